@@ -1,0 +1,85 @@
+"""The typer application and its error handling.
+
+Every command module registers on :data:`app`. A :class:`FingerfitError`
+(bad input) is printed as one red line and exits with status 2 -- never a
+traceback.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from collections.abc import Callable
+from typing import TypeVar
+
+import typer
+from rich.console import Console
+
+from ..errors import FingerfitError
+
+app = typer.Typer(
+    name="fingerfit",
+    help="Individual skeletal finger models (joint centres and tilted axes) from 6-DOF motion capture.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+console = Console(stderr=True)
+out = Console()
+
+F = TypeVar("F", bound=Callable)
+
+
+def fail(message: str) -> typer.Exit:
+    """Print one error line and return the exit to raise."""
+    console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    return typer.Exit(code=2)
+
+
+def user_errors(func: F) -> F:
+    """Turn :class:`FingerfitError` into a one-line message and exit status 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except FingerfitError as exc:
+            raise fail(str(exc)) from None
+        except KeyboardInterrupt:
+            raise fail("interrupted") from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def parse_list(value: str | None, allowed: tuple[str, ...], what: str) -> list[str] | None:
+    """Comma-separated names checked against ``allowed``."""
+    if value is None:
+        return None
+    items = [v.strip() for v in value.split(",") if v.strip()]
+    bad = [v for v in items if v not in allowed]
+    if bad or not items:
+        raise FingerfitError(
+            f"{what} must be comma-separated names from {', '.join(allowed)}", field=what
+        )
+    return items
+
+
+def run() -> None:
+    """Entry point of the console script."""
+    try:
+        app()
+    except FingerfitError as exc:  # raised outside a wrapped command
+        console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        sys.exit(2)
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", help="Print the version and exit."),
+) -> None:
+    """Individual skeletal finger models (joint centres and tilted axes) from 6-DOF motion capture."""
+    if version:
+        from .. import __version__
+
+        out.print(f"fingerfit {__version__}")
+        raise typer.Exit()

@@ -1,0 +1,217 @@
+"""In-memory session: recordings of sensor poses, landmarks and target events.
+
+All lengths are millimetres and all positions are tracker coordinates,
+whatever units the session files declare (the loader converts). Rotation
+matrices map sensor coordinates into tracker coordinates. Arrays are
+time-first. See ``docs/conventions.md`` and ``docs/formats.md``.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .errors import FingerfitError
+from .transforms import FloatArray
+
+FORMAT = "fingerfit.session/1"
+FINGERS = ("index", "middle", "ring", "little")
+SEGMENTS = ("proximal", "middle", "distal")
+JOINTS = ("mp", "pip", "dip")
+HAND_SENSOR = "hand"
+UNITS_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+
+_SENSOR_RE = re.compile(r"^(hand|stylus|(index|middle|ring|little)\.(proximal|middle|distal))$")
+_LANDMARK_RE = re.compile(
+    r"^((index|middle|ring|little)\.(mp|pip|dip|tip)|target\.[A-Za-z0-9_\-]+)$"
+)
+
+
+def sensor_name(finger: str, segment: str) -> str:
+    """Sensor name of a finger segment, e.g. ``index.proximal``."""
+    return f"{finger}.{segment}"
+
+
+def is_sensor_name(name: str) -> bool:
+    """Whether ``name`` is a valid sensor name of the session format."""
+    return bool(_SENSOR_RE.match(name))
+
+
+def is_landmark_name(name: str) -> bool:
+    """Whether ``name`` is a valid landmark name of the session format."""
+    return bool(_LANDMARK_RE.match(name))
+
+
+def joint_sensors(finger: str) -> dict[str, tuple[str, str]]:
+    """(parent, child) sensor names of each joint of a finger, ordered MP, PIP, DIP."""
+    seg = [HAND_SENSOR] + [sensor_name(finger, s) for s in SEGMENTS]
+    return {j: (seg[i], seg[i + 1]) for i, j in enumerate(JOINTS)}
+
+
+@dataclass(frozen=True)
+class PoseSeries:
+    """Poses of one sensor over time.
+
+    Attributes
+    ----------
+    position : ndarray, shape (n_frames, 3)
+        Sensor origin in tracker coordinates (mm); NaN where missing.
+    rotation : ndarray, shape (n_frames, 3, 3)
+        Rotation matrix from sensor to tracker coordinates; NaN where missing.
+    """
+
+    position: FloatArray
+    rotation: FloatArray
+
+    def __post_init__(self) -> None:
+        n = self.position.shape[0]
+        if self.position.shape != (n, 3) or self.rotation.shape != (n, 3, 3):
+            raise ValueError(
+                f"PoseSeries needs position (n, 3) and rotation (n, 3, 3); got "
+                f"{self.position.shape} and {self.rotation.shape}"
+            )
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.position.shape[0])
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Boolean mask ``(n_frames,)`` of frames with a complete sample."""
+        return np.isfinite(self.position).all(axis=1) & np.isfinite(self.rotation).all(axis=(1, 2))
+
+    def take(self, index: np.ndarray | slice) -> PoseSeries:
+        """Frames selected by a slice, boolean mask or index array."""
+        return PoseSeries(self.position[index], self.rotation[index])
+
+    def mean(self) -> tuple[FloatArray, FloatArray]:
+        """Mean pose over the valid frames: position ``(3,)`` mm, rotation ``(3, 3)``.
+
+        The mean rotation is the chordal L2 mean (scipy ``Rotation.mean``).
+        """
+        ok = self.valid
+        if not ok.any():
+            raise ValueError("no valid samples to average")
+        r = Rotation.from_matrix(self.rotation[ok]).mean().as_matrix()
+        return self.position[ok].mean(axis=0), r
+
+
+@dataclass
+class Recording:
+    """One recording: a common time base and a pose series per sensor.
+
+    Attributes
+    ----------
+    name : str
+        File name the recording came from (or will be written to).
+    time : ndarray, shape (n_frames,)
+        Seconds. Frames missing for every sensor appear with an interpolated
+        time and NaN poses, so gaps stay visible.
+    poses : dict[str, PoseSeries]
+        Per sensor name.
+    notes : list[str]
+        Counts of anything repaired or treated as missing while reading.
+    """
+
+    name: str
+    time: FloatArray
+    poses: dict[str, PoseSeries]
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.time.shape[0])
+
+    @property
+    def sensors(self) -> list[str]:
+        return list(self.poses)
+
+    def pose(self, sensor: str) -> PoseSeries:
+        """Pose series of ``sensor``; a clear error if the recording lacks it."""
+        try:
+            return self.poses[sensor]
+        except KeyError:
+            raise FingerfitError(
+                f"no samples for sensor '{sensor}' (has: {', '.join(self.poses) or 'none'})",
+                path=self.name,
+            ) from None
+
+    def slice(self, index: np.ndarray | slice) -> Recording:
+        """A recording of the selected frames of every sensor."""
+        return Recording(
+            self.name,
+            self.time[index],
+            {k: v.take(index) for k, v in self.poses.items()},
+            list(self.notes),
+        )
+
+
+@dataclass(frozen=True)
+class TargetEvent:
+    """The fingertip of ``finger`` touches landmark ``target.<target>`` during [start, end] s."""
+
+    recording: str
+    finger: str
+    target: str
+    start: float
+    end: float
+
+
+@dataclass
+class Session:
+    """One subject's measurements (format ``fingerfit.session/1``).
+
+    Attributes
+    ----------
+    subject : str
+    hand : {"left", "right"}
+    units : str
+        Units declared by the files; arrays here are always mm.
+    rate_hz : float
+    fingers : list[str]
+    reference : Recording
+        Static recording at the stretched reference posture (all joint angles 0).
+    grasp, targets, test : list[Recording]
+    landmarks : dict[str, ndarray]
+        Stylus-digitised points ``(3,)`` in tracker coordinates (mm), taken at the
+        reference posture.
+    events : list[TargetEvent]
+    path : Path or None
+        Directory the session was loaded from.
+    """
+
+    subject: str
+    hand: str
+    units: str
+    rate_hz: float
+    fingers: list[str]
+    reference: Recording
+    grasp: list[Recording]
+    landmarks: dict[str, FloatArray]
+    targets: list[Recording] = field(default_factory=list)
+    test: list[Recording] = field(default_factory=list)
+    events: list[TargetEvent] = field(default_factory=list)
+    path: Path | None = None
+
+    def recordings(self) -> list[Recording]:
+        """Every recording: reference, grasp, targets, test."""
+        return [self.reference, *self.grasp, *self.targets, *self.test]
+
+    def recording(self, name: str) -> Recording:
+        """Recording by file name."""
+        for rec in self.recordings():
+            if rec.name == name:
+                return rec
+        raise FingerfitError(f"session has no recording '{name}'", path=self.path)
+
+    def landmark(self, name: str) -> FloatArray:
+        """Landmark position ``(3,)`` mm, tracker coordinates."""
+        try:
+            return self.landmarks[name]
+        except KeyError:
+            where = None if self.path is None else self.path / "landmarks.csv"
+            raise FingerfitError(f"missing landmark '{name}'", path=where) from None

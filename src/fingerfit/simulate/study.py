@@ -1,0 +1,437 @@
+"""Simulated subjects and cohorts with ground truth.
+
+:func:`simulate_subject` draws one subject's anatomy, sensor mounts and
+tracker errors, runs the paper's protocol (reference, grasp, target reaching,
+free-motion test) and returns the measured :class:`~fingerfit.session.Session`
+together with the :class:`SubjectTruth`. :func:`write_subject` saves both:
+the session directory plus ``truth.json`` and ``truth/<recording>.csv``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation
+
+from ..io.atomic import atomic_write
+from ..io.sessiondir import save_session
+from ..session import (
+    HAND_SENSOR,
+    JOINTS,
+    SEGMENTS,
+    PoseSeries,
+    Recording,
+    Session,
+    TargetEvent,
+    sensor_name,
+)
+from ..transforms import FloatArray, apply_inverse_pose, quat_wxyz_from_matrix
+from . import motion as mo
+from .anatomy import FingerAnatomy, compose, sample_finger, segment_motions
+from .sensors import SensorMount, TrackerErrors, mount, sensor_poses
+
+TRUTH_FORMAT = "fingerfit.truth/1"
+TARGET_SPACING_MM = 20.0
+N_TARGETS = 7
+SENSOR_HEIGHT = np.array([7.5, 6.5, 5.0])  # dorsal height of phalanx sensors (mm)
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Switches and magnitudes of a simulated session.
+
+    Every error source can be switched off; :meth:`exact` gives the noise-free,
+    pure-hinge configuration used to check exactness.
+
+    Attributes
+    ----------
+    fingers : tuple of str
+    hand : {"left", "right"}
+    rate_hz : float
+    noise : float
+        Tracker error scale (white noise and field distortion); 1 = Liberty-like.
+    distortion : bool
+        Smooth field distortion on/off (scaled by ``noise``).
+    sta : float
+        Soft-tissue artefact scale (1 = realistic, 0 = rigid sensors).
+    stylus_mm : float
+        Stylus noise SD per axis (mm).
+    tilt_scale : float
+        Axis obliquity scale (1 = literature; 0 = axes perpendicular to bones).
+    rolling : bool
+        Centre of rotation migrating with flexion.
+    abduction : bool
+        MP ab/adduction axis moving during grasp and free motion.
+    rom_scale : float
+        Grasp range-of-motion scale.
+    cycles : int
+        Grasp cycles.
+    targets, test : bool
+        Include the target-reaching and free-motion recordings.
+    """
+
+    fingers: tuple[str, ...] = ("index",)
+    hand: str = "left"
+    rate_hz: float = 240.0
+    noise: float = 1.0
+    distortion: bool = True
+    sta: float = 1.0
+    stylus_mm: float = 0.3
+    tilt_scale: float = 1.0
+    rolling: bool = True
+    abduction: bool = True
+    rom_scale: float = 1.0
+    cycles: int = 10
+    targets: bool = True
+    test: bool = True
+
+    @classmethod
+    def exact(cls, **kw) -> SimConfig:
+        """Noise-free, rigid sensors, pure hinges: the model is exactly right."""
+        base = dict(
+            noise=0.0, distortion=False, sta=0.0, stylus_mm=0.0, rolling=False, abduction=False
+        )
+        base.update(kw)
+        return cls(**base)
+
+
+@dataclass
+class SubjectTruth:
+    """Ground truth of one simulated subject (mm, rad, tracker coordinates).
+
+    Attributes
+    ----------
+    fingers : dict[str, FingerAnatomy]
+        True geometry at the reference posture.
+    mounts : dict[str, SensorMount]
+        True sensor poses at the reference posture (before artefact and noise).
+    frames : dict[str, dict]
+        Per recording: ``time`` ``(n,)``, ``angles[finger][key]`` ``(n,)`` rad,
+        ``tip[finger]`` ``(n, 3)`` mm, ``sensors[name]`` noise-free
+        ``(position (n, 3), rotation (n, 3, 3))``.
+    config : SimConfig
+    """
+
+    fingers: dict[str, FingerAnatomy]
+    mounts: dict[str, SensorMount]
+    frames: dict[str, dict] = field(default_factory=dict)
+    config: SimConfig = field(default_factory=SimConfig)
+
+
+@dataclass
+class SimulatedSubject:
+    session: Session
+    truth: SubjectTruth
+
+
+def _hand_pose(rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
+    """Hand frame at the reference posture: palm down (dorsal = tracker +z), random yaw."""
+    yaw = Rotation.from_euler("z", rng.uniform(-30, 30), degrees=True)
+    roll = Rotation.from_euler("x", rng.normal(0, 5), degrees=True)
+    origin = np.array([300.0, 0.0, 80.0]) + rng.normal(0, 20.0, 3)
+    return (yaw * roll).as_matrix(), origin
+
+
+def _run(
+    motion: mo.Motion,
+    name: str,
+    fingers: dict[str, FingerAnatomy],
+    mounts: dict[str, SensorMount],
+    tracker: TrackerErrors,
+    rng: np.random.Generator,
+) -> tuple[Recording, dict]:
+    """Move the true hand through ``motion``; return the measured recording and its truth."""
+    hand = (motion.hand_rotation, motion.hand_translation)
+    poses: dict[str, PoseSeries] = {}
+    truth: dict = {"time": motion.time, "angles": motion.angles, "tip": {}, "sensors": {}}
+    mean_mp = np.mean([motion.angles[f]["mp"] for f in fingers], axis=0)
+    zero = np.zeros_like(motion.time)
+    p, r = sensor_poses(mounts[HAND_SENSOR], hand, (mean_mp, zero))
+    truth["sensors"][HAND_SENSOR] = (p, r)
+    poses[HAND_SENSOR] = PoseSeries(*tracker.apply(rng, p, r))
+    for f, anat in fingers.items():
+        ang = motion.angles[f]
+        seg = segment_motions(anat, ang, hand)
+        tip_r, tip_t = seg["distal"]
+        truth["tip"][f] = np.einsum("nij,j->ni", tip_r, anat.tip) + tip_t
+        adjacent = {"proximal": ("mp", "pip"), "middle": ("pip", "dip"), "distal": ("dip", None)}
+        for s in SEGMENTS:
+            a, b = adjacent[s]
+            sname = sensor_name(f, s)
+            p, r = sensor_poses(mounts[sname], seg[s], (ang[a], zero if b is None else ang[b]))
+            truth["sensors"][sname] = (p, r)
+            poses[sname] = PoseSeries(*tracker.apply(rng, p, r))
+    return Recording(name, motion.time.copy(), poses), truth
+
+
+def _target_motion(
+    rng: np.random.Generator,
+    fingers: dict[str, FingerAnatomy],
+    config: SimConfig,
+) -> tuple[mo.Motion, FloatArray, FloatArray]:
+    """Target reaching with the first finger: 7 targets 0-120 mm apart along a straight edge.
+
+    For each target a posture is drawn (more extended for farther targets, off
+    the grasp synergy by a few degrees); the hand is then placed so that the
+    true fingertip touches the target exactly.
+
+    Returns
+    -------
+    motion : Motion
+    targets : ndarray, shape (7, 3)
+        True target positions (mm).
+    holds : ndarray, shape (7, 2)
+        Hold intervals (s).
+    """
+    names = list(fingers)
+    main = names[0]
+    s = np.linspace(0.85, 0.1, N_TARGETS)
+    peak = np.radians(mo.GRASP_PEAK_DEG) * config.rom_scale
+    postures = []
+    tips = []
+    rot = Rotation.from_rotvec(rng.normal(0, np.radians(4.0), (N_TARGETS, 3)))
+    for j in range(N_TARGETS):
+        ang = {f: {} for f in names}
+        for f in names:
+            level = s[j] if f == main else 0.9
+            for ji, k in enumerate(("mp", "pip", "dip")):
+                ang[f][k] = np.array([max(level * peak[ji] + rng.normal(0, np.radians(4.0)), 0.0)])
+            ang[f]["mp_abduction"] = np.array(
+                [rng.normal(0, np.radians(2.0)) if config.abduction else 0.0]
+            )
+        postures.append(ang)
+        eye = (np.eye(3)[None], np.zeros((1, 3)))
+        seg = segment_motions(fingers[main], ang[main], eye)
+        r, t = seg["distal"]
+        tips.append(r[0] @ fingers[main].tip + t[0])
+    tips_a = np.array(tips)
+    direction = tips_a[-1] - tips_a[0]
+    direction /= np.linalg.norm(direction)
+    targets = tips_a[0] + np.arange(N_TARGETS)[:, None] * TARGET_SPACING_MM * direction
+    trans = targets - rot.apply(tips_a)
+    keys = [(f, k) for f in names for k in mo.ANGLE_KEYS]
+    way = np.column_stack(
+        [np.array([p[f][k][0] for p in postures]) for f, k in keys] + [rot.as_rotvec(), trans]
+    )
+    time, values, holds = mo.min_jerk_path(way, hold=1.0, move=1.0, rate=config.rate_hz)
+    angles = {f: {} for f in names}
+    for i, (f, k) in enumerate(keys):
+        angles[f][k] = values[:, i]
+    n_ang = len(keys)
+    r = Rotation.from_rotvec(values[:, n_ang : n_ang + 3]).as_matrix()
+    return mo.Motion(time, angles, r, values[:, n_ang + 3 :]), targets, holds
+
+
+def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> SimulatedSubject:
+    """Simulate one subject's session with ground truth.
+
+    Parameters
+    ----------
+    config : SimConfig
+    seed : int
+        Everything is deterministic given ``(config, seed)``.
+    subject : str
+        Subject identifier written to ``session.toml``.
+
+    Returns
+    -------
+    SimulatedSubject
+        ``session`` (as if loaded from files, mm) and ``truth``.
+    """
+    rng = np.random.default_rng(seed)
+    hand_rot, hand_origin = _hand_pose(rng)
+    scale = rng.normal(1.0, 0.06)
+    fingers: dict[str, FingerAnatomy] = {}
+    for f in config.fingers:
+        fingers[f] = sample_finger(
+            rng,
+            f,
+            hand=config.hand,
+            hand_scale=scale,
+            hand_rotation=hand_rot,
+            hand_origin=hand_origin,
+            tilt_scale=config.tilt_scale,
+            rolling=config.rolling,
+            abduction=config.abduction,
+        )
+    mounts: dict[str, SensorMount] = {}
+    hand_site = hand_origin + hand_rot @ np.array([-45.0, 0.0, 18.0])
+    mounts[HAND_SENSOR] = mount(
+        rng,
+        HAND_SENSOR,
+        hand_site,
+        hand_rot,
+        offset_sd=np.array([5.0, 5.0, 1.0]),
+        sta=0.4 * config.sta,
+    )
+    for f, anat in fingers.items():
+        pts = np.vstack([anat.centre, anat.tip])
+        for i, s in enumerate(SEGMENTS):
+            site = 0.5 * (pts[i] + pts[i + 1]) + SENSOR_HEIGHT[i] * anat.frame[:, 2]
+            mounts[sensor_name(f, s)] = mount(
+                rng,
+                sensor_name(f, s),
+                site,
+                anat.frame,
+                offset_sd=np.array([2.0, 1.5, 0.5]),
+                sta=config.sta,
+            )
+    tracker = TrackerErrors.sample(rng, config.noise, config.distortion)
+    coupling = rng.normal(-0.12, 0.06, len(fingers)) if config.abduction else None
+    flist = list(fingers)
+
+    truth = SubjectTruth(fingers, mounts, config=config)
+    ref, truth.frames["reference.csv"] = _run(
+        mo.static(rng, flist, config.rate_hz, 1.5), "reference.csv", fingers, mounts, tracker, rng
+    )
+    grasp_motion = mo.grasp(
+        rng,
+        flist,
+        config.rate_hz,
+        cycles=config.cycles,
+        rom_scale=config.rom_scale,
+        abduction_coupling=coupling,
+    )
+    grasp, truth.frames["grasp.csv"] = _run(
+        grasp_motion, "grasp.csv", fingers, mounts, tracker, rng
+    )
+
+    landmarks: dict[str, FloatArray] = {}
+    for f, anat in fingers.items():
+        for k, v in anat.landmarks.items():
+            landmarks[f"{f}.{k}"] = v + rng.normal(0, config.stylus_mm, 3)
+    targets: list[Recording] = []
+    events: list[TargetEvent] = []
+    if config.targets:
+        tm, tpos, holds = _target_motion(rng, fingers, config)
+        rec, truth.frames["targets.csv"] = _run(tm, "targets.csv", fingers, mounts, tracker, rng)
+        targets.append(rec)
+        for j in range(N_TARGETS):
+            label = f"t{round(j * TARGET_SPACING_MM):03d}"
+            # The stylus reading is the mean of five measurements.
+            landmarks[f"target.{label}"] = tpos[j] + rng.normal(0, config.stylus_mm / np.sqrt(5), 3)
+            events.append(
+                TargetEvent("targets.csv", flist[0], label, holds[j, 0] + 0.15, holds[j, 1] - 0.15)
+            )
+    test: list[Recording] = []
+    if config.test:
+        fm = mo.free(rng, flist, config.rate_hz, abduction=config.abduction)
+        rec, truth.frames["test.csv"] = _run(fm, "test.csv", fingers, mounts, tracker, rng)
+        test.append(rec)
+    session = Session(
+        subject=subject,
+        hand=config.hand,
+        units="mm",
+        rate_hz=config.rate_hz,
+        fingers=flist,
+        reference=ref,
+        grasp=[grasp],
+        landmarks=landmarks,
+        targets=targets,
+        test=test,
+        events=events,
+    )
+    return SimulatedSubject(session, truth)
+
+
+def truth_document(sim: SimulatedSubject) -> dict:
+    """``truth.json`` content: true geometry at the reference posture (tracker and sensor frames)."""
+    truth = sim.truth
+    ref_sensor = {name: (m.position, m.rotation) for name, m in truth.mounts.items()}
+    fingers = {}
+    for f, anat in truth.fingers.items():
+        joints = {}
+        parents = [HAND_SENSOR] + [sensor_name(f, s) for s in SEGMENTS]
+        for i, j in enumerate(JOINTS):
+            pp, pr = ref_sensor[parents[i]]
+            joints[j] = {
+                "center": anat.centre[i].tolist(),
+                "axis": anat.axis[i].tolist(),
+                "rolling_mm_per_rad": anat.rolling[i].tolist(),
+                "parent_sensor": parents[i],
+                "center_in_parent": (pr.T @ (anat.centre[i] - pp)).tolist(),
+                "axis_in_parent": (pr.T @ anat.axis[i]).tolist(),
+            }
+        fingers[f] = {
+            "joints": joints,
+            "mp_abduction": {
+                "point": anat.abduction_point.tolist(),
+                "axis": anat.abduction_axis.tolist(),
+            },
+            "segment_lengths": dict(zip(SEGMENTS, anat.lengths.tolist(), strict=True)),
+            "tip": anat.tip.tolist(),
+            "landmarks": {k: v.tolist() for k, v in anat.landmarks.items()},
+        }
+    return {
+        "format": TRUTH_FORMAT,
+        "subject": sim.session.subject,
+        "units": "mm",
+        "frame": "tracker coordinates at the reference posture; *_in_parent: parent sensor frame",
+        "config": asdict(truth.config),
+        "sensors": {
+            name: {"position": p.tolist(), "quat_wxyz": quat_wxyz_from_matrix(r).tolist()}
+            for name, (p, r) in ref_sensor.items()
+        },
+        "fingers": fingers,
+    }
+
+
+def truth_table(frames: dict) -> pd.DataFrame:
+    """Per-frame truth of one recording: ``time``, ``<finger>.<angle>`` (deg), ``<finger>.tip.x|y|z`` (mm)."""
+    cols: dict[str, FloatArray] = {"time": frames["time"]}
+    for f, ang in frames["angles"].items():
+        for k in mo.ANGLE_KEYS:
+            cols[f"{f}.{k}"] = np.degrees(ang[k])
+        for i, c in enumerate("xyz"):
+            cols[f"{f}.tip.{c}"] = frames["tip"][f][:, i]
+    return pd.DataFrame(cols)
+
+
+def write_subject(sim: SimulatedSubject, directory: str | Path) -> Path:
+    """Write the session directory plus ``truth.json`` and ``truth/<recording>.csv``."""
+    directory = Path(directory)
+    sim.session.path = directory
+    save_session(sim.session, directory)
+    with atomic_write(directory / "truth.json") as fh:
+        json.dump(truth_document(sim), fh, indent=1)
+    for name, frames in sim.truth.frames.items():
+        with atomic_write(directory / "truth" / name, newline="") as fh:
+            truth_table(frames).to_csv(fh, index=False, lineterminator="\n")
+    return directory
+
+
+def simulate_cohort(config: SimConfig, n_subjects: int, seed: int) -> list[SimulatedSubject]:
+    """``n_subjects`` independent subjects ``S01..``; subject i uses seed ``(seed, i)``."""
+    seeds = np.random.SeedSequence(seed).spawn(n_subjects)
+    return [
+        simulate_subject(config, int(s.generate_state(1)[0]), f"S{i + 1:02d}")
+        for i, s in enumerate(seeds)
+    ]
+
+
+def relative_truth_in_parent(
+    sim: SimulatedSubject, finger: str, joint: str
+) -> tuple[FloatArray, FloatArray]:
+    """True joint centre ``(3,)`` mm and axis ``(3,)`` in the parent sensor frame at reference."""
+    i = JOINTS.index(joint)
+    parent = HAND_SENSOR if i == 0 else sensor_name(finger, SEGMENTS[i - 1])
+    m = sim.truth.mounts[parent]
+    anat = sim.truth.fingers[finger]
+    c = apply_inverse_pose(m.rotation[None], m.position[None], anat.centre[i][None])[0]
+    return c, m.rotation.T @ anat.axis[i]
+
+
+__all__ = [
+    "SimConfig",
+    "SimulatedSubject",
+    "SubjectTruth",
+    "compose",
+    "replace",
+    "simulate_cohort",
+    "simulate_subject",
+    "write_subject",
+]
