@@ -202,3 +202,39 @@ def distance_point_to_line(point: FloatArray, centre: FloatArray, axis: FloatArr
     """Distance of points ``(..., 3)`` to the line through ``centre`` along ``axis`` (mm)."""
     d = np.asarray(point, dtype=float) - centre
     return np.linalg.norm(np.cross(d, unit(axis)), axis=-1)
+
+
+def relative_pose(
+    parent_rotation: FloatArray,
+    parent_position: FloatArray,
+    child_rotation: FloatArray,
+    child_position: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Pose of a child sensor in its parent sensor's frame, per frame.
+
+    Parameters
+    ----------
+    parent_rotation, child_rotation : ndarray, shape (n, 3, 3)
+        Sensor -> tracker rotations.
+    parent_position, child_position : ndarray, shape (n, 3)
+        Sensor origins in tracker coordinates (mm).
+
+    Returns
+    -------
+    R : ndarray, shape (n, 3, 3)
+        ``R_p^T R_c`` (child -> parent coordinates).
+    t : ndarray, shape (n, 3)
+        ``R_p^T (t_c - t_p)``: the child origin in parent coordinates (mm).
+    """
+    r = np.matmul(np.swapaxes(parent_rotation, -1, -2), child_rotation)
+    return r, apply_inverse_pose(parent_rotation, parent_position, child_position)
+
+
+def rotation_vector(matrix: FloatArray) -> FloatArray:
+    """Rotation vectors ``(n, 3)`` (axis times angle, rad) of matrices ``(n, 3, 3)``; NaN-safe."""
+    m = np.asarray(matrix, dtype=float)
+    out = np.full((m.shape[0], 3), np.nan)
+    ok = np.isfinite(m).all(axis=(1, 2))
+    if ok.any():
+        out[ok] = Rotation.from_matrix(m[ok]).as_rotvec()
+    return out

@@ -54,6 +54,22 @@ def _line_field_counts(raw: bytes, path: Path) -> int:
     return last - 1
 
 
+def _to_float(series: pd.Series, col: str, lines: np.ndarray, path: Path) -> np.ndarray:
+    """Exact float conversion of a text column; empty fields become NaN."""
+    text = series.to_numpy(dtype=object)
+    try:
+        return text.astype(np.float64)
+    except (ValueError, TypeError):
+        for i, v in enumerate(text):
+            try:
+                float(v)
+            except (ValueError, TypeError):
+                raise FingerfitError(
+                    f"not a number: '{v}'", path=path, line=int(lines[i]), field=col
+                ) from None
+        raise
+
+
 def read_pose_csv(
     path: str | Path,
     *,
@@ -105,26 +121,12 @@ def read_pose_csv(
             raise FingerfitError(f"unknown units '{units}'", path=path, field="units")
         scale_to_mm = UNITS_TO_MM[units]
 
-    df = pd.read_csv(
-        io.BytesIO(raw), dtype={"sensor": str}, skip_blank_lines=True, float_precision="round_trip"
-    )
+    # Read text and convert with Python's exact float parser: round-trip exact (pandas'
+    # fast C parser is not) and every bad value can be named with its line.
+    df = pd.read_csv(io.BytesIO(raw), dtype=str, skip_blank_lines=True)
     notes: list[str] = []
     lines = np.arange(df.shape[0]) + 2  # file line of each data row
-    values = {}
-    for col in _NUMERIC:
-        series = df[col]
-        if series.dtype.kind not in "fi":
-            num = pd.to_numeric(series, errors="coerce")
-            bad = (
-                num.isna() & series.notna() & (series.astype(str).str.strip().str.lower() != "nan")
-            )
-            if bad.any():
-                i = int(np.flatnonzero(bad.to_numpy())[0])
-                raise FingerfitError(
-                    f"not a number: '{series.iloc[i]}'", path=path, line=int(lines[i]), field=col
-                )
-            series = num
-        values[col] = series.to_numpy(dtype=float)
+    values = {col: _to_float(df[col], col, lines, path) for col in _NUMERIC}
     time = values["time"]
     sensors = df["sensor"].to_numpy(dtype=object)
     if df.shape[0] == 0:
@@ -213,7 +215,9 @@ def read_pose_csv(
         frame_times = full_time
     n = frame_times.size
     poses: dict[str, PoseSeries] = {}
-    for k, name in enumerate(names):
+    _, first = np.unique(inverse, return_index=True)
+    for k in np.argsort(first):  # sensors in order of first appearance
+        name = names[k]
         rows = inverse == k
         pos = np.full((n, 3), np.nan)
         quat = np.full((n, 4), np.nan)

@@ -12,6 +12,7 @@ Layout (see ``docs/formats.md``)::
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from pathlib import Path
 
@@ -60,7 +61,7 @@ def read_landmarks(path: str | Path, units: str = "mm") -> dict[str, np.ndarray]
     """Read ``name,x,y,z`` landmarks; returns positions ``(3,)`` in mm, tracker frame."""
     path = Path(path)
     try:
-        df = pd.read_csv(path, dtype={"name": str}, float_precision="round_trip")
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
     except FileNotFoundError:
         raise FingerfitError("file not found", path=path) from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
@@ -135,7 +136,8 @@ def load_session(directory: str | Path) -> Session:
     try:
         meta = tomllib.loads(meta_path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
-        line = getattr(exc, "lineno", None)
+        found = re.search(r"at line (\d+)", str(exc))
+        line = int(found.group(1)) if found else None
         raise FingerfitError(
             f"invalid TOML ({str(exc).split(' (at')[0]})", path=meta_path, line=line
         ) from None

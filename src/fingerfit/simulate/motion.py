@@ -58,21 +58,26 @@ def smooth_noise(rng: np.random.Generator, time: FloatArray, sd: float, f_max: f
 
 
 def slow_hand_motion(
-    rng: np.random.Generator, time: FloatArray, rot_deg: float, trans_mm: float
+    rng: np.random.Generator, time: FloatArray, rot_deg: float, trans_mm: float, pivot: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
-    """Slow hand drift about the reference pose: rotations ``(n,3,3)``, translations ``(n,3)`` mm."""
+    """Slow hand drift about the reference pose, turning about ``pivot (3,)`` (mm).
+
+    Returns rotations ``(n, 3, 3)`` and translations ``(n, 3)`` mm of ``p' = R p + t``.
+    """
     rv = np.column_stack([smooth_noise(rng, time, np.radians(rot_deg), 0.15) for _ in range(3)])
     tr = np.column_stack([smooth_noise(rng, time, trans_mm, 0.15) for _ in range(3)])
-    return Rotation.from_rotvec(rv).as_matrix(), tr
+    r = Rotation.from_rotvec(rv).as_matrix()
+    return r, pivot + tr - r @ pivot
 
 
-def static(rng: np.random.Generator, fingers: list[str], rate: float, duration: float) -> Motion:
-    """Reference recording: all joint angles 0, the hand still but for a faint tremor."""
+def static(fingers: list[str], rate: float, duration: float) -> Motion:
+    """Reference recording: all joint angles 0, the hand still at its reference pose."""
     time = np.arange(round(duration * rate)) / rate
     zero = np.zeros_like(time)
     angles = {f: dict.fromkeys(ANGLE_KEYS, zero) for f in fingers}
-    r, t = slow_hand_motion(rng, time, 0.02, 0.03)
-    return Motion(time, angles, r, t)
+    return Motion(
+        time, angles, np.broadcast_to(np.eye(3), (time.size, 3, 3)).copy(), np.zeros((time.size, 3))
+    )
 
 
 def grasp(
@@ -83,7 +88,8 @@ def grasp(
     cycles: int = 10,
     rom_scale: float = 1.0,
     abduction_coupling: FloatArray | None = None,
-    hand_motion: bool = True,
+    abduction: bool = True,
+    pivot: FloatArray | None = None,
 ) -> Motion:
     """Cylinder-grasp cycles: open hold, flex, closed hold, extend.
 
@@ -103,8 +109,10 @@ def grasp(
         Scales the peak flexion (1 = full cylinder grasp).
     abduction_coupling : ndarray, shape (n_fingers,), optional
         rad of ab/adduction per rad of MP flexion per finger.
-    hand_motion : bool
-        Slow hand drift (up to ~8 deg, ~15 mm).
+    abduction : bool
+        MP ab/adduction at all (the coupling plus a slow wander of ~1 deg).
+    pivot : ndarray, shape (3,), optional
+        Point the hand turns about (mm); without it the hand does not move.
     """
     hold0 = rng.uniform(0.3, 0.45, cycles)
     flex = rng.uniform(0.55, 0.75, cycles)
@@ -134,10 +142,10 @@ def grasp(
             tremor = smooth_noise(rng, time, np.radians(0.15), 2.0)
             out[j] = np.maximum(theta + tremor, 0.0)
         abd_rest = smooth_noise(rng, time, np.radians(1.0), 0.3)
-        out["mp_abduction"] = abduction_coupling[fi] * out["mp"] + abd_rest
+        out["mp_abduction"] = (abduction_coupling[fi] * out["mp"] + abd_rest) * float(abduction)
         angles[finger] = out
-    if hand_motion:
-        r, t = slow_hand_motion(rng, time, 6.0, 12.0)
+    if pivot is not None:
+        r, t = slow_hand_motion(rng, time, 6.0, 12.0, pivot)
     else:
         r, t = np.broadcast_to(np.eye(3), (time.size, 3, 3)).copy(), np.zeros((time.size, 3))
     return Motion(time, angles, r, t)
@@ -149,26 +157,30 @@ def free(
     rate: float,
     *,
     duration: float = 20.0,
+    abduction_coupling: FloatArray | None = None,
     abduction: bool = True,
+    pivot: FloatArray | None = None,
 ) -> Motion:
     """Free motion off the grasp synergy: each joint wanders independently within its range.
 
-    Ranges (deg): MP 0-75, PIP 0-95, DIP 0-65, ab/adduction +/-10 (0 when
-    ``abduction`` is false).
+    Ranges (deg): MP 0-75, PIP 0-95, DIP 0-65. The MP ab/adducts with flexion by
+    the subject's coupling plus an independent wander of up to +/-4 deg (none
+    when ``abduction`` is false).
     """
     time = np.arange(round(duration * rate)) / rate
     top = np.radians([75.0, 95.0, 65.0])
     angles: dict[str, dict[str, FloatArray]] = {}
-    for finger in fingers:
+    for fi, finger in enumerate(fingers):
         out = {}
         for ji, j in enumerate(("mp", "pip", "dip")):
             u = smooth_noise(rng, time, 1.0, 0.6)
             out[j] = top[ji] * 0.5 * (1 + np.tanh(u))
-        out["mp_abduction"] = (
-            np.radians(10.0) * np.tanh(smooth_noise(rng, time, 1.0, 0.4)) if abduction else 0 * time
-        )
+        k = 0.0 if abduction_coupling is None else abduction_coupling[fi]
+        wander = np.radians(4.0) * np.tanh(smooth_noise(rng, time, 1.0, 0.4))
+        out["mp_abduction"] = (k * out["mp"] + wander) * float(abduction)
         angles[finger] = out
-    r, t = slow_hand_motion(rng, time, 8.0, 15.0)
+    pivot = np.zeros(3) if pivot is None else pivot
+    r, t = slow_hand_motion(rng, time, 8.0, 15.0, pivot)
     return Motion(time, angles, r, t)
 
 

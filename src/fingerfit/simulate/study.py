@@ -38,6 +38,8 @@ TRUTH_FORMAT = "fingerfit.truth/1"
 TARGET_SPACING_MM = 20.0
 N_TARGETS = 7
 SENSOR_HEIGHT = np.array([7.5, 6.5, 5.0])  # dorsal height of phalanx sensors (mm)
+# Relative skin sliding under the phalanx sensors; the distal one sits on the nail.
+SENSOR_STA = np.array([1.0, 1.0, 0.3])
 
 
 @dataclass(frozen=True)
@@ -278,15 +280,17 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
                 site,
                 anat.frame,
                 offset_sd=np.array([2.0, 1.5, 0.5]),
-                sta=config.sta,
+                sta=SENSOR_STA[i] * config.sta,
             )
     tracker = TrackerErrors.sample(rng, config.noise, config.distortion)
-    coupling = rng.normal(-0.12, 0.06, len(fingers)) if config.abduction else None
+    # MP ab/adduction per radian of flexion (fingers converge in a fist): about -4 deg over a
+    # full grasp, varying between subjects.
+    coupling = rng.normal(-0.07, 0.04, len(fingers)) if config.abduction else None
     flist = list(fingers)
 
     truth = SubjectTruth(fingers, mounts, config=config)
     ref, truth.frames["reference.csv"] = _run(
-        mo.static(rng, flist, config.rate_hz, 1.5), "reference.csv", fingers, mounts, tracker, rng
+        mo.static(flist, config.rate_hz, 1.5), "reference.csv", fingers, mounts, tracker, rng
     )
     grasp_motion = mo.grasp(
         rng,
@@ -295,6 +299,8 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
         cycles=config.cycles,
         rom_scale=config.rom_scale,
         abduction_coupling=coupling,
+        abduction=config.abduction,
+        pivot=hand_origin,
     )
     grasp, truth.frames["grasp.csv"] = _run(
         grasp_motion, "grasp.csv", fingers, mounts, tracker, rng
@@ -319,7 +325,14 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
             )
     test: list[Recording] = []
     if config.test:
-        fm = mo.free(rng, flist, config.rate_hz, abduction=config.abduction)
+        fm = mo.free(
+            rng,
+            flist,
+            config.rate_hz,
+            abduction_coupling=coupling,
+            abduction=config.abduction,
+            pivot=hand_origin,
+        )
         rec, truth.frames["test.csv"] = _run(fm, "test.csv", fingers, mounts, tracker, rng)
         test.append(rec)
     session = Session(

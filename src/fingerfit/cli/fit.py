@@ -1,0 +1,121 @@
+"""``fingerfit fit`` and ``fingerfit angles``."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from ..estimate import FitOptions, fit_session
+from ..estimate.fit import METHODS
+from ..io import load_session, read_pose_csv
+from ..io.atomic import atomic_write
+from ..kinematics import compute_kinematics, kinematics_table
+from ..model import HandModel, load_model, save_model
+from ..session import FINGERS, UNITS_TO_MM
+from .app import app, console, out, parse_list, user_errors
+
+
+def quality_table(model: HandModel) -> Table:
+    """Per-joint figures: cycles, range of motion, centre-to-axis distance, conditioning."""
+    t = Table(title=f"{model.subject}: {model.method}", title_justify="left")
+    for c in (
+        "finger",
+        "joint",
+        "cycles",
+        "ROM deg",
+        "c_i→axis mm",
+        "s5/s6",
+        "axis vs cycles deg",
+        "segment mm",
+    ):
+        t.add_column(c, justify="right" if c not in ("finger", "joint") else "left")
+    for f, fm in model.fingers.items():
+        for (j, jm), seg in zip(fm.joints.items(), fm.segment_lengths.items(), strict=True):
+            q = jm.quality
+            rom = np.array(q.rom_deg)
+            t.add_row(
+                f,
+                j,
+                str(q.cycles),
+                f"{rom.mean():.0f} ({rom.min():.0f}–{rom.max():.0f})" if rom.size else "–",
+                f"{np.mean(q.centre_distance_mm):.2f}",
+                f"{np.median(q.conditioning):.0f}",
+                f"{q.null_agreement_deg:.1f}",
+                f"{seg[0]} {seg[1]:.1f}",
+            )
+    return t
+
+
+@app.command()
+@user_errors
+def fit(
+    session: Annotated[Path, typer.Argument(help="Session directory (fingerfit.session/1).")],
+    output: Annotated[
+        Path | None,
+        typer.Option("-o", "--output", help="Model JSON (default: SESSION/model.json)."),
+    ] = None,
+    method: Annotated[
+        str, typer.Option(help=f"Axis estimator: {', '.join(METHODS)}.")
+    ] = FitOptions.method,
+    fingers: Annotated[
+        str | None, typer.Option(help="Comma-separated fingers (default: all).")
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Fit joints the motion cannot determine, with warnings.")
+    ] = False,
+) -> None:
+    """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
+    if method not in METHODS:
+        raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
+    s = load_session(session)
+    for note in (n for r in s.recordings() for n in r.notes):
+        console.print(f"[yellow]note:[/] {note}")
+    names = parse_list(fingers, FINGERS, "--fingers")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = fit_session(
+            s, FitOptions(method=method, force=force, fingers=tuple(names) if names else None)
+        )
+    for w in caught:
+        console.print(f"[yellow]warning:[/] {w.message}")
+    path = save_model(model, output or session / "model.json")
+    out.print(quality_table(model))
+    out.print(f"model written to [bold]{path}[/]")
+
+
+@app.command()
+@user_errors
+def angles(
+    model_path: Annotated[
+        Path, typer.Argument(metavar="MODEL", help="Model JSON from `fingerfit fit`.")
+    ],
+    recording: Annotated[Path, typer.Argument(help="Pose CSV (canonical format).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Angles CSV to write.")],
+    units: Annotated[
+        str | None,
+        typer.Option(help="Units of the recording (default: the model's session units)."),
+    ] = None,
+    rate: Annotated[
+        float | None,
+        typer.Option(help="Sampling rate (Hz) to keep dropped frames visible as empty rows."),
+    ] = None,
+) -> None:
+    """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
+    model = load_model(model_path)
+    units = units or model.session_units
+    if units not in UNITS_TO_MM:
+        raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
+    rec = read_pose_csv(recording, units=units, rate_hz=rate)
+    for note in rec.notes:
+        console.print(f"[yellow]note:[/] {note}")
+    table = kinematics_table(compute_kinematics(model, rec), units=units)
+    with atomic_write(output, newline="") as fh:
+        table.to_csv(fh, index=False, lineterminator="\n")
+    out.print(
+        f"{rec.n_frames} frames -> [bold]{output}[/] (angles deg, fingertips {units}, tracker frame)"
+    )

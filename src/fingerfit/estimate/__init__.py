@@ -1,0 +1,12 @@
+"""Estimation of joint centres and axes from 6-DOF sensor recordings.
+
+* :mod:`.cycles` -- per-joint grasp-cycle extraction (movement periods);
+* :mod:`.centre` -- centre of rotation from two 6-DOF sensors (O'Brien et al. 2000);
+* :mod:`.axis` -- axis of rotation through the per-cycle centres (Tang et al. 2018, eq. 1);
+* :mod:`.sagittal` -- the finger's sagittal plane from stylus landmarks;
+* :mod:`.fit` -- the whole fit of a session into a :class:`~fingerfit.model.FingerModel`.
+"""
+
+from .fit import FitError, FitOptions, fit_session
+
+__all__ = ["FitError", "FitOptions", "fit_session"]

@@ -1,0 +1,382 @@
+"""The individual finger model and its file format ``fingerfit.model/1`` (JSON).
+
+Everything geometric is stored in **tracker coordinates at the reference
+posture, in mm** (and, for each joint, also in its parent sensor's frame),
+with the reference sensor poses needed to compute angles. The file is
+self-contained: :mod:`fingerfit.kinematics` needs nothing else.
+See ``docs/formats.md`` and ``docs/conventions.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .errors import FingerfitError
+from .io.atomic import atomic_write
+from .session import FINGERS, JOINTS, SEGMENTS
+from .transforms import FloatArray, matrix_from_quat_wxyz, quat_wxyz_from_matrix
+
+FORMAT = "fingerfit.model/1"
+VARIANTS = ("user_axis", "orthogonal")
+
+
+@dataclass(frozen=True)
+class JointQuality:
+    """How well the motion determined a joint (paper Fig. 8 and conditioning).
+
+    Attributes
+    ----------
+    cycles : int
+        Movement periods used.
+    rom_deg : list of float
+        Range of motion of each cycle (deg).
+    centre_distance_mm : list of float
+        Distance of each cycle's centre of rotation to the fitted axis (mm).
+    conditioning : list of float
+        ``s5/s6`` of each cycle's centre-of-rotation system.
+    spread_mm : float
+        RMS spread of the cycle centres along the axis (mm).
+    residual_mm : list of float
+        Residual RMS of each cycle's centre fit (mm).
+    null_agreement_deg : float
+        Angle between the fitted axis and the cycles' own rotation axis (SVD null
+        vectors); large means the centres did not spread along the axis.
+    notes : list of str
+        Warnings recorded while fitting.
+    """
+
+    cycles: int
+    rom_deg: list[float]
+    centre_distance_mm: list[float]
+    conditioning: list[float]
+    spread_mm: float
+    residual_mm: list[float]
+    null_agreement_deg: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class JointModel:
+    """One flexion joint at the reference posture (tracker coordinates, mm).
+
+    Attributes
+    ----------
+    name : {"mp", "pip", "dip"}
+    parent, child : str
+        Sensor names on the two segments.
+    center : ndarray, shape (3,)
+        Joint centre (on the sagittal plane).
+    axis : ndarray, shape (3,)
+        Fitted ("user") flexion axis, unit, oriented so flexion is positive.
+    orthogonal_axis : ndarray, shape (3,)
+        The axis made perpendicular to the bone (the classic model).
+    quality : JointQuality
+    """
+
+    name: str
+    parent: str
+    child: str
+    center: FloatArray
+    axis: FloatArray
+    orthogonal_axis: FloatArray
+    quality: JointQuality
+
+    def axis_for(self, variant: str) -> FloatArray:
+        """Axis ``(3,)`` of the ``user_axis`` or ``orthogonal`` variant."""
+        return self.axis if variant == "user_axis" else self.orthogonal_axis
+
+
+@dataclass(frozen=True)
+class SegmentFrame:
+    """A segment's local frame (paper Fig. 4): origin at its distal end, x along the bone,
+    ``z = x × a``, ``y = z × x``. ``rotation`` columns are x, y, z in tracker coordinates."""
+
+    origin: FloatArray
+    rotation: FloatArray
+
+
+@dataclass(frozen=True)
+class FingerModel:
+    """One finger: three joints, the fingertip point, segment lengths and frames (mm).
+
+    Attributes
+    ----------
+    joints : dict[str, JointModel]
+        ``mp``, ``pip``, ``dip`` flexion joints.
+    tip : ndarray, shape (3,)
+        Fingertip (nail-edge landmark), tracker coordinates at the reference posture.
+    segment_lengths : dict[str, float]
+        ``proximal``, ``middle``, ``distal`` (mm, centre to centre / to the tip).
+    frames : dict[str, SegmentFrame]
+    abduction : JointModel, optional
+        Two-axis MP models only: the MP ab/adduction axis (parent ``hand``, child
+        the proximal sensor). In the chain it acts **proximal** to MP flexion:
+        ``tip = Rot_ab(Rot_mp(Rot_pip(Rot_dip(tip_ref))))``, all about fixed
+        reference-posture axes. Its ``orthogonal_axis`` is the same axis (the
+        orthogonal variant only changes flexion axes).
+    """
+
+    name: str
+    joints: dict[str, JointModel]
+    tip: FloatArray
+    segment_lengths: dict[str, float]
+    frames: dict[str, SegmentFrame]
+    abduction: JointModel | None = None
+
+
+@dataclass(frozen=True)
+class HandModel:
+    """An individual hand model: what ``fingerfit fit`` writes.
+
+    Attributes
+    ----------
+    subject, hand : str
+    session_units : str
+        Units of the session it was fitted from (outputs use them).
+    method : str
+    reference_poses : dict[str, tuple[ndarray, ndarray]]
+        Sensor name -> (position ``(3,)`` mm, rotation ``(3, 3)`` sensor -> tracker)
+        at the reference posture.
+    fingers : dict[str, FingerModel]
+    version : str
+        fingerfit version that wrote it.
+    """
+
+    subject: str
+    hand: str
+    session_units: str
+    method: str
+    reference_poses: dict[str, tuple[FloatArray, FloatArray]]
+    fingers: dict[str, FingerModel]
+    version: str = __version__
+
+    def in_parent(
+        self, finger: str, joint: str, variant: str = "user_axis"
+    ) -> tuple[FloatArray, FloatArray]:
+        """Joint centre ``(3,)`` mm and axis ``(3,)`` in the parent sensor's frame."""
+        j = self.fingers[finger].joints[joint]
+        p, r = self.reference_poses[j.parent]
+        return r.T @ (j.center - p), r.T @ j.axis_for(variant)
+
+
+# --------------------------------------------------------------------------- JSON
+
+
+def _v(x: FloatArray) -> list[float]:
+    return [float(v) for v in np.asarray(x).ravel()]
+
+
+def _joint_doc(j: JointModel, model: HandModel) -> dict[str, Any]:
+    pp, pr = model.reference_poses[j.parent]
+    return {
+        "parent": j.parent,
+        "child": j.child,
+        "center": _v(j.center),
+        "axis": _v(j.axis),
+        "orthogonal_axis": _v(j.orthogonal_axis),
+        "in_parent": {
+            "center": _v(pr.T @ (j.center - pp)),
+            "axis": _v(pr.T @ j.axis),
+            "orthogonal_axis": _v(pr.T @ j.orthogonal_axis),
+        },
+        "quality": j.quality.__dict__,
+    }
+
+
+def model_to_dict(model: HandModel) -> dict[str, Any]:
+    """The JSON document of a model (see ``docs/formats.md``)."""
+    fingers = {}
+    for fname, f in model.fingers.items():
+        joints = {jname: _joint_doc(j, model) for jname, j in f.joints.items()}
+        dp, dr = model.reference_poses[f.joints["dip"].child]
+        fingers[fname] = {
+            "joints": joints,
+            **({"abduction": _joint_doc(f.abduction, model)} if f.abduction is not None else {}),
+            "tip": _v(f.tip),
+            "tip_in_distal": _v(dr.T @ (f.tip - dp)),
+            "segment_lengths": {k: float(v) for k, v in f.segment_lengths.items()},
+            "frames": {
+                k: {
+                    "origin": _v(fr.origin),
+                    "x": _v(fr.rotation[:, 0]),
+                    "y": _v(fr.rotation[:, 1]),
+                    "z": _v(fr.rotation[:, 2]),
+                }
+                for k, fr in f.frames.items()
+            },
+        }
+    return {
+        "format": FORMAT,
+        "fingerfit_version": model.version,
+        "method": model.method,
+        "units": "mm",
+        "frame": "tracker coordinates at the reference posture; in_parent: the joint's parent sensor frame",
+        "angle_units": "deg in quality figures",
+        "quaternion_order": "w,x,y,z (sensor -> tracker)",
+        "subject": model.subject,
+        "hand": model.hand,
+        "session_units": model.session_units,
+        "reference_poses": {
+            k: {"position": _v(p), "quat_wxyz": _v(quat_wxyz_from_matrix(r))}
+            for k, (p, r) in model.reference_poses.items()
+        },
+        "fingers": fingers,
+    }
+
+
+def save_model(model: HandModel, path: str | Path) -> Path:
+    """Write ``model`` as JSON, atomically. Returns the path."""
+    path = Path(path)
+    with atomic_write(path) as fh:
+        json.dump(model_to_dict(model), fh, indent=1)
+    return path
+
+
+class _Reader:
+    """Typed access to a JSON document with errors naming the field path."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def err(self, where: str, msg: str) -> FingerfitError:
+        return FingerfitError(msg, path=self.path, field=where)
+
+    def get(self, d: Any, key: str, where: str) -> Any:
+        if not isinstance(d, dict):
+            raise self.err(where, "must be an object")
+        if key not in d:
+            raise self.err(f"{where}.{key}".lstrip("."), "missing")
+        return d[key]
+
+    def vec(self, d: Any, key: str, where: str, n: int = 3, unit: bool = False) -> FloatArray:
+        w = f"{where}.{key}"
+        v = self.get(d, key, where)
+        if not (isinstance(v, list) and len(v) == n and all(isinstance(x, int | float) for x in v)):
+            raise self.err(w, f"must be a list of {n} numbers")
+        a = np.array(v, dtype=float)
+        if not np.isfinite(a).all():
+            raise self.err(w, "must be finite")
+        if unit and abs(np.linalg.norm(a) - 1.0) > 1e-6:
+            raise self.err(w, f"must have unit length (has {np.linalg.norm(a):.6g})")
+        return a
+
+    def str_(self, d: Any, key: str, where: str, allowed: tuple[str, ...] | None = None) -> str:
+        v = self.get(d, key, where)
+        if not isinstance(v, str) or (allowed is not None and v not in allowed):
+            raise self.err(
+                f"{where}.{key}".lstrip("."),
+                f"must be one of {allowed}" if allowed else "must be a string",
+            )
+        return v
+
+
+def _quality(q: dict[str, Any]) -> JointQuality:
+    keys = JointQuality.__dataclass_fields__
+    return JointQuality(**{k: q[k] for k in keys if k in q})
+
+
+def _load_joint(r: _Reader, jd: Any, name: str, wj: str, poses: dict) -> JointModel:
+    """One joint entry, checked: sensors known, unit axes, parent-frame values consistent."""
+    parent, child = r.str_(jd, "parent", wj), r.str_(jd, "child", wj)
+    for s in (parent, child):
+        if s not in poses:
+            raise r.err(wj, f"sensor '{s}' has no entry in reference_poses")
+    j = JointModel(
+        name,
+        parent,
+        child,
+        r.vec(jd, "center", wj),
+        r.vec(jd, "axis", wj, unit=True),
+        r.vec(jd, "orthogonal_axis", wj, unit=True),
+        _quality(r.get(jd, "quality", wj)),
+    )
+    pp, pr = poses[parent]
+    ip = r.get(jd, "in_parent", wj)
+    for key, val in (
+        ("center", pr.T @ (j.center - pp)),
+        ("axis", pr.T @ j.axis),
+        ("orthogonal_axis", pr.T @ j.orthogonal_axis),
+    ):
+        if np.abs(r.vec(ip, key, f"{wj}.in_parent") - val).max() > 1e-6:
+            raise r.err(f"{wj}.in_parent.{key}", "disagrees with the tracker-frame value")
+    return j
+
+
+def load_model(path: str | Path) -> HandModel:
+    """Read and validate a ``fingerfit.model/1`` file.
+
+    Raises
+    ------
+    FingerfitError
+        Naming the file and the field path (e.g. ``fingers.index.joints.pip.axis``)
+        of the first problem: a missing key, a wrong shape, a non-unit axis, or
+        parent-frame values inconsistent with the tracker-frame ones.
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FingerfitError("file not found", path=path) from None
+    except json.JSONDecodeError as exc:
+        raise FingerfitError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
+    r = _Reader(path)
+    fmt = r.str_(doc, "format", "")
+    if fmt != FORMAT:
+        raise r.err("format", f"unsupported format '{fmt}' (expected '{FORMAT}')")
+    if r.str_(doc, "units", "") != "mm":
+        raise r.err("units", "must be 'mm'")
+    poses = {}
+    for name, p in r.get(doc, "reference_poses", "").items():
+        w = f"reference_poses.{name}"
+        q = r.vec(p, "quat_wxyz", w, n=4)
+        if abs(np.linalg.norm(q) - 1) > 1e-6:
+            raise r.err(f"{w}.quat_wxyz", "must be a unit quaternion")
+        poses[name] = (r.vec(p, "position", w), matrix_from_quat_wxyz(q))
+    fingers = {}
+    fdoc = r.get(doc, "fingers", "")
+    if not isinstance(fdoc, dict) or not fdoc:
+        raise r.err("fingers", "must be a non-empty object")
+    for fname, fd in fdoc.items():
+        wf = f"fingers.{fname}"
+        if fname not in FINGERS:
+            raise r.err(wf, f"unknown finger (expected one of {', '.join(FINGERS)})")
+        jdoc = r.get(fd, "joints", wf)
+        joints = {
+            j: _load_joint(r, r.get(jdoc, j, f"{wf}.joints"), j, f"{wf}.joints.{j}", poses)
+            for j in JOINTS
+        }
+        abduction = None
+        if "abduction" in fd:
+            abduction = _load_joint(r, fd["abduction"], "mp_abduction", f"{wf}.abduction", poses)
+        lengths_doc = r.get(fd, "segment_lengths", wf)
+        lengths = {}
+        for s in SEGMENTS:
+            v = r.get(lengths_doc, s, f"{wf}.segment_lengths")
+            if not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+                raise r.err(f"{wf}.segment_lengths.{s}", "must be a positive number (mm)")
+            lengths[s] = float(v)
+        frames = {}
+        for s in SEGMENTS:
+            fr = r.get(r.get(fd, "frames", wf), s, f"{wf}.frames")
+            w = f"{wf}.frames.{s}"
+            rot = np.column_stack([r.vec(fr, k, w, unit=True) for k in "xyz"])
+            frames[s] = SegmentFrame(r.vec(fr, "origin", w), rot)
+        fingers[fname] = FingerModel(
+            fname, joints, r.vec(fd, "tip", wf), lengths, frames, abduction
+        )
+    return HandModel(
+        subject=r.str_(doc, "subject", ""),
+        hand=r.str_(doc, "hand", "", ("left", "right")),
+        session_units=r.str_(doc, "session_units", "", ("mm", "cm", "m", "in")),
+        method=r.str_(doc, "method", ""),
+        reference_poses=poses,
+        fingers=fingers,
+        version=str(doc.get("fingerfit_version", "unknown")),
+    )
