@@ -102,7 +102,7 @@ CSV_CASES = [
     (9, None, {"sensor": "thumb.distal"}, "unknown sensor name 'thumb.distal'", 9),
     (11, None, {"qw": "1.2", "qx": "0", "qy": "0", "qz": "0"}, "has norm 1.2, not 1", 11),
     (20, None, {"time": "0.0"}, "time goes backwards", 20),
-    (30, None, {"time": "0.0180"}, "not on the 240 Hz sampling grid", 30),
+    (30, None, {"time": "0.0150"}, "not on the 240 Hz sampling grid", 30),
 ]
 
 

@@ -1,0 +1,209 @@
+"""The paper's fit (method tang2018) and kinematics against simulator ground truth."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from fingerfit.cli import app
+from fingerfit.errors import FingerfitError
+from fingerfit.estimate import FitError, FitOptions, fit_session
+from fingerfit.estimate.cycles import extract_cycles
+from fingerfit.io import load_session, save_session
+from fingerfit.kinematics import compute_kinematics
+from fingerfit.model import load_model, save_model
+from fingerfit.simulate import SimConfig, simulate_subject, write_subject
+from fingerfit.simulate.study import relative_truth_in_parent
+from fingerfit.transforms import angle_between_axes, distance_point_to_line, relative_pose
+
+from .conftest import subject
+
+TANG = FitOptions(method="tang2018")
+
+
+def axis_errors(sim, model, finger="index"):
+    """Axis error (deg) and centre-to-true-axis distance (mm) per joint, parent frames."""
+    out = {}
+    for j in ("mp", "pip", "dip"):
+        c, a = model.in_parent(finger, j)
+        ct, at = relative_truth_in_parent(sim, finger, j)
+        out[j] = (np.degrees(angle_between_axes(a, at)), distance_point_to_line(c, ct, at))
+    return out
+
+
+def test_noise_free_fit_is_exact(exact_subject) -> None:
+    model = fit_session(exact_subject.session, TANG)
+    for j, (deg, mm) in axis_errors(exact_subject, model).items():
+        assert deg < 1e-6, j
+        assert mm < 1e-6, j
+    for j, jm in model.fingers["index"].joints.items():
+        assert jm.quality.cycles == 10
+        assert max(jm.quality.centre_distance_mm) < 1e-6, j
+
+
+def test_noise_free_angles_and_fingertip_are_exact(exact_subject) -> None:
+    model = fit_session(exact_subject.session, TANG)
+    rec = exact_subject.session.test[0]
+    kin = compute_kinematics(model, rec)
+    truth = exact_subject.truth.frames["test.csv"]
+    user = kin.motions["user_axis"]["index"]
+    for j in ("mp", "pip", "dip"):
+        np.testing.assert_allclose(user.angles[j], truth["angles"]["index"][j], atol=1e-9)
+    err = np.linalg.norm(user.tip - truth["tip"]["index"], axis=1)
+    assert err.max() < 1e-6
+    ortho = np.linalg.norm(kin.motions["orthogonal"]["index"].tip - truth["tip"]["index"], axis=1)
+    assert ortho.mean() > 0.5  # the tilted axes matter
+
+
+def test_realistic_fit_meets_the_paper_level() -> None:
+    errs, tips = [], []
+    for seed in range(4):
+        sim = subject("realistic", seed)
+        model = fit_session(sim.session, TANG)
+        e = axis_errors(sim, model)
+        errs.append([e[j][0] for j in ("mp", "pip", "dip")])
+        kin = compute_kinematics(model, sim.session.test[0])
+        true_tip = sim.truth.frames["test.csv"]["tip"]["index"]
+        tips.append(
+            [
+                np.linalg.norm(kin.motions[v]["index"].tip - true_tip, axis=1).mean()
+                for v in ("user_axis", "orthogonal")
+            ]
+        )
+    mp, pip, dip = np.mean(errs, axis=0)
+    assert mp <= 6.0 and pip <= 2.0 and dip <= 2.0, (mp, pip, dip)
+    user, ortho = np.mean(tips, axis=0)
+    assert user < 0.8 * ortho, (user, ortho)
+
+
+def test_cycles_exclude_static_holds() -> None:
+    sim = subject("realistic", 1)
+    s = sim.session
+    model = fit_session(s, TANG)
+    truth = sim.truth.frames["grasp.csv"]["angles"]["index"]
+    for j, jm in model.fingers["index"].joints.items():
+        p, c = s.grasp[0].pose(jm.parent), s.grasp[0].pose(jm.child)
+        r, _ = relative_pose(p.rotation, p.position, c.rotation, c.position)
+        ref = s.reference.pose(jm.parent).mean()[1].T @ s.reference.pose(jm.child).mean()[1]
+        cyc = extract_cycles(r, ref, s.rate_hz)
+        assert cyc.count == 10, j
+        speed = np.abs(np.gradient(np.degrees(truth[j]), 1 / s.rate_hz))
+        chosen = np.concatenate(cyc.periods)
+        # Almost no selected frame is a static hold (true speed below 5 deg/s) ...
+        assert np.mean(speed[chosen] < 5.0) < 0.05, j
+        # ... and most of the real movement is kept.
+        assert np.mean(np.isin(np.flatnonzero(speed > 30.0), chosen)) > 0.9, j
+
+
+def test_refuses_too_few_cycles() -> None:
+    sim = simulate_subject(SimConfig(cycles=2, test=False, targets=False), 3)
+    with pytest.raises(FitError, match=r"index (mp|pip|dip): only \d grasp cycle\(s\) found"):
+        fit_session(sim.session, TANG)
+
+
+def test_refuses_small_motion_unless_forced() -> None:
+    sim = simulate_subject(SimConfig(rom_scale=0.12, test=False, targets=False), 3)
+    with pytest.raises(
+        FitError, match=r"index mp: median range of motion .* below 15 deg; use --force"
+    ):
+        fit_session(sim.session, TANG)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = fit_session(sim.session, replace(TANG, force=True))
+    assert any("fitted anyway" in str(w.message) for w in caught)
+    assert model.fingers["index"].joints["mp"].quality.notes
+
+
+def test_refuses_when_centres_do_not_spread_along_the_axis() -> None:
+    """Noise-free rolling contact: the paper's per-cycle centres cluster off the axis."""
+    sim = simulate_subject(SimConfig.exact(rolling=True, test=False, targets=False), 0)
+    with pytest.raises(FitError, match=r"do not spread along one axis"):
+        fit_session(sim.session, TANG)
+
+
+def test_model_file_round_trip_and_validation(tmp_path, realistic_subject) -> None:
+    model = fit_session(realistic_subject.session, TANG)
+    path = save_model(model, tmp_path / "m.json")
+    back = load_model(path)
+    for j in ("mp", "pip", "dip"):
+        a, b = model.fingers["index"].joints[j], back.fingers["index"].joints[j]
+        np.testing.assert_allclose(a.center, b.center, atol=1e-12)
+        np.testing.assert_allclose(a.axis, b.axis, atol=1e-12)
+    doc = json.loads(path.read_text())
+    assert doc["format"] == "fingerfit.model/1" and doc["units"] == "mm"
+    assert set(doc["fingers"]["index"]["joints"]["pip"]) >= {
+        "center",
+        "axis",
+        "orthogonal_axis",
+        "in_parent",
+        "quality",
+    }
+
+    def broken(edit) -> str:
+        d = json.loads(path.read_text())
+        edit(d)
+        p = tmp_path / "bad.json"
+        p.write_text(json.dumps(d))
+        with pytest.raises(FingerfitError) as err:
+            load_model(p)
+        return str(err.value)
+
+    pip = lambda d: d["fingers"]["index"]["joints"]["pip"]  # noqa: E731
+    assert "field 'fingers.index.joints.pip.axis': must have unit length" in broken(
+        lambda d: pip(d).__setitem__("axis", [1.0, 1.0, 0.0])
+    )
+    assert "field 'fingers.index.joints.pip.in_parent.center': disagrees" in broken(
+        lambda d: pip(d)["in_parent"]["center"].__setitem__(0, 99.0)
+    )
+    assert "field 'fingers.index.joints.dip': missing" in broken(
+        lambda d: d["fingers"]["index"]["joints"].pop("dip")
+    )
+    assert "field 'format': unsupported format" in broken(lambda d: d.__setitem__("format", "x/2"))
+
+
+def test_cli_fit_and_angles_in_session_units(tmp_path) -> None:
+    sim = subject("realistic", 3)
+    d = write_subject(sim, tmp_path / "mm")
+    s = load_session(d)
+    s.units = "cm"
+    save_session(s, tmp_path / "cm")
+    runner = CliRunner()
+    for name in ("mm", "cm"):
+        res = runner.invoke(app, ["fit", str(tmp_path / name), "--method", "tang2018"])
+        assert res.exit_code == 0, res.output
+        res = runner.invoke(
+            app,
+            [
+                "angles",
+                str(tmp_path / name / "model.json"),
+                str(tmp_path / name / "test.csv"),
+                "-o",
+                str(tmp_path / f"{name}.csv"),
+            ],
+        )
+        assert res.exit_code == 0, res.output
+    a = pd.read_csv(tmp_path / "mm.csv")
+    b = pd.read_csv(tmp_path / "cm.csv")
+    assert list(a.columns[:7]) == [
+        "time",
+        "index.mp",
+        "index.pip",
+        "index.dip",
+        "index.tip.x",
+        "index.tip.y",
+        "index.tip.z",
+    ]
+    assert "orthogonal.index.tip.z" in a.columns
+    np.testing.assert_allclose(a["index.pip"], b["index.pip"], atol=1e-6)
+    np.testing.assert_allclose(a["index.tip.x"], 10 * b["index.tip.x"], rtol=1e-9)
+    true_tip = sim.truth.frames["test.csv"]["tip"]["index"]
+    err = np.linalg.norm(
+        a[["index.tip.x", "index.tip.y", "index.tip.z"]].to_numpy() - true_tip, axis=1
+    )
+    assert err.mean() < 6.0
