@@ -86,13 +86,12 @@ def projection_angle(
     """
     p0 = reference_offset - centre
     p0 = p0 - (p0 @ axis) * axis
-    u = np.cross(axis, p0)
-    # d = R^T (t_c - t_p) - c; d·v = (t_c - t_p)·(R v) - c·v for v in (u, p0).
-    rv = np.einsum("nij,kj->nki", parent_rotation, np.stack([u, p0]))
-    delta = child_position - parent_position
-    y = np.einsum("ni,ni->n", delta, rv[:, 0]) - centre @ u
-    x = np.einsum("ni,ni->n", delta, rv[:, 1]) - centre @ p0
-    return np.arctan2(y, x)
+    basis = np.column_stack([np.cross(axis, p0), p0])  # (3, 2): u, p0
+    # r = R^T (t_c - t_p) is the child origin in the parent frame; d = r - c.
+    r = np.einsum("ni,nij->nj", child_position - parent_position, parent_rotation)
+    yx = r @ basis
+    yx -= centre @ basis
+    return np.arctan2(yx[:, 0], yx[:, 1])
 
 
 def chain_points(

@@ -121,11 +121,16 @@ def rotate_about_line(
         Rotated points (mm).
     """
     a = np.asarray(axis, dtype=float)
-    th = np.asarray(angle, dtype=float)[:, None]
+    th = np.asarray(angle, dtype=float)
     v = np.asarray(points, dtype=float) - centre
-    v = np.broadcast_to(v, (th.shape[0], 3))
+    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
     cos, sin = np.cos(th), np.sin(th)
-    return centre + v * cos + np.cross(a, v) * sin + a * ((v @ a)[:, None] * (1.0 - cos))
+    # Rodrigues: v cos + (a x v) sin + a (a.v)(1 - cos), with BLAS products and in place.
+    out = np.multiply.outer(sin, v @ k.T) if v.ndim == 1 else (v @ k.T) * sin[:, None]
+    out += v * cos[:, None]
+    out += np.multiply.outer((v @ a) * (1.0 - cos), a)
+    out += centre
+    return out
 
 
 def apply_pose(rotation: FloatArray, translation: FloatArray, points: FloatArray) -> FloatArray:

@@ -1,0 +1,108 @@
+"""Speed benchmark: fit time per finger and angles + fingertip throughput.
+
+Run with ``make bench`` (``python bench/speed.py --json bench/speed.json``).
+Single-threaded BLAS so "per core" figures mean one core. Throughput is
+compared, in the same run, with a plain NumPy copy of the same input arrays
+(the memory-bound limit), and reported as a ratio.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fingerfit.estimate import FitOptions, fit_session
+from fingerfit.estimate.fit import METHODS, fit_finger, reference_poses
+from fingerfit.kinematics import compute_kinematics
+from fingerfit.session import PoseSeries, Recording
+from fingerfit.simulate import SimConfig, simulate_subject
+
+
+def best_of(fn, repeat: int) -> float:
+    """Minimum wall time (s) over ``repeat`` calls: the least disturbed run on a shared machine."""
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def long_recording(rec: Recording, n_frames: int) -> Recording:
+    """Tile a recording up to ``n_frames`` frames (hand + one finger's sensors)."""
+    reps = -(-n_frames // rec.n_frames)
+    poses = {
+        k: PoseSeries(
+            np.tile(v.position, (reps, 1))[:n_frames], np.tile(v.rotation, (reps, 1, 1))[:n_frames]
+        )
+        for k, v in rec.poses.items()
+    }
+    return Recording("long", np.arange(n_frames) / 240.0, poses)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--frames", type=int, default=1_200_000)
+    args = ap.parse_args()
+
+    sim = simulate_subject(SimConfig(), 0)
+    session = sim.session
+    results: dict = {
+        "machine": platform.processor() or platform.machine(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "fit": {},
+        "angles": {},
+    }
+    ref = reference_poses(session)
+    for method in METHODS:
+        opts = FitOptions(method=method)
+        t = best_of(lambda opts=opts: fit_finger(session, "index", ref, opts), 7)
+        results["fit"][method] = {
+            "seconds_per_finger": t,
+            "grasp_frames": session.grasp[0].n_frames,
+        }
+    model = fit_session(session, FitOptions(method="tang2018"))
+
+    rec = long_recording(session.test[0], args.frames)
+    arrays = [a for v in rec.poses.values() for a in (v.position, v.rotation)]
+    t_copy = best_of(lambda: [a.copy() for a in arrays], 3)
+    t_user = best_of(lambda: compute_kinematics(model, rec, variants=("user_axis",)), 3)
+    t_both = best_of(lambda: compute_kinematics(model, rec), 3)
+    n = rec.n_frames
+    results["angles"] = {
+        "frames": n,
+        "input_bytes": int(sum(a.nbytes for a in arrays)),
+        "copy_frames_per_s": n / t_copy,
+        "user_axis_frames_per_s": n / t_user,
+        "both_variants_frames_per_s": n / t_both,
+        "user_axis_time_over_copy": t_user / t_copy,
+    }
+    fit_rows = "\n".join(
+        f"| fit one finger (`{m}`, {r['grasp_frames']} grasp frames) | {1000 * r['seconds_per_finger']:.1f} ms |"
+        for m, r in results["fit"].items()
+    )
+    a = results["angles"]
+    print(f"""| measurement | result |
+|---|---|
+{fit_rows}
+| NumPy copy of the input ({n:,} frames, {a["input_bytes"] / 1e6:.0f} MB) | {a["copy_frames_per_s"] / 1e6:.1f} M frames/s |
+| angles + fingertip, user-axis model, one finger | {a["user_axis_frames_per_s"] / 1e6:.1f} M frames/s ({a["user_axis_time_over_copy"]:.1f}x the copy time) |
+| angles + fingertip, both models, one finger | {a["both_variants_frames_per_s"] / 1e6:.1f} M frames/s |""")
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
