@@ -64,7 +64,7 @@ def axis_quality(distances: pd.DataFrame, path: Path) -> Path:
 
 def trajectories(time: np.ndarray, tips: dict[str, np.ndarray], subject: str, path: Path) -> Path:
     """Fig. 9: fingertip trajectories of both models against the distal-sensor reference, three planes."""
-    step = max(1, int(round(0.1 / np.median(np.diff(time)))))
+    step = max(1, round(0.1 / np.median(np.diff(time))))
     fig, axes = plt.subplots(1, 3, figsize=(12, 4))
     ref = tips["reference"]
     centre = np.nanmean(ref, axis=0)
