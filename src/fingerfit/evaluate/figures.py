@@ -87,7 +87,7 @@ def trajectories(time: np.ndarray, tips: dict[str, np.ndarray], subject: str, pa
         ax.set_aspect("equal", adjustable="datalim")
     axes[0].legend(frameon=False, fontsize=8)
     fig.suptitle(
-        f"Fig. 9 - grasp fingertip trajectories, subject {subject} (tracker frame)", fontsize=10
+        f"Fig. 9 - grasp fingertip trajectories, subject {subject} (hand sensor frame)", fontsize=10
     )
     return save(fig, path)
 

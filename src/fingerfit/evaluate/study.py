@@ -23,8 +23,8 @@ from ..io import load_session
 from ..io.atomic import atomic_write
 from ..kinematics import compute_kinematics
 from ..model import VARIANTS, HandModel, save_model
-from ..session import Session
-from ..transforms import angle_between_axes
+from ..session import HAND_SENSOR, Session
+from ..transforms import angle_between_axes, apply_inverse_pose
 from . import figures
 from .fingertip import GraspEvaluation, evaluate_grasp, evaluate_targets
 from .stats import (
@@ -333,8 +333,10 @@ def run_study(
     fig["fig08"] = figures.axis_quality(tables["axis_quality"], out_dir / "fig08_axis_quality.png")
     for s in subjects:
         f, ev = next(iter(s.grasp.items()))
+        hand = s.session.grasp[0].pose(HAND_SENSOR)
+        in_hand = {k: apply_inverse_pose(hand.rotation, hand.position, v) for k, v in ev.tips.items()}
         fig[f"fig09_{s.subject}"] = figures.trajectories(
-            ev.time, ev.tips, f"{s.subject} ({f})", out_dir / f"fig09_trajectories_{s.subject}.png"
+            ev.time, in_hand, f"{s.subject} ({f})", out_dir / f"fig09_trajectories_{s.subject}.png"
         )
     fig["fig10"] = figures.paired_boxes(
         tables["max_flexion"],
