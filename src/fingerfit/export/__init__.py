@@ -1,0 +1,98 @@
+"""Robot export: the individual finger model as URDF and MuJoCo MJCF, and recorded
+motion as a joint-angle trajectory with the robot joint names.
+
+* :mod:`.geometry` -- the finger chains in the hand sensor frame (m, rad, kg),
+  shared by both writers;
+* :mod:`.urdf` -- URDF via yourdfpy;
+* :mod:`.mjcf` -- MJCF via ``mujoco.MjSpec``;
+* :mod:`.trajectory` -- joint angles (rad) per frame, columns named like the joints.
+
+yourdfpy and mujoco are the optional extra ``robot`` (``pip install fingerfit[robot]``);
+they are imported only when a file is written. See ``docs/export.md``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+from pathlib import Path
+from types import ModuleType
+
+from ..errors import FingerfitError
+from ..io.atomic import atomic_write
+
+
+def require(module: str) -> ModuleType:
+    """Import an optional dependency of the ``robot`` extra.
+
+    Parameters
+    ----------
+    module : str
+        Module name (``yourdfpy``, ``mujoco``).
+
+    Returns
+    -------
+    module
+
+    Raises
+    ------
+    FingerfitError
+        If it is not installed, saying ``pip install fingerfit[robot]``.
+    """
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise FingerfitError(
+            f"robot export needs the Python package '{module}': pip install fingerfit[robot]"
+        ) from None
+
+
+def write_text(files: dict[Path, str]) -> list[Path]:
+    """Write several text files all-or-nothing (each through ``atomic_write``).
+
+    Every temporary file is written before any is renamed into place, so a path
+    that cannot be written leaves none of the outputs behind.
+
+    Parameters
+    ----------
+    files : dict[Path, str]
+        Path -> complete text (written UTF-8 with ``\n`` line ends).
+
+    Returns
+    -------
+    list of Path
+
+    Raises
+    ------
+    FingerfitError
+        Naming the path that could not be written.
+    """
+    paths = list(files)
+    current = paths[0] if paths else Path()
+    try:
+        with contextlib.ExitStack() as stack:
+            for current in paths:
+                fh = stack.enter_context(atomic_write(current, encoding="utf-8", newline="\n"))
+                fh.write(files[current])
+    except OSError as exc:  # creating a temporary file, or renaming one into place
+        where = exc.filename2 or current
+        raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=where) from None
+    return paths
+
+
+from .geometry import RobotHand, joint_names, robot_hand  # noqa: E402
+from .mjcf import mjcf_string, write_mjcf  # noqa: E402
+from .trajectory import trajectory_table, write_trajectory  # noqa: E402
+from .urdf import urdf_string, write_urdf  # noqa: E402
+
+__all__ = [
+    "RobotHand",
+    "joint_names",
+    "mjcf_string",
+    "robot_hand",
+    "trajectory_table",
+    "urdf_string",
+    "write_mjcf",
+    "write_trajectory",
+    "write_urdf",
+]

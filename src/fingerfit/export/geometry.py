@@ -1,0 +1,397 @@
+"""The finger chains of a hand model in robot terms: links, joints, limits, inertials.
+
+One computation shared by the URDF and MJCF writers (and the trajectory writer's
+joint names), so the two files cannot disagree.
+
+Frames and units
+----------------
+Everything here is expressed in the **hand sensor frame at the reference
+posture**, in **metres** (kilograms, radians):
+
+    p_hand = R_h0^T (p_tracker - t_h0) / 1000,
+
+with ``(R_h0, t_h0)`` the hand sensor's reference pose (``R`` sensor -> tracker,
+``t`` mm). Every link frame is **parallel to the hand frame** at the reference
+posture and has its origin at the centre of the joint that moves it. Hence a
+joint's origin in its parent link is the difference of the two joint centres
+(no rotation, ``rpy = 0``), its axis is the fitted axis expressed in the hand
+frame (the same vector in the parent and child link frames at ``q = 0``), and
+the chain ``T(c1) Rot(a1, q1) T(c2 - c1) Rot(a2, q2) ...`` equals the product of
+exponentials of :func:`fingerfit.kinematics.chain_points` exactly. A two-axis MP
+gets an intermediate link: ab/adduction first (proximal), then MP flexion.
+
+Joint limits
+------------
+Flexion joints: ``[-margin, max(rom_deg) + margin]``; MP ab/adduction:
+``±(max(rom_deg) + margin)`` (its sign can go either way). ``rom_deg`` is the
+per-cycle range of motion recorded in the model's :class:`~fingerfit.model.JointQuality`;
+angles are 0 at the reference (stretched) posture and flexion is positive.
+Without a recorded range, anatomical defaults (:data:`DEFAULT_RANGE_DEG`) are
+used. See ``docs/export.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import FingerfitError
+from ..model import VARIANTS, FingerModel, HandModel, JointModel
+from ..session import HAND_SENSOR, JOINTS, SEGMENTS
+from ..transforms import FloatArray
+
+HAND_LINK = "hand"
+DEFAULT_MARGIN_DEG = 10.0
+#: Ranges (deg) used when a joint has no recorded range of motion.
+DEFAULT_RANGE_DEG = {
+    "mp_abduction": (-30.0, 30.0),
+    "mp": (-30.0, 90.0),
+    "pip": (-10.0, 110.0),
+    "dip": (-20.0, 90.0),
+}
+#: Soft tissue and bone, kg/m^3.
+DENSITY = 1100.0
+#: Capsule radius of each segment as a fraction of the proximal segment length.
+RADIUS_FRACTION = {"proximal": 0.17, "middle": 0.15, "distal": 0.13}
+#: Viscous joint damping, N m s/rad.
+DAMPING = {"mp_abduction": 0.005, "mp": 0.005, "pip": 0.003, "dip": 0.002}
+#: Joint effort (N m) and velocity (rad/s) limits required by URDF.
+EFFORT_NM = 2.0
+VELOCITY_RAD_S = 20.0
+#: The abduction gimbal link is massless in reality; simulators need a mass.
+GIMBAL_MASS_KG = 5e-4
+GIMBAL_RADIUS_M = 0.005
+
+
+@dataclass(frozen=True)
+class RobotJoint:
+    """One revolute joint of a finger chain.
+
+    Attributes
+    ----------
+    name : str
+        ``<finger>_mp_abduction``, ``<finger>_mp``, ``<finger>_pip`` or ``<finger>_dip``.
+    kind : str
+        ``mp_abduction``, ``mp``, ``pip`` or ``dip``.
+    parent, child : str
+        Link names.
+    centre : ndarray, shape (3,)
+        Joint centre, hand frame at the reference posture (m).
+    origin : ndarray, shape (3,)
+        Joint frame origin in the parent link frame (m); rotation identity.
+    axis : ndarray, shape (3,)
+        Unit axis, hand frame (= parent and child link frames at q = 0).
+    lower, upper : float
+        Joint limits (rad).
+    damping : float
+        Viscous damping (N m s/rad).
+    """
+
+    name: str
+    kind: str
+    parent: str
+    child: str
+    centre: FloatArray
+    origin: FloatArray
+    axis: FloatArray
+    lower: float
+    upper: float
+    damping: float
+
+
+@dataclass(frozen=True)
+class RobotLink:
+    """A moving link: capsule geometry and inertial, in its own frame (m, kg).
+
+    Attributes
+    ----------
+    name : str
+    capsule : tuple of ndarray or None
+        Capsule segment end points ``(start (3,), end (3,))`` in the link frame (m);
+        ``None`` for the abduction gimbal (no geometry).
+    radius : float
+        Capsule radius (m); for the gimbal, the radius of its nominal sphere.
+    mass : float
+        kg.
+    com : ndarray, shape (3,)
+        Centre of mass in the link frame (m).
+    inertia : ndarray, shape (3, 3)
+        Inertia tensor about ``com`` in link-frame axes (kg m^2).
+    """
+
+    name: str
+    capsule: tuple[FloatArray, FloatArray] | None
+    radius: float
+    mass: float
+    com: FloatArray
+    inertia: FloatArray
+
+
+@dataclass(frozen=True)
+class RobotFinger:
+    """One finger chain, proximal to distal.
+
+    Attributes
+    ----------
+    name : str
+    joints : tuple of RobotJoint
+        Ab/adduction (two-axis models only), MP, PIP, DIP; ``joints[k].child`` is
+        ``links[k].name``.
+    links : tuple of RobotLink
+    tip : ndarray, shape (3,)
+        Fingertip in the distal link frame (m).
+    tip_name : str
+        ``<finger>_tip`` (URDF link, MJCF site).
+    """
+
+    name: str
+    joints: tuple[RobotJoint, ...]
+    links: tuple[RobotLink, ...]
+    tip: FloatArray
+    tip_name: str
+
+
+@dataclass(frozen=True)
+class RobotHand:
+    """All finger chains of a model, rooted at the ``hand`` link (hand sensor frame).
+
+    Attributes
+    ----------
+    name : str
+        Robot / model name.
+    variant : {"user_axis", "orthogonal"}
+    margin_deg : float
+        Joint-limit margin (deg).
+    fingers : tuple of RobotFinger
+    """
+
+    name: str
+    variant: str
+    margin_deg: float
+    fingers: tuple[RobotFinger, ...]
+
+    @property
+    def joints(self) -> list[RobotJoint]:
+        """Every joint, finger by finger, proximal to distal."""
+        return [j for f in self.fingers for j in f.joints]
+
+
+def to_hand_frame(model: HandModel, points: FloatArray) -> FloatArray:
+    """Tracker points at the reference posture (mm) -> hand sensor frame (m).
+
+    Parameters
+    ----------
+    model : HandModel
+    points : ndarray, shape (..., 3)
+        Tracker coordinates at the reference posture (mm).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``R_h0^T (p - t_h0) / 1000`` (m).
+    """
+    t0, r0 = _hand_pose(model)
+    return ((np.asarray(points, dtype=float) - t0) @ r0) / 1000.0
+
+
+def joint_limits(joint: JointModel, kind: str, margin_deg: float) -> tuple[float, float]:
+    """Lower and upper limit (rad) of a joint from its recorded range of motion.
+
+    Parameters
+    ----------
+    joint : JointModel
+        ``joint.quality.rom_deg`` holds per-cycle ranges of motion (deg).
+    kind : {"mp_abduction", "mp", "pip", "dip"}
+    margin_deg : float
+        Added on both sides (deg).
+
+    Returns
+    -------
+    (float, float)
+        Flexion: ``(-margin, max ROM + margin)``; ab/adduction: ``±(max ROM + margin)``;
+        :data:`DEFAULT_RANGE_DEG` widened by the margin if no finite ROM is recorded (rad).
+    """
+    rom = np.asarray(joint.quality.rom_deg, dtype=float)
+    rom = rom[np.isfinite(rom) & (rom > 0)]
+    if rom.size == 0:
+        lo, hi = DEFAULT_RANGE_DEG[kind]
+        lo, hi = lo - margin_deg, hi + margin_deg
+    elif kind == "mp_abduction":
+        hi = float(rom.max()) + margin_deg
+        lo = -hi
+    else:
+        lo, hi = -margin_deg, float(rom.max()) + margin_deg
+    return math.radians(lo), math.radians(hi)
+
+
+def joint_names(model: HandModel) -> list[str]:
+    """Robot joint names of a model, finger by finger, proximal to distal.
+
+    Parameters
+    ----------
+    model : HandModel
+
+    Returns
+    -------
+    list of str
+        ``<finger>_mp_abduction`` (two-axis models), ``<finger>_mp``, ``<finger>_pip``,
+        ``<finger>_dip`` -- the order of :attr:`RobotHand.joints`, of the joints in the
+        URDF/MJCF files and of the columns of the ``--urdf-names`` trajectory.
+    """
+    return [f"{f}_{k}" for f, fm in model.fingers.items() for k in _kinds(fm)]
+
+
+def _kinds(finger: FingerModel) -> tuple[str, ...]:
+    """Joint kinds of a finger chain, proximal to distal."""
+    return (("mp_abduction",) if finger.abduction is not None else ()) + JOINTS
+
+
+def capsule_inertial(
+    start: FloatArray, end: FloatArray, radius: float, density: float = DENSITY
+) -> tuple[float, FloatArray, FloatArray]:
+    """Mass, centre of mass and inertia tensor of a solid capsule.
+
+    Parameters
+    ----------
+    start, end : ndarray, shape (3,)
+        Segment end points (m); the capsule is the set of points within ``radius``.
+    radius : float
+        m.
+    density : float
+        kg/m^3.
+
+    Returns
+    -------
+    mass : float
+        kg.
+    com : ndarray, shape (3,)
+        The segment midpoint (m).
+    inertia : ndarray, shape (3, 3)
+        About ``com``, in the axes of ``start``/``end`` (kg m^2).
+    """
+    d = np.asarray(end, dtype=float) - np.asarray(start, dtype=float)
+    h = float(np.linalg.norm(d))
+    u = d / h
+    m_cyl = density * math.pi * radius**2 * h
+    m_sph = density * 4.0 / 3.0 * math.pi * radius**3  # both hemispheres
+    i_axial = m_cyl * radius**2 / 2 + m_sph * 2 * radius**2 / 5
+    i_perp = m_cyl * (h**2 / 12 + radius**2 / 4) + m_sph * (
+        2 * radius**2 / 5 + h**2 / 4 + 3 * h * radius / 8
+    )
+    uu = np.outer(u, u)
+    inertia = i_perp * (np.eye(3) - uu) + i_axial * uu
+    return m_cyl + m_sph, (np.asarray(start) + np.asarray(end)) / 2, inertia
+
+
+def robot_hand(
+    model: HandModel, variant: str = "user_axis", margin_deg: float = DEFAULT_MARGIN_DEG
+) -> RobotHand:
+    """The robot description of a model: every finger chain in the hand frame (m).
+
+    Parameters
+    ----------
+    model : HandModel
+        Geometry in tracker coordinates at the reference posture (mm).
+    variant : {"user_axis", "orthogonal"}
+        Fitted (tilted) flexion axes, or the axes made perpendicular to the bones.
+        The ab/adduction axis is the same in both.
+    margin_deg : float
+        Joint-limit margin (deg, >= 0), see :func:`joint_limits`.
+
+    Returns
+    -------
+    RobotHand
+
+    Raises
+    ------
+    FingerfitError
+        Unknown variant, negative margin, no ``hand`` reference pose, or a
+        degenerate segment (joint centres coinciding).
+    """
+    if variant not in VARIANTS:
+        raise FingerfitError(
+            f"must be one of {', '.join(VARIANTS)}, not '{variant}'", field="variant"
+        )
+    if not (math.isfinite(margin_deg) and margin_deg >= 0):
+        raise FingerfitError("must be a non-negative number of degrees", field="margin_deg")
+    _hand_pose(model)
+    r0 = model.reference_poses[HAND_SENSOR][1]
+    fingers = []
+    for fname, fm in model.fingers.items():
+        flex = [fm.joints[j] for j in JOINTS]
+        centres = to_hand_frame(model, np.stack([j.center for j in flex] + [fm.tip]))
+        prox_len = float(np.linalg.norm(centres[1] - centres[0]))
+        spec = [
+            (k, fm.abduction, fm.abduction.axis)
+            if k == "mp_abduction"
+            else (k, fm.joints[k], fm.joints[k].axis_for(variant))
+            for k in _kinds(fm)
+        ]
+        for k, jm, _ in spec:
+            migration = getattr(jm, "migration", None)
+            if migration is not None and np.any(np.asarray(migration) != 0):
+                raise FingerfitError(
+                    "rolling-contact centre migration cannot be exported as a fixed "
+                    "revolute joint (robot export supports fixed-centre models)",
+                    field=f"fingers.{fname}."
+                    + ("abduction" if k == "mp_abduction" else f"joints.{k}")
+                    + ".migration_mm_per_rad",
+                )
+        link_names = [f"{fname}_{s}" for s in SEGMENTS]
+        if fm.abduction is not None:
+            link_names.insert(0, f"{fname}_mp_abduction_link")
+        joints, links = [], []
+        parent, parent_origin = HAND_LINK, np.zeros(3)
+        for (kind, jm, axis), child in zip(spec, link_names, strict=True):
+            centre = to_hand_frame(model, jm.center)
+            a = r0.T @ np.asarray(axis, dtype=float)
+            lo, hi = joint_limits(jm, kind, margin_deg)
+            joints.append(
+                RobotJoint(
+                    f"{fname}_{kind}",
+                    kind,
+                    parent,
+                    child,
+                    centre,
+                    centre - parent_origin,
+                    a / np.linalg.norm(a),
+                    lo,
+                    hi,
+                    DAMPING[kind],
+                )
+            )
+            if kind == "mp_abduction":
+                links.append(_gimbal(child))
+            else:
+                seg = SEGMENTS[JOINTS.index(kind)]
+                end = centres[JOINTS.index(kind) + 1] - centre
+                if np.linalg.norm(end) < 1e-4:
+                    raise FingerfitError(
+                        "segment shorter than 0.1 mm (joint centres coincide)",
+                        field=f"fingers.{fname}.segment_lengths.{seg}",
+                    )
+                radius = RADIUS_FRACTION[seg] * prox_len
+                mass, com, inertia = capsule_inertial(np.zeros(3), end, radius)
+                links.append(RobotLink(child, (np.zeros(3), end), radius, mass, com, inertia))
+            parent, parent_origin = child, centre
+        tip = centres[3] - parent_origin
+        fingers.append(RobotFinger(fname, tuple(joints), tuple(links), tip, f"{fname}_tip"))
+    name = f"fingerfit_{model.subject}_{model.hand}"
+    return RobotHand(name, variant, float(margin_deg), tuple(fingers))
+
+
+def _gimbal(name: str) -> RobotLink:
+    """The massless-in-reality link between MP ab/adduction and flexion (a small sphere)."""
+    i = 2.0 / 5.0 * GIMBAL_MASS_KG * GIMBAL_RADIUS_M**2
+    return RobotLink(name, None, GIMBAL_RADIUS_M, GIMBAL_MASS_KG, np.zeros(3), i * np.eye(3))
+
+
+def _hand_pose(model: HandModel) -> tuple[FloatArray, FloatArray]:
+    if HAND_SENSOR not in model.reference_poses:
+        raise FingerfitError(
+            "the model has no hand sensor pose", field=f"reference_poses.{HAND_SENSOR}"
+        )
+    t0, r0 = model.reference_poses[HAND_SENSOR]
+    return np.asarray(t0, dtype=float), np.asarray(r0, dtype=float)

@@ -1,0 +1,88 @@
+"""Recorded motion for robot software: joint angles per frame under the robot joint names.
+
+The CSV has a column ``time`` (s) and one column per joint of the exported
+URDF/MJCF, named like the joint (``<finger>_mp_abduction``, ``<finger>_mp``,
+``<finger>_pip``, ``<finger>_dip``), in **radians**, in the joint order of the
+robot files. Frames where an angle could not be computed are empty fields.
+Setting these values as joint positions of the exported model, with the ``hand``
+root placed at the recording's hand sensor pose, reproduces the fingertips that
+``fingerfit angles`` writes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..errors import FingerfitError
+from ..kinematics import Kinematics
+from ..model import HandModel
+from . import write_text
+from .geometry import joint_names
+
+
+def trajectory_table(kin: Kinematics, model: HandModel, variant: str = "user_axis") -> pd.DataFrame:
+    """Joint-angle trajectory with robot joint names.
+
+    Parameters
+    ----------
+    kin : Kinematics
+        From :func:`fingerfit.kinematics.compute_kinematics` with ``model``.
+    model : HandModel
+    variant : {"user_axis", "orthogonal"}
+        Must match the variant the URDF/MJCF was exported with.
+
+    Returns
+    -------
+    DataFrame
+        ``time`` (s, ``(n_frames,)``) and one column per robot joint (rad), in the
+        order of :func:`~fingerfit.export.geometry.joint_names`. A two-axis MP whose
+        ab/adduction angle the kinematics did not compute gets 0 (as in fingerfit's
+        own fingertip), NaN where the MP angle is NaN.
+
+    Raises
+    ------
+    FingerfitError
+        If ``kin`` lacks the variant or a finger of the model.
+    """
+    if variant not in kin.motions:
+        raise FingerfitError(f"the kinematics have no '{variant}' variant", field="variant")
+    cols: dict[str, np.ndarray] = {"time": np.asarray(kin.time, dtype=float)}
+    for name in joint_names(model):
+        finger, kind = name.split("_", 1)
+        motion = kin.motions[variant].get(finger)
+        if motion is None:
+            raise FingerfitError(f"the kinematics have no finger '{finger}'", field=finger)
+        if kind in motion.angles:
+            cols[name] = np.asarray(motion.angles[kind], dtype=float)
+        else:  # ab/adduction not estimated: 0 where the finger's angles exist
+            cols[name] = np.where(np.isfinite(motion.angles["mp"]), 0.0, np.nan)
+    return pd.DataFrame(cols)
+
+
+def write_trajectory(
+    path: str | Path, kin: Kinematics, model: HandModel, variant: str = "user_axis"
+) -> Path:
+    """Write :func:`trajectory_table` as CSV atomically (round-trip float precision).
+
+    Parameters
+    ----------
+    path : str or Path
+    kin : Kinematics
+    model : HandModel
+    variant : {"user_axis", "orthogonal"}
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FingerfitError
+        As :func:`trajectory_table`, or when ``path`` cannot be written.
+    """
+    table = trajectory_table(kin, model, variant)
+    text = table.to_csv(index=False, lineterminator="\n")
+    return write_text({Path(path): text})[0]
