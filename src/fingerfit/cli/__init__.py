@@ -1,6 +1,6 @@
 """Command-line interface (``fingerfit --help``). One module per command group."""
 
-from . import fit, simulate, study  # noqa: F401  (registers the commands)
+from . import export, fit, simulate, study  # noqa: F401  (registers the commands)
 from .app import app, run
 
 main = run

@@ -104,6 +104,13 @@ def angles(
         float | None,
         typer.Option(help="Sampling rate (Hz) to keep dropped frames visible as empty rows."),
     ] = None,
+    urdf_names: Annotated[
+        Path | None,
+        typer.Option(
+            "--urdf-names",
+            help="Also write the joint-angle trajectory (rad, URDF joint names, user-axis model).",
+        ),
+    ] = None,
 ) -> None:
     """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
     model = load_model(model_path)
@@ -113,9 +120,14 @@ def angles(
     rec = read_pose_csv(recording, units=units, rate_hz=rate)
     for note in rec.notes:
         console.print(f"[yellow]note:[/] {note}")
-    table = kinematics_table(compute_kinematics(model, rec), units=units)
+    kin = compute_kinematics(model, rec)
+    table = kinematics_table(kin, units=units)
     with atomic_write(output, newline="") as fh:
         table.to_csv(fh, index=False, lineterminator="\n")
+    if urdf_names is not None:
+        from ..export.trajectory import write_trajectory
+
+        out.print(f"joint trajectory (rad) -> [bold]{write_trajectory(urdf_names, kin, model)}[/]")
     out.print(
         f"{rec.n_frames} frames -> [bold]{output}[/] (angles deg, fingertips {units}, tracker frame)"
     )

@@ -1,0 +1,80 @@
+"""``fingerfit export``: the individual finger model as URDF and/or MuJoCo MJCF."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.text import Text
+
+from ..errors import FingerfitError
+from ..export import mjcf_string, robot_hand, urdf_string
+from ..export import write_text as _write_text
+from ..export.geometry import DEFAULT_MARGIN_DEG
+from ..model import VARIANTS, load_model
+from .app import app, console, out, user_errors
+
+
+@app.command()
+@user_errors
+def export(
+    model_path: Annotated[
+        Path, typer.Argument(metavar="MODEL", help="Model JSON from `fingerfit fit`.")
+    ],
+    urdf: Annotated[
+        Path | None, typer.Option("--urdf", help="URDF file to write (metres, radians).")
+    ] = None,
+    mjcf: Annotated[
+        Path | None, typer.Option("--mjcf", help="MuJoCo MJCF file to write (metres, radians).")
+    ] = None,
+    variant: Annotated[
+        str,
+        typer.Option(help=f"Flexion axes: {' or '.join(VARIANTS)} (perpendicular to the bones)."),
+    ] = "user_axis",
+    margin_deg: Annotated[
+        float,
+        typer.Option(
+            "--margin-deg",
+            help="Joint limits: observed range of motion widened by this margin (deg).",
+        ),
+    ] = DEFAULT_MARGIN_DEG,
+) -> None:
+    """Export the finger chains for robot software: root link `hand` (hand sensor frame),
+    joints <finger>_mp|pip|dip, fingertip frame <finger>_tip."""
+    try:
+        _export(model_path, urdf, mjcf, variant, margin_deg)
+    except FingerfitError as exc:
+        # Printed as plain text: messages hold brackets ("fingerfit[robot]", paths)
+        # that console markup would swallow.
+        console.print(Text.assemble(("error:", "bold red"), f" {exc}"), soft_wrap=True)
+        raise typer.Exit(code=2) from None
+
+
+def _export(
+    model_path: Path, urdf: Path | None, mjcf: Path | None, variant: str, margin_deg: float
+) -> None:
+    """Check the options, build every document, then write them all or none."""
+    if urdf is None and mjcf is None:
+        raise FingerfitError("nothing to write: give --urdf and/or --mjcf")
+    if urdf is not None and mjcf is not None and urdf.resolve() == mjcf.resolve():
+        raise FingerfitError("--urdf and --mjcf name the same file", path=urdf)
+    if variant not in VARIANTS:
+        raise FingerfitError(f"must be one of {', '.join(VARIANTS)}", field="--variant")
+    if not margin_deg >= 0:
+        raise FingerfitError("must be >= 0", field="--margin-deg")
+    model = load_model(model_path)
+    files: dict[Path, str] = {}
+    if urdf is not None:
+        files[urdf] = urdf_string(model, variant, margin_deg)
+    if mjcf is not None:
+        files[mjcf] = mjcf_string(model, variant, margin_deg)
+    _write_text(files)  # all files or none
+    hand = robot_hand(model, variant, margin_deg)
+    out.print(
+        f"{len(hand.fingers)} finger(s), {len(hand.joints)} joints ({variant} axes, limits = "
+        f"observed range of motion ± {margin_deg:g}°; metres, radians) -> "
+        + ", ".join(str(p) for p in files),
+        markup=False,
+        highlight=False,
+    )
