@@ -38,12 +38,19 @@ const data = JSON.parse(document.getElementById('model-data').textContent);
 const cv = document.getElementById('view'), ctx = cv.getContext('2d');
 const sel = document.getElementById('subject');
 for (const s of Object.keys(data)) { const o = document.createElement('option'); o.textContent = s; sel.appendChild(o); }
-let yaw = -0.6, pitch = 0.5, zoom = 3.2, drag = null;
+let yaw = -0.5, pitch = 0.35, zoom = 1, drag = null, mid = [0, 0, 0];
+function fit() {  // centre the subject's finger(s) and fill the canvas
+  const pts = data[sel.value].flatMap(f => [...f.centres, f.tip]);
+  mid = [0, 1, 2].map(k => pts.reduce((a, p) => a + p[k], 0) / pts.length);
+  const r = Math.max(...pts.map(p => Math.hypot(p[0] - mid[0], p[1] - mid[1], p[2] - mid[2])));
+  zoom = 0.42 * Math.min(cv.width, cv.height) / Math.max(r, 1);
+}
 function proj(p) {
   const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
-  const x = cy * p[0] - sy * p[1], y0 = sy * p[0] + cy * p[1];
-  const y = cp * y0 - sp * p[2], z = sp * y0 + cp * p[2];
-  return [cv.width / 2 + zoom * (x - 40), cv.height / 2 - zoom * z, y];
+  const q = [p[0] - mid[0], p[1] - mid[1], p[2] - mid[2]];
+  const x = cy * q[0] - sy * q[1], y0 = sy * q[0] + cy * q[1];
+  const y = cp * y0 - sp * q[2], z = sp * y0 + cp * q[2];
+  return [cv.width / 2 + zoom * x, cv.height / 2 - zoom * z, y];
 }
 function line(a, b, color, w) { const p = proj(a), q = proj(b); ctx.strokeStyle = color; ctx.lineWidth = w;
   ctx.beginPath(); ctx.moveTo(p[0], p[1]); ctx.lineTo(q[0], q[1]); ctx.stroke(); }
@@ -58,7 +65,7 @@ function draw() {
     for (let i = 0; i < 3; i++) {
       const c = f.centres[i];
       for (const [ax, col] of [[f.axes[i], '#1f77b4'], [f.orthogonal[i], '#d62728']])
-        line(c.map((v, k) => v - 12 * ax[k]), c.map((v, k) => v + 12 * ax[k]), col, 2);
+        line(c.map((v, k) => v - 18 * ax[k]), c.map((v, k) => v + 18 * ax[k]), col, 2);
       dot(c, '#000', 3.5);
     }
     for (const l of f.landmarks) dot(l, '#2ca02c', 2.5);
@@ -70,7 +77,7 @@ window.onmouseup = () => drag = null;
 window.onmousemove = e => { if (!drag) return; yaw = drag[2] + (e.clientX - drag[0]) / 150;
   pitch = drag[3] + (e.clientY - drag[1]) / 150; draw(); };
 cv.onwheel = e => { e.preventDefault(); zoom *= e.deltaY < 0 ? 1.1 : 0.9; draw(); };
-sel.onchange = draw; draw();
+sel.onchange = () => { fit(); draw(); }; fit(); draw();
 """
 
 
