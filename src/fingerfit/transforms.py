@@ -198,9 +198,12 @@ def unit(v: FloatArray) -> FloatArray:
 
 
 def angle_between_axes(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Angle between two lines' directions, ignoring sign (rad, in [0, pi/2])."""
-    c = np.abs(np.sum(unit(a) * unit(b), axis=-1))
-    return np.arccos(np.clip(c, 0.0, 1.0))
+    """Angle between two lines' directions ``(..., 3)``, ignoring sign (rad, in [0, pi/2]).
+
+    Computed as ``atan2(|a x b|, |a . b|)``, accurate for tiny angles (unlike arccos).
+    """
+    ua, ub = unit(a), unit(b)
+    return np.arctan2(np.linalg.norm(np.cross(ua, ub), axis=-1), np.abs(np.sum(ua * ub, axis=-1)))
 
 
 def distance_point_to_line(point: FloatArray, centre: FloatArray, axis: FloatArray) -> FloatArray:
