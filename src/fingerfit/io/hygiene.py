@@ -1,0 +1,476 @@
+"""Data hygiene for tracker recordings: reported, never silent.
+
+Every reader of real tracker files passes its data through these checks:
+
+* :func:`repeated_rows` -- exact repeats of the previous sample (a logger polling
+  faster than the tracker updates); readers drop them and count them;
+* :func:`check_increasing` and :func:`place_on_grid` -- time must increase; with a
+  sampling rate, frames go on the ``1/rate`` grid and missing frames become NaN rows;
+* :func:`find_jumps` -- position or orientation steps both faster than a finger moves
+  and much faster than the movement around them (magnetic hemisphere flips, marker
+  swaps) are flagged with their frame, never altered;
+* :func:`check_units` -- implausible distances between neighbouring sensors of a hand
+  (a unit mistake) are an error;
+* :func:`fill_gaps` -- optional: short interior gaps interpolated (positions linear,
+  orientations by spherical linear interpolation), longer ones left as NaN.
+
+Counts of anything repaired or flagged go in :attr:`Recording.notes`.
+Positions are millimetres in tracker coordinates; rotation matrices map sensor into
+tracker coordinates (``docs/conventions.md``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation, Slerp
+
+from ..errors import FingerfitError
+from ..session import FINGERS, HAND_SENSOR, PoseSeries, Recording, sensor_name
+
+#: Default thresholds of :func:`find_jumps`: faster than any finger moves.
+MAX_SPEED_MM_S = 3000.0
+MAX_TURN_DEG_S = 3600.0
+#: A jump is also this many times faster than the median of the steps around it ...
+JUMP_RELATIVE = 5.0
+#: ... taken over a centred window of this many steps.
+JUMP_WINDOW = 21
+
+#: Plausible median distances (mm) between the origins of neighbouring hand sensors.
+#: A unit mistake scales every distance by 2.54 (in/cm), 10 (cm/mm), 25.4 (in/mm) or
+#: 1000 (m/mm); the ranges are wide enough for any adult hand and sensor placement and
+#: catch the factors of 10 and more.
+NEIGHBOUR_RANGE_MM = {
+    ("hand", "proximal"): (15.0, 250.0),
+    ("proximal", "middle"): (8.0, 150.0),
+    ("middle", "distal"): (6.0, 120.0),
+}
+#: Largest plausible median distance (mm) of any sensor from the tracker origin.
+WORKSPACE_MM = 10_000.0
+
+_LIST_MAX = 8
+
+
+def repeated_rows(values: np.ndarray) -> np.ndarray:
+    """Rows that repeat the previous row exactly.
+
+    Parameters
+    ----------
+    values : ndarray, shape (n, m)
+        One sample per row (any units); NaN equals NaN here.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True where row ``i`` equals row ``i - 1`` in every column (never for row 0).
+    """
+    v = np.asarray(values, dtype=float)
+    if v.shape[0] < 2:
+        return np.zeros(v.shape[0], dtype=bool)
+    a, b = v[1:], v[:-1]
+    same = (a == b) | (np.isnan(a) & np.isnan(b))
+    return np.concatenate([[False], same.all(axis=1)])
+
+
+def check_increasing(
+    time: np.ndarray,
+    lines: np.ndarray,
+    path: str | Path,
+    *,
+    what: str = "time",
+    strict: bool = True,
+) -> None:
+    """Raise if time does not increase from one frame to the next.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Frame times (s) or frame counts, in file order.
+    lines : ndarray of int, shape (n,)
+        1-based file line (or record number) of each frame, for the message.
+    path : str or Path
+        The file, for the message.
+    what : str
+        Name of the quantity in the message (``time``, ``frame count`` ...).
+    strict : bool
+        Whether equal consecutive values are an error too.
+
+    Raises
+    ------
+    FingerfitError
+        Naming the first line where the value goes backwards (or repeats).
+    """
+    t = np.asarray(time, dtype=float)
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise FingerfitError(
+            f"{what} is missing or not finite", path=path, line=int(lines[bad[0]]), field=what
+        )
+    d = np.diff(t)
+    bad = np.flatnonzero(d <= 0 if strict else d < 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        verb = "goes backwards" if d[i - 1] < 0 else "does not increase"
+        raise FingerfitError(
+            f"{what} {verb} ({t[i]:.15g} after {t[i - 1]:.15g})",
+            path=path,
+            line=int(lines[i]),
+            field=what,
+        )
+
+
+def place_on_grid(
+    time: np.ndarray, rate_hz: float, lines: np.ndarray, path: str | Path
+) -> tuple[np.ndarray, np.ndarray]:
+    """Put frames on the ``1/rate_hz`` sampling grid, so missing frames become visible.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Strictly increasing frame times (s).
+    rate_hz : float
+        Sampling rate (frames per second).
+    lines : ndarray of int, shape (n,)
+        File line of each frame, for messages.
+    path : str or Path
+
+    Returns
+    -------
+    grid_time : ndarray, shape (n_grid,)
+        Times of every grid frame: the measured time where a frame exists, the grid
+        time ``t0 + k / rate_hz`` where it is missing.
+    index : ndarray of int, shape (n,)
+        Grid frame of each input frame.
+
+    Raises
+    ------
+    FingerfitError
+        If a frame is more than a quarter period off the grid, or two frames fall on
+        the same grid frame (wrong ``rate_hz``).
+    """
+    t = np.asarray(time, dtype=float)
+    if t.size == 0:
+        return t.copy(), np.zeros(0, dtype=np.int64)
+    idx = np.rint((t - t[0]) * rate_hz).astype(np.int64)
+    off = np.abs(t - (t[0] + idx / rate_hz))
+    bad = (off > 0.25 / rate_hz) | np.concatenate([[False], np.diff(idx) == 0])
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise FingerfitError(
+            f"time {t[i]:.6f} s is not on the {rate_hz:g} Hz sampling grid (wrong --rate?)",
+            path=path,
+            line=int(lines[i]),
+            field="time",
+        )
+    n = int(idx[-1]) + 1
+    grid = t[0] + np.arange(n) / rate_hz
+    grid[idx] = t
+    return grid, idx
+
+
+def frames_missing_note(n_missing: int) -> list[str]:
+    """The note for frames missing for every sensor (empty when none)."""
+    if n_missing <= 0:
+        return []
+    return [f"{n_missing} frames missing for every sensor (kept as NaN rows)"]
+
+
+def sensor_missing_notes(recording: Recording) -> list[str]:
+    """One note per sensor with missing frames: ``sensor 'x': k of n frames missing``."""
+    out = []
+    for name, pose in recording.poses.items():
+        missing = recording.n_frames - int(pose.valid.sum())
+        if missing:
+            out.append(f"sensor '{name}': {missing} of {recording.n_frames} frames missing")
+    return out
+
+
+def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and end (exclusive) of every run of True in a 1-D mask."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def fill_gaps(recording: Recording, max_gap: int) -> Recording:
+    """Interpolate short interior gaps; leave longer gaps and the ends as NaN.
+
+    Positions are interpolated linearly in time; orientations by spherical linear
+    interpolation (scipy ``Slerp``) between the valid samples on either side.
+
+    Parameters
+    ----------
+    recording : Recording
+        Positions in mm, rotations sensor -> tracker, ``time`` in s.
+    max_gap : int
+        Longest gap (in frames) to fill; ``0`` fills nothing.
+
+    Returns
+    -------
+    Recording
+        A new recording; ``notes`` gain, per sensor, the number of gaps and frames
+        filled and the number of longer gaps kept as NaN.
+    """
+    if max_gap < 0:
+        raise FingerfitError("the longest gap to fill must be 0 or more frames", field="max_gap")
+    notes = list(recording.notes)
+    poses: dict[str, PoseSeries] = {}
+    t = recording.time
+    for name, pose in recording.poses.items():
+        valid = pose.valid
+        starts, ends = _runs(~valid)
+        interior = (starts > 0) & (ends < recording.n_frames)
+        short = interior & (ends - starts <= max_gap)
+        if not short.any():
+            poses[name] = pose
+            if interior.any():
+                notes.append(
+                    f"sensor '{name}': {int(interior.sum())} gaps longer than {max_gap} "
+                    "frames kept as NaN"
+                )
+            continue
+        marks = np.zeros(recording.n_frames + 1, dtype=np.int64)
+        np.add.at(marks, starts[short], 1)
+        np.add.at(marks, ends[short], -1)
+        fill = np.cumsum(marks)[:-1] > 0
+        pos = pose.position.copy()
+        rot = pose.rotation.copy()
+        tv = t[valid]
+        for j in range(3):
+            pos[fill, j] = np.interp(t[fill], tv, pose.position[valid, j])
+        slerp = Slerp(tv, Rotation.from_matrix(pose.rotation[valid]))
+        rot[fill] = slerp(t[fill]).as_matrix()
+        poses[name] = PoseSeries(pos, rot)
+        msg = (
+            f"sensor '{name}': {int(short.sum())} gaps ({int(fill.sum())} frames) interpolated "
+            f"(at most {max_gap} frames; positions linear, orientations slerp)"
+        )
+        longer = int((interior & ~short).sum())
+        if longer:
+            msg += f"; {longer} longer gaps kept as NaN"
+        notes.append(msg)
+    return Recording(recording.name, recording.time.copy(), poses, notes)
+
+
+@dataclass(frozen=True)
+class Jump:
+    """A step of one sensor faster than a body can move.
+
+    Attributes
+    ----------
+    sensor : str
+    kind : {"position", "orientation"}
+    frame : int
+        0-based frame index of the first sample after the jump.
+    end_frame : int
+        Last frame of the jump (steps within a few frames are merged into one jump).
+    time : float
+        Time of ``frame`` (s).
+    peak : float
+        Largest speed in the jump: mm/s for position, deg/s for orientation.
+    hemisphere : bool
+        Whether the position after the jump is the mirror image through the tracker
+        origin of the position before it (a magnetic tracker's hemisphere ambiguity).
+    """
+
+    sensor: str
+    kind: str
+    frame: int
+    end_frame: int
+    time: float
+    peak: float
+    hemisphere: bool = False
+
+
+def find_jumps(
+    recording: Recording,
+    *,
+    max_speed_mm_s: float = MAX_SPEED_MM_S,
+    max_turn_deg_s: float = MAX_TURN_DEG_S,
+    relative: float = JUMP_RELATIVE,
+    window: int = JUMP_WINDOW,
+    merge_frames: int = 5,
+) -> list[Jump]:
+    """Flag position and orientation jumps between consecutive valid samples.
+
+    A step is a jump when its speed exceeds the absolute limit **and** ``relative``
+    times the median speed of the ``window`` steps around it, so fast but smooth
+    movement (e.g. a whole arm in a lab) is not flagged while a sudden step is.
+
+    Parameters
+    ----------
+    recording : Recording
+        Positions mm, rotations sensor -> tracker, time s.
+    max_speed_mm_s : float
+        Position speed (mm/s) above which a step may be a jump.
+    max_turn_deg_s : float
+        Angular speed (deg/s) above which a step may be a jump.
+    relative : float
+        How many times faster than the local median speed a jump must be.
+    window : int
+        Steps in the centred window of the local median.
+    merge_frames : int
+        Flagged steps at most this many frames apart form one jump.
+
+    Returns
+    -------
+    list of Jump
+        In order of sensor, kind and frame. Nothing is changed in the data.
+    """
+    out: list[Jump] = []
+    t = recording.time
+    for name, pose in recording.poses.items():
+        idx = np.flatnonzero(pose.valid)
+        if idx.size < 2:
+            continue
+        dt = np.diff(t[idx])
+        pos = pose.position[idx]
+        speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) / dt
+        r = pose.rotation[idx]
+        cos = (np.einsum("nij,nij->n", r[:-1], r[1:]) - 1.0) / 2.0
+        turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))) / dt
+        for kind, rate, limit in (
+            ("position", speed, max_speed_mm_s),
+            ("orientation", turn, max_turn_deg_s),
+        ):
+            local = pd.Series(rate).rolling(window, center=True, min_periods=1).median().to_numpy()
+            steps = np.flatnonzero((rate > limit) & (rate > relative * local))
+            if not steps.size:
+                continue
+            after = idx[steps + 1]
+            group = np.cumsum(np.concatenate([[True], np.diff(after) > merge_frames]))
+            for g in np.unique(group):
+                s = steps[group == g]
+                before_p = pos[s[0]]
+                after_p = pos[s[-1] + 1]
+                norm = np.linalg.norm(before_p)
+                mirror = bool(
+                    kind == "position"
+                    and norm > 0
+                    and np.linalg.norm(after_p + before_p) < 0.25 * norm
+                )
+                out.append(
+                    Jump(
+                        name,
+                        kind,
+                        int(idx[s[0] + 1]),
+                        int(idx[s[-1] + 1]),
+                        float(t[idx[s[0] + 1]]),
+                        float(rate[s].max()),
+                        mirror,
+                    )
+                )
+    return out
+
+
+def jump_notes(jumps: Sequence[Jump], *, max_speed_mm_s: float, max_turn_deg_s: float) -> list[str]:
+    """One note per sensor and kind listing the jumps' frames (at most a few)."""
+    notes = []
+    keys = list(dict.fromkeys((j.sensor, j.kind) for j in jumps))
+    for sensor, kind in keys:
+        js = [j for j in jumps if j.sensor == sensor and j.kind == kind]
+        limit = (
+            f"> {max_speed_mm_s:g} mm/s" if kind == "position" else f"> {max_turn_deg_s:g} deg/s"
+        )
+        where = ", ".join(
+            f"{j.frame} ({j.time:.3f} s{', hemisphere flip' if j.hemisphere else ''})"
+            for j in js[:_LIST_MAX]
+        )
+        more = f" and {len(js) - _LIST_MAX} more" if len(js) > _LIST_MAX else ""
+        notes.append(
+            f"sensor '{sensor}': {len(js)} {kind} jumps ({limit}) flagged at frames {where}{more}"
+        )
+    return notes
+
+
+def check_units(recording: Recording, path: str | Path | None = None) -> None:
+    """Raise if sensor distances are implausible for a hand (a unit mistake).
+
+    Checks the median distance between neighbouring hand sensors (``hand`` ->
+    ``<finger>.proximal`` -> ``.middle`` -> ``.distal``) against
+    :data:`NEIGHBOUR_RANGE_MM`, and the median distance of every sensor from the
+    tracker origin against :data:`WORKSPACE_MM`.
+
+    Parameters
+    ----------
+    recording : Recording
+        Positions in mm.
+    path : str or Path, optional
+        The source file, for the message.
+
+    Raises
+    ------
+    FingerfitError
+        ``field 'units'``: naming the sensors and the distance found.
+    """
+    poses = recording.poses
+    for name, pose in poses.items():
+        ok = pose.valid
+        if ok.any():
+            r = float(np.median(np.linalg.norm(pose.position[ok], axis=1)))
+            if r > WORKSPACE_MM:
+                raise FingerfitError(
+                    f"sensor '{name}' is {r / 1000:.4g} m from the tracker origin (median): "
+                    "implausible, are the units right (--units)?",
+                    path=path,
+                    field="units",
+                )
+    for finger in FINGERS:
+        chain = [HAND_SENSOR] + [sensor_name(finger, s) for s in ("proximal", "middle", "distal")]
+        kinds = ["hand", "proximal", "middle", "distal"]
+        for i in range(3):
+            a, b = chain[i], chain[i + 1]
+            if a not in poses or b not in poses:
+                continue
+            ok = poses[a].valid & poses[b].valid
+            if not ok.any():
+                continue
+            d = float(
+                np.median(np.linalg.norm(poses[a].position[ok] - poses[b].position[ok], axis=1))
+            )
+            lo, hi = NEIGHBOUR_RANGE_MM[(kinds[i], kinds[i + 1])]
+            if not lo <= d <= hi:
+                raise FingerfitError(
+                    f"implausible distance {d:.4g} mm between sensors '{a}' and '{b}' "
+                    f"(median over frames; expected {lo:g}-{hi:g} mm): are the units right "
+                    "(--units)?",
+                    path=path,
+                    field="units",
+                )
+
+
+def check_recording(
+    recording: Recording,
+    path: str | Path | None = None,
+    *,
+    units: bool = True,
+    max_speed_mm_s: float = MAX_SPEED_MM_S,
+    max_turn_deg_s: float = MAX_TURN_DEG_S,
+) -> list[Jump]:
+    """Unit plausibility (an error) and jump flags (notes) in one call.
+
+    Parameters
+    ----------
+    recording : Recording
+        Positions mm; its ``notes`` gain one line per sensor and kind of jump.
+    path : str or Path, optional
+        The source file, for messages.
+    units : bool
+        Whether to run :func:`check_units`.
+    max_speed_mm_s, max_turn_deg_s : float
+        Jump thresholds, see :func:`find_jumps`.
+
+    Returns
+    -------
+    list of Jump
+    """
+    if units:
+        check_units(recording, path)
+    jumps = find_jumps(recording, max_speed_mm_s=max_speed_mm_s, max_turn_deg_s=max_turn_deg_s)
+    recording.notes.extend(
+        jump_notes(jumps, max_speed_mm_s=max_speed_mm_s, max_turn_deg_s=max_turn_deg_s)
+    )
+    return jumps
