@@ -1,0 +1,829 @@
+"""Polhemus Liberty / Patriot output: ASCII and binary streams -> :class:`Recording`.
+
+**ASCII** (as captured from the device or saved by its host software): one CR/LF
+line per station, whitespace-separated: the station number (one or two digits,
+optionally followed by one indicator character, e.g. ``01`` or ``01D``), then the
+items of the output list in order. Numbers glued together by a sign (fixed-width
+fields overflowing, ``12.345-6.789``) are split.
+
+**Binary**: records of an 8-byte header -- ``'LY'`` (Liberty) or ``'PA'`` (Patriot),
+station byte, command byte, error byte, reserved byte, little-endian ``uint16`` body
+size -- then the items as little-endian ``float32`` (timestamp and frame count as
+``uint32``). The space and CR/LF items carry no data in binary records.
+
+Output-list items (device codes of the ``O`` command): ``2``/``3`` position x, y, z;
+``4``/``5`` Euler angles azimuth, elevation, roll in degrees, ``R = Rz(az) Ry(el)
+Rx(roll)``; ``7`` quaternion **w, x, y, z**; ``8`` timestamp (ms); ``9`` frame count;
+``0`` space and ``1`` CR/LF (ignored). The device default list is ``2,4,1`` and the
+default units inches.
+
+Frames: by the frame-count item when present; otherwise by station cycle (a record
+whose station number is not above the previous one starts a new frame). Time: from
+the timestamp item, else frame count / rate, else cycle index / rate. With a rate,
+frames are placed on the ``1/rate`` grid and missing frames appear as NaN rows.
+Returned positions are millimetres in tracker coordinates and rotation matrices map
+sensor into tracker coordinates (``docs/conventions.md``).
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation
+
+from ..errors import FingerfitError
+from ..session import UNITS_TO_MM, PoseSeries, Recording
+from ..transforms import matrix_from_quat_wxyz
+from .atomic import atomic_write
+from .hygiene import (
+    check_recording,
+    frames_missing_note,
+    place_on_grid,
+    repeated_rows,
+    sensor_missing_notes,
+)
+
+#: Number of values of each data item.
+ITEM_SIZE = {"position": 3, "euler": 3, "quaternion": 4, "timestamp": 1, "frame": 1}
+#: Device item codes (``O`` command) and accepted names -> item; None = no data.
+ITEM_ALIASES: dict[str, str | None] = {
+    "0": None,
+    "1": None,
+    "2": "position",
+    "3": "position",
+    "4": "euler",
+    "5": "euler",
+    "7": "quaternion",
+    "8": "timestamp",
+    "9": "frame",
+    "space": None,
+    "crlf": None,
+    "pos": "position",
+    "position": "position",
+    "euler": "euler",
+    "quat": "quaternion",
+    "quaternion": "quaternion",
+    "time": "timestamp",
+    "timestamp": "timestamp",
+    "frame": "frame",
+    "framecount": "frame",
+}
+#: The device's default output list ``O*,2,4,1``.
+DEFAULT_ITEMS = ("position", "euler")
+#: Decimals the ASCII writer uses per item (the device's standard precision).
+ASCII_DECIMALS = {"position": 3, "euler": 3, "quaternion": 4}
+MAX_STATION = 16
+QUAT_NORM_TOLERANCE = 1e-3
+_INT_ITEMS = ("timestamp", "frame")
+_MAGIC = (b"LY", b"PA")
+
+
+def parse_items(spec: str | Sequence[str] | None) -> tuple[str, ...]:
+    """The data items of an output list.
+
+    Parameters
+    ----------
+    spec : str or sequence of str or None
+        Device codes or names, comma-separated (``"2,4,1"``, ``"pos,quat,time"``);
+        ``None`` gives the device default (position, Euler angles).
+
+    Returns
+    -------
+    tuple of str
+        Item names in stream order, from ``position``, ``euler``, ``quaternion``,
+        ``timestamp``, ``frame`` (space and CR/LF dropped).
+
+    Raises
+    ------
+    FingerfitError
+        ``field 'items'``: unknown or repeated item, or no position or orientation.
+    """
+    if spec is None:
+        return DEFAULT_ITEMS
+    parts = spec.split(",") if isinstance(spec, str) else list(spec)
+    out: list[str] = []
+    for raw in parts:
+        key = str(raw).strip().lower()
+        if key == "6":
+            raise FingerfitError(
+                "item 6 (direction cosines) is not supported; use 7 (quaternion) or 4 (Euler)",
+                field="items",
+            )
+        if key not in ITEM_ALIASES:
+            raise FingerfitError(
+                f"unknown output item '{raw}' (use codes 0-5, 7-9 or names "
+                "pos, euler, quat, time, frame)",
+                field="items",
+            )
+        item = ITEM_ALIASES[key]
+        if item is None:
+            continue
+        if item in out:
+            raise FingerfitError(f"item '{item}' listed twice", field="items")
+        out.append(item)
+    if "position" not in out or not ({"euler", "quaternion"} & set(out)):
+        raise FingerfitError(
+            "the output list needs a position (2) and an orientation (4 or 7) item",
+            field="items",
+        )
+    return tuple(out)
+
+
+@dataclass
+class LibertyRecords:
+    """Raw station records of a Liberty/Patriot stream, in file order.
+
+    Attributes
+    ----------
+    items : tuple of str
+        Data items in stream order (see :func:`parse_items`).
+    station : ndarray of int, shape (n_records,)
+        Station numbers 1-16.
+    values : dict[str, ndarray]
+        Per item, in device units: ``position`` ``(n, 3)`` (file units),
+        ``euler`` ``(n, 3)`` degrees (azimuth, elevation, roll), ``quaternion``
+        ``(n, 4)`` scalar first ``(w, x, y, z)``, ``timestamp`` ``(n,)`` ms and
+        ``frame`` ``(n,)`` counts (integer valued floats).
+    indicator : ndarray of str, shape (n_records,)
+        Indicator character after the station number (ASCII) or the error byte
+        (binary) as a character; ``""`` when none.
+    where : ndarray of int, shape (n_records,)
+        1-based file line (ASCII) or record number (binary) of each record.
+    binary : bool
+        Whether ``where`` counts binary records.
+    record_size : int
+        Bytes per binary record (0 for ASCII).
+    """
+
+    items: tuple[str, ...]
+    station: np.ndarray
+    values: dict[str, np.ndarray]
+    indicator: np.ndarray
+    where: np.ndarray
+    binary: bool = False
+    record_size: int = 0
+    family: str = field(default="LY")
+
+    @property
+    def n_records(self) -> int:
+        return int(self.station.shape[0])
+
+    def matrix(self) -> np.ndarray:
+        """All item values side by side, ``(n_records, n_values)`` float."""
+        cols = [self.values[i].reshape(self.n_records, -1) for i in self.items]
+        return np.concatenate(cols, axis=1).astype(float)
+
+    def error(
+        self, message: str, i: int | None, path: str | Path, field: str | None = None
+    ) -> FingerfitError:
+        """A one-line error about record ``i`` (file line or binary record)."""
+        if i is None:
+            return FingerfitError(message, path=path, field=field)
+        if self.binary:
+            k = int(self.where[i])
+            where = f"record {k} (byte {(k - 1) * self.record_size}): "
+            if field is not None:
+                where += f"field '{field}': "
+            return FingerfitError(where + message, path=path)
+        return FingerfitError(message, path=path, line=int(self.where[i]), field=field)
+
+    def check_increasing(
+        self, values: np.ndarray, index: np.ndarray, path: str | Path, what: str, strict: bool
+    ) -> None:
+        """Raise at the first record (of ``index``) where ``values`` decrease (or repeat)."""
+        d = np.diff(values)
+        bad = np.flatnonzero(d <= 0 if strict else d < 0)
+        if bad.size:
+            j = int(bad[0]) + 1
+            verb = "goes backwards" if d[j - 1] < 0 else "does not increase"
+            raise self.error(
+                f"{what} {verb} ({values[j]:.15g} after {values[j - 1]:.15g})",
+                int(index[j]),
+                path,
+                field=what,
+            )
+
+
+# ----------------------------------------------------------------------------- ASCII
+
+
+def _read_bytes(path: str | Path) -> bytes:
+    try:
+        return Path(path).read_bytes()
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+
+
+def _line_starts(b: np.ndarray) -> np.ndarray:
+    """Index of the line (0-based) each byte belongs to."""
+    nl = b == ord("\n")
+    return np.cumsum(nl) - nl
+
+
+def parse_liberty_ascii(
+    path: str | Path, items: str | Sequence[str] | None = None, *, data: bytes | None = None
+) -> LibertyRecords:
+    """Parse a Liberty/Patriot ASCII stream into raw records.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (also used in messages).
+    items : str or sequence, optional
+        Output list (see :func:`parse_items`); default position + Euler angles.
+    data : bytes, optional
+        The file's content, if already in memory.
+
+    Returns
+    -------
+    LibertyRecords
+        Values in device units (positions in the file's units).
+
+    Raises
+    ------
+    FingerfitError
+        Naming the file and line: non-text bytes, a line with the wrong number of
+        fields (truncated or garbled record), a non-numeric value, a bad station.
+    """
+    items_t = parse_items(items)
+    raw = _read_bytes(path) if data is None else data
+    b = np.frombuffer(raw, dtype=np.uint8)
+    bad = np.flatnonzero(((b < 32) & ~np.isin(b, (9, 10, 13))) | (b > 126))
+    if bad.size:
+        line = int(_line_starts(b)[bad[0]]) + 1
+        raise FingerfitError(
+            f"garbled record: byte 0x{int(b[bad[0]]):02x} is not ASCII text "
+            "(binary output? use the liberty-binary format)",
+            path=path,
+            line=line,
+        )
+    # Split numbers glued by a sign: "12.345-6.789" -> "12.345 -6.789".
+    text = re.sub(rb"(\.\d+)(?=[+-])", rb"\1 ", raw)
+    b = np.frombuffer(text, dtype=np.uint8)
+    expected = 1 + sum(ITEM_SIZE[i] for i in items_t)
+    sep = np.isin(b, (9, 10, 13, 32))
+    start = ~sep & np.concatenate([[True], sep[:-1]])
+    line_of = _line_starts(b)
+    n_lines = int(line_of[-1]) + 1 if b.size else 0
+    counts = np.bincount(line_of[start], minlength=n_lines)
+    used = counts > 0
+    wrong = np.flatnonzero(used & (counts != expected))
+    if wrong.size:
+        i = int(wrong[0])
+        raise FingerfitError(
+            f"expected {expected} fields (station + {', '.join(items_t)}), found "
+            f"{counts[i]}: truncated or garbled record (or wrong --items)",
+            path=path,
+            line=i + 1,
+        )
+    lines = np.flatnonzero(used) + 1
+    if lines.size == 0:
+        raise FingerfitError("no records", path=path)
+    table = pd.read_csv(
+        io.BytesIO(text),
+        sep=r"\s+",
+        header=None,
+        dtype=str,
+        engine="c",
+        skip_blank_lines=True,
+        keep_default_na=False,
+    )
+    head = table[0].str.extract(r"^(\d{1,2})([^\d\s]?)$")
+    bad = head[0].isna().to_numpy()
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise FingerfitError(
+            f"'{table.iat[i, 0]}' is not a station number (1-2 digits and an optional "
+            "indicator character)",
+            path=path,
+            line=int(lines[i]),
+            field="station",
+        )
+    station = head[0].to_numpy(dtype=np.int64)
+    nums = np.empty((lines.size, expected - 1))
+    for j in range(1, expected):
+        col = pd.to_numeric(table[j], errors="coerce").to_numpy(dtype=float)
+        nums[:, j - 1] = col
+    bad = ~np.isfinite(nums)
+    if bad.any():
+        i, j = (int(v[0]) for v in np.nonzero(bad))
+        raise FingerfitError(
+            f"not a finite number: '{table.iat[i, j + 1]}' (garbled record)",
+            path=path,
+            line=int(lines[i]),
+            field=_field_name(items_t, j),
+        )
+    recs = LibertyRecords(
+        items_t,
+        station,
+        _split_values(nums, items_t),
+        head[1].to_numpy(dtype=str),
+        lines,
+    )
+    _check_records(recs, path)
+    return recs
+
+
+def _field_name(items: Sequence[str], column: int) -> str:
+    k = 0
+    for item in items:
+        if column < k + ITEM_SIZE[item]:
+            return item if ITEM_SIZE[item] == 1 else f"{item}[{column - k}]"
+        k += ITEM_SIZE[item]
+    return "?"
+
+
+def _split_values(nums: np.ndarray, items: Sequence[str]) -> dict[str, np.ndarray]:
+    out, k = {}, 0
+    for item in items:
+        size = ITEM_SIZE[item]
+        v = nums[:, k : k + size]
+        out[item] = v[:, 0].copy() if size == 1 else v.copy()
+        k += size
+    return out
+
+
+def _check_records(recs: LibertyRecords, path: str | Path) -> None:
+    bad = np.flatnonzero((recs.station < 1) | (recs.station > MAX_STATION))
+    if bad.size:
+        i = int(bad[0])
+        raise recs.error(
+            f"unknown station {recs.station[i]} (stations are 1-{MAX_STATION})", i, path
+        )
+    for item in _INT_ITEMS:
+        if item in recs.values:
+            v = recs.values[item]
+            bad = np.flatnonzero((v != np.floor(v)) | (v < 0))
+            if bad.size:
+                i = int(bad[0])
+                raise recs.error(f"{item} must be a whole number >= 0, not {v[i]:g}", i, path)
+
+
+def format_liberty_ascii(records: LibertyRecords, decimals: Mapping[str, int] | None = None) -> str:
+    """Format records as a Liberty ASCII stream (CR/LF lines).
+
+    Parameters
+    ----------
+    records : LibertyRecords
+        Values in device units; quaternions ``(w, x, y, z)``.
+    decimals : mapping, optional
+        Decimals per item; default :data:`ASCII_DECIMALS` (position and Euler 3,
+        quaternion 4). Timestamp and frame count are written as integers.
+
+    Returns
+    -------
+    str
+        ``"01 " + fields + "\\r\\n"`` per record; every field preceded by a space.
+    """
+    dec = dict(ASCII_DECIMALS)
+    dec.update(decimals or {})
+    n = records.n_records
+    ind = np.where(records.indicator == "", " ", records.indicator).astype(str)
+    cols = [np.char.add(np.char.mod("%02d", records.station), ind)]
+    for item in records.items:
+        v = records.values[item].reshape(n, -1)
+        fmt = "%d" if item in _INT_ITEMS else f"%.{dec[item]}f"
+        for j in range(v.shape[1]):
+            vals = v[:, j].astype(np.int64) if item in _INT_ITEMS else v[:, j]
+            cols.append(np.char.mod(" " + fmt, vals))
+    lines = cols[0]
+    for c in cols[1:]:
+        lines = np.char.add(lines, c)
+    return "".join(f"{ln}\r\n" for ln in lines.tolist())
+
+
+def write_liberty_ascii(
+    path: str | Path, records: LibertyRecords, decimals: Mapping[str, int] | None = None
+) -> Path:
+    """Write records as a Liberty ASCII stream, atomically (see :func:`format_liberty_ascii`)."""
+    path = Path(path)
+    with atomic_write(path, "w", newline="", encoding="ascii") as fh:
+        fh.write(format_liberty_ascii(records, decimals))
+    return path
+
+
+# ---------------------------------------------------------------------------- binary
+
+
+def _binary_dtype(items: Sequence[str]) -> np.dtype:
+    fields: list[tuple] = [
+        ("magic", "S2"),
+        ("station", "u1"),
+        ("command", "u1"),
+        ("error", "u1"),
+        ("reserved", "u1"),
+        ("size", "<u2"),
+    ]
+    for item in items:
+        if item in _INT_ITEMS:
+            fields.append((item, "<u4"))
+        else:
+            fields.append((item, "<f4", (ITEM_SIZE[item],)))
+    return np.dtype(fields)
+
+
+def parse_liberty_binary(
+    path: str | Path, items: str | Sequence[str] | None = None, *, data: bytes | None = None
+) -> LibertyRecords:
+    """Parse Liberty (``LY``) / Patriot (``PA``) binary records.
+
+    Parameters
+    ----------
+    path : str or Path
+    items : str or sequence, optional
+        Output list (see :func:`parse_items`); default position + Euler angles.
+    data : bytes, optional
+        The file's content, if already in memory.
+
+    Returns
+    -------
+    LibertyRecords
+        ``where`` counts records from 1; messages give the byte offset too.
+
+    Raises
+    ------
+    FingerfitError
+        A header without ``LY``/``PA``, a body size that does not match the output
+        list, a truncated last record, a bad station, a non-finite value.
+    """
+    items_t = parse_items(items)
+    raw = _read_bytes(path) if data is None else data
+    dt = _binary_dtype(items_t)
+    body = dt.itemsize - 8
+    if len(raw) < 8:
+        raise FingerfitError(
+            f"record 1 (byte 0): truncated header ({len(raw)} of 8 bytes)", path=path
+        )
+    if raw[:2] not in _MAGIC:
+        raise FingerfitError(
+            f"record 1 (byte 0): not a Liberty/Patriot binary record (header "
+            f"{raw[:2]!r}, expected 'LY' or 'PA'; ASCII output? use the liberty format)",
+            path=path,
+        )
+    size0 = int.from_bytes(raw[6:8], "little")
+    if size0 != body:
+        raise FingerfitError(
+            f"record 1 (byte 0): body of {size0} bytes, but the output list "
+            f"({', '.join(items_t)}) needs {body} (wrong --items?)",
+            path=path,
+        )
+    n = len(raw) // dt.itemsize
+    recs = np.frombuffer(raw, dtype=dt, count=n)
+    magic_bad = (recs["magic"] != raw[:2]) | (recs["size"] != size0)
+    if magic_bad.any():
+        k = int(np.flatnonzero(magic_bad)[0])
+        r = recs[k]
+        what = (
+            f"header {bytes(r['magic'])!r} instead of {raw[:2]!r}"
+            if r["magic"] != raw[:2]
+            else f"body size {int(r['size'])} instead of {size0}"
+        )
+        raise FingerfitError(
+            f"record {k + 1} (byte {k * dt.itemsize}): {what} (garbled or misaligned record)",
+            path=path,
+        )
+    rest = len(raw) - n * dt.itemsize
+    if rest:
+        raise FingerfitError(
+            f"record {n + 1} (byte {n * dt.itemsize}): truncated ({rest} of {dt.itemsize} bytes)",
+            path=path,
+        )
+    values: dict[str, np.ndarray] = {}
+    for item in items_t:
+        v = recs[item].astype(float)
+        values[item] = v
+    err = recs["error"]
+    indicator = np.where(err == 0, "", np.array([chr(c) for c in range(256)])[err])
+    out = LibertyRecords(
+        items_t,
+        recs["station"].astype(np.int64),
+        values,
+        indicator.astype(str),
+        np.arange(1, n + 1),
+        binary=True,
+        record_size=dt.itemsize,
+        family=raw[:2].decode("ascii"),
+    )
+    mat = out.matrix()
+    bad = ~np.isfinite(mat)
+    if bad.any():
+        i, j = (int(v[0]) for v in np.nonzero(bad))
+        raise out.error(f"not a finite number in {_field_name(items_t, j)}", i, path)
+    _check_records(out, path)
+    return out
+
+
+def liberty_binary_bytes(records: LibertyRecords, *, family: str | None = None) -> bytes:
+    """Encode records as binary ``LY``/``PA`` records (float32 / uint32 little-endian).
+
+    Parameters
+    ----------
+    records : LibertyRecords
+        Values in device units.
+    family : {"LY", "PA"}, optional
+        Header letters; default ``records.family``.
+
+    Returns
+    -------
+    bytes
+    """
+    dt = _binary_dtype(records.items)
+    out = np.zeros(records.n_records, dtype=dt)
+    out["magic"] = (family or records.family).encode("ascii")
+    out["station"] = records.station
+    out["command"] = ord("P")
+    out["error"] = [ord(c) if c else 0 for c in records.indicator.tolist()]
+    out["size"] = dt.itemsize - 8
+    for item in records.items:
+        out[item] = records.values[item]
+    return out.tobytes()
+
+
+def write_liberty_binary(path: str | Path, records: LibertyRecords) -> Path:
+    """Write records as binary ``LY``/``PA`` records, atomically."""
+    path = Path(path)
+    with atomic_write(path, "wb") as fh:
+        fh.write(liberty_binary_bytes(records))
+    return path
+
+
+# ------------------------------------------------------------------- records -> frames
+
+
+def records_to_recording(
+    records: LibertyRecords,
+    path: str | Path,
+    *,
+    units: str = "in",
+    rate_hz: float | None = None,
+    sensors: Mapping[int, str] | None = None,
+    keep_repeats: bool = False,
+) -> Recording:
+    """Group station records into frames and convert to a :class:`Recording`.
+
+    Parameters
+    ----------
+    records : LibertyRecords
+    path : str or Path
+        Source file, for messages and the recording's name.
+    units : str
+        Units of the position item (``in`` device default, ``cm``, ``mm``, ``m``).
+    rate_hz : float, optional
+        Frame rate; needed when the output list has no timestamp. With it, frames go
+        on the ``1/rate_hz`` grid and missing frames become NaN rows.
+    sensors : mapping int -> str, optional
+        Station number -> sensor name. Every station in the data must be mapped and
+        every mapped station must have records. Default: the station numbers as names.
+    keep_repeats : bool
+        Without a frame-count item, a whole station cycle identical to the previous
+        one (timestamp included, if any) is a repeated sample and is dropped and
+        counted, unless this is True (a perfectly still set-up can repeat exactly at
+        ASCII precision). With a frame count, a record repeating its frame count and
+        values is always a repeat, and one with different values an error.
+
+    Returns
+    -------
+    Recording
+        Time (s), positions (mm, tracker frame), rotations (sensor -> tracker).
+    """
+    path = Path(path)
+    if units not in UNITS_TO_MM:
+        raise FingerfitError(
+            f"unknown units '{units}' (use {', '.join(UNITS_TO_MM)})", path=path, field="units"
+        )
+    if rate_hz is not None and not rate_hz > 0:
+        raise FingerfitError("the rate must be positive (Hz)", path=path, field="rate")
+    scale = UNITS_TO_MM[units]
+    notes = [f"{records.n_records} station records read"]
+    station = records.station
+    present = np.unique(station)
+    if sensors is not None:
+        unknown = np.flatnonzero(~np.isin(station, list(sensors)))
+        if unknown.size:
+            i = int(unknown[0])
+            mapped = ", ".join(f"{k}={v}" for k, v in sensors.items())
+            raise records.error(f"unknown station {station[i]} (not in the map {mapped})", i, path)
+        absent = [k for k in sensors if k not in present]
+        if absent:
+            raise FingerfitError(
+                f"mapped station {absent[0]} ('{sensors[absent[0]]}') has no records", path=path
+            )
+        stations = list(sensors)
+        names = [sensors[s] for s in stations]
+    else:
+        stations = [int(s) for s in present]
+        names = [str(s) for s in stations]
+    lut = np.full(MAX_STATION + 1, -1)
+    lut[stations] = np.arange(len(stations))
+    scol = lut[station]
+    values = records.matrix()
+    items = records.items
+
+    if "frame" in items:
+        fc = records.values["frame"]
+        records.check_increasing(
+            fc, np.arange(station.size), path, what="frame count", strict=False
+        )
+        key = fc.astype(np.int64) * (MAX_STATION + 1) + station
+        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        orig = first[inverse]
+        dup = orig != np.arange(station.size)
+        keep = ~dup
+        if dup.any():
+            same = np.all(values == values[orig], axis=1)
+            if not same.all():
+                i = int(np.flatnonzero(~same)[0])
+                raise records.error(
+                    f"second, different record for station {station[i]} in frame {fc[i]:.0f}",
+                    i,
+                    path,
+                )
+            notes.append(f"{int(dup.sum())} exactly repeated records (same frame count) dropped")
+        rec_idx = np.flatnonzero(keep)
+        fcs = fc[rec_idx]
+        frame_ids, frame_of = np.unique(fcs, return_inverse=True)
+        first_rec = rec_idx[np.unique(frame_of, return_index=True)[1]]
+        grid_idx = (frame_ids - frame_ids[0]).astype(np.int64)
+        n = int(grid_idx[-1]) + 1
+        if "timestamp" in items:
+            ts = records.values["timestamp"][first_rec] / 1000.0
+            records.check_increasing(ts, first_rec, path, what="timestamp", strict=True)
+            time = np.interp(np.arange(n), grid_idx, ts)
+            time[grid_idx] = ts
+            notes.append("frames by frame count, time from the timestamp item")
+        elif rate_hz is not None:
+            time = (frame_ids[0] + np.arange(n)) / rate_hz
+            notes.append(f"frames by frame count, time = frame count / {rate_hz:g} Hz")
+        else:
+            raise FingerfitError(
+                "--rate is needed: the output list has a frame count but no timestamp",
+                path=path,
+                field="rate",
+            )
+        notes += frames_missing_note(n - frame_ids.size)
+        frame_of_rec = grid_idx[frame_of]
+    else:
+        new = np.concatenate([[True], station[1:] <= station[:-1]])
+        cycle = np.cumsum(new) - 1
+        n_cycles = int(cycle[-1]) + 1
+        width = values.shape[1]
+        block = np.full((n_cycles, len(stations), width), np.nan)
+        block[cycle, scol] = values
+        rep = repeated_rows(block.reshape(n_cycles, -1))
+        if rep.any() and not keep_repeats:
+            notes.append(
+                f"{int(rep.sum())} exactly repeated frames ({int(np.isin(cycle, np.flatnonzero(rep)).sum())} "
+                "records) dropped"
+            )
+            keep_rec = ~rep[cycle]
+            rec_idx = np.flatnonzero(keep_rec)
+            cyc_keep = np.flatnonzero(~rep)
+            renum = np.full(n_cycles, -1)
+            renum[cyc_keep] = np.arange(cyc_keep.size)
+            frame_of = renum[cycle[rec_idx]]
+        else:
+            rec_idx = np.arange(station.size)
+            frame_of = cycle
+        n_frames = int(frame_of[-1]) + 1
+        first_rec = rec_idx[np.unique(frame_of, return_index=True)[1]]
+        if "timestamp" in items:
+            ts = records.values["timestamp"][first_rec] / 1000.0
+            records.check_increasing(ts, first_rec, path, what="timestamp", strict=True)
+            if rate_hz is not None:
+                try:
+                    time, grid_idx = place_on_grid(ts, rate_hz, np.arange(ts.size), path)
+                except FingerfitError as exc:
+                    raise records.error(
+                        exc.reason, int(first_rec[exc.line or 0]), path, field=exc.field
+                    ) from None
+                notes += frames_missing_note(time.size - n_frames)
+                frame_of = grid_idx[frame_of]
+                n = time.size
+            else:
+                time, n = ts, n_frames
+                notes.append("no --rate: frames kept at their timestamps, not placed on a grid")
+            notes.insert(1, "frames by station cycle, time from the timestamp item")
+        elif rate_hz is not None:
+            time = np.arange(n_frames) / rate_hz
+            n = n_frames
+            notes.append(
+                f"frames by station cycle, time = cycle / {rate_hz:g} Hz (no timestamp or "
+                "frame count item: lost frames cannot be detected)"
+            )
+        else:
+            raise FingerfitError(
+                "--rate is needed: the output list has no timestamp or frame count",
+                path=path,
+                field="rate",
+            )
+        frame_of_rec = frame_of
+
+    sel = rec_idx
+    pos_all = records.values["position"][sel] * scale
+    if "quaternion" in items:
+        q = records.values["quaternion"][sel]
+        norm = np.linalg.norm(q, axis=1)
+        bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
+        if bad.size:
+            i = int(sel[bad[0]])
+            raise records.error(
+                f"quaternion (w,x,y,z) has norm {norm[bad[0]]:.6g}, not 1 (wrong --items?)",
+                i,
+                path,
+            )
+        rot_all = matrix_from_quat_wxyz(q)
+        if "euler" in items:
+            notes.append("orientation from the quaternion item (Euler angles not used)")
+    else:
+        e = records.values["euler"][sel]
+        rot_all = Rotation.from_euler("ZYX", e, degrees=True).as_matrix()
+    poses: dict[str, PoseSeries] = {}
+    scol_sel = scol[sel]
+    for k, name in enumerate(names):
+        m = scol_sel == k
+        pos = np.full((n, 3), np.nan)
+        rot = np.full((n, 3, 3), np.nan)
+        pos[frame_of_rec[m]] = pos_all[m]
+        rot[frame_of_rec[m]] = rot_all[m]
+        poses[name] = PoseSeries(pos, rot)
+    flagged = records.indicator[sel]
+    for ch in sorted(set(flagged.tolist()) - {""}):
+        notes.append(
+            f"{int((flagged == ch).sum())} records with indicator '{ch}' after the station number"
+        )
+    rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes)
+    rec.notes.extend(sensor_missing_notes(rec))
+    return rec
+
+
+def read_liberty_ascii(
+    path: str | Path,
+    *,
+    items: str | Sequence[str] | None = None,
+    units: str = "in",
+    rate_hz: float | None = None,
+    sensors: Mapping[int, str] | None = None,
+    keep_repeats: bool = False,
+    check: bool = True,
+) -> Recording:
+    """Read a Liberty/Patriot ASCII stream into a :class:`Recording`.
+
+    Parameters
+    ----------
+    path : str or Path
+    items : str or sequence, optional
+        Output list, device codes or names (default ``2,4,1``: position, Euler).
+    units : str
+        Position units in the file (device default ``in``).
+    rate_hz : float, optional
+        Frame rate (needed without a timestamp item).
+    sensors : mapping int -> str, optional
+        Station -> sensor name; unknown stations are an error.
+    keep_repeats : bool
+        Keep exactly repeated station cycles (see :func:`records_to_recording`).
+    check : bool
+        Run :func:`~fingerfit.io.hygiene.check_recording` (unit plausibility and
+        jump flags).
+
+    Returns
+    -------
+    Recording
+        Time s, positions mm (tracker frame), rotations sensor -> tracker; ``notes``
+        count everything dropped, missing or flagged.
+    """
+    recs = parse_liberty_ascii(path, items)
+    rec = records_to_recording(
+        recs, path, units=units, rate_hz=rate_hz, sensors=sensors, keep_repeats=keep_repeats
+    )
+    if check:
+        check_recording(rec, path)
+    return rec
+
+
+def read_liberty_binary(
+    path: str | Path,
+    *,
+    items: str | Sequence[str] | None = None,
+    units: str = "in",
+    rate_hz: float | None = None,
+    sensors: Mapping[int, str] | None = None,
+    keep_repeats: bool = False,
+    check: bool = True,
+) -> Recording:
+    """Read binary ``LY``/``PA`` records into a :class:`Recording`.
+
+    Parameters are those of :func:`read_liberty_ascii`.
+    """
+    recs = parse_liberty_binary(path, items)
+    rec = records_to_recording(
+        recs, path, units=units, rate_hz=rate_hz, sensors=sensors, keep_repeats=keep_repeats
+    )
+    if check:
+        check_recording(rec, path)
+    return rec
