@@ -1,0 +1,491 @@
+"""Wide CSV pose logs: one row per sample, one group of columns per station.
+
+The default layout is that of common Liberty logging scripts::
+
+    Time,w1,x1,y1,z1,w2,x2,y2,z2,loc1_x,loc1_y,loc1_z,loc2_x,loc2_y,loc2_z
+
+with quaternions **scalar first** ``(w, x, y, z)`` and positions ``loc<n>_x|y|z``.
+Other layouts are given as a small mapping of column templates in which ``{n}``
+stands for the station number, e.g. ``time=t;x=X{n};y=Y{n};z=Z{n};az=A{n};el=E{n};
+roll=R{n}`` (keys ``time``, ``x y z``, and ``qw qx qy qz`` or ``az el roll`` in
+degrees with ``R = Rz(az) Ry(el) Rx(roll)``).
+
+Hygiene (see :mod:`fingerfit.io.hygiene`): rows repeating the previous row exactly
+are dropped and counted. When most rows update only some stations (a logger that
+writes a row whenever any one sensor reports, holding the others' last values),
+frames are assembled by station cycle from the updates, so held values never count
+as samples. Positions come out in mm (tracker frame), rotations sensor -> tracker.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation
+
+from ..errors import FingerfitError
+from ..session import UNITS_TO_MM, PoseSeries, Recording
+from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from .atomic import atomic_write
+from .hygiene import (
+    check_increasing,
+    check_recording,
+    frames_missing_note,
+    place_on_grid,
+    repeated_rows,
+    sensor_missing_notes,
+)
+
+QUAT_NORM_TOLERANCE = 1e-3
+#: Largest relative disagreement between ``--rate`` and the rate implied by the time
+#: column when frames are timed by counting.
+RATE_TOLERANCE = 0.05
+_POS = ("x", "y", "z")
+_QUAT = ("qw", "qx", "qy", "qz")
+_EULER = ("az", "el", "roll")
+
+
+@dataclass(frozen=True)
+class WideLayout:
+    """Column templates of a wide CSV (``{n}`` = station number).
+
+    Attributes
+    ----------
+    time : str or None
+        Name of the time column (seconds), or None when the file has none.
+    columns : dict[str, str]
+        ``x, y, z`` and either ``qw, qx, qy, qz`` or ``az, el, roll`` -> template.
+    """
+
+    time: str | None
+    columns: dict[str, str]
+
+    @property
+    def orientation(self) -> tuple[str, ...]:
+        return _QUAT if "qw" in self.columns else _EULER
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return _POS + self.orientation
+
+
+DEFAULT_LAYOUT = WideLayout(
+    "Time",
+    {
+        "qw": "w{n}",
+        "qx": "x{n}",
+        "qy": "y{n}",
+        "qz": "z{n}",
+        "x": "loc{n}_x",
+        "y": "loc{n}_y",
+        "z": "loc{n}_z",
+    },
+)
+
+
+def parse_layout(spec: str | None) -> WideLayout:
+    """Parse ``key=template;key=template;...`` into a :class:`WideLayout`.
+
+    Parameters
+    ----------
+    spec : str or None
+        ``time=<column>`` (optional; ``time=`` for none), ``x=,y=,z=`` and either
+        ``qw=,qx=,qy=,qz=`` (scalar-first quaternion) or ``az=,el=,roll=`` (degrees).
+        ``None`` gives :data:`DEFAULT_LAYOUT`.
+
+    Returns
+    -------
+    WideLayout
+
+    Raises
+    ------
+    FingerfitError
+        ``field 'columns'``: unknown key, missing key, or both orientation kinds.
+    """
+    if spec is None:
+        return DEFAULT_LAYOUT
+    cols: dict[str, str] = {}
+    time: str | None = None
+    for part in spec.split(";"):
+        if not part.strip():
+            continue
+        key, sep, value = part.partition("=")
+        key = key.strip()
+        if not sep:
+            raise FingerfitError(f"'{part}' is not key=column", field="columns")
+        if key == "time":
+            time = value.strip() or None
+        elif key in _POS + _QUAT + _EULER:
+            if not value.strip():
+                raise FingerfitError(f"empty column template for '{key}'", field="columns")
+            cols[key] = value.strip()
+        else:
+            raise FingerfitError(
+                f"unknown key '{key}' (use time, x, y, z, qw, qx, qy, qz, az, el, roll)",
+                field="columns",
+            )
+    has_q = any(k in cols for k in _QUAT)
+    has_e = any(k in cols for k in _EULER)
+    if has_q and has_e:
+        raise FingerfitError("give a quaternion or Euler angles, not both", field="columns")
+    need = _POS + (_EULER if has_e else _QUAT)
+    missing = [k for k in need if k not in cols]
+    if missing:
+        raise FingerfitError(f"missing key(s) {', '.join(missing)}", field="columns")
+    return WideLayout(time, cols)
+
+
+def _template_regex(template: str) -> re.Pattern:
+    return re.compile("^" + re.escape(template).replace(r"\{n\}", r"(\d+)") + "$")
+
+
+def _stations(header: list[str], layout: WideLayout, path: Path) -> list[int]:
+    tx = layout.columns["x"]
+    if "{n}" not in tx:
+        return [1] if tx in header else []
+    rx = _template_regex(tx)
+    return sorted({int(m.group(1)) for h in header if (m := rx.match(h))})
+
+
+def _column(template: str, station: int) -> str:
+    return template.replace("{n}", str(station))
+
+
+def _field_counts(raw: bytes, path: Path, n_fields: int) -> None:
+    """Every line (except trailing blank ones) must have ``n_fields`` fields."""
+    b = np.frombuffer(raw, dtype=np.uint8)
+    ends = np.flatnonzero(b == ord("\n"))
+    if b.size and b[-1] != ord("\n"):
+        ends = np.append(ends, b.size)
+    starts = np.concatenate([[0], ends[:-1] + 1])
+    lengths = ends - starts
+    last_char = b[np.clip(starts, 0, max(b.size - 1, 0))] if b.size else np.zeros(0, np.uint8)
+    empty = (lengths == 0) | ((lengths == 1) & (last_char == ord("\r")))
+    commas = np.flatnonzero(b == ord(","))
+    counts = np.bincount(np.searchsorted(ends, commas), minlength=ends.size)[: ends.size]
+    last = ends.size
+    while last > 0 and empty[last - 1]:
+        last -= 1
+    bad = np.flatnonzero((counts[:last] != n_fields - 1) | empty[:last])
+    if bad.size:
+        i = int(bad[0])
+        if empty[i]:
+            raise FingerfitError("empty line inside the data", path=path, line=i + 1)
+        raise FingerfitError(
+            f"expected {n_fields} comma-separated fields, found {counts[i] + 1} "
+            "(truncated or garbled record)",
+            path=path,
+            line=i + 1,
+        )
+
+
+def read_wide_csv(
+    path: str | Path,
+    *,
+    units: str | None,
+    layout: WideLayout | str | None = None,
+    rate_hz: float | None = None,
+    sensors: Mapping[int, str] | None = None,
+    check: bool = True,
+) -> Recording:
+    """Read a wide pose CSV into a :class:`Recording`.
+
+    Parameters
+    ----------
+    path : str or Path
+    units : str
+        Position units of the file (``mm``, ``cm``, ``m``, ``in``). Required: the
+        format does not state them.
+    layout : WideLayout or str, optional
+        Column templates (see :func:`parse_layout`); default :data:`DEFAULT_LAYOUT`.
+    rate_hz : float, optional
+        Tracker frame rate. Frames are placed on the ``1/rate_hz`` grid by their
+        times (missing frames become NaN rows); if the time column is a logger's
+        clock too irregular for the grid, frames are timed by their count instead,
+        which must agree with the time column's span within 5 %.
+    sensors : mapping int -> str, optional
+        Station -> sensor name; a station in the file but not in the mapping is an
+        error. Default: station numbers as names.
+    check : bool
+        Run unit plausibility and jump checks (:func:`~fingerfit.io.hygiene.check_recording`).
+
+    Returns
+    -------
+    Recording
+        Time s; positions mm (tracker frame); rotations sensor -> tracker.
+
+    Raises
+    ------
+    FingerfitError
+        One line naming the file and line or column.
+    """
+    path = Path(path)
+    if units is None:
+        raise FingerfitError(
+            "the wide CSV does not state its units: give them (--units mm|cm|m|in)",
+            path=path,
+            field="units",
+        )
+    if units not in UNITS_TO_MM:
+        raise FingerfitError(
+            f"unknown units '{units}' (use {', '.join(UNITS_TO_MM)})", path=path, field="units"
+        )
+    if rate_hz is not None and not rate_hz > 0:
+        raise FingerfitError("the rate must be positive (Hz)", path=path, field="rate")
+    lay = parse_layout(layout) if not isinstance(layout, WideLayout) else layout
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    first = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
+    header = [h.strip() for h in first.split(",")]
+    if len(set(header)) != len(header):
+        dup = next(h for h in header if header.count(h) > 1)
+        raise FingerfitError(f"column '{dup}' appears twice", path=path, line=1)
+    _field_counts(raw, path, len(header))
+    stations = _stations(header, lay, path)
+    if not stations:
+        raise FingerfitError(
+            f"no column matches '{lay.columns['x']}' (wrong --columns?)", path=path, line=1
+        )
+    if lay.time is not None and lay.time not in header:
+        raise FingerfitError(
+            f"no time column '{lay.time}' (wrong --columns?)", path=path, line=1, field=lay.time
+        )
+    used: list[str] = [] if lay.time is None else [lay.time]
+    for s in stations:
+        for key in lay.keys:
+            c = _column(lay.columns[key], s)
+            if c not in header:
+                raise FingerfitError(
+                    f"column '{c}' missing for station {s}", path=path, line=1, field=c
+                )
+            used.append(c)
+    notes: list[str] = []
+    ignored = [h for h in header if h not in used]
+    if ignored:
+        notes.append(f"columns not used: {', '.join(ignored)}")
+    if sensors is not None:
+        extra = [s for s in stations if s not in sensors]
+        if extra:
+            mapped = ", ".join(f"{k}={v}" for k, v in sensors.items())
+            raise FingerfitError(
+                f"unknown station {extra[0]} (not in the map {mapped})",
+                path=path,
+                line=1,
+                field=_column(lay.columns["x"], extra[0]),
+            )
+        absent = [k for k in sensors if k not in stations]
+        if absent:
+            raise FingerfitError(
+                f"mapped station {absent[0]} ('{sensors[absent[0]]}') has no columns",
+                path=path,
+                line=1,
+            )
+        names = [sensors[s] for s in stations]
+    else:
+        names = [str(s) for s in stations]
+
+    df = pd.read_csv(io.BytesIO(raw), dtype=str, keep_default_na=False, skip_blank_lines=True)
+    df.columns = header
+    n_rows = df.shape[0]
+    if n_rows == 0:
+        raise FingerfitError("no data rows", path=path)
+    lines = np.arange(n_rows) + 2
+
+    def numeric(col: str) -> np.ndarray:
+        s = df[col].str.strip()
+        v = pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
+        bad = np.isnan(v) & (s != "").to_numpy() & (s.str.lower() != "nan").to_numpy()
+        bad |= np.isinf(v)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise FingerfitError(
+                f"not a finite number: '{df[col].iat[i]}'", path=path, line=int(lines[i]), field=col
+            )
+        return v
+
+    k = len(lay.keys)
+    vals = np.empty((n_rows, len(stations), k))
+    for j, s in enumerate(stations):
+        for m, key in enumerate(lay.keys):
+            vals[:, j, m] = numeric(_column(lay.columns[key], s))
+    tcol = None
+    if lay.time is not None:
+        tcol = numeric(lay.time)
+        check_increasing(tcol, lines, path, what="time", strict=False)
+        # check_increasing names the column 'time'; the message says which line.
+    notes.insert(0, f"{n_rows} rows of {len(stations)} stations read")
+
+    rep = repeated_rows(vals.reshape(n_rows, -1))
+    if rep.any():
+        notes.append(
+            f"{int(rep.sum())} exactly repeated rows dropped (a logger polling faster "
+            "than the tracker)"
+        )
+    keep = np.flatnonzero(~rep)
+    v = vals[keep]
+    t_rows = None if tcol is None else tcol[keep]
+    row_lines = lines[keep]
+    n_kept = keep.size
+    prev = np.concatenate([np.full((1, len(stations), k), np.nan), v[:-1]])
+    same = ((v == prev) | (np.isnan(v) & np.isnan(prev))).all(axis=2)
+    same[0] = False
+    partial = same.any(axis=1) & ~same.all(axis=1)
+    if len(stations) > 1 and partial.mean() > 0.5:
+        rows_u, st_u = np.nonzero(~same)
+        new = np.concatenate([[True], st_u[1:] <= st_u[:-1]])
+        frame_of = np.cumsum(new) - 1
+        n_frames = int(frame_of[-1]) + 1
+        frame_vals = np.full((n_frames, len(stations), k), np.nan)
+        frame_vals[frame_of, st_u] = v[rows_u, st_u]
+        first_row = rows_u[np.flatnonzero(new)]
+        held = int(same.sum())
+        notes.append(
+            f"rows update one station at a time (values held between updates): "
+            f"{n_frames} frames assembled by station cycle, {held} held values not counted "
+            "as samples"
+        )
+    else:
+        frame_vals = v
+        first_row = np.arange(n_kept)
+        n_frames = n_kept
+    f_lines = row_lines[first_row]
+    f_time = None if t_rows is None else t_rows[first_row]
+
+    if f_time is None:
+        if rate_hz is None:
+            raise FingerfitError(
+                "--rate is needed: the layout has no time column", path=path, field="rate"
+            )
+        time = np.arange(n_frames) / rate_hz
+        grid_idx = np.arange(n_frames)
+        notes.append(f"time = frame / {rate_hz:g} Hz (no time column: lost frames undetectable)")
+    elif rate_hz is None:
+        check_increasing(f_time, f_lines, path, what="time")
+        time, grid_idx = f_time, np.arange(n_frames)
+        notes.append(
+            "no --rate: frames kept at the time column's values, not on a grid"
+            + (" (a logger's clock: give --rate for reliable timing)" if n_frames != n_kept else "")
+        )
+    else:
+        check_increasing(f_time, f_lines, path, what="time")
+        idx = np.rint((f_time - f_time[0]) * rate_hz)
+        off = np.abs(f_time - (f_time[0] + idx / rate_hz))
+        if n_frames < 2 or ((off <= 0.25 / rate_hz).all() and (np.diff(idx) > 0).all()):
+            time, grid_idx = place_on_grid(f_time, rate_hz, f_lines, path)
+            notes += frames_missing_note(time.size - n_frames)
+        else:
+            span = f_time[-1] - f_time[0]
+            implied = (n_frames - 1) / span if span > 0 else np.inf
+            if abs(implied / rate_hz - 1.0) > RATE_TOLERANCE:
+                raise FingerfitError(
+                    f"the time column spans {span:.4g} s for {n_frames} frames ({implied:.4g} Hz), "
+                    f"not {rate_hz:g} Hz: frames lost or wrong --rate",
+                    path=path,
+                    field="rate",
+                )
+            time = f_time[0] + np.arange(n_frames) / rate_hz
+            grid_idx = np.arange(n_frames)
+            lag = f_time - time
+            notes.append(
+                f"time column too irregular for the {rate_hz:g} Hz grid (a logger's clock): "
+                f"frames timed by count from its first value; its span implies "
+                f"{implied:.4g} Hz and its delay varies by up to "
+                f"{1000 * (lag.max() - lag.min()):.0f} ms"
+            )
+    n = int(grid_idx[-1]) + 1 if n_frames else 0
+
+    scale = UNITS_TO_MM[units]
+    poses: dict[str, PoseSeries] = {}
+    complete = np.isfinite(frame_vals).all(axis=2)
+    partial_s = ~complete & np.isfinite(frame_vals).any(axis=2)
+    if partial_s.any():
+        notes.append(f"{int(partial_s.sum())} samples with empty fields treated as missing")
+    for j, name in enumerate(names):
+        ok = complete[:, j]
+        pos = np.full((n, 3), np.nan)
+        rot = np.full((n, 3, 3), np.nan)
+        fv = frame_vals[ok, j]
+        pos[grid_idx[ok]] = fv[:, :3] * scale
+        if lay.orientation == _QUAT:
+            norm = np.linalg.norm(fv[:, 3:], axis=1)
+            bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
+            if bad.size:
+                i = int(np.flatnonzero(ok)[bad[0]])
+                raise FingerfitError(
+                    f"quaternion of station {stations[j]} has norm {norm[bad[0]]:.6g}, not 1 "
+                    "(wrong --columns?)",
+                    path=path,
+                    line=int(f_lines[i]),
+                    field=_column(lay.columns["qw"], stations[j]),
+                )
+            rot[grid_idx[ok]] = matrix_from_quat_wxyz(fv[:, 3:])
+        else:
+            rot[grid_idx[ok]] = Rotation.from_euler("ZYX", fv[:, 3:], degrees=True).as_matrix()
+        poses[name] = PoseSeries(pos, rot)
+    rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes)
+    rec.notes.extend(sensor_missing_notes(rec))
+    if check:
+        check_recording(rec, path)
+    return rec
+
+
+def wide_table(
+    recording: Recording, *, units: str = "mm", layout: WideLayout | None = None
+) -> pd.DataFrame:
+    """A recording as a wide table (one row per frame; stations numbered 1, 2, ...
+    in sensor order).
+
+    Parameters
+    ----------
+    recording : Recording
+        Positions mm.
+    units : str
+        Units of the written positions.
+    layout : WideLayout, optional
+        Column templates; default :data:`DEFAULT_LAYOUT` (quaternions ``w, x, y, z``).
+
+    Returns
+    -------
+    DataFrame
+        Missing samples are NaN.
+    """
+    lay = layout or DEFAULT_LAYOUT
+    data: dict[str, np.ndarray] = {}
+    if lay.time is not None:
+        data[lay.time] = recording.time
+    for s, name in enumerate(recording.sensors, start=1):
+        pose = recording.poses[name]
+        if lay.orientation == _QUAT:
+            ori = quat_wxyz_from_matrix(pose.rotation)
+        else:
+            ori = np.full((recording.n_frames, 3), np.nan)
+            ok = pose.valid
+            ori[ok] = Rotation.from_matrix(pose.rotation[ok]).as_euler("ZYX", degrees=True)
+        for m, key in enumerate(lay.orientation):
+            data[_column(lay.columns[key], s)] = ori[:, m]
+        for m, key in enumerate(_POS):
+            data[_column(lay.columns[key], s)] = pose.position[:, m] / UNITS_TO_MM[units]
+    return pd.DataFrame(data)
+
+
+def write_wide_csv(
+    path: str | Path,
+    recording: Recording,
+    *,
+    units: str = "mm",
+    layout: WideLayout | None = None,
+) -> Path:
+    """Write a recording as a wide CSV, atomically, with round-trip float formatting."""
+    path = Path(path)
+    table = wide_table(recording, units=units, layout=layout)
+    with atomic_write(path, newline="") as fh:
+        table.to_csv(fh, index=False, lineterminator="\n")
+    return path
