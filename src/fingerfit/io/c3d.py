@@ -1,0 +1,413 @@
+"""C3D motion files (via the optional ``ezc3d`` package): 6-DOF channels and marker clusters.
+
+Two sources of segment poses:
+
+* **ROTATION channels** (C3D ``ROTATION`` group): one 4x4 homogeneous transform per
+  channel and frame, segment -> lab; translations in ``POINT:UNITS``.
+* **Marker clusters**: three or more markers on one segment. By default every group
+  of markers named ``<segment><number>`` with at least three members is a cluster
+  (``ArmR1, ArmR2, ArmR3`` -> ``ArmR``). Each frame's pose is the least-squares rigid
+  fit of the cluster's shape (:mod:`fingerfit.io.rigid`), with the RMS residual per
+  frame reported. The shape comes from the same file or from a static trial.
+
+Positions are returned in mm (lab = tracker coordinates), rotations map segment into
+lab coordinates (``docs/conventions.md``). Install with ``pip install fingerfit[c3d]``.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FingerfitError
+from ..session import UNITS_TO_MM, PoseSeries, Recording
+from .hygiene import check_recording, sensor_missing_notes
+from .rigid import ClusterFit, cluster_shape, fit_cluster
+
+#: Residual RMS (mm) above which a frame of a cluster fit is counted as suspect.
+MAX_RESIDUAL_MM = 5.0
+#: Largest deviation of a ROTATION channel's 3x3 block from orthonormal.
+ORTHONORMAL_TOLERANCE = 1e-3
+_CLUSTER_RE = re.compile(r"^(.*?[^\d])(\d+)$")
+
+
+def _ezc3d():
+    try:
+        import ezc3d
+    except ImportError:  # pragma: no cover - depends on the environment
+        raise FingerfitError(
+            "reading C3D files needs the optional package ezc3d: pip install 'fingerfit[c3d]'"
+        ) from None
+    return ezc3d
+
+
+@dataclass
+class C3DMarkers:
+    """Marker trajectories of a C3D file.
+
+    Attributes
+    ----------
+    labels : list of str
+    points : ndarray, shape (n_frames, n_markers, 3)
+        Positions in mm, lab coordinates; NaN where a marker is not visible.
+    time : ndarray, shape (n_frames,)
+        Seconds, ``(first_frame + k) / rate_hz``.
+    rate_hz : float
+    """
+
+    labels: list[str]
+    points: np.ndarray
+    time: np.ndarray
+    rate_hz: float
+
+    def marker(self, label: str) -> np.ndarray:
+        """Trajectory ``(n_frames, 3)`` mm of one marker."""
+        try:
+            return self.points[:, self.labels.index(label)]
+        except ValueError:
+            raise FingerfitError(f"no marker '{label}' in the C3D file") from None
+
+    def cluster(self, labels: list[str]) -> np.ndarray:
+        """Trajectories ``(n_frames, m, 3)`` mm of several markers."""
+        return np.stack([self.marker(lb) for lb in labels], axis=1)
+
+
+def _param(c, group: str, name: str, default=None):
+    try:
+        return c["parameters"][group][name]["value"]
+    except KeyError:
+        return default
+
+
+def _open(path: Path):
+    ezc3d = _ezc3d()
+    if not path.is_file():
+        raise FingerfitError("file not found", path=path)
+    try:
+        return ezc3d.c3d(str(path))
+    except Exception as exc:  # ezc3d raises plain RuntimeError/IOError on bad files
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise FingerfitError(f"not a readable C3D file ({msg})", path=path) from None
+
+
+def _scale(c, path: Path, units: str | None) -> float:
+    if units is not None:
+        if units not in UNITS_TO_MM:
+            raise FingerfitError(
+                f"unknown units '{units}' (use {', '.join(UNITS_TO_MM)})", path=path, field="units"
+            )
+        return UNITS_TO_MM[units]
+    u = _param(c, "POINT", "UNITS", [""])
+    u = (u[0] if len(u) else "").strip()
+    if u not in UNITS_TO_MM:
+        raise FingerfitError(f"unknown units '{u}' (give --units)", path=path, field="POINT:UNITS")
+    return UNITS_TO_MM[u]
+
+
+def read_c3d_markers(path: str | Path, *, units: str | None = None) -> C3DMarkers:
+    """Read the marker trajectories of a C3D file.
+
+    Parameters
+    ----------
+    path : str or Path
+    units : str, optional
+        Overrides ``POINT:UNITS``.
+
+    Returns
+    -------
+    C3DMarkers
+        Positions mm; markers with a negative residual or NaN are missing (NaN).
+    """
+    path = Path(path)
+    c = _open(path)
+    return _markers(c, path, units)
+
+
+def _markers(c, path: Path, units: str | None) -> C3DMarkers:
+    scale = _scale(c, path, units)
+    labels = [str(s).strip() for s in _param(c, "POINT", "LABELS", [])]
+    k = 2
+    while (more := _param(c, "POINT", f"LABELS{k}")) is not None:
+        labels += [str(s).strip() for s in more]
+        k += 1
+    pts = np.asarray(c["data"]["points"], dtype=float)
+    n_markers, n_frames = pts.shape[1], pts.shape[2]
+    labels = labels[:n_markers]
+    if len(labels) < n_markers:
+        labels += [f"marker{i + 1}" for i in range(len(labels), n_markers)]
+    xyz = np.transpose(pts[:3], (2, 1, 0)) * scale
+    resid = c["data"].get("meta_points", {}).get("residuals")
+    if resid is not None and np.size(resid):
+        bad = np.transpose(np.asarray(resid)[0], (1, 0)) < 0
+        xyz[bad] = np.nan
+    rate = float(_param(c, "POINT", "RATE", [0.0])[0])
+    if not rate > 0:
+        raise FingerfitError("POINT:RATE must be positive", path=path, field="POINT:RATE")
+    first = int(c["header"]["points"]["first_frame"])
+    time = (first + np.arange(n_frames)) / rate
+    return C3DMarkers(labels, xyz, time, rate)
+
+
+def find_clusters(labels: list[str], min_markers: int = 3) -> dict[str, list[str]]:
+    """Group markers named ``<segment><number>`` into clusters.
+
+    Parameters
+    ----------
+    labels : list of str
+    min_markers : int
+        Fewest members for a group to count as a cluster.
+
+    Returns
+    -------
+    dict[str, list[str]]
+        Segment -> marker labels ordered by number (marker 1 first).
+    """
+    groups: dict[str, list[tuple[int, str]]] = {}
+    for lb in labels:
+        m = _CLUSTER_RE.match(lb)
+        if m:
+            groups.setdefault(m.group(1), []).append((int(m.group(2)), lb))
+    return {
+        seg: [lb for _, lb in sorted(members)]
+        for seg, members in groups.items()
+        if len(members) >= min_markers
+    }
+
+
+def parse_clusters(spec: str) -> dict[str, list[str]]:
+    """Parse ``Segment=m1,m2,m3;Other=a,b,c`` into segment -> marker labels."""
+    out: dict[str, list[str]] = {}
+    for part in spec.split(";"):
+        if not part.strip():
+            continue
+        seg, sep, rest = part.partition("=")
+        labels = [s.strip() for s in rest.split(",") if s.strip()]
+        if not sep or not seg.strip() or len(labels) < 3:
+            raise FingerfitError(
+                f"'{part}' is not Segment=marker,marker,marker (3 or more markers)",
+                field="clusters",
+            )
+        out[seg.strip()] = labels
+    return out
+
+
+@dataclass
+class C3DSegments:
+    """Segment poses read from a C3D file.
+
+    Attributes
+    ----------
+    recording : Recording
+        One pose series per segment (mm, segment -> lab rotations).
+    fits : dict[str, ClusterFit]
+        Per marker-cluster segment (by output name): per-frame residual RMS (mm) and
+        markers used.
+    shapes : dict[str, ndarray]
+        Per cluster segment, marker coordinates ``(m, 3)`` mm in the segment frame.
+    clusters : dict[str, list[str]]
+        Per cluster segment, its marker labels.
+    """
+
+    recording: Recording
+    fits: dict[str, ClusterFit] = field(default_factory=dict)
+    shapes: dict[str, np.ndarray] = field(default_factory=dict)
+    clusters: dict[str, list[str]] = field(default_factory=dict)
+
+
+def _rotation_channels(c, path: Path, scale: float) -> tuple[dict[str, PoseSeries], float, int]:
+    rot = np.asarray(c["data"].get("rotations", np.zeros((4, 4, 0, 0))), dtype=float)
+    if rot.ndim != 4 or rot.shape[2] == 0:
+        return {}, 0.0, 1
+    labels = [str(s).strip() for s in _param(c, "ROTATION", "LABELS", [])]
+    n_ch = rot.shape[2]
+    labels = labels[:n_ch] + [f"rotation{i + 1}" for i in range(len(labels), n_ch)]
+    ratio = int(np.asarray(_param(c, "ROTATION", "RATIO", [1])).ravel()[0] or 1)
+    rate = float(np.asarray(_param(c, "ROTATION", "RATE", [0.0])).ravel()[0] or 0.0)
+    m = np.transpose(rot, (2, 3, 0, 1))  # (channel, frame, 4, 4)
+    out: dict[str, PoseSeries] = {}
+    eye = np.eye(3)
+    for ch, label in enumerate(labels):
+        r = m[ch, :, :3, :3].copy()
+        t = m[ch, :, :3, 3] * scale
+        ok = np.isfinite(m[ch, :, :3, :]).all(axis=(1, 2))
+        dev = np.abs(np.swapaxes(r[ok], 1, 2) @ r[ok] - eye).max(axis=(1, 2))
+        det = np.linalg.det(r[ok])
+        bad = (dev > ORTHONORMAL_TOLERANCE) | (det <= 0)
+        if bad.any():
+            k = int(np.flatnonzero(ok)[np.flatnonzero(bad)[0]])
+            raise FingerfitError(
+                f"frame {k + 1}: not a rotation matrix (deviation {dev[bad][0]:.3g}, "
+                f"det {det[bad][0]:.3g})",
+                path=path,
+                field=f"ROTATION:{label}",
+            )
+        r[~ok] = np.nan
+        t[~ok] = np.nan
+        out[label] = PoseSeries(t, r)
+    return out, rate, ratio
+
+
+def read_c3d_segments(
+    path: str | Path,
+    *,
+    units: str | None = None,
+    clusters: Mapping[str, list[str]] | None = None,
+    segments: Mapping[str, str] | None = None,
+    static: str | Path | None = None,
+    shapes: Mapping[str, np.ndarray] | None = None,
+    rotations: bool = True,
+    max_residual_mm: float = MAX_RESIDUAL_MM,
+    check: bool = True,
+) -> C3DSegments:
+    """Segment poses from a C3D file: ROTATION channels and marker clusters.
+
+    Parameters
+    ----------
+    path : str or Path
+    units : str, optional
+        Overrides ``POINT:UNITS`` (also used for ROTATION translations).
+    clusters : mapping segment -> marker labels, optional
+        Default: :func:`find_clusters` on the file's labels.
+    segments : mapping str -> str, optional
+        Cluster or channel name -> output sensor name; only these are returned and
+        each must exist. Default: every cluster and channel, under its own name.
+    static : str or Path, optional
+        A static trial of the same markers defining each cluster's shape (default:
+        the shape averaged over this file).
+    shapes : mapping segment -> ndarray (m, 3), optional
+        Cluster shapes (mm, segment frame) to use as given, e.g. from another trial,
+        so segment frames are identical across trials. Takes precedence over ``static``.
+    rotations : bool
+        Whether to read ROTATION channels.
+    max_residual_mm : float
+        Frames with a larger residual RMS are counted in the notes (kept).
+    check : bool
+        Run :func:`~fingerfit.io.hygiene.check_recording`.
+
+    Returns
+    -------
+    C3DSegments
+        ``recording`` (time s, positions mm, rotations segment -> lab), per-frame
+        fit residuals and the shapes used.
+    """
+    path = Path(path)
+    c = _open(path)
+    mk = _markers(c, path, units)
+    scale = _scale(c, path, units)
+    explicit = clusters is not None or segments is not None
+    if clusters is None:
+        clusters = find_clusters(mk.labels)
+    for seg, labels in clusters.items():
+        for lb in labels:
+            if lb not in mk.labels:
+                raise FingerfitError(
+                    f"cluster '{seg}' names marker '{lb}', which is not in the file",
+                    path=path,
+                    field="clusters",
+                )
+    rot_poses: dict[str, PoseSeries] = {}
+    rot_rate, ratio = 0.0, 1
+    if rotations:
+        rot_poses, rot_rate, ratio = _rotation_channels(c, path, scale)
+    available = list(clusters) + list(rot_poses)
+    if segments is None:
+        wanted = {s: s for s in available}
+    else:
+        missing = [s for s in segments if s not in available]
+        if missing:
+            raise FingerfitError(
+                f"no cluster or ROTATION channel '{missing[0]}' (has: "
+                f"{', '.join(available) or 'none'})",
+                path=path,
+                field="map",
+            )
+        wanted = dict(segments)
+    if len(set(wanted.values())) != len(wanted):
+        raise FingerfitError("two segments map to the same sensor name", path=path, field="map")
+    if not wanted:
+        raise FingerfitError("no marker cluster or ROTATION channel found", path=path)
+    use_markers = any(s in clusters for s in wanted)
+    use_rot = any(s in rot_poses for s in wanted)
+    if use_rot and ratio != 1 and use_markers:
+        raise FingerfitError(
+            f"ROTATION:RATIO is {ratio}: channels and markers have different rates; "
+            "convert them separately",
+            path=path,
+            field="ROTATION:RATIO",
+        )
+    if use_markers or not use_rot:
+        time = mk.time
+    else:
+        n_rot = next(iter(rot_poses.values())).n_frames
+        rate = rot_rate or mk.rate_hz * ratio
+        time = (int(c["header"]["points"]["first_frame"]) * ratio + np.arange(n_rot)) / rate
+
+    static_mk = None
+    if static is not None and shapes is None:
+        static_mk = read_c3d_markers(static, units=units)
+    notes: list[str] = []
+    poses: dict[str, PoseSeries] = {}
+    fits: dict[str, ClusterFit] = {}
+    used_shapes: dict[str, np.ndarray] = {}
+    used_clusters: dict[str, list[str]] = {}
+    for seg, name in wanted.items():
+        if seg in rot_poses:
+            poses[name] = rot_poses[seg]
+            notes.append(f"segment '{name}': ROTATION channel '{seg}'")
+            continue
+        labels = list(clusters[seg])
+        xyz = mk.cluster(labels)
+        try:
+            if shapes is not None and seg in shapes:
+                shape = np.asarray(shapes[seg], dtype=float)
+                src = "given shape"
+            elif static_mk is not None:
+                shape = cluster_shape(static_mk.cluster(labels))
+                src = f"shape from {Path(static).name}"
+            else:
+                shape = cluster_shape(xyz)
+                src = "shape averaged over this file"
+        except ValueError as exc:
+            if explicit:
+                raise FingerfitError(
+                    f"cluster '{seg}': {exc}", path=path, field="clusters"
+                ) from None
+            notes.append(f"cluster '{seg}' ({', '.join(labels)}) skipped: {exc}")
+            continue
+        except FingerfitError as exc:
+            raise FingerfitError(f"cluster '{seg}': {exc.reason}", path=static) from None
+        fit = fit_cluster(xyz, shape)
+        poses[name] = PoseSeries(fit.translation, fit.rotation)
+        fits[name] = fit
+        used_shapes[name] = shape
+        used_clusters[name] = labels
+        ok = np.isfinite(fit.residual)
+        if ok.any():
+            worst = int(np.nanargmax(fit.residual))
+            big = int((fit.residual[ok] > max_residual_mm).sum())
+            notes.append(
+                f"segment '{name}': rigid fit of {len(labels)} markers ({src}), residual RMS "
+                f"median {np.median(fit.residual[ok]):.2f} mm, max "
+                f"{fit.residual[worst]:.2f} mm (frame {worst})"
+                + (f"; {big} frames above {max_residual_mm:g} mm" if big else "")
+            )
+        else:
+            notes.append(f"segment '{name}': no frame with 3 visible markers")
+    rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes)
+    rec.notes.extend(sensor_missing_notes(rec))
+    if check:
+        check_recording(rec, path)
+    return C3DSegments(rec, fits, used_shapes, used_clusters)
+
+
+def read_c3d(path: str | Path, **kwargs) -> Recording:
+    """Segment poses of a C3D file as a :class:`Recording`.
+
+    Keyword arguments are those of :func:`read_c3d_segments`; the fit residuals are
+    summarised in the recording's notes.
+    """
+    return read_c3d_segments(path, **kwargs).recording
