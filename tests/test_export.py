@@ -390,7 +390,7 @@ def test_inertials_and_geometry(tmp: str) -> None:
     model = case_model("fitted", tmp)
     hand = robot_hand(model, "user_axis", MARGIN_DEG)
     # capsule inertial against MuJoCo's own computation from the geom (density 1100)
-    link = hand.fingers[0].links[0]
+    link = next(lk for lk in hand.fingers[0].links if lk.capsule is not None)
     spec = mujoco.MjSpec()
     b = spec.worldbody.add_body(pos=[0, 0, 0])
     b.add_joint(type=mujoco.mjtJoint.mjJNT_FREE)
