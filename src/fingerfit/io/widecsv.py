@@ -323,7 +323,8 @@ def read_wide_csv(
         # check_increasing names the column 'time'; the message says which line.
     notes.insert(0, f"{n_rows} rows of {len(stations)} stations read")
 
-    rep = repeated_rows(vals.reshape(n_rows, -1))
+    # A row repeating the previous one is a repeat only if it holds a sample at all.
+    rep = repeated_rows(vals.reshape(n_rows, -1)) & np.isfinite(vals).any(axis=(1, 2))
     if rep.any():
         notes.append(
             f"{int(rep.sum())} exactly repeated rows dropped (a logger polling faster "
@@ -335,7 +336,7 @@ def read_wide_csv(
     row_lines = lines[keep]
     n_kept = keep.size
     prev = np.concatenate([np.full((1, len(stations), k), np.nan), v[:-1]])
-    same = ((v == prev) | (np.isnan(v) & np.isnan(prev))).all(axis=2)
+    same = (v == prev).all(axis=2)  # a held (repeated) value; missing is never "held"
     same[0] = False
     partial = same.any(axis=1) & ~same.all(axis=1)
     if len(stations) > 1 and partial.mean() > 0.5:
