@@ -2,10 +2,19 @@
 
 * :mod:`.posecsv` -- the canonical pose CSV of the session format;
 * :mod:`.sessiondir` -- whole session directories (``session.toml`` + CSVs);
-* :mod:`.atomic` -- all-or-nothing file writes.
+* :mod:`.atomic` -- all-or-nothing file writes;
+* :mod:`.liberty`, :mod:`.widecsv`, :mod:`.c3d` -- real tracker files (Polhemus
+  Liberty/Patriot ASCII and binary, wide CSV logs, C3D markers and 6-DOF channels);
+* :mod:`.hygiene` -- repeated samples, gaps, jumps and unit checks;
+  :mod:`.rigid` -- segment poses from marker clusters.
 """
 
+from .c3d import read_c3d, read_c3d_segments
+from .liberty import read_liberty_ascii, read_liberty_binary
 from .posecsv import read_pose_csv, write_pose_csv
 from .sessiondir import load_session, save_session
+from .widecsv import read_wide_csv
 
 __all__ = ["load_session", "read_pose_csv", "save_session", "write_pose_csv"]
+__all__ += ["read_c3d", "read_c3d_segments", "read_liberty_ascii", "read_liberty_binary"]
+__all__ += ["read_wide_csv"]

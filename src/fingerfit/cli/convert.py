@@ -1,0 +1,282 @@
+"""``fingerfit convert``: real tracker files -> the canonical pose CSV of the session format."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import pandas as pd
+import typer
+
+from ..errors import FingerfitError
+from ..session import UNITS_TO_MM, Recording, is_sensor_name
+from .app import app, out, user_errors
+
+
+class SourceFormat(StrEnum):
+    """Input formats of ``fingerfit convert``."""
+
+    liberty = "liberty"
+    liberty_binary = "liberty-binary"
+    wide_csv = "wide-csv"
+    c3d = "c3d"
+
+
+def parse_map(spec: str | None, *, numeric: bool) -> dict | None:
+    """Parse ``1=hand,2=index.proximal`` (or ``ArmR=hand,...`` for C3D).
+
+    Parameters
+    ----------
+    spec : str or None
+    numeric : bool
+        Whether the keys are station numbers.
+
+    Returns
+    -------
+    dict or None
+        Station number (int) or channel name (str) -> sensor name.
+    """
+    if spec is None:
+        return None
+    out_map: dict = {}
+    for part in spec.split(","):
+        if not part.strip():
+            continue
+        key, sep, name = (s.strip() for s in part.partition("="))
+        if not sep or not key or not name:
+            raise FingerfitError(f"'{part.strip()}' is not KEY=SENSOR", field="--map")
+        if numeric:
+            if not key.isdigit():
+                raise FingerfitError(f"station '{key}' is not a number", field="--map")
+            key = int(key)
+        if not is_sensor_name(name):
+            raise FingerfitError(
+                f"'{name}' is not a sensor name (hand, stylus or <finger>.<segment>, "
+                "e.g. index.proximal)",
+                field="--map",
+            )
+        if key in out_map:
+            raise FingerfitError(f"'{key}' mapped twice", field="--map")
+        if name in out_map.values():
+            raise FingerfitError(f"sensor '{name}' given twice", field="--map")
+        out_map[key] = name
+    if not out_map:
+        raise FingerfitError("empty map", field="--map")
+    return out_map
+
+
+def _check_units_option(units: str | None) -> None:
+    if units is not None and units not in UNITS_TO_MM:
+        raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
+
+
+def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
+    from ..io.atomic import atomic_write
+
+    frames = []
+    for name, fit in fits.items():
+        frames.append(
+            pd.DataFrame(
+                {
+                    "time": rec.time,
+                    "segment": name,
+                    "residual_mm": fit.residual,
+                    "markers": fit.n_markers,
+                }
+            )
+        )
+    table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    with atomic_write(path, newline="") as fh:
+        table.to_csv(fh, index=False, lineterminator="\n")
+
+
+@app.command()
+@user_errors
+def convert(
+    source: Annotated[Path, typer.Argument(help="Tracker file to convert.", show_default=False)],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Pose CSV to write.", show_default=False)
+    ],
+    fmt: Annotated[
+        SourceFormat,
+        typer.Option("--from", help="Input format.", case_sensitive=False, show_default=False),
+    ],
+    units: Annotated[
+        str | None,
+        typer.Option(
+            help="Position units in the input (mm, cm, m, in). Default: in for liberty "
+            "formats (the device default), POINT:UNITS for c3d; required for wide-csv."
+        ),
+    ] = None,
+    rate: Annotated[
+        float | None,
+        typer.Option(
+            min=0.001,
+            help="Frame rate (Hz). Places frames on the 1/rate grid so lost frames show "
+            "as NaN; needed when the input has no time.",
+        ),
+    ] = None,
+    map_: Annotated[
+        str | None,
+        typer.Option(
+            "--map",
+            help="Station/channel -> sensor name, e.g. 1=hand,2=index.proximal "
+            "(c3d: ArmR=hand,...).",
+        ),
+    ] = None,
+    items: Annotated[
+        str | None,
+        typer.Option(
+            help="liberty: output list, device codes or names (default 2,4,1 = position, "
+            "Euler; 7 quaternion w,x,y,z; 8 timestamp ms; 9 frame count)."
+        ),
+    ] = None,
+    columns: Annotated[
+        str | None,
+        typer.Option(
+            help="wide-csv: column templates, e.g. 'time=Time;qw=w{n};qx=x{n};qy=y{n};"
+            "qz=z{n};x=loc{n}_x;y=loc{n}_y;z=loc{n}_z' (the default)."
+        ),
+    ] = None,
+    clusters: Annotated[
+        str | None,
+        typer.Option(
+            help="c3d: marker clusters 'Seg=m1,m2,m3;...' (default: markers named "
+            "<segment><number>, 3 or more)."
+        ),
+    ] = None,
+    static: Annotated[
+        Path | None,
+        typer.Option(help="c3d: static trial defining each cluster's shape."),
+    ] = None,
+    residuals: Annotated[
+        Path | None,
+        typer.Option(help="c3d: also write the per-frame rigid-fit residuals (CSV, mm)."),
+    ] = None,
+    fill_gaps: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            help="Interpolate gaps of at most this many frames (positions linear, "
+            "orientations slerp); 0 = none.",
+        ),
+    ] = 0,
+    max_speed: Annotated[
+        float, typer.Option(min=0.0, help="Jump flag: position speed limit (mm/s).")
+    ] = 3000.0,
+    max_turn: Annotated[
+        float, typer.Option(min=0.0, help="Jump flag: angular speed limit (deg/s).")
+    ] = 3600.0,
+    keep_repeats: Annotated[
+        bool,
+        typer.Option(
+            "--keep-repeats",
+            help="liberty without frame count: keep exactly repeated station cycles.",
+        ),
+    ] = False,
+    unit_check: Annotated[
+        bool,
+        typer.Option(
+            "--unit-check/--no-unit-check",
+            help="Reject implausible distances between neighbouring hand sensors.",
+        ),
+    ] = True,
+    out_units: Annotated[str, typer.Option(help="Units of x,y,z in the written pose CSV.")] = "mm",
+) -> None:
+    """Convert Liberty/Patriot ASCII or binary, wide CSV or C3D to the pose CSV."""
+    from ..io.hygiene import check_recording
+    from ..io.hygiene import fill_gaps as fill
+    from ..io.posecsv import write_pose_csv
+
+    _check_units_option(units)
+    if out_units not in UNITS_TO_MM:
+        raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--out-units")
+    if not source.is_file():
+        raise FingerfitError("file not found", path=source)
+    if output.exists() and output.resolve() == source.resolve():
+        raise FingerfitError("the output would overwrite the input", path=output)
+    if output.is_dir():
+        raise FingerfitError("is a directory; give a file name", path=output)
+    numeric = fmt is not SourceFormat.c3d
+    sensors = parse_map(map_, numeric=numeric)
+    for opt, value, ok in (
+        ("--items", items, fmt in (SourceFormat.liberty, SourceFormat.liberty_binary)),
+        ("--columns", columns, fmt is SourceFormat.wide_csv),
+        ("--clusters", clusters, fmt is SourceFormat.c3d),
+        ("--static", static, fmt is SourceFormat.c3d),
+        ("--residuals", residuals, fmt is SourceFormat.c3d),
+        ("--rate", rate, fmt is not SourceFormat.c3d),
+    ):
+        if value is not None and not ok:
+            raise FingerfitError(f"does not apply to --from {fmt.value}", field=opt)
+
+    fits: dict = {}
+    if fmt in (SourceFormat.liberty, SourceFormat.liberty_binary):
+        from ..io.liberty import read_liberty_ascii, read_liberty_binary
+
+        reader = read_liberty_ascii if fmt is SourceFormat.liberty else read_liberty_binary
+        rec = reader(
+            source,
+            items=items,
+            units=units or "in",
+            rate_hz=rate,
+            sensors=sensors,
+            keep_repeats=keep_repeats,
+            check=False,
+        )
+    elif fmt is SourceFormat.wide_csv:
+        from ..io.widecsv import read_wide_csv
+
+        rec = read_wide_csv(
+            source, units=units, layout=columns, rate_hz=rate, sensors=sensors, check=False
+        )
+    else:
+        from ..io.c3d import parse_clusters, read_c3d_segments
+
+        seg = read_c3d_segments(
+            source,
+            units=units,
+            clusters=None if clusters is None else parse_clusters(clusters),
+            segments=sensors,
+            static=static,
+            check=False,
+        )
+        rec, fits = seg.recording, seg.fits
+
+    bad = [s for s in rec.sensors if not is_sensor_name(s)]
+    if bad:
+        raise FingerfitError(
+            f"'{bad[0]}' is not a sensor name of the session format; name every "
+            f"{'station' if numeric else 'segment'} with --map (found: {', '.join(rec.sensors)}; "
+            f"e.g. --map {rec.sensors[0]}=hand)",
+            path=source,
+            field="--map",
+        )
+    if fill_gaps:
+        rec = fill(rec, fill_gaps)
+    check_recording(
+        rec, source, units=unit_check, max_speed_mm_s=max_speed, max_turn_deg_s=max_turn
+    )
+    write_pose_csv(output, rec, units=out_units)
+    if residuals is not None:
+        _write_residuals(residuals, rec, fits)
+    n_valid = {s: int(p.valid.sum()) for s, p in rec.poses.items()}
+    span = float(rec.time[-1] - rec.time[0]) if rec.n_frames else 0.0
+    out.print(
+        f"wrote [bold]{output}[/]: {rec.n_frames} frames ({span:.3f} s), sensors "
+        + ", ".join(f"{s} ({n_valid[s]} samples)" for s in rec.sensors),
+        highlight=False,
+        soft_wrap=True,
+    )
+    for note in rec.notes:
+        out.print(f"  note: {note}", highlight=False, soft_wrap=True)
+    if residuals is not None:
+        med = {n: float(np.nanmedian(f.residual)) for n, f in fits.items()}
+        out.print(
+            f"wrote [bold]{residuals}[/]: per-frame residuals of "
+            + ", ".join(f"{n} (median {m:.2f} mm)" for n, m in med.items()),
+            highlight=False,
+            soft_wrap=True,
+        )
