@@ -14,6 +14,7 @@ from typing import TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from ..errors import FingerfitError
 
@@ -32,8 +33,13 @@ F = TypeVar("F", bound=Callable)
 
 def fail(message: str) -> typer.Exit:
     """Print one error line and return the exit to raise."""
-    console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     return typer.Exit(code=2)
+
+
+def notice(kind: str, message: str) -> None:
+    """Print a yellow ``note:`` or ``warning:`` line (message shown literally) to stderr."""
+    console.print(f"[yellow]{kind}:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
 def user_errors(func: F) -> F:
@@ -69,7 +75,7 @@ def run() -> None:
     try:
         app()
     except FingerfitError as exc:  # raised outside a wrapped command
-        console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
         sys.exit(2)
 
 

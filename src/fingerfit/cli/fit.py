@@ -17,7 +17,7 @@ from ..io.atomic import atomic_write
 from ..kinematics import compute_kinematics, kinematics_table
 from ..model import HandModel, load_model, save_model
 from ..session import FINGERS, UNITS_TO_MM
-from .app import app, console, out, parse_list, user_errors
+from .app import app, notice, out, parse_list, user_errors
 
 
 def quality_table(model: HandModel) -> Table:
@@ -74,7 +74,7 @@ def fit(
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
     s = load_session(session)
     for note in (n for r in s.recordings() for n in r.notes):
-        console.print(f"[yellow]note:[/] {note}")
+        notice("note", note)
     names = parse_list(fingers, FINGERS, "--fingers")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -82,7 +82,7 @@ def fit(
             s, FitOptions(method=method, force=force, fingers=tuple(names) if names else None)
         )
     for w in caught:
-        console.print(f"[yellow]warning:[/] {w.message}")
+        notice("warning", str(w.message))
     path = save_model(model, output or session / "model.json")
     out.print(quality_table(model))
     out.print(f"model written to [bold]{path}[/]")
@@ -119,7 +119,7 @@ def angles(
         raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
     rec = read_pose_csv(recording, units=units, rate_hz=rate)
     for note in rec.notes:
-        console.print(f"[yellow]note:[/] {note}")
+        notice("note", note)
     kin = compute_kinematics(model, rec)
     table = kinematics_table(kin, units=units)
     with atomic_write(output, newline="") as fh:
