@@ -6,14 +6,13 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.text import Text
 
 from ..errors import FingerfitError
 from ..export import mjcf_string, robot_hand, urdf_string
 from ..export import write_text as _write_text
 from ..export.geometry import DEFAULT_MARGIN_DEG
 from ..model import VARIANTS, load_model
-from .app import app, console, out, user_errors
+from .app import app, out, user_errors
 
 
 @app.command()
@@ -42,13 +41,7 @@ def export(
 ) -> None:
     """Export the finger chains for robot software: root link `hand` (hand sensor frame),
     joints <finger>_mp|pip|dip, fingertip frame <finger>_tip."""
-    try:
-        _export(model_path, urdf, mjcf, variant, margin_deg)
-    except FingerfitError as exc:
-        # Printed as plain text: messages hold brackets ("fingerfit[robot]", paths)
-        # that console markup would swallow.
-        console.print(Text.assemble(("error:", "bold red"), f" {exc}"), soft_wrap=True)
-        raise typer.Exit(code=2) from None
+    _export(model_path, urdf, mjcf, variant, margin_deg)
 
 
 def _export(
