@@ -436,7 +436,7 @@ def check_units(recording: Recording, path: str | Path | None = None) -> None:
                 raise FingerfitError(
                     f"implausible distance {d:.4g} mm between sensors '{a}' and '{b}' "
                     f"(median over frames; expected {lo:g}-{hi:g} mm): are the units right "
-                    "(--units)?",
+                    "(--units)? (--no-unit-check if these are not hand sensors)",
                     path=path,
                     field="units",
                 )
