@@ -9,10 +9,11 @@ from typing import Annotated
 import numpy as np
 import pandas as pd
 import typer
+from rich.markup import escape
 
 from ..errors import FingerfitError
 from ..session import UNITS_TO_MM, Recording, is_sensor_name
-from .app import app, out, user_errors
+from .app import app, notice, out, user_errors
 
 
 class SourceFormat(StrEnum):
@@ -264,19 +265,19 @@ def convert(
         _write_residuals(residuals, rec, fits)
     n_valid = {s: int(p.valid.sum()) for s, p in rec.poses.items()}
     span = float(rec.time[-1] - rec.time[0]) if rec.n_frames else 0.0
+    for note in rec.notes:
+        notice("note", note)
     out.print(
-        f"wrote [bold]{output}[/]: {rec.n_frames} frames ({span:.3f} s), sensors "
-        + ", ".join(f"{s} ({n_valid[s]} samples)" for s in rec.sensors),
+        f"wrote [bold]{escape(str(output))}[/]: {rec.n_frames} frames ({span:.3f} s), sensors "
+        + escape(", ".join(f"{s} ({n_valid[s]} samples)" for s in rec.sensors)),
         highlight=False,
         soft_wrap=True,
     )
-    for note in rec.notes:
-        out.print(f"  note: {note}", highlight=False, soft_wrap=True)
     if residuals is not None:
         med = {n: float(np.nanmedian(f.residual)) for n, f in fits.items()}
         out.print(
-            f"wrote [bold]{residuals}[/]: per-frame residuals of "
-            + ", ".join(f"{n} (median {m:.2f} mm)" for n, m in med.items()),
+            f"wrote [bold]{escape(str(residuals))}[/]: per-frame residuals of "
+            + escape(", ".join(f"{n} (median {m:.2f} mm)" for n, m in med.items())),
             highlight=False,
             soft_wrap=True,
         )
