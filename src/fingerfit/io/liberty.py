@@ -220,10 +220,9 @@ def _read_bytes(path: str | Path) -> bytes:
         raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
 
 
-def _line_starts(b: np.ndarray) -> np.ndarray:
-    """Index of the line (0-based) each byte belongs to."""
-    nl = b == ord("\n")
-    return np.cumsum(nl) - nl
+def _line_of(b: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """0-based line of each byte position (number of newlines before it)."""
+    return np.searchsorted(np.flatnonzero(b == ord("\n")), positions)
 
 
 def parse_liberty_ascii(
@@ -254,9 +253,10 @@ def parse_liberty_ascii(
     items_t = parse_items(items)
     raw = _read_bytes(path) if data is None else data
     b = np.frombuffer(raw, dtype=np.uint8)
-    bad = np.flatnonzero(((b < 32) & ~np.isin(b, (9, 10, 13))) | (b > 126))
+    ws = (b == 9) | (b == 10) | (b == 13)
+    bad = np.flatnonzero(((b < 32) & ~ws) | (b > 126))
     if bad.size:
-        line = int(_line_starts(b)[bad[0]]) + 1
+        line = int(_line_of(b, bad[:1])[0]) + 1
         raise FingerfitError(
             f"garbled record: byte 0x{int(b[bad[0]]):02x} is not ASCII text "
             "(binary output? use the liberty-binary format)",
@@ -267,11 +267,10 @@ def parse_liberty_ascii(
     text = re.sub(rb"(\.\d+)(?=[+-])", rb"\1 ", raw)
     b = np.frombuffer(text, dtype=np.uint8)
     expected = 1 + sum(ITEM_SIZE[i] for i in items_t)
-    sep = np.isin(b, (9, 10, 13, 32))
-    start = ~sep & np.concatenate([[True], sep[:-1]])
-    line_of = _line_starts(b)
-    n_lines = int(line_of[-1]) + 1 if b.size else 0
-    counts = np.bincount(line_of[start], minlength=n_lines)
+    sep = (b == 32) | (b == 10) | (b == 13) | (b == 9)
+    token_starts = np.flatnonzero(~sep & np.concatenate([[True], sep[:-1]]))
+    n_lines = int((b == ord("\n")).sum()) + (1 if b.size and b[-1] != ord("\n") else 0)
+    counts = np.bincount(_line_of(b, token_starts), minlength=n_lines)
     used = counts > 0
     wrong = np.flatnonzero(used & (counts != expected))
     if wrong.size:
@@ -289,15 +288,18 @@ def parse_liberty_ascii(
         io.BytesIO(text),
         sep=r"\s+",
         header=None,
-        dtype=str,
+        dtype={0: str},
         engine="c",
         skip_blank_lines=True,
         keep_default_na=False,
+        na_values=[],
     )
-    head = table[0].str.extract(r"^(\d{1,2})([^\d\s]?)$")
-    bad = head[0].isna().to_numpy()
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
+    # Station tokens: few distinct values, so parse each distinct token once.
+    tokens, inverse = np.unique(table[0].to_numpy(dtype=str), return_inverse=True)
+    parsed = [re.fullmatch(r"(\d{1,2})([^\d\s]?)", t) for t in tokens.tolist()]
+    bad_tok = [k for k, m in enumerate(parsed) if m is None]
+    if bad_tok:
+        i = int(np.flatnonzero(np.isin(inverse, bad_tok))[0])
         raise FingerfitError(
             f"'{table.iat[i, 0]}' is not a station number (1-2 digits and an optional "
             "indicator character)",
@@ -305,27 +307,27 @@ def parse_liberty_ascii(
             line=int(lines[i]),
             field="station",
         )
-    station = head[0].to_numpy(dtype=np.int64)
+    station = np.array([int(m.group(1)) for m in parsed], dtype=np.int64)[inverse]
+    indicator = np.array([m.group(2) for m in parsed], dtype=str)[inverse]
     nums = np.empty((lines.size, expected - 1))
+    raw_text: dict[int, pd.Series] = {}
     for j in range(1, expected):
-        col = pd.to_numeric(table[j], errors="coerce").to_numpy(dtype=float)
-        nums[:, j - 1] = col
+        col = table[j]
+        if col.dtype.kind not in "fi":  # something in it is not a number
+            raw_text[j] = col.astype(str)
+            col = pd.to_numeric(col, errors="coerce")
+        nums[:, j - 1] = col.to_numpy(dtype=float)
     bad = ~np.isfinite(nums)
     if bad.any():
         i, j = (int(v[0]) for v in np.nonzero(bad))
+        token = raw_text[j + 1].iat[i] if j + 1 in raw_text else table.iat[i, j + 1]
         raise FingerfitError(
-            f"not a finite number: '{table.iat[i, j + 1]}' (garbled record)",
+            f"not a finite number: '{token}' (garbled record)",
             path=path,
             line=int(lines[i]),
             field=_field_name(items_t, j),
         )
-    recs = LibertyRecords(
-        items_t,
-        station,
-        _split_values(nums, items_t),
-        head[1].to_numpy(dtype=str),
-        lines,
-    )
+    recs = LibertyRecords(items_t, station, _split_values(nums, items_t), indicator, lines)
     _check_records(recs, path)
     return recs
 
