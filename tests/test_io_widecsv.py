@@ -217,3 +217,32 @@ def test_random_tables_round_trip(tmp_path, n, seed, drop, units) -> None:
         np.testing.assert_allclose(
             quat_wxyz_from_matrix(got.rotation), quat_wxyz_from_matrix(pose.rotation), atol=1e-14
         )
+
+
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    kind=st.sampled_from(["truncate", "garbage", "extra", "backwards", "empty"]),
+    where=st.integers(0, 7),
+    col=st.integers(0, 14),
+    bad=st.sampled_from(["abc", "1.2.3", "inf", "--1", "0x1"]),
+)
+def test_random_corruptions_end_in_a_clear_error(tmp_path, kind, where, col, bad) -> None:
+    lines = good_lines(10)  # header + 10 rows
+    i = 2 + where  # a data line (1-based line number i + 1)
+    if kind == "truncate":
+        lines = [*lines[:i], lines[i][: len(lines[i]) // 2]]
+    elif kind == "garbage":
+        lines[i] = set_field(lines[i], col, bad)
+    elif kind == "extra":
+        lines[i] += ",1.0"
+    elif kind == "backwards":
+        lines[i] = set_field(lines[i], 0, "1000.0")
+    else:
+        lines.insert(i, "")
+    path = write_lines(tmp_path / "c.csv", lines)
+    with pytest.raises(FingerfitError) as err:
+        read_wide_csv(path, units="cm", sensors=MAP2, rate_hz=120.0, check=False)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(f"{path}:{i + 1}: ")

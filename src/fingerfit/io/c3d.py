@@ -179,7 +179,22 @@ def find_clusters(labels: list[str], min_markers: int = 3) -> dict[str, list[str
 
 
 def parse_clusters(spec: str) -> dict[str, list[str]]:
-    """Parse ``Segment=m1,m2,m3;Other=a,b,c`` into segment -> marker labels."""
+    """Parse ``Segment=m1,m2,m3;Other=a,b,c`` into segment -> marker labels.
+
+    Parameters
+    ----------
+    spec : str
+
+    Returns
+    -------
+    dict[str, list[str]]
+        Marker 1 first (it and markers 2-3 define the technical frame).
+
+    Raises
+    ------
+    FingerfitError
+        ``field 'clusters'``: a part is not ``name=label,label,label`` (3 or more).
+    """
     out: dict[str, list[str]] = {}
     for part in spec.split(";"):
         if not part.strip():
@@ -407,7 +422,16 @@ def read_c3d_segments(
 def read_c3d(path: str | Path, **kwargs) -> Recording:
     """Segment poses of a C3D file as a :class:`Recording`.
 
-    Keyword arguments are those of :func:`read_c3d_segments`; the fit residuals are
-    summarised in the recording's notes.
+    Parameters
+    ----------
+    path : str or Path
+    **kwargs
+        As for :func:`read_c3d_segments`.
+
+    Returns
+    -------
+    Recording
+        Time s, positions mm (lab frame), rotations segment -> lab; the fit residuals
+        are summarised in the notes (see :func:`read_c3d_segments` for per-frame values).
     """
     return read_c3d_segments(path, **kwargs).recording

@@ -367,7 +367,18 @@ def find_jumps(
 
 
 def jump_notes(jumps: Sequence[Jump], *, max_speed_mm_s: float, max_turn_deg_s: float) -> list[str]:
-    """One note per sensor and kind listing the jumps' frames (at most a few)."""
+    """One note per sensor and kind listing the jumps' frames (at most eight).
+
+    Parameters
+    ----------
+    jumps : sequence of Jump
+    max_speed_mm_s, max_turn_deg_s : float
+        The thresholds used, stated in the notes.
+
+    Returns
+    -------
+    list of str
+    """
     notes = []
     keys = list(dict.fromkeys((j.sensor, j.kind) for j in jumps))
     for sensor, kind in keys:

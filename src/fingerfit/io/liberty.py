@@ -403,7 +403,21 @@ def format_liberty_ascii(records: LibertyRecords, decimals: Mapping[str, int] | 
 def write_liberty_ascii(
     path: str | Path, records: LibertyRecords, decimals: Mapping[str, int] | None = None
 ) -> Path:
-    """Write records as a Liberty ASCII stream, atomically (see :func:`format_liberty_ascii`)."""
+    """Write records as a Liberty ASCII stream, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    records : LibertyRecords
+        Values in device units; quaternions ``(w, x, y, z)``.
+    decimals : mapping, optional
+        Decimals per item (see :func:`format_liberty_ascii`).
+
+    Returns
+    -------
+    Path
+        The written file; it appears complete or not at all.
+    """
     path = Path(path)
     with atomic_write(path, "w", newline="", encoding="ascii") as fh:
         fh.write(format_liberty_ascii(records, decimals))
@@ -548,7 +562,19 @@ def liberty_binary_bytes(records: LibertyRecords, *, family: str | None = None) 
 
 
 def write_liberty_binary(path: str | Path, records: LibertyRecords) -> Path:
-    """Write records as binary ``LY``/``PA`` records, atomically."""
+    """Write records as binary ``LY``/``PA`` records, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    records : LibertyRecords
+        Values in device units; quaternions ``(w, x, y, z)``; float items are stored
+        as little-endian float32, timestamp and frame count as uint32.
+
+    Returns
+    -------
+    Path
+    """
     path = Path(path)
     with atomic_write(path, "wb") as fh:
         fh.write(liberty_binary_bytes(records))
@@ -820,7 +846,17 @@ def read_liberty_binary(
 ) -> Recording:
     """Read binary ``LY``/``PA`` records into a :class:`Recording`.
 
-    Parameters are those of :func:`read_liberty_ascii`.
+    Parameters
+    ----------
+    path : str or Path
+    items, units, rate_hz, sensors, keep_repeats, check
+        As for :func:`read_liberty_ascii` (default list position + Euler, inches).
+
+    Returns
+    -------
+    Recording
+        Time s, positions mm (tracker frame), rotations sensor -> tracker; ``notes``
+        count everything dropped, missing or flagged (including non-zero error bytes).
     """
     recs = parse_liberty_binary(path, items)
     rec = records_to_recording(

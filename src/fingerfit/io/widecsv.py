@@ -484,7 +484,22 @@ def write_wide_csv(
     units: str = "mm",
     layout: WideLayout | None = None,
 ) -> Path:
-    """Write a recording as a wide CSV, atomically, with round-trip float formatting."""
+    """Write a recording as a wide CSV, atomically, with round-trip float formatting.
+
+    Parameters
+    ----------
+    path : str or Path
+    recording : Recording
+        Positions mm, rotations sensor -> tracker.
+    units : str
+        Units of the written positions.
+    layout : WideLayout, optional
+        Column templates; default :data:`DEFAULT_LAYOUT` (quaternions ``w, x, y, z``).
+
+    Returns
+    -------
+    Path
+    """
     path = Path(path)
     table = wide_table(recording, units=units, layout=layout)
     with atomic_write(path, newline="") as fh:
