@@ -145,6 +145,30 @@ def test_convert_real_liberty_files_prints_repeat_counts(tmp_path) -> None:
         assert (tmp_path / name).is_file()
 
 
+def test_axis_helpers_recover_known_joints() -> None:
+    """The helpers behind the numbers above, on synthetic joints with known axes."""
+    rng = np.random.default_rng(0)
+    n = 200
+    a1 = unit(np.array([0.1, 0.2, 1.0]))
+    a2 = unit(np.array([1.0, -0.2, 0.1]))
+    r0 = Rotation.from_rotvec([0.3, -0.2, 0.5])
+    t = np.linspace(0, 4 * np.pi, n)
+    th1 = np.radians(50 + 45 * np.sin(t))
+    th2 = np.radians(30 * np.sin(1.7 * t + 0.5))
+    noise = Rotation.from_rotvec(rng.normal(scale=np.radians(1.0), size=(n, 3)))
+    hinge = (Rotation.from_rotvec(th1[:, None] * a1) * r0 * noise).as_matrix()
+    assert axis_angle_deg(sara_axis(hinge)[0], a1) < 1.0
+    assert axis_angle_deg(dominant_axis(hinge), a1) < 1.0
+    assert axis_angle_deg(sara_axis(hinge)[1], r0.inv().apply(a1)) < 1.0
+    two = Rotation.from_rotvec(th1[:, None] * a1) * r0 * Rotation.from_rotvec(th2[:, None] * a2)
+    rel = (two * noise).as_matrix()
+    fit = two_axis_fit(rel, dominant_axis(rel), n_starts=2)
+    assert axis_angle_deg(fit["a1"], a1) < 1.0
+    assert axis_angle_deg(fit["a2"], a2) < 3.0
+    assert 0.8 < fit["rms_deg"] < 2.0  # the 1 deg per-axis noise
+    assert axis_angle_deg(sara_axis(rel)[0], a1) > 5.0  # one hinge cannot absorb a2
+
+
 # ------------------------------------------------------------------------ Optotrak arm
 
 
