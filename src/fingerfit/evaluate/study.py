@@ -334,7 +334,9 @@ def run_study(
     for s in subjects:
         f, ev = next(iter(s.grasp.items()))
         hand = s.session.grasp[0].pose(HAND_SENSOR)
-        in_hand = {k: apply_inverse_pose(hand.rotation, hand.position, v) for k, v in ev.tips.items()}
+        in_hand = {
+            k: apply_inverse_pose(hand.rotation, hand.position, v) for k, v in ev.tips.items()
+        }
         fig[f"fig09_{s.subject}"] = figures.trajectories(
             ev.time, in_hand, f"{s.subject} ({f})", out_dir / f"fig09_trajectories_{s.subject}.png"
         )
