@@ -27,6 +27,7 @@ test: $(VENV)/.test-extras
 	   (apt-get update -qq >/dev/null 2>&1 && apt-get install -y -qq chromium >/dev/null 2>&1)) || \
 	  echo "chromium not installed: the report screenshot test will be skipped")
 	$(BIN)/ruff check src tests bench
+	$(BIN)/ruff format --check --quiet src tests bench
 	$(BIN)/python -m pytest -q
 
 bench: $(VENV)/.test-extras

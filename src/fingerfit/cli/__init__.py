@@ -1,7 +1,6 @@
 """Command-line interface (``fingerfit --help``). One module per command group."""
 
-from . import convert  # noqa: F401, I001
-from . import export, fit, simulate, study  # noqa: F401  (registers the commands)
+from . import convert, export, fit, session, simulate, study  # noqa: F401  (registers the commands)
 from .app import app, run
 
 main = run

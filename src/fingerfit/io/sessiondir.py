@@ -11,6 +11,7 @@ Layout (see ``docs/formats.md``)::
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tomllib
@@ -37,6 +38,7 @@ from .posecsv import read_pose_csv, write_pose_csv
 
 SESSION_FILE = "session.toml"
 LANDMARKS_FILE = "landmarks.csv"
+EVENTS_FILE = "events.csv"
 EVENTS_HEADER = ("recording", "finger", "target", "start", "end")
 
 
@@ -249,7 +251,36 @@ def _check_complete(session: Session) -> None:
 
 
 def _toml_list(names: list[str]) -> str:
-    return "[" + ", ".join(f'"{n}"' for n in names) + "]"
+    return "[" + ", ".join(json.dumps(n) for n in names) + "]"
+
+
+def write_session_toml(session: Session, directory: str | Path) -> Path:
+    """Write ``session.toml`` naming the session's recordings (files are not written).
+
+    ``events = "events.csv"`` is listed when the session has events.
+    """
+    lines = [
+        f'format = "{FORMAT}"',
+        f"subject = {json.dumps(session.subject)}",
+        f'hand = "{session.hand}"',
+        f'units = "{session.units}"',
+        f"rate_hz = {float(session.rate_hz)!r}",
+        f"fingers = {_toml_list(session.fingers)}",
+        "",
+        "[recordings]",
+        f"reference = {json.dumps(session.reference.name)}",
+        f"grasp = {_toml_list([r.name for r in session.grasp])}",
+    ]
+    if session.targets:
+        lines.append(f"targets = {_toml_list([r.name for r in session.targets])}")
+    if session.test:
+        lines.append(f"test = {_toml_list([r.name for r in session.test])}")
+    if session.events:
+        lines.append(f'events = "{EVENTS_FILE}"')
+    path = Path(directory) / SESSION_FILE
+    with atomic_write(path) as fh:
+        fh.write("\n".join(lines) + "\n")
+    return path
 
 
 def save_session(session: Session, directory: str | Path) -> Path:
@@ -277,27 +308,9 @@ def save_session(session: Session, directory: str | Path) -> Path:
     )
     with atomic_write(directory / LANDMARKS_FILE, newline="") as fh:
         lm.to_csv(fh, index=False, lineterminator="\n")
-    lines = [
-        f'format = "{FORMAT}"',
-        f'subject = "{session.subject}"',
-        f'hand = "{session.hand}"',
-        f'units = "{session.units}"',
-        f"rate_hz = {session.rate_hz!r}",
-        f"fingers = {_toml_list(session.fingers)}",
-        "",
-        "[recordings]",
-        f'reference = "{session.reference.name}"',
-        f"grasp = {_toml_list([r.name for r in session.grasp])}",
-    ]
-    if session.targets:
-        lines.append(f"targets = {_toml_list([r.name for r in session.targets])}")
-    if session.test:
-        lines.append(f"test = {_toml_list([r.name for r in session.test])}")
     if session.events:
         ev = pd.DataFrame([e.__dict__ for e in session.events], columns=list(EVENTS_HEADER))
-        with atomic_write(directory / "events.csv", newline="") as fh:
+        with atomic_write(directory / EVENTS_FILE, newline="") as fh:
             ev.to_csv(fh, index=False, lineterminator="\n")
-        lines.append('events = "events.csv"')
-    with atomic_write(directory / SESSION_FILE) as fh:
-        fh.write("\n".join(lines) + "\n")
+    write_session_toml(session, directory)
     return directory

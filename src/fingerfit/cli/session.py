@@ -1,0 +1,96 @@
+"""``fingerfit session``: assemble a session directory from canonical recordings and landmarks."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import FingerfitError
+from ..io import load_session, read_pose_csv
+from ..io.sessiondir import (
+    EVENTS_FILE,
+    LANDMARKS_FILE,
+    read_events,
+    read_landmarks,
+    write_session_toml,
+)
+from ..session import FINGERS, UNITS_TO_MM, Session
+from .app import app, notice, out, parse_list, user_errors
+
+
+@app.command()
+@user_errors
+def session(
+    out_dir: Annotated[Path, typer.Argument(help="Session directory to create (must not exist).")],
+    subject: Annotated[str, typer.Option(help="Subject identifier.")],
+    reference: Annotated[Path, typer.Option(help="Static reference recording (pose CSV).")],
+    grasp: Annotated[list[Path], typer.Option(help="Grasp recording(s); repeat the option.")],
+    landmarks: Annotated[Path, typer.Option(help="Stylus landmarks CSV (name,x,y,z).")],
+    hand: Annotated[str, typer.Option(help="left or right.")] = "left",
+    units: Annotated[str, typer.Option(help="Units of every x,y,z given.")] = "mm",
+    rate: Annotated[float, typer.Option(min=1e-6, help="Sampling rate (Hz).")] = 240.0,
+    fingers: Annotated[str, typer.Option(help="Comma-separated fingers.")] = "index",
+    targets: Annotated[
+        list[Path] | None, typer.Option(help="Target-reaching recording(s).")
+    ] = None,
+    test: Annotated[list[Path] | None, typer.Option(help="Free-motion test recording(s).")] = None,
+    events: Annotated[Path | None, typer.Option(help="Touch events CSV.")] = None,
+) -> None:
+    """Build a fingerfit.session/1 directory from pose CSVs (e.g. from `fingerfit convert`).
+
+    Every file is read and checked first; the directory is written only if all are valid,
+    and then loaded back and validated as a whole (sensors of every finger, landmarks).
+    """
+    if hand not in ("left", "right"):
+        raise typer.BadParameter("must be left or right", param_hint="--hand")
+    if units not in UNITS_TO_MM:
+        raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
+    if out_dir.exists():
+        raise FingerfitError("already exists; choose a new directory", path=out_dir)
+    names = parse_list(fingers, FINGERS, "--fingers") or []
+
+    def read(paths: list[Path] | None) -> list:
+        return [read_pose_csv(p, units=units, rate_hz=rate) for p in paths or []]
+
+    s = Session(
+        subject=subject,
+        hand=hand,
+        units=units,
+        rate_hz=rate,
+        fingers=names,
+        reference=read([reference])[0],
+        grasp=read(grasp),
+        landmarks=read_landmarks(landmarks, units),
+        targets=read(targets),
+        test=read(test),
+        events=read_events(events) if events else [],
+    )
+    names_used = [r.name for r in s.recordings()]
+    if len(set(names_used)) != len(names_used) or {LANDMARKS_FILE, EVENTS_FILE} & set(names_used):
+        raise FingerfitError(
+            "recordings need distinct file names (not landmarks.csv or events.csv)"
+        )
+    for rec in s.recordings():
+        for note in rec.notes:
+            notice("note", f"{rec.name}: {note}")
+    # Copy the checked files byte for byte, write session.toml, validate the whole session,
+    # and only then let the directory appear.
+    tmp = out_dir.with_name(f".{out_dir.name}.partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        sources = [reference, *grasp, *(targets or []), *(test or [])]
+        for src in sources:
+            shutil.copyfile(src, tmp / src.name)
+        shutil.copyfile(landmarks, tmp / LANDMARKS_FILE)
+        if events:
+            shutil.copyfile(events, tmp / EVENTS_FILE)
+        write_session_toml(s, tmp)
+        load_session(tmp)
+        tmp.rename(out_dir)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    out.print(f"session written to [bold]{out_dir}[/]")
