@@ -25,6 +25,10 @@ from .transforms import FloatArray, matrix_from_quat_wxyz, quat_wxyz_from_matrix
 
 FORMAT = "fingerfit.model/1"
 VARIANTS = ("user_axis", "orthogonal")
+# How joint angles are computed from the sensors (``docs/methods.md``): the paper's
+# projection of the child sensor origin (Fig. 6) or the swing-twist decomposition of the
+# full relative orientation. Files written before this field existed used "projection".
+ANGLE_METHODS = ("projection", "swing_twist")
 
 
 @dataclass(frozen=True)
@@ -50,6 +54,13 @@ class JointQuality:
         vectors); large means the centres did not spread along the axis.
     notes : list of str
         Warnings recorded while fitting.
+    pooled_conditioning : float or None
+        ``s5/s6`` of the pooled system over all kept movement frames (pooled
+        methods): RMS rotation about the axis over RMS rotation off it.
+    rejected_frames : int
+        Movement frames rejected as outliers (robust methods).
+    rejected_cycles : list of int
+        Indices (0-based, in extraction order) of cycles rejected as inconsistent.
     """
 
     cycles: int
@@ -60,6 +71,9 @@ class JointQuality:
     residual_mm: list[float]
     null_agreement_deg: float = 0.0
     notes: list[str] = field(default_factory=list)
+    pooled_conditioning: float | None = None
+    rejected_frames: int = 0
+    rejected_cycles: list[int] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -78,6 +92,10 @@ class JointModel:
     orthogonal_axis : ndarray, shape (3,)
         The axis made perpendicular to the bone (the classic model).
     quality : JointQuality
+    migration : ndarray, shape (3,), optional
+        Rolling-contact migration of the centre (mm/rad, tracker coordinates at
+        the reference posture): at angle ``theta`` the joint turns about the line
+        through ``center + theta * migration``. ``None``: a fixed centre.
     """
 
     name: str
@@ -87,6 +105,7 @@ class JointModel:
     axis: FloatArray
     orthogonal_axis: FloatArray
     quality: JointQuality
+    migration: FloatArray | None = None
 
     def axis_for(self, variant: str) -> FloatArray:
         """Axis ``(3,)`` of the ``user_axis`` or ``orthogonal`` variant."""
@@ -147,6 +166,9 @@ class HandModel:
     fingers : dict[str, FingerModel]
     version : str
         fingerfit version that wrote it.
+    angle_method : {"projection", "swing_twist"}
+        How :mod:`fingerfit.kinematics` computes joint angles from the sensors
+        (files without the field: ``projection``, the paper's method).
     """
 
     subject: str
@@ -156,6 +178,7 @@ class HandModel:
     reference_poses: dict[str, tuple[FloatArray, FloatArray]]
     fingers: dict[str, FingerModel]
     version: str = __version__
+    angle_method: str = "projection"
 
     def in_parent(
         self, finger: str, joint: str, variant: str = "user_axis"
@@ -164,6 +187,64 @@ class HandModel:
         j = self.fingers[finger].joints[joint]
         p, r = self.reference_poses[j.parent]
         return r.T @ (j.center - p), r.T @ j.axis_for(variant)
+
+
+def orthogonal_axis(axis: FloatArray, bone: FloatArray) -> FloatArray:
+    """``axis (3,)`` made perpendicular to the unit ``bone (3,)`` direction (unit ``(3,)``)."""
+    y = axis - (axis @ bone) * bone
+    return y / np.linalg.norm(y)
+
+
+def assemble_finger(
+    name: str,
+    joints: dict[str, tuple[str, str, FloatArray, FloatArray, JointQuality]],
+    tip: FloatArray,
+    abduction: JointModel | None = None,
+    migration: dict[str, FloatArray] | None = None,
+) -> FingerModel:
+    """Segment lengths, local frames and orthogonal axes of a finger from its joints.
+
+    Parameters
+    ----------
+    name : str
+        Finger name.
+    joints : dict
+        ``mp``, ``pip``, ``dip`` -> ``(parent, child, centre (3,), axis (3,), quality)``;
+        centres (mm) and unit axes (oriented so flexion is positive) in tracker
+        coordinates at the reference posture.
+    tip : ndarray, shape (3,)
+        Fingertip landmark (mm, same frame).
+    abduction : JointModel, optional
+        MP ab/adduction axis of a two-axis MP joint.
+    migration : dict, optional
+        Joint -> centre migration ``(3,)`` mm/rad (tracker frame at the reference posture).
+
+    Returns
+    -------
+    FingerModel
+        Bones run centre to centre (and DIP centre to tip); the orthogonal axis of
+        each joint is its axis made perpendicular to the bone of the segment ending
+        at it (the metacarpal is taken collinear with the proximal phalanx); the
+        local frame of each segment is the paper's Fig. 4 frame at its distal end.
+    """
+    ends = [joints["mp"][2], joints["pip"][2], joints["dip"][2], tip]
+    bones = [(ends[i + 1] - ends[i]) / np.linalg.norm(ends[i + 1] - ends[i]) for i in range(3)]
+    bone_at = {"mp": bones[0], "pip": bones[0], "dip": bones[1]}
+    migration = migration or {}
+    out: dict[str, JointModel] = {}
+    for j, (parent, child, c, a, quality) in joints.items():
+        out[j] = JointModel(
+            j, parent, child, c, a, orthogonal_axis(a, bone_at[j]), quality, migration.get(j)
+        )
+    frames = {}
+    axes_at_end = [out["pip"].axis, out["dip"].axis, out["dip"].axis]
+    for i, s in enumerate(SEGMENTS):
+        x = bones[i]
+        z = np.cross(x, axes_at_end[i])
+        z /= np.linalg.norm(z)
+        frames[s] = SegmentFrame(ends[i + 1], np.column_stack([x, np.cross(z, x), z]))
+    lengths = {s: float(np.linalg.norm(ends[i + 1] - ends[i])) for i, s in enumerate(SEGMENTS)}
+    return FingerModel(name, out, tip, lengths, frames, abduction)
 
 
 # --------------------------------------------------------------------------- JSON
@@ -175,7 +256,7 @@ def _v(x: FloatArray) -> list[float]:
 
 def _joint_doc(j: JointModel, model: HandModel) -> dict[str, Any]:
     pp, pr = model.reference_poses[j.parent]
-    return {
+    doc: dict[str, Any] = {
         "parent": j.parent,
         "child": j.child,
         "center": _v(j.center),
@@ -188,6 +269,10 @@ def _joint_doc(j: JointModel, model: HandModel) -> dict[str, Any]:
         },
         "quality": j.quality.__dict__,
     }
+    if j.migration is not None:
+        doc["migration_mm_per_rad"] = _v(j.migration)
+        doc["in_parent"]["migration_mm_per_rad"] = _v(pr.T @ j.migration)
+    return doc
 
 
 def model_to_dict(model: HandModel) -> dict[str, Any]:
@@ -216,6 +301,7 @@ def model_to_dict(model: HandModel) -> dict[str, Any]:
         "format": FORMAT,
         "fingerfit_version": model.version,
         "method": model.method,
+        "angle_method": model.angle_method,
         "units": "mm",
         "frame": "tracker coordinates at the reference posture; in_parent: the joint's parent sensor frame",
         "angle_units": "deg in quality figures",
@@ -296,14 +382,18 @@ def _load_joint(r: _Reader, jd: Any, name: str, wj: str, poses: dict) -> JointMo
         r.vec(jd, "axis", wj, unit=True),
         r.vec(jd, "orthogonal_axis", wj, unit=True),
         _quality(r.get(jd, "quality", wj)),
+        r.vec(jd, "migration_mm_per_rad", wj) if "migration_mm_per_rad" in jd else None,
     )
     pp, pr = poses[parent]
     ip = r.get(jd, "in_parent", wj)
-    for key, val in (
+    checks = [
         ("center", pr.T @ (j.center - pp)),
         ("axis", pr.T @ j.axis),
         ("orthogonal_axis", pr.T @ j.orthogonal_axis),
-    ):
+    ]
+    if j.migration is not None:
+        checks.append(("migration_mm_per_rad", pr.T @ j.migration))
+    for key, val in checks:
         if np.abs(r.vec(ip, key, f"{wj}.in_parent") - val).max() > 1e-6:
             raise r.err(f"{wj}.in_parent.{key}", "disagrees with the tracker-frame value")
     return j
@@ -311,6 +401,10 @@ def _load_joint(r: _Reader, jd: Any, name: str, wj: str, poses: dict) -> JointMo
 
 def load_model(path: str | Path) -> HandModel:
     """Read and validate a ``fingerfit.model/1`` file.
+
+    Files written before the optional fields existed (``angle_method``, a joint's
+    ``migration_mm_per_rad``, a finger's ``abduction``) load with their defaults:
+    projection angles, fixed centres, a one-axis MP joint.
 
     Raises
     ------
@@ -379,4 +473,9 @@ def load_model(path: str | Path) -> HandModel:
         reference_poses=poses,
         fingers=fingers,
         version=str(doc.get("fingerfit_version", "unknown")),
+        angle_method=(
+            r.str_(doc, "angle_method", "", ANGLE_METHODS)
+            if "angle_method" in doc
+            else "projection"
+        ),
     )
