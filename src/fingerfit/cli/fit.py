@@ -60,7 +60,10 @@ def fit(
         typer.Option("-o", "--output", help="Model JSON (default: SESSION/model.json)."),
     ] = None,
     method: Annotated[
-        str, typer.Option(help=f"Axis estimator: {', '.join(METHODS)}.")
+        str,
+        typer.Option(
+            help=f"Axis estimator: {', '.join(METHODS)} (docs/methods.md; tang2018 = the paper)."
+        ),
     ] = FitOptions.method,
     fingers: Annotated[
         str | None, typer.Option(help="Comma-separated fingers (default: all).")

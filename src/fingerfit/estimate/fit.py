@@ -4,10 +4,21 @@ Per finger and joint (paper section 3):
 
 1. relative poses of the child sensor in the parent sensor over every grasp
    recording; grasp cycles and their movement periods (:mod:`.cycles`);
-2. a centre of rotation per cycle (:mod:`.centre`);
-3. the axis through those centres (:mod:`.axis`), oriented so flexion is positive;
-4. the joint centre where the axis meets the sagittal plane (:mod:`.sagittal`);
-5. segment lengths, fingertip, local frames and the orthogonal-axis variant.
+2. the axis by the chosen estimator (``METHODS``, ``docs/methods.md``):
+
+   * ``tang2018`` -- the paper: a centre of rotation per cycle (:mod:`.centre`)
+     and the line through them (:mod:`.axis`);
+   * ``pooled`` -- SARA axis and SCoRE centre over all movement frames (:mod:`.pooled`);
+   * ``robust`` -- ``pooled`` after the outlier-frame and -cycle rules, with
+     per-cycle weights (:mod:`.robust`);
+   * ``twoaxis`` -- ``robust``, and a two-axis MP joint (flexion + ab/adduction,
+     :mod:`.twoaxis`) where the data show the second axis;
+   * ``rolling`` -- ``twoaxis`` plus rolling-contact migration of every centre
+     (:mod:`.migration`);
+
+   oriented so flexion is positive;
+3. the joint centre where the axis meets the sagittal plane (:mod:`.sagittal`);
+4. segment lengths, fingertip, local frames and the orthogonal-axis variant.
 
 A joint whose motion cannot determine an axis (too few cycles, too little
 range of motion, a degenerate system) is refused with a message naming it,
@@ -19,18 +30,25 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..errors import FingerfitError
-from ..model import FingerModel, HandModel, JointModel, JointQuality, SegmentFrame
-from ..session import HAND_SENSOR, JOINTS, SEGMENTS, Session, joint_sensors
-from ..transforms import FloatArray, relative_pose, rotation_vector, unit
-from .axis import AxisFit, line_through_centres, orient_flexion
+from ..kinematics import twist_angle, two_axis_angles
+from ..model import ANGLE_METHODS, FingerModel, HandModel, JointModel, JointQuality, assemble_finger
+from ..session import HAND_SENSOR, JOINTS, Session, joint_sensors
+from ..transforms import FloatArray, angle_between_axes, relative_pose, rotation_vector
+from .axis import AxisFit, line_through_centres, mean_null_axis, orient_flexion
 from .centre import CentreFit, centre_of_rotation
 from .cycles import extract_cycles
+from .migration import fit_axis_points
+from .pooled import pooled_hinge
+from .robust import robust_hinge
 from .sagittal import intersect, sagittal_plane
+from .twoaxis import TwoAxisFit, fit_two_axis
+
+DEFAULT_METHOD = "rolling"
 
 
 class FitError(FingerfitError):
@@ -44,7 +62,9 @@ class FitOptions:
     Attributes
     ----------
     method : str
-        Axis estimator (``tang2018``: the paper's line through per-cycle centres).
+        Axis estimator, one of ``METHODS`` (``docs/methods.md``); the default is the
+        most accurate one measured (``docs/accuracy.md``); ``tang2018`` is the
+        paper's line through per-cycle centres.
     min_cycles : int
         Fewer movement periods than this refuse the joint.
     min_rom_deg : float
@@ -56,14 +76,23 @@ class FitOptions:
         Fit anyway, with warnings, instead of refusing.
     fingers : tuple of str, optional
         Fit only these fingers (default: all in the session).
+    angle_method : {"projection", "swing_twist"}, optional
+        How the model computes joint angles (recorded in the model file); default:
+        the method's own (``projection`` for ``tang2018``, as in the paper;
+        ``swing_twist`` for the others -- ``docs/methods.md`` has the measurement).
+    min_conditioning : float
+        Pooled methods: a pooled ``s5/s6`` below this -- rotation about the best
+        axis less than this many times the rotation off it -- refuses the joint.
     """
 
-    method: str = "tang2018"
+    method: str = DEFAULT_METHOD
     min_cycles: int = 3
     min_rom_deg: float = 15.0
     max_null_disagreement_deg: float = 20.0
     force: bool = False
     fingers: tuple[str, ...] | None = None
+    angle_method: str | None = None
+    min_conditioning: float = 3.0
 
 
 @dataclass(frozen=True)
@@ -83,6 +112,11 @@ class JointData:
     reference_rotation : ndarray, shape (3, 3)
     reference_offset : ndarray, shape (3,)
         Relative pose at the reference posture.
+    joint : str
+        ``mp``, ``pip`` or ``dip`` (estimators may treat the MP differently).
+    finger_direction : ndarray, shape (3,), optional
+        Unit direction of the stretched finger in the parent frame (least-squares
+        line through the dorsal landmarks, proximal to distal).
     """
 
     rotation: FloatArray
@@ -91,14 +125,41 @@ class JointData:
     rom: FloatArray
     reference_rotation: FloatArray
     reference_offset: FloatArray
+    joint: str = ""
+    finger_direction: FloatArray | None = None
 
 
 @dataclass(frozen=True)
 class AxisEstimate:
-    """An estimator's result: the axis (parent frame) plus per-cycle diagnostics."""
+    """An estimator's result (parent sensor frame, mm) plus diagnostics.
+
+    Attributes
+    ----------
+    axis : AxisFit
+        The flexion axis: ``point`` and ``direction``; ``distances`` of the
+        per-cycle centres to it.
+    centres : list of CentreFit
+        Per-cycle O'Brien centres (of the cycles used).
+    abduction : TwoAxisFit, optional
+        The MP ab/adduction axis when a two-axis joint was fitted and accepted.
+    migration : ndarray, shape (3,), optional
+        Centre migration (mm/rad, parent frame).
+    pooled_conditioning : float, optional
+        ``s5/s6`` of the pooled hinge system.
+    rejected_frames : int
+    rejected_cycles : list of int
+    notes : list of str
+        Facts worth keeping in the joint's quality notes.
+    """
 
     axis: AxisFit
     centres: list[CentreFit]
+    abduction: TwoAxisFit | None = None
+    migration: FloatArray | None = None
+    pooled_conditioning: float | None = None
+    rejected_frames: int = 0
+    rejected_cycles: list[int] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
 
 def tang2018(data: JointData) -> AxisEstimate:
@@ -107,10 +168,138 @@ def tang2018(data: JointData) -> AxisEstimate:
     return AxisEstimate(line_through_centres(centres), centres)
 
 
-METHODS: dict[str, Callable[[JointData], AxisEstimate]] = {"tang2018": tang2018}
+def _cycle_centres(data: JointData, cycles: list[int]) -> list[CentreFit]:
+    """Per-cycle O'Brien centres (quality figures: paper Fig. 8)."""
+    return [
+        centre_of_rotation(data.rotation[data.periods[i]], data.translation[data.periods[i]])
+        for i in cycles
+    ]
 
 
-def joint_data(session: Session, parent: str, child: str, reference: dict) -> JointData:
+def _axis_fit(point: FloatArray, direction: FloatArray, centres: list[CentreFit]) -> AxisFit:
+    """An :class:`AxisFit` for a line found by a pooled method, with per-cycle diagnostics."""
+    c = np.array([f.parent_point for f in centres])
+    distances = np.linalg.norm(np.cross(c - point, direction), axis=1)
+    along = (c - c.mean(axis=0)) @ direction
+    spread = float(np.sqrt(np.mean(along**2)))
+    agreement = float(np.degrees(angle_between_axes(direction, mean_null_axis(centres))))
+    return AxisFit(point, direction, distances, spread, False, agreement)
+
+
+def pooled(data: JointData) -> AxisEstimate:
+    """SARA axis and axis-truncated SCoRE centre over all movement frames (:mod:`.pooled`)."""
+    mv = np.concatenate(data.periods)
+    h = pooled_hinge(data.rotation[mv], data.translation[mv])
+    centres = _cycle_centres(data, list(range(len(data.periods))))
+    return AxisEstimate(
+        _axis_fit(h.centre_parent, h.axis_parent, centres),
+        centres,
+        pooled_conditioning=h.conditioning,
+    )
+
+
+def robust(data: JointData) -> AxisEstimate:
+    """``pooled`` after the outlier-frame and -cycle rules, with cycle weights (:mod:`.robust`)."""
+    return _robust_family(data, two_axis=False, migration=False)
+
+
+def twoaxis(data: JointData) -> AxisEstimate:
+    """``robust``, with a two-axis MP joint where the data show one (:mod:`.twoaxis`)."""
+    return _robust_family(data, two_axis=True, migration=False)
+
+
+def rolling(data: JointData) -> AxisEstimate:
+    """``twoaxis`` plus rolling-contact migration of every joint centre (:mod:`.migration`)."""
+    return _robust_family(data, two_axis=True, migration=True)
+
+
+def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisEstimate:
+    rh = robust_hinge(data.rotation, data.translation, data.periods)
+    h, k = rh.fit, rh.frames
+    noise = max(float(np.sqrt(np.mean(h.centre_residual**2) / 3.0)), 1e-6)
+    centres = _cycle_centres(data, rh.kept_cycles)
+    point, direction = h.centre_parent, h.axis_parent
+    notes = []
+    if rh.rejected_cycles:
+        notes.append(
+            f"cycles {', '.join(str(i + 1) for i in rh.rejected_cycles)} rejected as "
+            "inconsistent with the others (sensor slip?)"
+        )
+    if rh.rejected_frames:
+        notes.append(f"{rh.rejected_frames} outlier frame(s) rejected")
+    abduction = None
+    if two_axis and data.joint == "mp":
+        tf = fit_two_axis(
+            data.rotation[k],
+            data.translation[k],
+            data.reference_rotation,
+            direction,
+            rh.weights,
+            noise,
+            data.finger_direction,
+        )
+        if tf.accepted:
+            abduction = tf
+            point, direction = tf.flexion_point, tf.flexion_axis
+            notes.append(
+                f"two-axis MP: ab/adduction spans {tf.abduction_range_deg:.1f} deg; rotation "
+                f"off the model {np.degrees(tf.rms_hinge_rad):.2f} -> "
+                f"{np.degrees(tf.rms_two_axis_rad):.2f} deg RMS"
+            )
+        else:
+            notes.append(
+                f"one-axis MP: a second axis would explain too little (ab/adduction span "
+                f"{tf.abduction_range_deg:.1f} deg, rotation off the model "
+                f"{np.degrees(tf.rms_hinge_rad):.2f} -> {np.degrees(tf.rms_two_axis_rad):.2f} deg)"
+            )
+    mig = None
+    if migration:
+        q = data.rotation[k] @ data.reference_rotation.T
+        if abduction is not None:
+            beta, theta = two_axis_angles(q, direction, abduction.abduction_axis)
+            extra = {"abduction_axis": abduction.abduction_axis, "beta": beta}
+        else:
+            theta, extra = twist_angle(q, direction), {}
+        pts = fit_axis_points(
+            data.rotation[k],
+            data.translation[k],
+            data.reference_rotation,
+            direction,
+            theta,
+            migration=True,
+            weights=rh.weights,
+            noise_mm=noise,
+            **extra,
+        )
+        point, mig = pts.centre, pts.migration
+        if abduction is not None:
+            abduction = replace(abduction, flexion_point=point)
+    return AxisEstimate(
+        _axis_fit(point, direction, centres),
+        centres,
+        abduction=abduction,
+        migration=mig,
+        pooled_conditioning=h.conditioning,
+        rejected_frames=rh.rejected_frames,
+        rejected_cycles=rh.rejected_cycles,
+        notes=notes,
+    )
+
+
+METHODS: dict[str, Callable[[JointData], AxisEstimate]] = {
+    "tang2018": tang2018,
+    "pooled": pooled,
+    "robust": robust,
+    "twoaxis": twoaxis,
+    "rolling": rolling,
+}
+# Angle method each estimator's models use unless FitOptions.angle_method says otherwise.
+METHOD_ANGLES = {"tang2018": "projection"} | {m: "swing_twist" for m in METHODS if m != "tang2018"}
+
+
+def joint_data(
+    session: Session, parent: str, child: str, reference: dict, joint: str = ""
+) -> JointData:
     """Relative poses and grasp cycles of one joint over all grasp recordings."""
     (pp, pr), (cp, cr) = reference[parent], reference[child]
     ref_rot = pr.T @ cr
@@ -132,6 +321,7 @@ def joint_data(session: Session, parent: str, child: str, reference: dict) -> Jo
         np.concatenate(roms),
         ref_rot,
         pr.T @ (cp - pp),
+        joint,
     )
 
 
@@ -170,64 +360,93 @@ def _check(finger: str, joint: str, data: JointData, options: FitOptions) -> lis
     return problems
 
 
+def _conditioning_problem(est: AxisEstimate, options: FitOptions) -> list[str]:
+    """A refusal message when the pooled system does not single out one axis."""
+    c = est.pooled_conditioning
+    if c is None or c >= options.min_conditioning:
+        return []
+    return [
+        f"the motion does not determine a hinge axis: rotation about the best axis is only "
+        f"{c:.1f} times the rotation off it (s5/s6 below {options.min_conditioning:g})"
+    ]
+
+
+def _quality(data: JointData, est: AxisEstimate, notes: list[str]) -> JointQuality:
+    """Quality figures of one joint."""
+    extra = ["exact data: axis from the cycles' null vectors"] if est.axis.degenerate else []
+    pc = est.pooled_conditioning
+    return JointQuality(
+        cycles=len(data.periods),
+        rom_deg=[float(v) for v in np.degrees(data.rom)],
+        centre_distance_mm=[float(v) for v in est.axis.distances],
+        conditioning=[min(c.conditioning, 1e12) for c in est.centres],
+        spread_mm=est.axis.spread_mm,
+        residual_mm=[c.rms_mm for c in est.centres],
+        null_agreement_deg=est.axis.null_agreement_deg,
+        notes=notes + est.notes + extra,
+        pooled_conditioning=None if pc is None else min(pc, 1e12),
+        rejected_frames=est.rejected_frames,
+        rejected_cycles=list(est.rejected_cycles),
+    )
+
+
 def fit_finger(session: Session, finger: str, reference: dict, options: FitOptions) -> FingerModel:
     """Fit one finger (see module docstring); tracker coordinates at the reference posture."""
     estimator = METHODS[options.method]
-    fitted: dict[
-        str, tuple[str, str, FloatArray, FloatArray, AxisEstimate, JointData, list[str]]
-    ] = {}
+    fitted: dict[str, tuple[str, str, FloatArray, FloatArray, AxisEstimate, JointData, list[str]]]
+    fitted = {}
+    landmarks = np.array([session.landmark(f"{finger}.{k}") for k in ("mp", "pip", "dip", "tip")])
+    _, _, vt = np.linalg.svd(landmarks - landmarks.mean(axis=0))
+    along = vt[0] if vt[0] @ (landmarks[-1] - landmarks[0]) > 0 else -vt[0]
     for j, (parent, child) in joint_sensors(finger).items():
-        data = joint_data(session, parent, child, reference)
+        data = joint_data(session, parent, child, reference, j)
+        data = replace(data, finger_direction=reference[parent][1].T @ along)
         notes = _check(finger, j, data, options)
         est = estimator(data)
+        problems = _conditioning_problem(est, options)
         if est.axis.null_agreement_deg > options.max_null_disagreement_deg:
-            problem = (
+            problems.append(
                 f"the per-cycle centres do not spread along one axis (fitted axis "
                 f"{est.axis.null_agreement_deg:.0f} deg from the cycles' own rotation axis); "
                 f"method '{options.method}' is unreliable for this motion"
             )
-            _refuse_or_warn(finger, j, [problem], options, hard=False)
-            notes = [*notes, problem]
+        if problems:
+            _refuse_or_warn(finger, j, problems, options, hard=False)
+            notes = [*notes, *problems]
         moving = np.concatenate(data.periods)
         rv = rotation_vector(data.rotation[moving] @ data.reference_rotation.T)
         a_parent = orient_flexion(est.axis.direction, rv)
         pp, pr = reference[parent]
         fitted[j] = (parent, child, pr @ est.axis.point + pp, pr @ a_parent, est, data, notes)
 
-    landmarks = np.array([session.landmark(f"{finger}.{k}") for k in ("mp", "pip", "dip", "tip")])
     plane = sagittal_plane(landmarks, np.array([f[3] for f in fitted.values()]), finger)
     tip = session.landmark(f"{finger}.tip")
-    centres = {j: intersect(plane, f[2], f[3], f"{finger} {j}") for j, f in fitted.items()}
-    ends = [centres["mp"], centres["pip"], centres["dip"], tip]
-    bones = [unit(ends[i + 1] - ends[i]) for i in range(3)]
-    # Orthogonal axis of each joint: y of the local frame of the segment ending at it
-    # (the metacarpal is not digitised; at the stretched posture it is taken
-    # collinear with the proximal phalanx).
-    bone_at = {"mp": bones[0], "pip": bones[0], "dip": bones[1]}
-    joints: dict[str, JointModel] = {}
-    for j, (parent, child, _, a, est, data, notes) in fitted.items():
-        x = bone_at[j]
-        y = unit(a - (a @ x) * x)
-        quality = JointQuality(
-            cycles=len(data.periods),
-            rom_deg=[float(v) for v in np.degrees(data.rom)],
-            centre_distance_mm=[float(v) for v in est.axis.distances],
-            conditioning=[min(c.conditioning, 1e12) for c in est.centres],
-            spread_mm=est.axis.spread_mm,
-            residual_mm=[c.rms_mm for c in est.centres],
-            null_agreement_deg=est.axis.null_agreement_deg,
-            notes=notes
-            + (["exact data: axis from the cycles' null vectors"] if est.axis.degenerate else []),
+    joints = {}
+    migration = {}
+    for j, (parent, child, point, a, est, data, notes) in fitted.items():
+        centre = intersect(plane, point, a, f"{finger} {j}")
+        joints[j] = (parent, child, centre, a, _quality(data, est, notes))
+        if est.migration is not None:
+            # The migration is per radian of the angle about the estimator's axis sense.
+            sense = np.sign(a @ (reference[parent][1] @ est.axis.direction))
+            migration[j] = sense * (reference[parent][1] @ est.migration)
+    abduction = None
+    mp_est = fitted["mp"][4]
+    if mp_est.abduction is not None:
+        parent, child = fitted["mp"][0], fitted["mp"][1]
+        pp, pr = reference[parent]
+        tf = mp_est.abduction
+        b = pr @ tf.abduction_axis
+        # Positive ab/adduction is radial deviation (docs/conventions.md): about b the
+        # finger direction turns towards the thumb, i.e. b . (x x a) > 0 for a right
+        # hand and < 0 for a left one (y = z x x points ulnarly on a left hand).
+        side = 1.0 if session.hand == "right" else -1.0
+        if side * (b @ np.cross(plane.direction, joints["mp"][3])) < 0:
+            b = -b
+        abduction = JointModel(
+            "mp_abduction", parent, child, pr @ tf.abduction_point + pp, b, b, joints["mp"][4]
         )
-        joints[j] = JointModel(j, parent, child, centres[j], a, y, quality)
-    frames = {}
-    axes_at_end = [joints["pip"].axis, joints["dip"].axis, joints["dip"].axis]
-    for i, s in enumerate(SEGMENTS):
-        x = bones[i]
-        z = unit(np.cross(x, axes_at_end[i]))
-        frames[s] = SegmentFrame(ends[i + 1], np.column_stack([x, np.cross(z, x), z]))
-    lengths = {s: float(np.linalg.norm(ends[i + 1] - ends[i])) for i, s in enumerate(SEGMENTS)}
-    return FingerModel(finger, joints, tip, lengths, frames)
+    return assemble_finger(finger, joints, tip, abduction, migration)
 
 
 def fit_session(session: Session, options: FitOptions | None = None) -> HandModel:
@@ -255,6 +474,11 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
         raise FingerfitError(
             f"unknown method '{options.method}' (have: {', '.join(METHODS)})", field="method"
         )
+    if options.angle_method is not None and options.angle_method not in ANGLE_METHODS:
+        raise FingerfitError(
+            f"unknown angle method '{options.angle_method}' (have: {', '.join(ANGLE_METHODS)})",
+            field="angle_method",
+        )
     reference = reference_poses(session)
     fingers = list(options.fingers or session.fingers)
     for f in fingers:
@@ -269,7 +493,18 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
         method=options.method,
         reference_poses={k: v for k, v in reference.items() if k in used},
         fingers=model_fingers,
+        angle_method=options.angle_method or METHOD_ANGLES[options.method],
     )
 
 
-__all__ = ["JOINTS", "METHODS", "FitError", "FitOptions", "JointData", "fit_session"]
+__all__ = [
+    "DEFAULT_METHOD",
+    "JOINTS",
+    "METHODS",
+    "METHOD_ANGLES",
+    "AxisEstimate",
+    "FitError",
+    "FitOptions",
+    "JointData",
+    "fit_session",
+]
