@@ -48,7 +48,7 @@ from .robust import robust_hinge
 from .sagittal import intersect, sagittal_plane
 from .twoaxis import TwoAxisFit, fit_two_axis
 
-DEFAULT_METHOD = "rolling"
+DEFAULT_METHOD = "twoaxis"
 
 
 class FitError(FingerfitError):
