@@ -12,7 +12,7 @@ from fingerfit.estimate import FitError, FitOptions, fit_session
 from fingerfit.estimate.fit import DEFAULT_METHOD, METHODS, joint_data, reference_poses
 from fingerfit.kinematics import compute_kinematics, kinematics_table, twist_angle
 from fingerfit.model import load_model, save_model
-from fingerfit.session import HAND_SENSOR, PoseSeries
+from fingerfit.session import PoseSeries
 from fingerfit.simulate import SimConfig, simulate_subject
 from fingerfit.simulate.study import relative_truth_in_parent
 from fingerfit.simulate.truthmodel import truth_model
@@ -212,11 +212,6 @@ def test_refusals_name_the_joint() -> None:
     sim = subject("exact", 11)
     rec = sim.session.grasp[0].slice(slice(None))
     pose = rec.poses["index.proximal"]
-    ref = reference_poses(sim.session)
-    wobble = twist_angle(
-        pose.rotation @ ref["index.proximal"][1].T @ ref[HAND_SENSOR][1] @ np.eye(3),
-        np.array([0.0, 0.0, 1.0]),
-    )
     wobble = np.sin(np.arange(rec.n_frames) / 17.0) * 0.6
     extra = axis_angle_matrix(np.array([0.0, 0.0, 1.0]), wobble)
     rec.poses["index.proximal"] = PoseSeries(pose.position, extra @ pose.rotation)
