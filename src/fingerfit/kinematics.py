@@ -11,7 +11,8 @@ Two ways to get a joint angle from the two sensors of a joint (the model's
 * ``swing_twist``: the full relative orientation away from the reference
   posture, ``Q = R_p^T R_c R_ref^T`` (parent frame), is split into a twist about
   the joint axis ``a`` and a swing perpendicular to it; the angle is the twist,
-  ``theta = 2 atan2(vee(Q - Q^T)·a, 1 + tr Q)`` (no quaternion needed). For a
+  ``theta = 2 atan2(vee(Q - Q^T)·a, 1 + tr Q)`` (no quaternion needed): traces of
+  ``Q``, one BLAS product over the whole recording. For a
   two-axis MP joint ``Q = Rot(b, beta) Rot(a, theta)``: ``beta`` turns ``a``
   to ``Q a`` about ``b``, and ``theta`` is the twist of ``Rot(b, -beta) Q``.
 
@@ -35,7 +36,7 @@ import pandas as pd
 
 from .model import ANGLE_METHODS, VARIANTS, FingerModel, HandModel
 from .session import HAND_SENSOR, JOINTS, UNITS_TO_MM, Recording
-from .transforms import FloatArray, axis_angle_matrix, rotate_about_line
+from .transforms import FloatArray, rotate_about_line, rotate_about_lines
 
 ABDUCTION = "mp_abduction"
 
@@ -127,7 +128,27 @@ def relative_rotation(
         ``Q = R_p^T R_c reference^T``: identity at the reference posture; for a
         hinge it is the rotation about the parent-frame axis by the joint angle.
     """
-    return np.matmul(np.matmul(np.swapaxes(parent_rotation, 1, 2), child_rotation), reference.T)
+    g = np.matmul(np.swapaxes(parent_rotation, 1, 2), child_rotation)
+    return (g.reshape(-1, 3) @ reference.T).reshape(g.shape)
+
+
+# Swing-twist angles need only traces tr(Q C) for a few constant matrices C (and Q a):
+# with Q flattened to (n, 9) each is one column of a single BLAS product.
+
+
+def _skew(a: FloatArray) -> FloatArray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _traces(q: FloatArray, mats: FloatArray) -> FloatArray:
+    """``tr(Q C_k)`` for ``q (n, 3, 3)`` and ``mats (k, 3, 3)``: ``(n, k)``."""
+    n, k = q.shape[0], mats.shape[0]
+    return q.reshape(n, 9) @ np.swapaxes(mats, 1, 2).reshape(k, 9).T
+
+
+def _twist(tr_identity: FloatArray, tr_skew: FloatArray) -> FloatArray:
+    """``2 atan2(tr(Q K_a^T), 1 + tr Q)``: the twist about ``a`` (rad)."""
+    return 2.0 * np.arctan2(tr_skew, 1.0 + tr_identity)
 
 
 def twist_angle(rotation: FloatArray, axis: FloatArray) -> FloatArray:
@@ -147,14 +168,8 @@ def twist_angle(rotation: FloatArray, axis: FloatArray) -> FloatArray:
         of the rotation about ``a`` that leaves a pure swing (a rotation about an
         axis perpendicular to ``a``) when removed. Exact for ``Q = Rot(a, theta)``.
     """
-    q = rotation
-    y = (
-        (q[:, 2, 1] - q[:, 1, 2]) * axis[0]
-        + (q[:, 0, 2] - q[:, 2, 0]) * axis[1]
-        + (q[:, 1, 0] - q[:, 0, 1]) * axis[2]
-    )
-    x = 1.0 + q[:, 0, 0] + q[:, 1, 1] + q[:, 2, 2]
-    return 2.0 * np.arctan2(y, x)
+    t = _traces(rotation, np.stack([np.eye(3), _skew(axis).T]))
+    return _twist(t[:, 0], t[:, 1])
 
 
 def two_axis_angles(
@@ -181,12 +196,20 @@ def two_axis_angles(
         about ``a``. Exact when ``Q`` is of the two-axis form.
     """
     a, b = flexion_axis, abduction_axis
-    qa = rotation @ a
+    n = rotation.shape[0]
     ap = a - (a @ b) * b
-    qp = qa - np.multiply.outer(qa @ b, b)
-    beta = np.arctan2(qp @ np.cross(b, ap), qp @ ap)
-    m = np.matmul(axis_angle_matrix(b, -beta), rotation)
-    return beta, twist_angle(m, a)
+    # beta = atan2((Q a)·(b x ap), (Q a)·ap), and (Q a)·w = tr(Q a w^T). The twist needs
+    # tr(X Rot(b, -beta) Q) = tr(Q X) - sin(beta) tr(Q X K_b) + (1 - cos(beta)) tr(Q X K_b^2)
+    # for X = I and K_a^T. All ten traces come from one product.
+    kb = _skew(b)
+    xs, ys = (np.eye(3), _skew(a).T), (np.eye(3), kb, kb @ kb)
+    mats = [np.outer(a, np.cross(b, ap)), np.outer(a, ap)] + [x @ y for x in xs for y in ys]
+    t = _traces(rotation, np.stack(mats))
+    beta = np.arctan2(t[:, 0], t[:, 1])
+    t = t[:, 2:].reshape(n, 2, 3)
+    s, c = np.sin(beta)[:, None], (1.0 - np.cos(beta))[:, None]
+    tr = t[:, :, 0] - s * t[:, :, 1] + c * t[:, :, 2]
+    return beta, _twist(tr[:, 0], tr[:, 1])
 
 
 def _projected(r: FloatArray, centre: FloatArray, axis: FloatArray, r0: FloatArray) -> FloatArray:
@@ -276,17 +299,17 @@ def chain_points(
     ndarray, shape (n, 3)
         The points with the hand at its reference pose (mm).
     """
-    p = points
+    steps = []
     for j in reversed(JOINTS[:depth]):
         jm = finger.joints[j]
         centre = jm.center
         if jm.migration is not None:
             centre = centre + np.multiply.outer(angles[j], jm.migration)
-        p = rotate_about_line(p, centre, jm.axis_for(variant), angles[j])
+        steps.append((centre, jm.axis_for(variant), angles[j]))
     if finger.abduction is not None and depth > 0 and ABDUCTION in angles:
         ab = finger.abduction
-        p = rotate_about_line(p, ab.center, ab.axis, angles[ABDUCTION])
-    return np.asarray(p)
+        steps.append((ab.center, ab.axis, angles[ABDUCTION]))
+    return rotate_about_lines(points, steps)
 
 
 def carry_by_hand(

@@ -99,6 +99,59 @@ def axis_angle_matrix(axis: FloatArray, angle: FloatArray) -> FloatArray:
     return np.eye(3) + s * k + c * (k @ k)
 
 
+def _line_basis(axis: FloatArray) -> FloatArray:
+    """Rows ``e1, e2, a``: an orthonormal basis with ``a`` the unit axis (``e2 = a x e1``)."""
+    a = unit(axis)
+    helper = np.eye(3)[np.argmin(np.abs(a))]
+    e1 = unit(np.cross(a, helper))
+    return np.stack([e1, np.cross(a, e1), a])
+
+
+def rotate_about_lines(
+    points: FloatArray, steps: list[tuple[FloatArray, FloatArray, FloatArray]]
+) -> FloatArray:
+    """Rotate points about several lines in turn, one angle per frame for each line.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3) or (3,)
+        Points in the frame of the lines (mm).
+    steps : list of (centre, axis, angle)
+        Applied in order. ``centre``: a point on the line, ``(3,)`` or per frame
+        ``(n, 3)`` (a migrating centre, mm); ``axis``: unit direction ``(3,)``;
+        ``angle``: ``(n,)`` rad, right-hand rule about ``axis``.
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+
+    Notes
+    -----
+    Coordinates are kept in each line's orthonormal basis (``(3, n)`` layout), where
+    the rotation is a 2D one; consecutive lines are joined by one constant 3x3
+    product, so each step costs one BLAS product plus a few vector operations.
+    """
+    x = y = basis = centre_t = None
+    for centre, axis, angle in steps:
+        b = _line_basis(axis)
+        c = np.asarray(centre, dtype=float)
+        c_t = c.T if c.ndim == 2 else c[:, None]  # (3, n) or (3, 1)
+        if y is None:
+            p = np.asarray(points, dtype=float)
+            x = b @ ((p.T if p.ndim == 2 else p[:, None]) - c_t)
+        else:
+            x = (b @ basis.T) @ y + b @ (centre_t - c_t)
+        cos, sin = np.cos(angle), np.sin(angle)
+        y = np.empty((3, cos.shape[0]))
+        np.subtract(x[0] * cos, x[1] * sin, out=y[0])
+        np.add(x[0] * sin, x[1] * cos, out=y[1])
+        y[2] = x[2]
+        basis, centre_t = b, c_t
+    out = basis.T @ y
+    out += centre_t
+    return np.ascontiguousarray(out.T)
+
+
 def rotate_about_line(
     points: FloatArray, centre: FloatArray, axis: FloatArray, angle: FloatArray
 ) -> FloatArray:
@@ -108,7 +161,7 @@ def rotate_about_line(
     ----------
     points : ndarray, shape (n, 3) or (3,)
         Points in the same frame as ``centre`` and ``axis`` (mm).
-    centre : ndarray, shape (3,)
+    centre : ndarray, shape (3,) or (n, 3)
         A point on the line (mm).
     axis : ndarray, shape (3,)
         Unit direction of the line.
@@ -120,17 +173,7 @@ def rotate_about_line(
     ndarray, shape (n, 3)
         Rotated points (mm).
     """
-    a = np.asarray(axis, dtype=float)
-    th = np.asarray(angle, dtype=float)
-    v = np.asarray(points, dtype=float) - centre
-    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-    cos, sin = np.cos(th), np.sin(th)
-    # Rodrigues: v cos + (a x v) sin + a (a.v)(1 - cos), with BLAS products and in place.
-    out = np.multiply.outer(sin, v @ k.T) if v.ndim == 1 else (v @ k.T) * sin[:, None]
-    out += v * cos[:, None]
-    out += np.multiply.outer((v @ a) * (1.0 - cos), a)
-    out += centre
-    return out
+    return rotate_about_lines(points, [(centre, axis, np.asarray(angle, dtype=float))])
 
 
 def apply_pose(rotation: FloatArray, translation: FloatArray, points: FloatArray) -> FloatArray:
