@@ -75,7 +75,8 @@ def evaluate_grasp(
     kin = compute_kinematics(model, recording, fingers=[finger])
     tips = {"reference": reference_tip(model, finger, recording)}
     tips |= {v: kin.motions[v][finger].tip for v in VARIANTS}
-    total = sum(kin.motions["user_axis"][finger].angles.values())
+    angles = kin.motions["user_axis"][finger].angles
+    total = angles["mp"] + angles["pip"] + angles["dip"]  # flexion only, not ab/adduction
     frames = max_flexion_frames(total, rate_hz)
     errors = pd.DataFrame({"cycle": np.arange(1, frames.size + 1)})
     for v in VARIANTS:
