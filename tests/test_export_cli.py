@@ -23,7 +23,7 @@ from fingerfit.errors import FingerfitError
 from fingerfit.export import joint_names, robot_hand, trajectory_table
 from fingerfit.io import read_pose_csv
 from fingerfit.kinematics import FingerMotion, Kinematics
-from fingerfit.model import JointModel, load_model
+from fingerfit.model import JointModel, load_model, save_model, with_fixed_centres
 from fingerfit.simulate import write_subject
 
 from .conftest import subject
@@ -192,3 +192,27 @@ def test_rolling_centre_is_refused(fitted: Path) -> None:
     model = dataclasses.replace(model, fingers={**model.fingers, "index": fm})
     with pytest.raises(FingerfitError, match=r"fingers\.index\.joints\.pip\.migration"):
         robot_hand(model)
+
+
+def test_rolling_model_exports_with_fixed_centres(fitted: Path, tmp_path: Path) -> None:
+    model = load_model(fitted / "model.json")
+    fm = model.fingers["index"]
+    m = np.array([0.3, 0.0, -0.4])  # 0.5 mm/rad
+    pip = dataclasses.replace(fm.joints["pip"], migration=m)
+    fm = dataclasses.replace(fm, joints={**fm.joints, "pip": pip})
+    model = dataclasses.replace(model, fingers={**model.fingers, "index": fm})
+    save_model(model, tmp_path / "rolling.json")
+    args = ["export", str(tmp_path / "rolling.json"), "--urdf", str(tmp_path / "r.urdf")]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2 and "--fix-centres" in res.output
+    assert not (tmp_path / "r.urdf").exists()
+    res = CliRunner().invoke(app, [*args, "--fix-centres"])
+    assert res.exit_code == 0, res.output
+    half = 0.5 * np.radians(max(pip.quality.rom_deg))
+    assert "index.pip: migrating centre fixed at mid-range" in res.output
+    assert f"up to {half * 0.5:.2f} mm" in res.output
+    fixed, _ = with_fixed_centres(model)
+    np.testing.assert_allclose(fixed.fingers["index"].joints["pip"].center, pip.center + half * m)
+    assert fixed.fingers["index"].joints["pip"].migration is None
+    assert fixed.fingers["index"].joints["dip"] is model.fingers["index"].joints["dip"]
+    robot_hand(fixed)  # exportable

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -187,6 +187,39 @@ class HandModel:
         j = self.fingers[finger].joints[joint]
         p, r = self.reference_poses[j.parent]
         return r.T @ (j.center - p), r.T @ j.axis_for(variant)
+
+
+def with_fixed_centres(model: HandModel) -> tuple[HandModel, dict[str, float]]:
+    """The model with every migrating joint centre fixed at its mid-range position.
+
+    A rolling-contact joint's centre moves as ``c + theta * m``; a revolute joint
+    (robot software) needs a fixed one. The centre is fixed at the middle of the
+    observed range, ``theta = max(rom_deg) / 2``, which halves the largest
+    displacement over that range.
+
+    Parameters
+    ----------
+    model : HandModel
+
+    Returns
+    -------
+    model : HandModel
+        A copy without migration (unchanged joints are shared).
+    deviation_mm : dict[str, float]
+        ``"<finger>.<joint>"`` -> the largest distance (mm) between the fixed and the
+        migrating centre over the observed range (only joints that migrated).
+    """
+    fingers, deviation = {}, {}
+    for fname, fm in model.fingers.items():
+        joints = dict(fm.joints)
+        for j, jm in fm.joints.items():
+            if jm.migration is None:
+                continue
+            half = 0.5 * math.radians(max(jm.quality.rom_deg, default=0.0))
+            joints[j] = replace(jm, center=jm.center + half * jm.migration, migration=None)
+            deviation[f"{fname}.{j}"] = float(half * np.linalg.norm(jm.migration))
+        fingers[fname] = replace(fm, joints=joints)
+    return replace(model, fingers=fingers), deviation
 
 
 def orthogonal_axis(axis: FloatArray, bone: FloatArray) -> FloatArray:

@@ -11,8 +11,8 @@ from ..errors import FingerfitError
 from ..export import mjcf_string, robot_hand, urdf_string
 from ..export import write_text as _write_text
 from ..export.geometry import DEFAULT_MARGIN_DEG
-from ..model import VARIANTS, load_model
-from .app import app, out, user_errors
+from ..model import VARIANTS, load_model, with_fixed_centres
+from .app import app, notice, out, user_errors
 
 
 @app.command()
@@ -38,14 +38,26 @@ def export(
             help="Joint limits: observed range of motion widened by this margin (deg).",
         ),
     ] = DEFAULT_MARGIN_DEG,
+    fix_centres: Annotated[
+        bool,
+        typer.Option(
+            "--fix-centres",
+            help="Rolling-contact models: fix each migrating centre at its mid-range position.",
+        ),
+    ] = False,
 ) -> None:
     """Export the finger chains for robot software: root link `hand` (hand sensor frame),
     joints <finger>_mp|pip|dip, fingertip frame <finger>_tip."""
-    _export(model_path, urdf, mjcf, variant, margin_deg)
+    _export(model_path, urdf, mjcf, variant, margin_deg, fix_centres)
 
 
 def _export(
-    model_path: Path, urdf: Path | None, mjcf: Path | None, variant: str, margin_deg: float
+    model_path: Path,
+    urdf: Path | None,
+    mjcf: Path | None,
+    variant: str,
+    margin_deg: float,
+    fix_centres: bool = False,
 ) -> None:
     """Check the options, build every document, then write them all or none."""
     if urdf is None and mjcf is None:
@@ -57,6 +69,14 @@ def _export(
     if not margin_deg >= 0:
         raise FingerfitError("must be >= 0", field="--margin-deg")
     model = load_model(model_path)
+    if fix_centres:
+        model, deviation = with_fixed_centres(model)
+        for joint, mm in deviation.items():
+            notice(
+                "warning",
+                f"{joint}: migrating centre fixed at mid-range; it differs from the fitted "
+                f"one by up to {mm:.2f} mm over the observed range of motion",
+            )
     files: dict[Path, str] = {}
     if urdf is not None:
         files[urdf] = urdf_string(model, variant, margin_deg)

@@ -334,7 +334,8 @@ def robot_hand(
             if migration is not None and np.any(np.asarray(migration) != 0):
                 raise FingerfitError(
                     "rolling-contact centre migration cannot be exported as a fixed "
-                    "revolute joint (robot export supports fixed-centre models)",
+                    "revolute joint; export with --fix-centres to fix each centre at its "
+                    "mid-range position",
                     field=f"fingers.{fname}."
                     + ("abduction" if k == "mp_abduction" else f"joints.{k}")
                     + ".migration_mm_per_rad",
