@@ -21,32 +21,39 @@ from .app import app, notice, out, parse_list, user_errors
 
 
 def quality_table(model: HandModel) -> Table:
-    """Per-joint figures: cycles, range of motion, centre-to-axis distance, conditioning."""
-    t = Table(title=f"{model.subject}: {model.method}", title_justify="left")
+    """Per joint: cycles, range of motion, centre-to-axis distance, conditioning, bone length."""
+    t = Table(
+        title=f"{model.subject}: method {model.method}",
+        title_justify="left",
+        caption="c→axis: mean distance of the cycles' centres of rotation to the axis; "
+        "vs cycles: angle between the axis and the cycles' own rotation axis; "
+        "bone: from this joint's centre to the next (or to the tip)",
+        caption_justify="left",
+    )
     for c in (
         "finger",
         "joint",
         "cycles",
-        "ROM deg",
-        "c_i→axis mm",
+        "ROM° mean (range)",
+        "c→axis mm",
         "s5/s6",
-        "axis vs cycles deg",
-        "segment mm",
+        "vs cycles°",
+        "bone mm",
     ):
-        t.add_column(c, justify="right" if c not in ("finger", "joint") else "left")
+        t.add_column(c, justify="left" if c in ("finger", "joint") else "right")
     for f, fm in model.fingers.items():
-        for (j, jm), seg in zip(fm.joints.items(), fm.segment_lengths.items(), strict=True):
+        for (j, jm), length in zip(fm.joints.items(), fm.segment_lengths.values(), strict=True):
             q = jm.quality
             rom = np.array(q.rom_deg)
             t.add_row(
                 f,
                 j,
                 str(q.cycles),
-                f"{rom.mean():.0f} ({rom.min():.0f}–{rom.max():.0f})" if rom.size else "–",
+                f"{rom.min():.0f}–{rom.max():.0f}" if rom.size else "–",
                 f"{np.mean(q.centre_distance_mm):.2f}",
                 f"{np.median(q.conditioning):.0f}",
                 f"{q.null_agreement_deg:.1f}",
-                f"{seg[0]} {seg[1]:.1f}",
+                f"{length:.1f}",
             )
     return t
 
