@@ -23,7 +23,8 @@ from .app import app, notice, out, parse_list, user_errors
 def quality_table(model: HandModel) -> Table:
     """Per joint: cycles, range of motion, centre-to-axis distance, conditioning, bone length."""
     t = Table(
-        title=f"{model.subject}: method {model.method}",
+        title=f"{model.subject}: method {model.method}"
+        + (", two-axis MP" if any(f.abduction is not None for f in model.fingers.values()) else ""),
         title_justify="left",
         caption="c→axis: mean distance of the cycles' centres of rotation to the axis; "
         "vs cycles: angle between the axis and the cycles' own rotation axis; "
