@@ -24,8 +24,28 @@ _NUMERIC = ("time", "x", "y", "z", "qw", "qx", "qy", "qz")
 QUAT_NORM_TOLERANCE = 1e-3
 
 
-def _line_field_counts(raw: bytes, path: Path) -> int:
-    """Check every line has 9 comma-separated fields; return the number of data lines."""
+def check_field_counts(raw: bytes, path: Path, n_fields: int) -> int:
+    """Check that every line of a CSV file has ``n_fields`` comma-separated fields.
+
+    Parameters
+    ----------
+    raw : bytes
+        The whole file.
+    path : Path
+        For error messages.
+    n_fields : int
+
+    Returns
+    -------
+    int
+        Number of lines after the header (trailing blank lines are allowed).
+
+    Raises
+    ------
+    FingerfitError
+        Naming the first line that is empty inside the data or has another field
+        count (a truncated or garbled record).
+    """
     b = np.frombuffer(raw, dtype=np.uint8)
     ends = np.flatnonzero(b == ord("\n"))
     if b.size and b[-1] != ord("\n"):
@@ -33,20 +53,20 @@ def _line_field_counts(raw: bytes, path: Path) -> int:
     starts = np.concatenate([[0], ends[:-1] + 1])
     lengths = ends - starts
     # A line holding only '\r' counts as empty.
-    empty = (lengths == 0) | ((lengths == 1) & (b[np.minimum(starts, b.size - 1)] == ord("\r")))
+    first = b[np.clip(starts, 0, max(b.size - 1, 0))] if b.size else np.zeros(0, np.uint8)
+    empty = (lengths == 0) | ((lengths == 1) & (first == ord("\r")))
     commas = np.flatnonzero(b == ord(","))
     counts = np.bincount(np.searchsorted(ends, commas), minlength=ends.size)[: ends.size]
-    # Trailing empty lines are allowed; anything else must have 8 commas.
     last = ends.size
     while last > 0 and empty[last - 1]:
         last -= 1
-    bad = np.flatnonzero((counts[:last] != len(HEADER) - 1) | empty[:last])
+    bad = np.flatnonzero((counts[:last] != n_fields - 1) | empty[:last])
     if bad.size:
         i = int(bad[0])
         if empty[i]:
             raise FingerfitError("empty line inside the data", path=path, line=i + 1)
         raise FingerfitError(
-            f"expected {len(HEADER)} comma-separated fields, found {counts[i] + 1} "
+            f"expected {n_fields} comma-separated fields, found {counts[i] + 1} "
             "(truncated or garbled record)",
             path=path,
             line=i + 1,
@@ -115,7 +135,7 @@ def read_pose_csv(
         raise FingerfitError(
             f"header must be exactly '{','.join(HEADER)}', found '{first[:80]}'", path=path, line=1
         )
-    _line_field_counts(raw, path)
+    check_field_counts(raw, path, len(HEADER))
     if scale_to_mm is None:
         if units not in UNITS_TO_MM:
             raise FingerfitError(f"unknown units '{units}'", path=path, field="units")

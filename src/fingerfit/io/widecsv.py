@@ -41,6 +41,7 @@ from .hygiene import (
     repeated_rows,
     sensor_missing_notes,
 )
+from .posecsv import check_field_counts
 
 QUAT_NORM_TOLERANCE = 1e-3
 #: Largest relative disagreement between ``--rate`` and the rate implied by the time
@@ -157,34 +158,6 @@ def _column(template: str, station: int) -> str:
     return template.replace("{n}", str(station))
 
 
-def _field_counts(raw: bytes, path: Path, n_fields: int) -> None:
-    """Every line (except trailing blank ones) must have ``n_fields`` fields."""
-    b = np.frombuffer(raw, dtype=np.uint8)
-    ends = np.flatnonzero(b == ord("\n"))
-    if b.size and b[-1] != ord("\n"):
-        ends = np.append(ends, b.size)
-    starts = np.concatenate([[0], ends[:-1] + 1])
-    lengths = ends - starts
-    last_char = b[np.clip(starts, 0, max(b.size - 1, 0))] if b.size else np.zeros(0, np.uint8)
-    empty = (lengths == 0) | ((lengths == 1) & (last_char == ord("\r")))
-    commas = np.flatnonzero(b == ord(","))
-    counts = np.bincount(np.searchsorted(ends, commas), minlength=ends.size)[: ends.size]
-    last = ends.size
-    while last > 0 and empty[last - 1]:
-        last -= 1
-    bad = np.flatnonzero((counts[:last] != n_fields - 1) | empty[:last])
-    if bad.size:
-        i = int(bad[0])
-        if empty[i]:
-            raise FingerfitError("empty line inside the data", path=path, line=i + 1)
-        raise FingerfitError(
-            f"expected {n_fields} comma-separated fields, found {counts[i] + 1} "
-            "(truncated or garbled record)",
-            path=path,
-            line=i + 1,
-        )
-
-
 def read_wide_csv(
     path: str | Path,
     *,
@@ -248,7 +221,7 @@ def read_wide_csv(
     if len(set(header)) != len(header):
         dup = next(h for h in header if header.count(h) > 1)
         raise FingerfitError(f"column '{dup}' appears twice", path=path, line=1)
-    _field_counts(raw, path, len(header))
+    check_field_counts(raw, path, len(header))
     stations = _stations(header, lay, path)
     if not stations:
         raise FingerfitError(
