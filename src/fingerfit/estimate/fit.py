@@ -293,6 +293,24 @@ METHODS: dict[str, Callable[[JointData], AxisEstimate]] = {
     "twoaxis": twoaxis,
     "rolling": rolling,
 }
+# One sentence per method and angle method, for reports.
+METHOD_SUMMARY = {
+    "tang2018": "the paper's estimator: a centre of rotation per grasp cycle (O'Brien et al. "
+    "2000, untruncated least squares) and the line through those centres (Tang et al. 2018, "
+    "eq. 1)",
+    "pooled": "the SARA hinge axis over all movement frames (Ehrig et al. 2007)",
+    "robust": "the SARA hinge axis after rejecting outlier frames and cycles, cycles weighted "
+    "by their residual",
+    "twoaxis": "robust SARA hinge axes, with a second (ab/adduction) axis at the MP joint "
+    "where the data show one",
+    "rolling": "twoaxis, with rolling-contact migration of each joint centre",
+}
+ANGLE_SUMMARY = {
+    "projection": "projection of the child sensor's position on the plane normal to each "
+    "axis (paper Fig. 6)",
+    "swing_twist": "the twist of the child sensor's relative orientation about each axis "
+    "(swing-twist decomposition; a two-axis MP: ab/adduction, then flexion)",
+}
 # Angle method each estimator's models use unless FitOptions.angle_method says otherwise.
 METHOD_ANGLES = {"tang2018": "projection"} | {m: "swing_twist" for m in METHODS if m != "tang2018"}
 

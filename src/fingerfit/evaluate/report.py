@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from ..estimate.fit import ANGLE_SUMMARY, METHOD_SUMMARY
 from ..io.atomic import atomic_write
 
 if TYPE_CHECKING:
@@ -68,6 +69,8 @@ function draw() {
         line(c.map((v, k) => v - 18 * ax[k]), c.map((v, k) => v + 18 * ax[k]), col, 2);
       dot(c, '#000', 3.5);
     }
+    if (f.abduction) { const [c, ax] = f.abduction;
+      line(c.map((v, k) => v - 18 * ax[k]), c.map((v, k) => v + 18 * ax[k]), '#9467bd', 2); }
     for (const l of f.landmarks) dot(l, '#2ca02c', 2.5);
     dot(f.tip, '#ff7f0e', 4);
   }
@@ -120,6 +123,9 @@ def _viewer_data(result: StudyResult) -> dict:
                     "landmarks": [
                         loc(s.session.landmark(f"{f}.{k}")) for k in ("mp", "pip", "dip", "tip")
                     ],
+                    "abduction": None
+                    if fm.abduction is None
+                    else [loc(fm.abduction.center), (fm.abduction.axis @ rot).round(4).tolist()],
                 }
             )
         out[s.subject] = fingers
@@ -171,13 +177,15 @@ def write_report(result: StudyResult, path: Path) -> Path:
         "<h2>Methods and parameters</h2>",
         "<p>Per subject: reference poses = mean over the static reference recording; per joint, grasp cycles are "
         "found from the joint's own angular speed (static holds excluded); a centre of rotation per cycle from the "
-        "two 6-DOF sensors (O'Brien et al. 2000, untruncated least squares); the axis by the selected method; the "
-        "joint centre where the axis meets the sagittal plane through the dorsal stylus landmarks. The orthogonal "
-        "model uses the same centres and lengths with each axis made perpendicular to its bone. Joint angles by "
-        "projection of the child sensor's position on the plane normal to each axis (paper Fig. 6); fingertips "
-        "by forward kinematics from the hand sensor. Reference fingertip = distal sensor pose carrying the "
-        "stylus-measured tip vector. Statistics: Student t-tests (scipy), two-factor ANOVA with interaction "
-        "(statsmodels, type II).</p>",
+        "two 6-DOF sensors (O'Brien et al. 2000, untruncated least squares) for the axis-quality figures; "
+        f"the axis by method <code>{html.escape(sm['method'])}</code>: "
+        f"{html.escape(METHOD_SUMMARY.get(sm['method'], sm['method']))}; the joint centre where the axis meets "
+        "the sagittal plane through the dorsal stylus landmarks. The orthogonal model uses the same centres and "
+        "lengths with each flexion axis made perpendicular to its bone. Joint angles by "
+        + "; ".join(html.escape(ANGLE_SUMMARY.get(m, m)) for m in sm["angle_methods"])
+        + "; fingertips by forward kinematics from the hand sensor. Reference fingertip = distal sensor pose "
+        "carrying the stylus-measured tip vector. Statistics: Student t-tests (scipy), two-factor ANOVA with "
+        "interaction (statsmodels, type II).</p>",
         f"<p class=note>Subjects: {', '.join(html.escape(s) for s in sm['subjects'])}. See docs/methods.md for "
         "equations and docs/conventions.md for frames and units.</p>",
         "<h2>Axis quality (Fig. 8)</h2>",
@@ -282,7 +290,7 @@ def write_report(result: StudyResult, path: Path) -> Path:
         ),
         "<h2>3D view of the fitted fingers</h2>",
         "<p class=note>Drag to rotate, wheel to zoom. Grey: bones; black: joint centres; blue: fitted (user) "
-        "axes; red: orthogonal axes; green: stylus landmarks; orange: fingertip. Frame: origin at the MP "
+        "axes; red: orthogonal axes; purple: MP ab/adduction axis (two-axis models); green: stylus landmarks; orange: fingertip. Frame: origin at the MP "
         "centre, x along the proximal phalanx (mm).</p>",
         "<p>subject <select id=subject></select></p><canvas id=view width=760 height=460></canvas>",
         f"<script type='application/json' id='model-data'>{json.dumps(_viewer_data(result))}</script>",

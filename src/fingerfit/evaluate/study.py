@@ -165,6 +165,7 @@ def summarize_study(
         "fingerfit_version": __version__,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "method": options.method,
+        "angle_methods": sorted({s.model.angle_method for s in subjects}),
         "subjects": [s.subject for s in subjects],
         "units": "mm",
         "paper": PAPER,
