@@ -1,7 +1,9 @@
-"""Small, self-contained joint-axis estimates used by the real-data tests.
+"""Joint-axis estimates used by the real-data tests.
 
-These validate the readers on real recordings (a hinge axis must come out stable
-between halves of a recording). They belong in ``fingerfit.estimate`` eventually.
+The hinge axis is fingerfit's own SARA estimator; the dominant rotation axis is an
+independent check of it; the elbow's two-axis fit (one axis fixed in the parent,
+one in the child frame) is a test-only model, since fingerfit's two-axis joint is
+the MP's (both axes known in the parent frame at the reference posture).
 Rotation matrices ``(n, 3, 3)`` map child (or sensor) coordinates into parent (or
 tracker) coordinates; axes are unit vectors ``(3,)``; angles in degrees unless named.
 """
@@ -13,16 +15,13 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
-
-def unit(v: np.ndarray) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+from fingerfit.estimate.pooled import sara_axis as pooled_sara_axis
+from fingerfit.transforms import angle_between_axes, unit
 
 
 def axis_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     """Angle between two lines (sign of the directions ignored), degrees in [0, 90]."""
-    c = abs(float(np.dot(unit(a), unit(b))))
-    return float(np.degrees(np.arccos(min(c, 1.0))))
+    return float(np.degrees(angle_between_axes(a, b)))
 
 
 def relative_rotations(parent: np.ndarray, child: np.ndarray) -> np.ndarray:
@@ -31,16 +30,10 @@ def relative_rotations(parent: np.ndarray, child: np.ndarray) -> np.ndarray:
 
 
 def sara_axis(rel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Hinge axis direction in the parent and the child frame (SARA-style).
-
-    A direction fixed in both frames satisfies ``a_p = R(k) a_c`` for every frame;
-    stacking ``[I, -R(k)] [a_p; a_c] = 0`` over frames (3N x 6), the right singular
-    vector of the smallest singular value gives both directions.
-    """
-    n = rel.shape[0]
-    a = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)), -rel], axis=2).reshape(3 * n, 6)
-    x = np.linalg.svd(a, full_matrices=False)[2][-1]
-    return unit(x[:3]), unit(x[3:])
+    """The product's SARA hinge axis (:func:`fingerfit.estimate.pooled.sara_axis`) in the
+    parent and the child frame, so the real-data tests exercise fingerfit's own estimator."""
+    axis_parent, axis_child, _ = pooled_sara_axis(rel)
+    return axis_parent, axis_child
 
 
 def dominant_axis(rel: np.ndarray) -> np.ndarray:
