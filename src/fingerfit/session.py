@@ -46,6 +46,12 @@ def is_landmark_name(name: str) -> bool:
     return bool(_LANDMARK_RE.match(name))
 
 
+def true_runs(mask: np.ndarray) -> np.ndarray:
+    """Start (inclusive) and end (exclusive) frame ``(m, 2)`` of every run of True in a 1-D mask."""
+    d = np.diff(np.concatenate([[0], np.asarray(mask).astype(np.int8), [0]]))
+    return np.column_stack([np.flatnonzero(d == 1), np.flatnonzero(d == -1)])
+
+
 def joint_sensors(finger: str) -> dict[str, tuple[str, str]]:
     """(parent, child) sensor names of each joint of a finger, ordered MP, PIP, DIP."""
     seg = [HAND_SENSOR] + [sensor_name(finger, s) for s in SEGMENTS]

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import savgol_filter
 
+from ..session import true_runs
 from ..transforms import FloatArray, rotation_vector
 
 SMOOTH_S = 0.1  # Savitzky-Golay window (s)
@@ -50,12 +51,6 @@ class Cycles:
     @property
     def count(self) -> int:
         return len(self.periods)
-
-
-def _runs(mask: np.ndarray) -> np.ndarray:
-    """Start (inclusive) and end (exclusive) indices ``(m, 2)`` of the True runs of ``mask``."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return np.column_stack([np.flatnonzero(d == 1), np.flatnonzero(d == -1)])
 
 
 def geodesic_angle(rotation: FloatArray, reference: FloatArray) -> FloatArray:
@@ -96,7 +91,7 @@ def extract_cycles(rotation: FloatArray, reference: FloatArray, rate_hz: float) 
     speed = np.abs(savgol_filter(filled, window, 3, deriv=1)) * rate_hz
     threshold = max(np.radians(MIN_SPEED_DEG_S), SPEED_FRACTION * np.percentile(speed, 95))
     lo, hi = np.percentile(smooth, [5, 95])
-    peaks = _runs(smooth > lo + 0.5 * (hi - lo))
+    peaks = true_runs(smooth > lo + 0.5 * (hi - lo))
     if peaks.shape[0] == 0 or hi - lo <= 0:
         return Cycles(angle, speed, [], np.zeros(0), float(threshold))
     # Cycle i spans from midway after the previous excursion to midway before the next.

@@ -19,10 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from ..estimate.cycles import _runs
 from ..kinematics import Kinematics, compute_kinematics
 from ..model import VARIANTS, HandModel
-from ..session import Recording, Session
+from ..session import Recording, Session, true_runs
 from ..transforms import FloatArray, apply_pose
 
 SOURCES = ("reference", *VARIANTS)
@@ -63,7 +62,7 @@ def max_flexion_frames(total_flexion: FloatArray, rate_hz: float) -> np.ndarray:
     """Frame of peak summed flexion in each excursion above half its range, ``(n_cycles,)``."""
     f = np.nan_to_num(total_flexion, nan=-np.inf)
     lo, hi = np.nanpercentile(total_flexion, [5, 95])
-    runs = _runs(f > lo + 0.5 * (hi - lo))
+    runs = true_runs(f > lo + 0.5 * (hi - lo))
     runs = runs[(runs[:, 1] - runs[:, 0]) > 0.1 * rate_hz]  # ignore sub-0.1 s blips
     return np.array([a + int(np.argmax(f[a:b])) for a, b in runs], dtype=int)
 

@@ -30,7 +30,7 @@ import pandas as pd
 from scipy.spatial.transform import Rotation, Slerp
 
 from ..errors import FingerfitError
-from ..session import FINGERS, HAND_SENSOR, PoseSeries, Recording, sensor_name
+from ..session import FINGERS, HAND_SENSOR, PoseSeries, Recording, sensor_name, true_runs
 
 #: Default thresholds of :func:`find_jumps`: faster than any finger moves.
 MAX_SPEED_MM_S = 3000.0
@@ -189,12 +189,6 @@ def sensor_missing_notes(recording: Recording) -> list[str]:
     return out
 
 
-def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Start and end (exclusive) of every run of True in a 1-D mask."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-
-
 def fill_gaps(recording: Recording, max_gap: int) -> Recording:
     """Interpolate short interior gaps; leave longer gaps and the ends as NaN.
 
@@ -221,7 +215,7 @@ def fill_gaps(recording: Recording, max_gap: int) -> Recording:
     t = recording.time
     for name, pose in recording.poses.items():
         valid = pose.valid
-        starts, ends = _runs(~valid)
+        starts, ends = true_runs(~valid).T
         interior = (starts > 0) & (ends < recording.n_frames)
         short = interior & (ends - starts <= max_gap)
         if not short.any():

@@ -10,7 +10,7 @@ the session directory plus ``truth.json`` and ``truth/<recording>.csv``.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +31,7 @@ from ..session import (
 )
 from ..transforms import FloatArray, apply_inverse_pose, quat_wxyz_from_matrix
 from . import motion as mo
-from .anatomy import FingerAnatomy, compose, sample_finger, segment_motions
+from .anatomy import FingerAnatomy, sample_finger, segment_motions
 from .sensors import SensorMount, TrackerErrors, mount, sensor_poses
 
 TRUTH_FORMAT = "fingerfit.truth/1"
@@ -442,8 +442,6 @@ __all__ = [
     "SimConfig",
     "SimulatedSubject",
     "SubjectTruth",
-    "compose",
-    "replace",
     "simulate_cohort",
     "simulate_subject",
     "write_subject",
