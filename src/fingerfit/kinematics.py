@@ -36,7 +36,7 @@ import pandas as pd
 
 from .model import ANGLE_METHODS, VARIANTS, FingerModel, HandModel
 from .session import HAND_SENSOR, JOINTS, UNITS_TO_MM, Recording
-from .transforms import FloatArray, rotate_about_line, rotate_about_lines
+from .transforms import FloatArray, rotate_about_line, rotate_about_lines, skew
 
 ABDUCTION = "mp_abduction"
 
@@ -136,10 +136,6 @@ def relative_rotation(
 # with Q flattened to (n, 9) each is one column of a single BLAS product.
 
 
-def _skew(a: FloatArray) -> FloatArray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-
-
 def _traces(q: FloatArray, mats: FloatArray) -> FloatArray:
     """``tr(Q C_k)`` for ``q (n, 3, 3)`` and ``mats (k, 3, 3)``: ``(n, k)``."""
     n, k = q.shape[0], mats.shape[0]
@@ -168,7 +164,7 @@ def twist_angle(rotation: FloatArray, axis: FloatArray) -> FloatArray:
         of the rotation about ``a`` that leaves a pure swing (a rotation about an
         axis perpendicular to ``a``) when removed. Exact for ``Q = Rot(a, theta)``.
     """
-    t = _traces(rotation, np.stack([np.eye(3), _skew(axis).T]))
+    t = _traces(rotation, np.stack([np.eye(3), skew(axis).T]))
     return _twist(t[:, 0], t[:, 1])
 
 
@@ -201,8 +197,8 @@ def two_axis_angles(
     # beta = atan2((Q a)·(b x ap), (Q a)·ap), and (Q a)·w = tr(Q a w^T). The twist needs
     # tr(X Rot(b, -beta) Q) = tr(Q X) - sin(beta) tr(Q X K_b) + (1 - cos(beta)) tr(Q X K_b^2)
     # for X = I and K_a^T. All ten traces come from one product.
-    kb = _skew(b)
-    xs, ys = (np.eye(3), _skew(a).T), (np.eye(3), kb, kb @ kb)
+    kb = skew(b)
+    xs, ys = (np.eye(3), skew(a).T), (np.eye(3), kb, kb @ kb)
     mats = [np.outer(a, np.cross(b, ap)), np.outer(a, ap)] + [x @ y for x in xs for y in ys]
     t = _traces(rotation, np.stack(mats))
     beta = np.arctan2(t[:, 0], t[:, 1])

@@ -93,14 +93,20 @@ def axis_angle_matrix(axis: FloatArray, angle: FloatArray) -> FloatArray:
     """
     a = np.asarray(axis, dtype=float)
     th = np.asarray(angle, dtype=float)
-    k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    k = skew(a)
     s = np.sin(th)[:, None, None]
     c = (1.0 - np.cos(th))[:, None, None]
     return np.eye(3) + s * k + c * (k @ k)
 
 
-def _line_basis(axis: FloatArray) -> FloatArray:
-    """Rows ``e1, e2, a``: an orthonormal basis with ``a`` the unit axis (``e2 = a x e1``)."""
+def skew(a: FloatArray) -> FloatArray:
+    """Cross-product matrix ``(3, 3)`` of ``a (3,)``: ``skew(a) @ v == a x v``."""
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def orthonormal_basis(axis: FloatArray) -> FloatArray:
+    """Rows ``e1, e2, a`` ``(3, 3)``: a right-handed orthonormal basis whose last row is the
+    unit ``axis`` (``e2 = a x e1``); its transpose is a rotation taking z to ``axis``."""
     a = unit(axis)
     helper = np.eye(3)[np.argmin(np.abs(a))]
     e1 = unit(np.cross(a, helper))
@@ -133,7 +139,7 @@ def rotate_about_lines(
     """
     x = y = basis = centre_t = None
     for centre, axis, angle in steps:
-        b = _line_basis(axis)
+        b = orthonormal_basis(axis)
         c = np.asarray(centre, dtype=float)
         c_t = c.T if c.ndim == 2 else c[:, None]  # (3, n) or (3, 1)
         if y is None:

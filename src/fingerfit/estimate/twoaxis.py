@@ -54,7 +54,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..kinematics import twist_angle, two_axis_angles
-from ..transforms import FloatArray, axis_angle_matrix, unit
+from ..transforms import FloatArray, axis_angle_matrix, orthonormal_basis, unit
 from .migration import fit_axis_points
 
 MAX_RESIDUAL_RATIO = 0.5
@@ -98,13 +98,6 @@ class TwoAxisFit:
     abduction_range_deg: float
     accepted: bool
     interior: bool = True
-
-
-def _basis(v: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Two unit vectors ``(3,)`` completing ``v`` to an orthonormal basis."""
-    e = np.eye(3)[np.argmin(np.abs(v))]
-    e1 = unit(np.cross(v, e))
-    return e1, np.cross(v, e1)
 
 
 def _skew_residual(q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
@@ -170,12 +163,12 @@ def fit_two_axis_directions(
     starts = [pca, np.cross(a0, pca)]
     if finger_direction is not None and np.linalg.norm(np.cross(finger_direction, a0)) > 0.1:
         starts = [unit(np.cross(finger_direction, a0))]
-    ea = _basis(a0)
+    ea = orthonormal_basis(a0)
     best = None
     for b0 in starts:
-        eb = _basis(b0)
+        eb = orthonormal_basis(b0)
 
-        def dirs(x: FloatArray, b0: FloatArray = b0, eb: tuple = eb) -> tuple:
+        def dirs(x: FloatArray, b0: FloatArray = b0, eb: FloatArray = eb) -> tuple:
             a = unit(a0 + x[0] * ea[0] + x[1] * ea[1])
             b = unit(b0 + x[2] * eb[0] + x[3] * eb[1])
             return a, b

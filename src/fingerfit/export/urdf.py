@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model import HandModel
+from ..transforms import orthonormal_basis
 from . import require, write_text
 from .geometry import (
     DEFAULT_MARGIN_DEG,
@@ -42,11 +43,7 @@ def _pose(translation: np.ndarray, rotation: np.ndarray | None = None) -> np.nda
 
 def _z_to(direction: np.ndarray) -> np.ndarray:
     """A rotation matrix whose z column is the unit vector ``direction``."""
-    z = direction / np.linalg.norm(direction)
-    helper = np.eye(3)[np.argmin(np.abs(z))]
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z])
+    return orthonormal_basis(direction).T
 
 
 def _capsule_shapes(ydf, link: RobotLink) -> list[tuple[np.ndarray, object]]:
