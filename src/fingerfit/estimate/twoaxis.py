@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..kinematics import twist_angle, two_axis_angles
+from ..kinematics import two_axis_angles
 from ..transforms import FloatArray, axis_angle_matrix, orthonormal_basis, unit
 from .migration import fit_axis_points
 
@@ -103,15 +103,11 @@ class TwoAxisFit:
 def _skew_residual(q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
     """Rotation ``(n, 3)`` (rad, small-angle) left after removing the two-axis motion.
 
-    Same decomposition as :func:`fingerfit.kinematics.two_axis_angles`, written out
-    so that ``Rot(b, -beta) Q`` is formed once: ``E = Rot(a, -theta) Rot(b, -beta) Q``.
+    The angles are :func:`fingerfit.kinematics.two_axis_angles`; the residual is
+    ``E = Rot(a, -theta) Rot(b, -beta) Q``.
     """
-    qa = q @ a
-    ap = a - (a @ b) * b
-    qp = qa - np.multiply.outer(qa @ b, b)
-    beta = np.arctan2(qp @ np.cross(b, ap), qp @ ap)
-    m = np.matmul(axis_angle_matrix(b, -beta), q)
-    e = np.matmul(axis_angle_matrix(a, -twist_angle(m, a)), m)
+    beta, theta = two_axis_angles(q, a, b)
+    e = axis_angle_matrix(a, -theta) @ (axis_angle_matrix(b, -beta) @ q)
     return 0.5 * np.stack(
         [e[:, 2, 1] - e[:, 1, 2], e[:, 0, 2] - e[:, 2, 0], e[:, 1, 0] - e[:, 0, 1]], axis=1
     )
