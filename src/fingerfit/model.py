@@ -169,6 +169,10 @@ class HandModel:
     angle_method : {"projection", "swing_twist"}
         How :mod:`fingerfit.kinematics` computes joint angles from the sensors
         (files without the field: ``projection``, the paper's method).
+    warnings : tuple of str
+        Plausibility and quality warnings the fit was forced past (``--force``);
+        stored in the model file (``"warnings"``, absent or empty when none) and shown
+        in the report.
     """
 
     subject: str
@@ -179,6 +183,7 @@ class HandModel:
     fingers: dict[str, FingerModel]
     version: str = __version__
     angle_method: str = "projection"
+    warnings: tuple[str, ...] = ()
 
     def in_parent(
         self, finger: str, joint: str, variant: str = "user_axis"
@@ -347,6 +352,7 @@ def model_to_dict(model: HandModel) -> dict[str, Any]:
             for k, (p, r) in model.reference_poses.items()
         },
         "fingers": fingers,
+        "warnings": list(model.warnings),
     }
 
 
@@ -511,4 +517,13 @@ def load_model(path: str | Path) -> HandModel:
             if "angle_method" in doc
             else "projection"
         ),
+        warnings=_warnings(r, doc),
     )
+
+
+def _warnings(r: _Reader, doc: dict[str, Any]) -> tuple[str, ...]:
+    """The optional ``warnings`` list of strings (older files: none)."""
+    w = doc.get("warnings", [])
+    if not isinstance(w, list) or not all(isinstance(x, str) for x in w):
+        raise r.err("warnings", "must be a list of strings")
+    return tuple(w)
