@@ -26,6 +26,9 @@ HAND_SENSOR = "hand"
 UNITS_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
 _SENSOR_RE = re.compile(r"^(hand|stylus|(index|middle|ring|little)\.(proximal|middle|distal))$")
+_SUBJECT_RE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]{0,63}$")
+#: Longest subject identifier (characters).
+SUBJECT_ID_MAX = 64
 _LANDMARK_RE = re.compile(
     r"^((index|middle|ring|little)\.(mp|pip|dip|tip)|target\.[A-Za-z0-9_\-]+)$"
 )
@@ -44,6 +47,47 @@ def is_sensor_name(name: str) -> bool:
 def is_landmark_name(name: str) -> bool:
     """Whether ``name`` is a valid landmark name of the session format."""
     return bool(_LANDMARK_RE.match(name))
+
+
+def check_subject_id(
+    value: object, *, path: str | Path | None = None, field: str | None = "subject"
+) -> str:
+    """Check a subject identifier; it names folders and files, so it must be safe as one.
+
+    Parameters
+    ----------
+    value : object
+        The identifier (from ``session.toml``, ``--subject`` or a study list).
+    path : str or Path, optional
+        The file it came from, for the message.
+    field : str, optional
+        The field or option it came from, for the message.
+
+    Returns
+    -------
+    str
+        ``value``, unchanged: 1-64 characters from letters, digits, ``_``, ``.`` and
+        ``-``, not starting with ``.`` (so never ``..``, a hidden name or a path).
+
+    Raises
+    ------
+    FingerfitError
+        Naming ``path`` and ``field`` and showing the value (escaped, shortened).
+    """
+    if not isinstance(value, str):
+        raise FingerfitError(
+            f"subject ID must be a string, not {type(value).__name__}", path=path, field=field
+        )
+    if not _SUBJECT_RE.fullmatch(value):
+        shown = value.encode("unicode_escape").decode("ascii")
+        shown = shown if len(shown) <= 70 else shown[:67] + "..."
+        raise FingerfitError(
+            f"subject ID '{shown}' must be 1-{SUBJECT_ID_MAX} letters, digits, '_', '.' or '-', "
+            "not starting with '.'",
+            path=path,
+            field=field,
+        )
+    return value
 
 
 def true_runs(mask: np.ndarray) -> np.ndarray:
