@@ -25,8 +25,10 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-console = Console(stderr=True)
-out = Console()
+# No emoji codes and no highlighting: user text (paths, names) is shown verbatim; markup
+# in our own templates only, with every user value passed through ``escape``.
+console = Console(stderr=True, emoji=False, highlight=False)
+out = Console(emoji=False, highlight=False)
 
 F = TypeVar("F", bound=Callable)
 
@@ -70,6 +72,22 @@ def parse_list(value: str | None, allowed: tuple[str, ...], what: str) -> list[s
     return items
 
 
+def say(template: str, *values: object) -> None:
+    """Print a line to stdout: ``template`` may hold markup; ``values`` are shown verbatim.
+
+    ``say("model written to [bold]{}[/]", path)``.
+    """
+    out.print(template.format(*(escape(str(v)) for v in values)), soft_wrap=True)
+
+
+def _version(value: bool) -> None:
+    if value:
+        from .. import __version__
+
+        out.print(f"fingerfit {__version__}")
+        raise typer.Exit()
+
+
 def run() -> None:
     """Entry point of the console script."""
     try:
@@ -81,11 +99,8 @@ def run() -> None:
 
 @app.callback()
 def _root(
-    version: bool = typer.Option(False, "--version", help="Print the version and exit."),
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
 ) -> None:
     """Individual skeletal finger models (joint centres and tilted axes) from 6-DOF motion capture."""
-    if version:
-        from .. import __version__
-
-        out.print(f"fingerfit {__version__}")
-        raise typer.Exit()

@@ -11,6 +11,7 @@ from ..errors import FingerfitError
 from ..export import mjcf_string, robot_hand, urdf_string
 from ..export import write_text as _write_text
 from ..export.geometry import DEFAULT_MARGIN_DEG
+from ..io.atomic import check_target, refuse_writing_inputs
 from ..model import VARIANTS, load_model, with_fixed_centres
 from .app import app, notice, out, user_errors
 
@@ -45,10 +46,16 @@ def export(
             help="Rolling-contact models: fix each migrating centre at its mid-range position.",
         ),
     ] = False,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace existing output files.")
+    ] = False,
 ) -> None:
     """Export the finger chains for robot software: root link `hand` (hand sensor frame),
-    joints <finger>_mp|pip|dip, fingertip frame <finger>_tip."""
-    _export(model_path, urdf, mjcf, variant, margin_deg, fix_centres)
+    joints <finger>_mp|pip|dip, fingertip frame <finger>_tip.
+
+    Both files are written or neither; an existing file is replaced only with --overwrite.
+    """
+    _export(model_path, urdf, mjcf, variant, margin_deg, fix_centres, overwrite)
 
 
 def _export(
@@ -58,12 +65,17 @@ def _export(
     variant: str,
     margin_deg: float,
     fix_centres: bool = False,
+    overwrite: bool = False,
 ) -> None:
     """Check the options, build every document, then write them all or none."""
     if urdf is None and mjcf is None:
         raise FingerfitError("nothing to write: give --urdf and/or --mjcf")
     if urdf is not None and mjcf is not None and urdf.resolve() == mjcf.resolve():
         raise FingerfitError("--urdf and --mjcf name the same file", path=urdf)
+    targets = [p for p in (urdf, mjcf) if p is not None]
+    refuse_writing_inputs(targets, [model_path])
+    for p in targets:
+        check_target(p, overwrite=overwrite)
     if variant not in VARIANTS:
         raise FingerfitError(f"must be one of {', '.join(VARIANTS)}", field="--variant")
     if not margin_deg >= 0:
@@ -82,7 +94,7 @@ def _export(
         files[urdf] = urdf_string(model, variant, margin_deg)
     if mjcf is not None:
         files[mjcf] = mjcf_string(model, variant, margin_deg)
-    _write_text(files)  # all files or none
+    _write_text(files, overwrite=overwrite)  # all files or none
     hand = robot_hand(model, variant, margin_deg)
     out.print(
         f"{len(hand.fingers)} finger(s), {len(hand.joints)} joints ({variant} axes, limits = "

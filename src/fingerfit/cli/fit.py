@@ -13,11 +13,11 @@ from rich.table import Table
 from ..estimate import FitOptions, fit_session
 from ..estimate.fit import METHODS
 from ..io import load_session, read_pose_csv
-from ..io.atomic import atomic_write
+from ..io.atomic import atomic_write, check_target, refuse_writing_inputs
 from ..kinematics import compute_kinematics, kinematics_table
 from ..model import HandModel, load_model, save_model
 from ..session import FINGERS, UNITS_TO_MM
-from .app import app, notice, out, parse_list, user_errors
+from .app import app, notice, out, parse_list, say, user_errors
 
 
 def quality_table(model: HandModel) -> Table:
@@ -96,7 +96,7 @@ def fit(
         notice("warning", str(w.message))
     path = save_model(model, output or session / "model.json")
     out.print(quality_table(model))
-    out.print(f"model written to [bold]{path}[/]")
+    say("model written to [bold]{}[/]", path)
 
 
 @app.command()
@@ -124,6 +124,10 @@ def angles(
     ] = None,
 ) -> None:
     """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
+    outputs = [output] if urdf_names is None else [output, urdf_names]
+    refuse_writing_inputs(outputs, [model_path, recording])
+    for target in outputs:
+        check_target(target)
     model = load_model(model_path)
     units = units or model.session_units
     if units not in UNITS_TO_MM:
@@ -138,7 +142,10 @@ def angles(
     if urdf_names is not None:
         from ..export.trajectory import write_trajectory
 
-        out.print(f"joint trajectory (rad) -> [bold]{write_trajectory(urdf_names, kin, model)}[/]")
-    out.print(
-        f"{rec.n_frames} frames -> [bold]{output}[/] (angles deg, fingertips {units}, tracker frame)"
+        say("joint trajectory (rad) -> [bold]{}[/]", write_trajectory(urdf_names, kin, model))
+    say(
+        "{} frames -> [bold]{}[/] (angles deg, fingertips {}, tracker frame)",
+        rec.n_frames,
+        output,
+        units,
     )

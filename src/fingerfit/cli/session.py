@@ -10,6 +10,7 @@ import typer
 
 from ..errors import FingerfitError
 from ..io import load_session, read_pose_csv
+from ..io.atomic import staged_directory
 from ..io.sessiondir import (
     EVENTS_FILE,
     LANDMARKS_FILE,
@@ -18,7 +19,7 @@ from ..io.sessiondir import (
     write_session_toml,
 )
 from ..session import FINGERS, UNITS_TO_MM, Session
-from .app import app, notice, out, parse_list, user_errors
+from .app import app, notice, parse_list, say, user_errors
 
 
 @app.command()
@@ -77,12 +78,9 @@ def session(
         for note in rec.notes:
             notice("note", f"{rec.name}: {note}")
     # Copy the checked files byte for byte, write session.toml, validate the whole session,
-    # and only then let the directory appear.
-    tmp = out_dir.with_name(f".{out_dir.name}.partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
-        sources = [reference, *grasp, *(targets or []), *(test or [])]
+    # and only then let the directory appear (errors name OUT_DIR, not the staging folder).
+    sources = [reference, *grasp, *(targets or []), *(test or [])]
+    with staged_directory(out_dir) as tmp:
         for src in sources:
             shutil.copyfile(src, tmp / src.name)
         shutil.copyfile(landmarks, tmp / LANDMARKS_FILE)
@@ -90,7 +88,4 @@ def session(
             shutil.copyfile(events, tmp / EVENTS_FILE)
         write_session_toml(s, tmp)
         load_session(tmp)
-        tmp.rename(out_dir)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    out.print(f"session written to [bold]{out_dir}[/]")
+    say("session written to [bold]{}[/]", out_dir)

@@ -10,7 +10,7 @@ from rich.progress import Progress
 
 from ..session import FINGERS
 from ..simulate import SimConfig, simulate_cohort, write_subject
-from .app import app, out, parse_list, user_errors
+from .app import app, parse_list, say, user_errors
 
 
 @app.command()
@@ -70,4 +70,4 @@ def simulate(
         for sim in cohort:
             write_subject(sim, out_dir / sim.session.subject)
             bar.advance(task)
-    out.print(f"wrote {subjects} session(s) to [bold]{out_dir}[/]")
+    say("wrote {} session(s) to [bold]{}[/]", subjects, out_dir)

@@ -13,7 +13,7 @@ from ..estimate import FitOptions
 from ..estimate.fit import METHODS
 from ..evaluate import StudyResult, run_study
 from ..simulate import SimConfig, simulate_cohort, write_subject
-from .app import app, out, user_errors
+from .app import app, out, say, user_errors
 
 
 def _progress() -> Progress:
@@ -73,7 +73,7 @@ def study(
 ) -> None:
     """The paper's evaluation over sessions: report.html, summary.json, CSV tables, PNG figures."""
     result = _run(list(sessions), out_dir, method)
-    out.print(f"report: [bold]{result.report}[/]")
+    say("report: [bold]{}[/]", result.report)
 
 
 @app.command()
@@ -95,5 +95,5 @@ def demo(
             dirs.append(write_subject(sim, out_dir / "sessions" / sim.session.subject))
             bar.advance(task)
     result = _run(dirs, out_dir / "study", method)
-    out.print(f"sessions: {out_dir / 'sessions'}")
-    out.print(f"report: [bold]{result.report}[/]")
+    say("sessions: {}", out_dir / "sessions")
+    say("report: [bold]{}[/]", result.report)

@@ -13,13 +13,12 @@ they are imported only when a file is written. See ``docs/export.md``.
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 from pathlib import Path
 from types import ModuleType
 
 from ..errors import FingerfitError
-from ..io.atomic import atomic_write
+from ..io.atomic import write_files
 
 
 def require(module: str) -> ModuleType:
@@ -47,16 +46,15 @@ def require(module: str) -> ModuleType:
         ) from None
 
 
-def write_text(files: dict[Path, str]) -> list[Path]:
-    """Write several text files all-or-nothing (each through ``atomic_write``).
-
-    Every temporary file is written before any is renamed into place, so a path
-    that cannot be written leaves none of the outputs behind.
+def write_text(files: dict[Path, str], *, overwrite: bool = True) -> list[Path]:
+    """Write several text files all-or-nothing (:func:`fingerfit.io.atomic.write_files`).
 
     Parameters
     ----------
     files : dict[Path, str]
         Path -> complete text (written UTF-8 with ``\n`` line ends).
+    overwrite : bool
+        Whether existing files may be replaced (``--overwrite``).
 
     Returns
     -------
@@ -65,19 +63,9 @@ def write_text(files: dict[Path, str]) -> list[Path]:
     Raises
     ------
     FingerfitError
-        Naming the path that could not be written.
+        Naming the path that could not or must not be written.
     """
-    paths = list(files)
-    current = paths[0] if paths else Path()
-    try:
-        with contextlib.ExitStack() as stack:
-            for current in paths:
-                fh = stack.enter_context(atomic_write(current, encoding="utf-8", newline="\n"))
-                fh.write(files[current])
-    except OSError as exc:  # creating a temporary file, or renaming one into place
-        where = exc.filename2 or current
-        raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=where) from None
-    return paths
+    return write_files(files, overwrite=overwrite)
 
 
 from .geometry import RobotHand, joint_names, robot_hand  # noqa: E402

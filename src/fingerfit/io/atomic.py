@@ -1,15 +1,77 @@
-"""All-or-nothing writes: a file appears complete or not at all."""
+"""All-or-nothing writes: a file, a set of files or a folder appears complete or not at all.
+
+Every output of fingerfit goes through here, so the same rules hold for every command:
+
+* a target that is a folder, or a file whose mode bits say read-only, is refused
+  (checked on the mode bits: as root ``os.access`` always says writable);
+* :func:`write_files` replaces an existing target only when asked to (``overwrite``);
+* a set of files (:func:`write_files`) or a folder (:func:`staged_directory`) is built
+  beside its target and moved into place only when all of it is complete; a failure
+  part-way leaves the previous state;
+* errors raised while a folder is staged name the user's path, never the staging one;
+* :func:`refuse_writing_inputs` stops a command from writing onto one of its inputs.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import shutil
+import stat
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import IO
 
 from ..errors import FingerfitError
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def check_target(path: str | Path, *, overwrite: bool = True) -> None:
+    """Refuse an output path that cannot or must not be replaced.
+
+    Parameters
+    ----------
+    path : str or Path
+        File about to be written.
+    overwrite : bool
+        Whether an existing file may be replaced.
+
+    Raises
+    ------
+    FingerfitError
+        The target is a folder, exists (without ``overwrite``), is read-only by its
+        mode bits, or a parent of it is a file.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise FingerfitError("is a folder, not a file", path=path)
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise FingerfitError(f"cannot write: '{parent}' is a file, not a folder", path=path)
+            break
+    if path.exists():
+        if not overwrite:
+            raise FingerfitError("exists; pass --overwrite to replace it", path=path)
+        if not path.stat().st_mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):
+            raise FingerfitError("is read-only; not replaced", path=path)
+
+
+def _temp_beside(path: Path) -> tuple[int, Path]:
+    """Create the parent folders and an empty temporary file beside ``path``."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+        os.chmod(tmp, 0o666 & ~_umask())
+    except OSError as exc:
+        raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=path) from None
+    return fd, Path(tmp)
 
 
 @contextlib.contextmanager
@@ -17,22 +79,155 @@ def atomic_write(path: str | Path, mode: str = "w", **kwargs) -> Iterator[IO]:
     """Open a temporary file beside ``path``; rename it over ``path`` on success.
 
     If the block raises, the temporary file is removed and ``path`` is left
-    untouched, so no half-written output ever exists.
+    untouched, so no half-written output ever exists. ``path`` is checked first
+    with :func:`check_target` (an existing file is replaced).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    mode : str
+        ``"w"`` (text) or ``"wb"`` (bytes); ``kwargs`` go to :func:`open`.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
+    check_target(path)
+    fd, tmp = _temp_beside(path)
     try:
         with os.fdopen(fd, mode, **kwargs) as fh:
             yield fh
         os.replace(tmp, path)
+    except OSError as exc:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=path) from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def write_files(files: Mapping[Path, str | bytes], *, overwrite: bool = True) -> list[Path]:
+    """Write several files all-or-nothing.
+
+    Every target is checked (:func:`check_target`) and every temporary file written
+    before any is moved into place; if moving one fails, those already moved are
+    restored to what they were, so a failure leaves no new output and no lost file.
+
+    Parameters
+    ----------
+    files : mapping of Path to str or bytes
+        Target -> complete content (text is written UTF-8 with ``\\n`` line ends).
+    overwrite : bool
+        Whether existing targets may be replaced.
+
+    Returns
+    -------
+    list of Path
+        The targets, in the order given.
+
+    Raises
+    ------
+    FingerfitError
+        Naming the target that could not be written.
+    """
+    paths = [Path(p) for p in files]
+    if len({p.resolve() for p in paths}) != len(paths):
+        raise FingerfitError("the same file is named twice as an output", path=paths[0])
+    for p in paths:
+        check_target(p, overwrite=overwrite)
+    temps: dict[Path, Path] = {}
+    backups: dict[Path, Path] = {}
+    placed: list[Path] = []
+    current = paths[0] if paths else Path()
+    try:
+        for current, content in zip(paths, files.values(), strict=True):
+            fd, temps[current] = _temp_beside(current)
+            data = content.encode("utf-8") if isinstance(content, str) else content
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+        for current in paths:
+            if current.exists():
+                backups[current] = current.with_name(f".{current.name}.{os.getpid()}.previous")
+                os.link(current, backups[current])
+            os.replace(temps.pop(current), current)
+            placed.append(current)
+    except OSError as exc:
+        for p in placed:
+            with contextlib.suppress(OSError):
+                if p in backups:
+                    os.replace(backups.pop(p), p)
+                else:
+                    os.unlink(p)
+        raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=current) from None
+    finally:
+        for tmp in [*temps.values(), *backups.values()]:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+    return paths
+
+
+def _renamed(exc: FingerfitError, staging: Path, target: Path) -> FingerfitError:
+    """The same error naming ``target`` wherever it named ``staging``."""
+    path = exc.path
+    if path is not None and path.is_relative_to(staging):
+        path = target / path.relative_to(staging)
+    reason = exc.reason.replace(str(staging), str(target))
+    exc.__init__(reason, path=path, line=exc.line, field=exc.field)  # type: ignore[misc]
+    return exc
+
+
+@contextlib.contextmanager
+def staged_directory(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
+    """Build a folder in a hidden sibling; move it to ``target`` when the block succeeds.
+
+    Parameters
+    ----------
+    target : str or Path
+        The folder to create. An empty existing folder is fine; a non-empty one is
+        replaced only with ``overwrite`` (and only after the new one is complete).
+
+    Yields
+    ------
+    Path
+        The staging folder to write into.
+
+    Raises
+    ------
+    FingerfitError
+        ``target`` is a file, or a non-empty folder without ``overwrite``; errors
+        raised in the block name ``target`` instead of the staging folder.
+    """
+    target = Path(target)
+    if target.exists() and not target.is_dir():
+        raise FingerfitError("exists and is not a folder", path=target)
+    if target.is_dir() and any(target.iterdir()) and not overwrite:
+        raise FingerfitError("exists and is not empty; pass --overwrite to replace it", path=target)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(
+            tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".partial", dir=target.parent)
+        )
+    except OSError as exc:
+        raise FingerfitError(f"cannot create ({exc.strerror or exc})", path=target) from None
+    try:
+        try:
+            yield staging
+        except FingerfitError as exc:
+            raise _renamed(exc, staging, target) from None
+        old = None
+        if target.exists():
+            old = target.with_name(f".{target.name}.{os.getpid()}.previous")
+            os.replace(target, old)
+        try:
+            os.replace(staging, target)
+        except OSError as exc:
+            if old is not None:
+                os.replace(old, target)
+            raise FingerfitError(f"cannot create ({exc.strerror or exc})", path=target) from None
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _same_file(a: Path, b: Path) -> bool:
