@@ -9,7 +9,7 @@ OUT    ?= fingerfit-demo
 $(BIN)/fingerfit: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e ".[stats]"
+	$(BIN)/pip install --quiet -e ".[stats,c3d,robot]"
 	touch $@
 
 .venv: $(BIN)/fingerfit
