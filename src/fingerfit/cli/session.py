@@ -18,7 +18,7 @@ from ..io.sessiondir import (
     read_landmarks,
     write_session_toml,
 )
-from ..session import FINGERS, UNITS_TO_MM, Session
+from ..session import FINGERS, UNITS_TO_MM, Session, check_subject_id
 from .app import app, notice, parse_list, say, user_errors
 
 
@@ -49,6 +49,7 @@ def session(
         raise typer.BadParameter("must be left or right", param_hint="--hand")
     if units not in UNITS_TO_MM:
         raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
+    check_subject_id(subject, field="--subject")
     if out_dir.exists():
         raise FingerfitError("already exists; choose a new directory", path=out_dir)
     names = parse_list(fingers, FINGERS, "--fingers") or []

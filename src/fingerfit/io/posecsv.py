@@ -8,6 +8,7 @@ may be absent rows or rows with empty/NaN fields. See ``docs/formats.md``.
 
 from __future__ import annotations
 
+import csv
 import io
 from pathlib import Path
 
@@ -43,10 +44,12 @@ def check_field_counts(raw: bytes, path: Path, n_fields: int) -> int:
     Raises
     ------
     FingerfitError
-        Naming the first line that is empty inside the data or has another field
-        count (a truncated or garbled record).
+        Naming the first line that is not text (control bytes other than tab, CR and
+        LF, or invalid UTF-8), is empty inside the data or has another field count (a
+        truncated or garbled record).
     """
     b = np.frombuffer(raw, dtype=np.uint8)
+    check_text(b, path)
     ends = np.flatnonzero(b == ord("\n"))
     if b.size and b[-1] != ord("\n"):
         ends = np.append(ends, b.size)
@@ -74,20 +77,65 @@ def check_field_counts(raw: bytes, path: Path, n_fields: int) -> int:
     return last - 1
 
 
-def _to_float(series: pd.Series, col: str, lines: np.ndarray, path: Path) -> np.ndarray:
-    """Exact float conversion of a text column; empty fields become NaN."""
+def check_text(b: np.ndarray, path: Path) -> None:
+    """Raise, naming the line, if the bytes ``b`` (``uint8``) are not UTF-8 text.
+
+    Control bytes other than tab, CR and LF (a binary file, a corrupted transfer) and
+    invalid UTF-8 sequences are refused.
+    """
+    ctrl = np.flatnonzero((b < 32) & (b != 9) & (b != 10) & (b != 13) | (b == 127))
+    at = int(ctrl[0]) if ctrl.size else None
+    if at is None and (b >= 128).any():
+        try:
+            b.tobytes().decode("utf-8")
+        except UnicodeDecodeError as exc:
+            at = exc.start
+    if at is not None:
+        line = int(np.count_nonzero(b[:at] == ord("\n"))) + 1
+        raise FingerfitError(
+            f"not text: byte 0x{int(b[at]):02x} at offset {at} (binary or corrupted file)",
+            path=path,
+            line=line,
+        )
+
+
+def _to_float(
+    series: pd.Series, col: str, lines: np.ndarray, path: Path, underscores: bool = True
+) -> np.ndarray:
+    """Exact float conversion of a text column; empty fields become NaN.
+
+    Infinite values (``inf``, ``-Infinity``, overflowing ``1e999`` ...) are an error,
+    never a missing sample; so are digit-group underscores (``1_000``), which Python's
+    parser would silently accept (looked for only when ``underscores`` is True).
+    """
     text = series.to_numpy(dtype=object)
     try:
-        return text.astype(np.float64)
+        values = text.astype(np.float64)
     except (ValueError, TypeError):
         for i, v in enumerate(text):
             try:
                 float(v)
             except (ValueError, TypeError):
                 raise FingerfitError(
-                    f"not a number: '{v}'", path=path, line=int(lines[i]), field=col
+                    f"not a number: '{shown(v)}'", path=path, line=int(lines[i]), field=col
                 ) from None
         raise
+    bad = np.isinf(values)
+    if underscores:
+        bad |= np.array([isinstance(v, str) and "_" in v for v in text], dtype=bool)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise FingerfitError(
+            f"not a finite number: '{shown(text[i])}'", path=path, line=int(lines[i]), field=col
+        )
+    return values
+
+
+def shown(value: object, n: int = 40) -> str:
+    """A value as shown in a one-line message: control characters and non-ASCII escaped
+    (``\\n``, ``\\xe9``), at most ``n`` characters (longer ones end in ``...``)."""
+    s = str(value).encode("unicode_escape").decode("ascii")
+    return s if len(s) <= n else s[: n - 3] + "..."
 
 
 def read_pose_csv(
@@ -133,7 +181,9 @@ def read_pose_csv(
     first = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
     if tuple(h.strip() for h in first.split(",")) != HEADER:
         raise FingerfitError(
-            f"header must be exactly '{','.join(HEADER)}', found '{first[:80]}'", path=path, line=1
+            f"header must be exactly '{','.join(HEADER)}', found '{shown(first, 80)}'",
+            path=path,
+            line=1,
         )
     check_field_counts(raw, path, len(HEADER))
     if scale_to_mm is None:
@@ -143,10 +193,13 @@ def read_pose_csv(
 
     # Read text and convert with Python's exact float parser: round-trip exact (pandas'
     # fast C parser is not) and every bad value can be named with its line.
-    df = pd.read_csv(io.BytesIO(raw), dtype=str, skip_blank_lines=True)
+    df = pd.read_csv(
+        io.BytesIO(raw), dtype=str, skip_blank_lines=True, quoting=csv.QUOTE_NONE, encoding="utf-8"
+    )
     notes: list[str] = []
     lines = np.arange(df.shape[0]) + 2  # file line of each data row
-    values = {col: _to_float(df[col], col, lines, path) for col in _NUMERIC}
+    under = b"_" in raw
+    values = {col: _to_float(df[col], col, lines, path, under) for col in _NUMERIC}
     time = values["time"]
     sensors = df["sensor"].to_numpy(dtype=object)
     if df.shape[0] == 0:
@@ -172,7 +225,7 @@ def read_pose_csv(
         if not is_sensor_name(name):
             i = int(np.flatnonzero(inverse == k)[0])
             raise FingerfitError(
-                f"unknown sensor name '{name}' (expected hand, stylus or <finger>.<segment>)",
+                f"unknown sensor name '{shown(name)}' (expected hand, stylus or <finger>.<segment>)",
                 path=path,
                 line=int(lines[i]),
                 field="sensor",

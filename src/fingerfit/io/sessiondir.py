@@ -11,11 +11,14 @@ Layout (see ``docs/formats.md``)::
 
 from __future__ import annotations
 
+import csv
+import difflib
+import io
 import json
 import math
 import re
 import tomllib
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
 
 import numpy as np
 import pandas as pd
@@ -30,16 +33,24 @@ from ..session import (
     Recording,
     Session,
     TargetEvent,
+    check_subject_id,
     is_landmark_name,
     sensor_name,
 )
 from .atomic import atomic_write
-from .posecsv import read_pose_csv, write_pose_csv
+from .posecsv import check_field_counts, read_pose_csv, shown, write_pose_csv
 
 SESSION_FILE = "session.toml"
 LANDMARKS_FILE = "landmarks.csv"
 EVENTS_FILE = "events.csv"
 EVENTS_HEADER = ("recording", "finger", "target", "start", "end")
+
+
+#: Keys of ``session.toml``: top level and ``[recordings]``.
+TOP_KEYS = ("format", "subject", "hand", "units", "rate_hz", "fingers", "recordings")
+RECORDING_KEYS = ("reference", "grasp", "targets", "test", "events")
+#: Largest sampling rate accepted (Hz): far above any tracker, far below float trouble.
+MAX_RATE_HZ = 1e6
 
 
 def _require(table: dict, key: str, kind: type | tuple[type, ...], path: Path, where: str = ""):
@@ -59,55 +70,206 @@ def _file_list(value, path: Path, key: str) -> list[str]:
     return value
 
 
-def read_landmarks(path: str | Path, units: str = "mm") -> dict[str, np.ndarray]:
-    """Read ``name,x,y,z`` landmarks; returns positions ``(3,)`` in mm, tracker frame."""
-    path = Path(path)
+def _check_keys(table: dict, allowed: tuple[str, ...], path: Path, where: str) -> None:
+    """Refuse unknown keys, suggesting the closest known one (``difflib``)."""
+    for key in table:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), allowed, n=1)
+            hint = f", did you mean '{close[0]}'?" if close else f" (known: {', '.join(allowed)})"
+            raise FingerfitError(
+                f"unknown key '{shown(key)}' in {where}{hint}", path=path, field=str(key)
+            )
+
+
+def session_file(directory: Path, name: object, meta_path: Path, field: str) -> Path:
+    """The file a ``session.toml`` field names, contained in the session folder.
+
+    Parameters
+    ----------
+    directory : Path
+        The session folder.
+    name : object
+        The field's value: a path relative to the folder, e.g. ``"grasp.csv"`` or
+        ``"raw/grasp.csv"``.
+    meta_path : Path
+        ``session.toml``, for messages.
+    field : str
+        The field, for messages (e.g. ``recordings.grasp``).
+
+    Returns
+    -------
+    Path
+        ``directory / name``; an existing regular file whose real path (symlinks
+        resolved) lies inside the folder. The file is not opened.
+
+    Raises
+    ------
+    FingerfitError
+        Naming ``meta_path`` and ``field``: not a string, empty, control characters,
+        an absolute path, a ``..`` component, a path or symlink resolving outside the
+        folder, or no such regular file.
+    """
+    if not isinstance(name, str) or not name.strip():
+        raise FingerfitError("must be a non-empty file name", path=meta_path, field=field)
+    if any(ord(c) < 32 or ord(c) == 127 for c in name):
+        raise FingerfitError(
+            f"'{shown(name)}' contains control characters", path=meta_path, field=field
+        )
+    rel = PurePosixPath(name.replace("\\", "/"))
+    if rel.is_absolute() or PureWindowsPath(name).drive:
+        raise FingerfitError(
+            f"'{shown(name)}' is an absolute path; name a file inside the session folder "
+            "(a path relative to it)",
+            path=meta_path,
+            field=field,
+        )
+    if ".." in rel.parts:
+        raise FingerfitError(
+            f"'{shown(name)}' leaves the session folder ('..'); name a file inside it",
+            path=meta_path,
+            field=field,
+        )
+    f = directory / name
     try:
-        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+        root = directory.resolve(strict=True)
+        real = f.resolve()
+    except (OSError, RuntimeError) as exc:  # symlink loops, unreadable folders
+        raise FingerfitError(
+            f"cannot resolve '{shown(name)}' ({type(exc).__name__})", path=meta_path, field=field
+        ) from None
+    if not real.is_relative_to(root):
+        raise FingerfitError(
+            f"'{shown(name)}' is a link to a file outside the session folder; copy the file in",
+            path=meta_path,
+            field=field,
+        )
+    if not f.is_file():
+        what = "is not a regular file" if f.exists() else "names a file that does not exist"
+        raise FingerfitError(f"{what}: '{shown(name)}'", path=meta_path, field=field)
+    return f
+
+
+def _read_small_csv(path: Path, header: tuple[str, ...]) -> pd.DataFrame:
+    """A small text table with an exact header; every line has ``len(header)`` fields.
+
+    Returns the table as strings; row ``i`` is file line ``i + 2``.
+    """
+    try:
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise FingerfitError("file not found", path=path) from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise FingerfitError(f"not a valid CSV ({str(exc).splitlines()[0]})", path=path) from None
-    if tuple(df.columns) != ("name", "x", "y", "z"):
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    first = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
+    cols = tuple(h.strip() for h in first.split(","))
+    if cols != header:
         raise FingerfitError(
-            f"header must be 'name,x,y,z', found '{','.join(df.columns)}'", path=path, line=1
+            f"header must be '{','.join(header)}', found '{shown(first, 80)}'", path=path, line=1
         )
+    n = check_field_counts(raw, path, len(header))
+    if n == 0:
+        return pd.DataFrame(columns=list(header), dtype=str)
+    df = pd.read_csv(
+        io.BytesIO(raw),
+        dtype=str,
+        keep_default_na=False,
+        quoting=csv.QUOTE_NONE,
+        encoding="utf-8",
+        skip_blank_lines=True,
+    )
+    df.columns = list(header)
+    return df.apply(lambda c: c.str.strip())
+
+
+def _number(text: str, path: Path, line: int, field: str, what: str) -> float:
+    """A finite number from a field's text, else an error naming the line and field."""
+    try:
+        if "_" in text:
+            raise ValueError
+        v = float(text)
+    except ValueError:
+        raise FingerfitError(
+            f"{what} must be a number, not '{shown(text)}'", path=path, line=line, field=field
+        ) from None
+    if not math.isfinite(v):
+        raise FingerfitError(
+            f"{what} must be a finite number, not '{shown(text)}'",
+            path=path,
+            line=line,
+            field=field,
+        )
+    return v
+
+
+def read_landmarks(path: str | Path, units: str = "mm") -> dict[str, np.ndarray]:
+    """Read a ``name,x,y,z`` landmarks CSV.
+
+    Parameters
+    ----------
+    path : str or Path
+    units : str
+        Units of ``x,y,z`` in the file.
+
+    Returns
+    -------
+    dict[str, ndarray]
+        Landmark name -> position ``(3,)`` in mm, tracker coordinates.
+
+    Raises
+    ------
+    FingerfitError
+        Naming the file and line: header, field count, unknown or repeated name,
+        a coordinate that is not a finite number.
+    """
+    path = Path(path)
+    df = _read_small_csv(path, ("name", "x", "y", "z"))
     out: dict[str, np.ndarray] = {}
     for i, row in enumerate(df.itertuples(index=False), start=2):
         name = str(row.name)
         if not is_landmark_name(name):
-            raise FingerfitError(f"unknown landmark name '{name}'", path=path, line=i, field="name")
+            raise FingerfitError(
+                f"unknown landmark name '{shown(name)}'", path=path, line=i, field="name"
+            )
         if name in out:
             raise FingerfitError(f"landmark '{name}' given twice", path=path, line=i, field="name")
-        try:
-            xyz = np.array([float(row.x), float(row.y), float(row.z)])
-        except ValueError:
-            raise FingerfitError("coordinates must be numbers", path=path, line=i) from None
-        if not np.isfinite(xyz).all():
-            raise FingerfitError("coordinates must be finite numbers", path=path, line=i)
+        xyz = np.array(
+            [_number(v, path, i, k, "coordinate") for k, v in zip("xyz", row[1:], strict=True)]
+        )
         out[name] = xyz * UNITS_TO_MM[units]
     return out
 
 
-def read_events(path: Path) -> list[TargetEvent]:
-    """Read ``recording,finger,target,start,end`` touch events (seconds)."""
-    try:
-        df = pd.read_csv(path, dtype=str, keep_default_na=False)
-    except FileNotFoundError:
-        raise FingerfitError("file not found", path=path) from None
-    if tuple(df.columns) != EVENTS_HEADER:
-        raise FingerfitError(f"header must be '{','.join(EVENTS_HEADER)}'", path=path, line=1)
+def read_events(path: str | Path) -> list[TargetEvent]:
+    """Read ``recording,finger,target,start,end`` touch events.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    list of TargetEvent
+        ``start`` and ``end`` in seconds (finite, ``start < end``).
+
+    Raises
+    ------
+    FingerfitError
+        Naming the file and line: header, field count, a time that is not a finite
+        number, ``end <= start``, an unknown finger.
+    """
+    path = Path(path)
+    df = _read_small_csv(path, EVENTS_HEADER)
     events = []
     for i, row in enumerate(df.itertuples(index=False), start=2):
-        try:
-            start, end = float(row.start), float(row.end)
-        except ValueError:
-            raise FingerfitError("start and end must be numbers (s)", path=path, line=i) from None
-        if not (math.isfinite(start) and math.isfinite(end) and end > start):
-            raise FingerfitError("need finite start < end", path=path, line=i)
+        start = _number(row.start, path, i, "start", "start and end (s)")
+        end = _number(row.end, path, i, "end", "start and end (s)")
+        if not end > start:
+            raise FingerfitError(
+                f"need start < end, got {start:g} and {end:g} s", path=path, line=i
+            )
         if row.finger not in FINGERS:
             raise FingerfitError(
-                f"unknown finger '{row.finger}'", path=path, line=i, field="finger"
+                f"unknown finger '{shown(row.finger)}'", path=path, line=i, field="finger"
             )
         events.append(TargetEvent(row.recording, row.finger, row.target, start, end))
     return events
@@ -119,7 +281,9 @@ def load_session(directory: str | Path) -> Session:
     Parameters
     ----------
     directory : str or Path
-        Folder holding ``session.toml`` and the files it names.
+        Folder holding ``session.toml`` and the files it names. Every file must be a
+        relative path inside this folder (symlinks included); nothing outside it is
+        read.
 
     Returns
     -------
@@ -135,53 +299,67 @@ def load_session(directory: str | Path) -> Session:
     meta_path = directory / SESSION_FILE
     if not meta_path.is_file():
         raise FingerfitError(f"not a session directory (no {SESSION_FILE})", path=directory)
+    session_file(directory, SESSION_FILE, meta_path, SESSION_FILE)
     try:
-        meta = tomllib.loads(meta_path.read_text(encoding="utf-8"))
+        text = meta_path.read_bytes().decode("utf-8")
+        meta = tomllib.loads(text)
+    except UnicodeDecodeError as exc:
+        raise FingerfitError(f"not UTF-8 text (byte {exc.start})", path=meta_path) from None
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=meta_path) from None
     except tomllib.TOMLDecodeError as exc:
         found = re.search(r"at line (\d+)", str(exc))
         line = int(found.group(1)) if found else None
         raise FingerfitError(
             f"invalid TOML ({str(exc).split(' (at')[0]})", path=meta_path, line=line
         ) from None
+    _check_keys(meta, TOP_KEYS, meta_path, SESSION_FILE)
     fmt = _require(meta, "format", str, meta_path)
     if fmt != FORMAT:
         raise FingerfitError(
-            f"unsupported format '{fmt}' (expected '{FORMAT}')", path=meta_path, field="format"
+            f"unsupported format '{shown(fmt)}' (expected '{FORMAT}')",
+            path=meta_path,
+            field="format",
         )
-    subject = _require(meta, "subject", str, meta_path)
+    subject = check_subject_id(_require(meta, "subject", str, meta_path), path=meta_path)
     hand = _require(meta, "hand", str, meta_path)
     if hand not in ("left", "right"):
         raise FingerfitError(
-            f"must be 'left' or 'right', not '{hand}'", path=meta_path, field="hand"
+            f"must be 'left' or 'right', not '{shown(hand)}'", path=meta_path, field="hand"
         )
     units = _require(meta, "units", str, meta_path)
     if units not in UNITS_TO_MM:
         raise FingerfitError(
-            f"must be one of {', '.join(UNITS_TO_MM)}, not '{units}'", path=meta_path, field="units"
+            f"must be one of {', '.join(UNITS_TO_MM)}, not '{shown(units)}'",
+            path=meta_path,
+            field="units",
         )
-    rate = float(_require(meta, "rate_hz", (int, float), meta_path))
-    if not rate > 0:
-        raise FingerfitError("must be positive", path=meta_path, field="rate_hz")
+    rate_value = _require(meta, "rate_hz", (int, float), meta_path)
+    if not (0 < rate_value <= MAX_RATE_HZ):  # NaN fails too; huge ints never reach float()
+        raise FingerfitError(
+            f"must be positive and at most {MAX_RATE_HZ:g} Hz", path=meta_path, field="rate_hz"
+        )
+    rate = float(rate_value)
     fingers = _require(meta, "fingers", list, meta_path)
-    if not fingers or any(f not in FINGERS for f in fingers) or len(set(fingers)) != len(fingers):
+    if (
+        not fingers
+        or not all(isinstance(f, str) for f in fingers)
+        or any(f not in FINGERS for f in fingers)
+        or len(set(fingers)) != len(fingers)
+    ):
         raise FingerfitError(
             f"must be a non-empty list of distinct names from {', '.join(FINGERS)}",
             path=meta_path,
             field="fingers",
         )
     recs = _require(meta, "recordings", dict, meta_path)
+    _check_keys(recs, RECORDING_KEYS, meta_path, "[recordings]")
 
-    def load(name: str, key: str) -> Recording:
-        f = directory / name
-        if not f.is_file():
-            raise FingerfitError(
-                f"names a file that does not exist: '{name}'",
-                path=meta_path,
-                field=f"recordings.{key}",
-            )
-        return read_pose_csv(f, units=units, rate_hz=rate)
+    def file(name: object, key: str) -> Path:
+        return session_file(directory, name, meta_path, f"recordings.{key}")
 
-    reference = load(_require(recs, "reference", str, meta_path, "recordings."), "reference")
+    # Check every named file first (containment, existence), then read.
+    ref_name = _require(recs, "reference", str, meta_path, "recordings.")
     grasp_names = _file_list(
         _require(recs, "grasp", (str, list), meta_path, "recordings."),
         meta_path,
@@ -191,16 +369,26 @@ def load_session(directory: str | Path) -> Session:
         raise FingerfitError(
             "needs at least one grasp recording", path=meta_path, field="recordings.grasp"
         )
-    grasp = [load(n, "grasp") for n in grasp_names]
-    targets = [
-        load(n, "targets")
-        for n in _file_list(recs.get("targets", []), meta_path, "recordings.targets")
-    ]
-    test = [load(n, "test") for n in _file_list(recs.get("test", []), meta_path, "recordings.test")]
-    landmarks = read_landmarks(directory / LANDMARKS_FILE, units)
-    events = []
+    target_names = _file_list(recs.get("targets", []), meta_path, "recordings.targets")
+    test_names = _file_list(recs.get("test", []), meta_path, "recordings.test")
+    ref_file = file(ref_name, "reference")
+    grasp_files = [file(n, "grasp") for n in grasp_names]
+    target_files = [file(n, "targets") for n in target_names]
+    test_files = [file(n, "test") for n in test_names]
+    events_file = None
     if "events" in recs:
-        events = read_events(directory / _require(recs, "events", str, meta_path, "recordings."))
+        events_file = file(_require(recs, "events", str, meta_path, "recordings."), "events")
+    landmarks_file = session_file(directory, LANDMARKS_FILE, meta_path, LANDMARKS_FILE)
+
+    def load(f: Path) -> Recording:
+        return read_pose_csv(f, units=units, rate_hz=rate)
+
+    reference = load(ref_file)
+    grasp = [load(f) for f in grasp_files]
+    targets = [load(f) for f in target_files]
+    test = [load(f) for f in test_files]
+    landmarks = read_landmarks(landmarks_file, units)
+    events = read_events(events_file) if events_file is not None else []
     session = Session(
         subject=subject,
         hand=hand,
