@@ -17,6 +17,7 @@ lab coordinates (``docs/conventions.md``). Install with ``pip install fingerfit[
 from __future__ import annotations
 
 import re
+import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -83,15 +84,141 @@ def _param(c, group: str, name: str, default=None):
         return default
 
 
+@dataclass(frozen=True)
+class C3DHeader:
+    """What the raw 512-byte C3D header says, read before (and independently of) ezc3d.
+
+    Attributes
+    ----------
+    n_points : int
+        3D points per frame (header word 2).
+    analog_per_frame : int
+        Analog samples per 3D frame, all channels (word 3).
+    first_frame, last_frame : int
+        1-based frame numbers (words 4 and 5; 16-bit, so 65535 may mean "more").
+    data_start : int
+        Byte offset of the data section (``512 * (word 9 - 1)``).
+    float_data : bool
+        Whether samples are 4-byte floats (negative scale factor) or 2-byte integers.
+    """
+
+    n_points: int
+    analog_per_frame: int
+    first_frame: int
+    last_frame: int
+    data_start: int
+    float_data: bool
+
+    @property
+    def n_frames(self) -> int:
+        """Frames the header announces (``last - first + 1``, at least 0)."""
+        return max(0, self.last_frame - self.first_frame + 1)
+
+    @property
+    def frame_bytes(self) -> int:
+        """Bytes of one frame of data: 4 words per point plus the analog samples."""
+        return (4 * self.n_points + self.analog_per_frame) * (4 if self.float_data else 2)
+
+
+#: C3D processor types (byte 4 of the parameter section): Intel, DEC, MIPS.
+_PROCESSORS = {84: "<", 85: "<", 86: ">"}
+#: Byte of the header's scale factor (words 7-8) holding its sign bit, per processor.
+_SCALE_SIGN_BYTE = {84: 15, 85: 13, 86: 12}
+
+
+def read_c3d_header(path: Path) -> C3DHeader:
+    """Read and check the raw header of a C3D file.
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    C3DHeader
+
+    Raises
+    ------
+    FingerfitError
+        A file shorter than its header, a wrong key byte (not C3D), an unknown
+        processor type, or a file too short for the frames its header announces
+        (``truncated: header says 700 frames (needs 459200 bytes of data), file holds 149``).
+    """
+    try:
+        size = path.stat().st_size
+        with path.open("rb") as fh:
+            head = fh.read(512)
+            block = head[0] if head else 0
+            fh.seek(max(block - 1, 0) * 512)
+            param = fh.read(4)
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    if len(head) < 512:
+        raise FingerfitError(
+            f"not a readable C3D file ({size} bytes, shorter than the 512-byte header)", path=path
+        )
+    if head[1] != 0x50:
+        raise FingerfitError(
+            f"not a readable C3D file (byte 2 of the header is 0x{head[1]:02x}, not 0x50)",
+            path=path,
+        )
+    proc = param[3] if len(param) == 4 and block >= 2 else None
+    if proc not in _PROCESSORS:
+        raise FingerfitError(
+            f"not a readable C3D file (parameter section at block {block}: processor type "
+            f"{proc}, expected 84 Intel, 85 DEC or 86 MIPS)",
+            path=path,
+        )
+    words = struct.unpack(_PROCESSORS[proc] + "12H", head[:24])
+    header = C3DHeader(
+        n_points=words[1],
+        analog_per_frame=words[2],
+        first_frame=words[3],
+        last_frame=words[4],
+        data_start=512 * max(words[8] - 1, 0),
+        float_data=bool(head[_SCALE_SIGN_BYTE[proc]] & 0x80),
+    )
+    _check_size(header, size, path)
+    return header
+
+
+def _check_size(header: C3DHeader, size: int, path: Path, read: int | None = None) -> None:
+    """Raise if the file (``size`` bytes) or the frames read fall short of the header."""
+    if header.last_frame == 0xFFFF:  # 16-bit limit: the header cannot state the count
+        return
+    need = header.n_frames * header.frame_bytes
+    holds = max(0, size - header.data_start) // header.frame_bytes if header.frame_bytes else 0
+    if header.frame_bytes and header.data_start + need > size:
+        raise FingerfitError(
+            f"truncated: header says {header.n_frames} frames (needs {need} bytes of data), "
+            f"file holds {min(holds, header.n_frames)}",
+            path=path,
+        )
+    if read is not None and read < header.n_frames:
+        raise FingerfitError(
+            f"truncated: header says {header.n_frames} frames (needs {need} bytes of data), "
+            f"file holds {read}",
+            path=path,
+        )
+
+
 def _open(path: Path):
     ezc3d = _ezc3d()
     if not path.is_file():
         raise FingerfitError("file not found", path=path)
+    header = read_c3d_header(path)
     try:
-        return ezc3d.c3d(str(path))
+        c = ezc3d.c3d(str(path))
     except Exception as exc:  # ezc3d raises plain RuntimeError/IOError on bad files
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise FingerfitError(f"not a readable C3D file ({msg})", path=path) from None
+        raise FingerfitError(f"not a readable C3D file ({msg[:120]})", path=path) from None
+    # ezc3d rewrites its header and POINT:FRAMES to what it managed to read: compare
+    # the frames it holds with what the raw header announced.
+    pts = c["data"]["points"]
+    n_read = int(np.shape(pts)[2]) if np.ndim(pts) == 3 else 0
+    if header.n_points or header.analog_per_frame:
+        _check_size(header, path.stat().st_size, path, read=n_read)
+    return c
 
 
 def _scale(c, path: Path, units: str | None) -> float:
