@@ -1,16 +1,59 @@
-"""``fingerfit simulate``: write simulated sessions with ground truth."""
+"""``fingerfit simulate``: write simulated sessions with ground truth.
+
+``--format csv`` (default) writes one session folder per subject; ``--format
+liberty-ascii|liberty-binary|c3d`` writes the recordings as the files those devices
+produce (:mod:`fingerfit.simulate.trackerfiles`) and prints the ``fingerfit convert`` /
+``session`` / ``fit`` commands that turn them into sessions.
+"""
 
 from __future__ import annotations
 
+import shlex
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.progress import Progress
 
+from ..errors import FingerfitError
+from ..io.atomic import atomic_write, check_target
 from ..session import FINGERS
 from ..simulate import SimConfig, simulate_cohort, write_subject
-from .app import app, parse_list, say, user_errors
+from ..simulate.trackerfiles import (
+    CONVERTED_DIR,
+    SESSION_DIR,
+    TrackerFiles,
+    write_tracker_subject,
+)
+from .app import app, out, parse_list, say, user_errors
+
+#: File (in the output folder) the printed command sequence is also saved to.
+COMMANDS_FILE = "commands.sh"
+
+
+class SimFormat(StrEnum):
+    """Output formats of ``fingerfit simulate``."""
+
+    csv = "csv"
+    liberty_ascii = "liberty-ascii"
+    liberty_binary = "liberty-binary"
+    c3d = "c3d"
+
+
+_DESCRIPTION = {
+    "liberty-ascii": "Liberty ASCII (output list 2,7,9,1: position in inches, 3 decimals; "
+    "quaternion w,x,y,z, 4 decimals; frame count)",
+    "liberty-binary": "Liberty binary (LY records, output list 2,7,9,1: float32 position in "
+    "inches and quaternion w,x,y,z, uint32 frame count)",
+    "c3d": "C3D (one ROTATION channel per sensor: 4x4 transforms, float32, mm; sensor "
+    "origins as points)",
+}
+
+
+def _plain(text: str) -> None:
+    """Print a line verbatim (no markup, no wrapping): commands must be copyable."""
+    out.print(text, markup=False, highlight=False, soft_wrap=True)
 
 
 @app.command()
@@ -46,6 +89,24 @@ def simulate(
     exact: Annotated[
         bool, typer.Option("--exact", help="No error source at all, pure hinges.")
     ] = False,
+    fmt: Annotated[
+        SimFormat,
+        typer.Option(
+            "--format",
+            case_sensitive=False,
+            help="csv: session folders (canonical pose CSV). liberty-ascii, liberty-binary, "
+            "c3d: one tracker file per recording plus the fingerfit convert/session/fit "
+            "commands that turn them into a session (docs/simulator.md).",
+        ),
+    ] = SimFormat.csv,
+    overwrite: Annotated[
+        bool,
+        typer.Option(
+            "--overwrite",
+            help="Tracker formats: replace existing non-empty subject folders (and "
+            "commands.sh) instead of refusing.",
+        ),
+    ] = False,
 ) -> None:
     """Simulate sessions (reference, grasp, targets, free-motion test) with truth.json."""
     if hand not in ("left", "right"):
@@ -64,10 +125,62 @@ def simulate(
             distortion=distortion,
             **kw,
         )
+    if out_dir.exists() and not out_dir.is_dir():
+        raise FingerfitError("exists and is not a folder", path=out_dir)
+    if fmt is not SimFormat.csv:
+        _check_tracker_outputs(out_dir, subjects, overwrite)
+    written: list[TrackerFiles] = []
     with Progress(transient=True) as bar:
         task = bar.add_task("simulating", total=subjects)
         cohort = simulate_cohort(config, subjects, seed)
         for sim in cohort:
-            write_subject(sim, out_dir / sim.session.subject)
+            target = out_dir / sim.session.subject
+            if fmt is SimFormat.csv:
+                try:
+                    write_subject(sim, target)
+                except OSError as exc:
+                    raise FingerfitError(
+                        f"cannot write ({exc.strerror or exc})", path=exc.filename or target
+                    ) from None
+            else:
+                written.append(write_tracker_subject(sim, target, fmt.value, overwrite=overwrite))
             bar.advance(task)
-    say("wrote {} session(s) to [bold]{}[/]", subjects, out_dir)
+    if fmt is SimFormat.csv:
+        say("wrote {} session(s) to [bold]{}[/]", subjects, out_dir)
+        return
+    _plain(f"wrote {subjects} subject(s) to {out_dir} as {_DESCRIPTION[fmt.value]}")
+    _print_commands(out_dir, written)
+
+
+def _check_tracker_outputs(out_dir: Path, subjects: int, overwrite: bool) -> None:
+    """Refuse, before simulating, outputs that could not or must not be written."""
+    for i in range(subjects):
+        sub = out_dir / f"S{i + 1:02d}"
+        if sub.exists() and not sub.is_dir():
+            raise FingerfitError("exists and is not a folder", path=sub)
+        if sub.is_dir() and any(sub.iterdir()) and not overwrite:
+            raise FingerfitError(
+                "exists and is not empty; pass --overwrite to replace it (its converted "
+                f"'{CONVERTED_DIR}' and '{SESSION_DIR}' folders too)",
+                path=sub,
+            )
+    check_target(out_dir / COMMANDS_FILE, overwrite=overwrite)
+
+
+def _print_commands(out_dir: Path, written: list[TrackerFiles]) -> None:
+    """Print the station map and the convert/session/fit commands; save them as commands.sh."""
+    first = written[0]
+    kind = "ROTATION channels" if first.fmt == "c3d" else "Liberty stations"
+    _plain(f"{kind}: " + ", ".join(f"{k}={v}" for k, v in first.mapping.items()))
+    _plain(
+        "landmarks.csv (mm) and events.csv (s) stay CSV, as a stylus export would; the "
+        f"commands write each subject's pose CSVs to <subject>/{CONVERTED_DIR} and its "
+        f"session to <subject>/{SESSION_DIR}"
+    )
+    commands = [c for t in written for c in t.commands]
+    script = out_dir / COMMANDS_FILE
+    with atomic_write(script) as fh:
+        fh.write("#!/bin/sh\nset -e\n" + "\n".join(commands) + "\n")
+    _plain(f"to build and fit the session(s), run (also in {shlex.quote(str(script))}):")
+    for c in commands:
+        _plain(c)

@@ -1,0 +1,304 @@
+"""``fingerfit simulate --format``: tracker files without hardware, and the real-data round trip.
+
+For each tracker format the subject is simulated through the CLI, the printed
+``fingerfit convert`` / ``session`` / ``fit`` commands are run exactly as printed, and the
+fitted model is compared with the one fitted from the CSV session of the same seed.
+
+``python -m tests.test_simulate_formats [N_SUBJECTS]`` prints the largest differences per
+format, method and joint over N subjects (the table in ``docs/simulator.md``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import shlex
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fingerfit.io import load_session
+from fingerfit.io.liberty import parse_liberty_ascii, parse_liberty_binary
+from fingerfit.model import HandModel, load_model
+from fingerfit.session import JOINTS, SEGMENTS
+from fingerfit.simulate.trackerfiles import (
+    LIBERTY_ITEM_CODES,
+    c3d_label,
+    station_map,
+)
+
+from .bad_inputs._cli import listing, run
+
+SEED = 4
+FORMATS = ("liberty-ascii", "liberty-binary", "c3d")
+METHODS = ("twoaxis", "robust")
+#: Tight tolerances of the round trip (every format): axis deg, centre mm, length mm.
+AXIS_DEG, CENTRE_MM, LENGTH_MM = 0.2, 0.2, 0.2
+_EXT = {"liberty-ascii": "txt", "liberty-binary": "bin", "c3d": "c3d"}
+
+
+def _needs(fmt: str) -> None:
+    if fmt == "c3d":
+        pytest.importorskip("ezc3d", reason="the c3d extra (ezc3d) is not installed")
+
+
+def printed_commands(output: str) -> list[str]:
+    """The ``fingerfit ...`` command lines of ``simulate``'s output, in order."""
+    return [ln for ln in output.splitlines() if ln.startswith("fingerfit ")]
+
+
+def run_printed(commands: list[str], cwd: Path) -> list[str]:
+    """Run each printed command exactly (shell-split, in ``cwd``); return their outputs."""
+    outputs = []
+    for cmd in commands:
+        args = shlex.split(cmd)
+        assert args[0] == "fingerfit"
+        res = run(*args[1:], cwd=cwd)
+        assert res.exit_code == 0, f"{cmd}\n{res.output}"
+        outputs.append(res.output)
+    return outputs
+
+
+def simulate_and_fit(
+    work: Path, fmt: str, seed: int = SEED, subjects: int = 1
+) -> dict[str, list[HandModel]]:
+    """Simulate via the CLI in ``work/<fmt>``; fit every method; models per method, per subject.
+
+    ``csv``: ``fingerfit fit OUT/Sxx``; tracker formats: the printed commands, then
+    ``fingerfit fit`` again for the other methods.
+    """
+    res = run("simulate", fmt, "--subjects", subjects, "--seed", seed, "--format", fmt, cwd=work)
+    assert res.exit_code == 0, res.output
+    sessions = [Path(fmt) / f"S{i + 1:02d}" for i in range(subjects)]
+    if fmt != "csv":
+        commands = printed_commands(res.output)
+        assert len(commands) == subjects * 6  # 4 convert, session, fit
+        run_printed(commands, work)
+        sessions = [s / "session" for s in sessions]
+    models: dict[str, list[HandModel]] = {m: [] for m in METHODS}
+    for s in sessions:
+        for m in METHODS:
+            path = s / f"model-{m}.json"
+            if fmt != "csv" and m == "twoaxis":  # the printed `fingerfit fit` (default method)
+                path = s / "model.json"
+            else:
+                r = run("fit", s, "--method", m, "-o", path, cwd=work)
+                assert r.exit_code == 0, r.output
+            models[m].append(load_model(work / path))
+    return models
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip(abs(float(a @ b)), -1.0, 1.0))))
+
+
+def model_differences(a: HandModel, b: HandModel) -> dict[str, dict[str, float]]:
+    """Per joint (and ``mp_abduction``, two-axis models): axis deg, centre mm, segment mm."""
+    out: dict[str, dict[str, float]] = {}
+    for f, fa in a.fingers.items():
+        fb = b.fingers[f]
+        for j, seg in zip(JOINTS, SEGMENTS, strict=True):
+            ja, jb = fa.joints[j], fb.joints[j]
+            out[j] = {
+                "axis_deg": _angle_deg(ja.axis, jb.axis),
+                "centre_mm": float(np.linalg.norm(ja.center - jb.center)),
+                "length_mm": abs(fa.segment_lengths[seg] - fb.segment_lengths[seg]),
+            }
+        if fa.abduction is not None and fb.abduction is not None:
+            out["mp_abduction"] = {
+                "axis_deg": _angle_deg(fa.abduction.axis, fb.abduction.axis),
+                "centre_mm": float(np.linalg.norm(fa.abduction.center - fb.abduction.center)),
+                "length_mm": 0.0,
+            }
+    return out
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("formats")
+
+
+@pytest.fixture(scope="module")
+def csv_models(work: Path) -> dict[str, list[HandModel]]:
+    return simulate_and_fit(work, "csv")
+
+
+_cache: dict[str, dict[str, list[HandModel]]] = {}
+
+
+def tracker_models(work: Path, fmt: str) -> dict[str, list[HandModel]]:
+    if fmt not in _cache:
+        _cache[fmt] = simulate_and_fit(work, fmt)
+    return _cache[fmt]
+
+
+# ------------------------------------------------------------------ file layout and units
+
+
+def test_liberty_ascii_layout_units_and_precision(work: Path, csv_models) -> None:
+    tracker_models(work, "liberty-ascii")
+    truth = load_session(work / "csv" / "S01")
+    path = work / "liberty-ascii" / "S01" / "grasp.txt"
+    raw = path.read_bytes()
+    lines = raw.split(b"\r\n")
+    assert lines[-1] == b"" and b"\n" not in raw.replace(b"\r\n", b"")  # CR/LF records
+    # station, position x3 (3 decimals), quaternion x4 (4 decimals), frame count
+    pat = re.compile(rb"^0[1-4]  ?-?\d+\.\d{3}( -?\d+\.\d{3}){2}( -?\d\.\d{4}){4} \d+$")
+    assert all(pat.match(ln) for ln in lines[:-1]), lines[:4]
+    recs = parse_liberty_ascii(path, LIBERTY_ITEM_CODES)
+    stations = station_map(truth.grasp[0].sensors)
+    rec = truth.grasp[0]
+    n = rec.n_frames
+    assert recs.n_records == 4 * n
+    np.testing.assert_array_equal(recs.station, np.tile(list(stations), n))
+    np.testing.assert_array_equal(recs.values["frame"], np.repeat(np.arange(n), 4))
+    pos_mm = np.stack([rec.poses[s].position for s in stations.values()], axis=1).reshape(-1, 3)
+    # inches, rounded to 0.001 in
+    err = np.abs(recs.values["position"] - pos_mm / 25.4)
+    assert err.max() <= 0.0005 + 1e-9
+    assert err.max() > 1e-5  # really rounded, so really inches at 3 decimals
+    # quaternion w,x,y,z at 4 decimals: rotation matches the session's to ~0.02 deg
+    from fingerfit.transforms import matrix_from_quat_wxyz
+
+    rot = np.stack([rec.poses[s].rotation for s in stations.values()], axis=1).reshape(-1, 3, 3)
+    got = matrix_from_quat_wxyz(recs.values["quaternion"])
+    cos = (np.einsum("nij,nij->n", got, rot) - 1) / 2
+    assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 0.03
+
+
+def test_liberty_binary_records(work: Path, csv_models) -> None:
+    tracker_models(work, "liberty-binary")
+    truth = load_session(work / "csv" / "S01")
+    path = work / "liberty-binary" / "S01" / "reference.bin"
+    raw = path.read_bytes()
+    size = 8 + 4 * (3 + 4) + 4  # header, float32 position + quaternion, uint32 frame count
+    n = truth.reference.n_frames
+    assert len(raw) == 4 * n * size
+    assert raw[:2] == b"LY" and raw[2] == 1 and int.from_bytes(raw[6:8], "little") == size - 8
+    recs = parse_liberty_binary(path, LIBERTY_ITEM_CODES)
+    pos_mm = np.stack(
+        [truth.reference.poses[s].position for s in station_map(truth.reference.sensors).values()],
+        axis=1,
+    ).reshape(-1, 3)
+    np.testing.assert_allclose(recs.values["position"] * 25.4, pos_mm, atol=1e-4)  # float32
+
+
+def test_c3d_rotation_channels(work: Path, csv_models) -> None:
+    _needs("c3d")
+    import ezc3d
+
+    tracker_models(work, "c3d")
+    truth = load_session(work / "csv" / "S01")
+    c = ezc3d.c3d(str(work / "c3d" / "S01" / "test.c3d"))
+    sensors = list(station_map(truth.test[0].sensors).values())
+    labels = [c3d_label(s) for s in sensors]
+    assert list(c["parameters"]["ROTATION"]["LABELS"]["value"]) == labels
+    assert c["parameters"]["POINT"]["UNITS"]["value"] == ["mm"]
+    assert c["parameters"]["POINT"]["RATE"]["value"][0] == 240.0
+    m = np.transpose(c["data"]["rotations"], (2, 3, 0, 1))  # (channel, frame, 4, 4)
+    for k, s in enumerate(sensors):
+        np.testing.assert_allclose(m[k, :, :3, 3], truth.test[0].poses[s].position, atol=1e-3)
+        np.testing.assert_allclose(m[k, :, :3, :3], truth.test[0].poses[s].rotation, atol=1e-6)
+
+
+# ------------------------------------------------------------------ round trip
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_printed_commands_give_the_same_session(work: Path, csv_models, fmt: str) -> None:
+    """Same frames, times, sensors, landmarks and events as the CSV session, within precision."""
+    _needs(fmt)
+    tracker_models(work, fmt)
+    a = load_session(work / "csv" / "S01")
+    b = load_session(work / fmt / "S01" / "session")
+    assert b.landmarks.keys() == a.landmarks.keys()
+    assert b.events == a.events
+    pos_tol = {"liberty-ascii": 0.0127 + 1e-6, "liberty-binary": 1e-4, "c3d": 1e-4}[fmt]
+    for ra, rb in zip(a.recordings(), b.recordings(), strict=True):
+        assert ra.name == rb.name
+        np.testing.assert_allclose(rb.time, ra.time, atol=1e-9)
+        assert rb.sensors == ra.sensors
+        for s in ra.sensors:
+            np.testing.assert_allclose(rb.poses[s].position, ra.poses[s].position, atol=pos_tol)
+    # the simulation wrote its files inside its output folder only, nothing half done
+    assert not [p for p in (work / fmt).rglob("*") if ".part" in p.name]
+
+
+def _assert_close(diff: dict[str, float], what: str) -> None:
+    assert diff["axis_deg"] <= AXIS_DEG, f"{what}: axis {diff['axis_deg']:.3f} deg"
+    assert diff["centre_mm"] <= CENTRE_MM, f"{what}: centre {diff['centre_mm']:.3f} mm"
+    assert diff["length_mm"] <= LENGTH_MM, f"{what}: segment {diff['length_mm']:.3f} mm"
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("method", METHODS)
+def test_round_trip_pip_dip(work: Path, csv_models, fmt: str, method: str) -> None:
+    _needs(fmt)
+    got = tracker_models(work, fmt)[method][0]
+    diff = model_differences(csv_models[method][0], got)
+    for j in ("pip", "dip"):
+        _assert_close(diff[j], f"{fmt} {method} {j}")
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_round_trip_mp_single_axis(work: Path, csv_models, fmt: str) -> None:
+    _needs(fmt)
+    diff = model_differences(csv_models["robust"][0], tracker_models(work, fmt)["robust"][0])
+    _assert_close(diff["mp"], f"{fmt} robust mp")
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_round_trip_mp_two_axis(work: Path, csv_models, fmt: str) -> None:
+    _needs(fmt)
+    diff = model_differences(csv_models["twoaxis"][0], tracker_models(work, fmt)["twoaxis"][0])
+    _assert_close(diff["mp"], f"{fmt} twoaxis mp")
+    _assert_close(diff["mp_abduction"], f"{fmt} twoaxis mp_abduction")
+
+
+def test_nothing_outside_the_output_folder(tmp_path: Path) -> None:
+    (tmp_path / "keep.txt").write_text("x")
+    before = listing(tmp_path)
+    res = run("simulate", "out", "--subjects", 1, "--seed", 1, "--format", "liberty-ascii",
+              cwd=tmp_path)  # fmt: skip
+    assert res.exit_code == 0, res.output
+    after = listing(tmp_path)
+    new = sorted(set(after) - set(before))
+    assert all(Path(p).is_relative_to(tmp_path / "out") for p in new)
+    assert {k: v for k, v in after.items() if k in before} == before
+    names = {Path(p).relative_to(tmp_path / "out").as_posix() for p in new}
+    assert {"commands.sh", "S01/grasp.txt", "S01/landmarks.csv", "S01/events.csv"} <= names
+    assert not [n for n in names if ".part" in n or "/." in n]
+    script = (tmp_path / "out" / "commands.sh").read_text().splitlines()
+    assert script[2:] == printed_commands(res.output)
+    # a second run refuses to replace the subject folder, and changes nothing
+    again = run("simulate", "out", "--subjects", 1, "--seed", 2, "--format", "c3d", cwd=tmp_path)
+    assert again.exit_code == 2 and "pass --overwrite" in again.output
+    assert listing(tmp_path) == after
+
+
+def _measure(n_subjects: int) -> None:  # pragma: no cover - documentation helper
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        work = Path(d)
+        ref = simulate_and_fit(work, "csv", SEED, n_subjects)
+        print(f"max over {n_subjects} subjects (seed {SEED}) of |tracker path - CSV path|")
+        print("| format | method | joint | axis (deg) | centre (mm) | segment (mm) |")
+        print("|---|---|---|---|---|---|")
+        for fmt in FORMATS:
+            got = simulate_and_fit(work, fmt, SEED, n_subjects)
+            for m in METHODS:
+                diffs = [model_differences(a, b) for a, b in zip(ref[m], got[m], strict=True)]
+                for j in diffs[0]:
+                    row = [max(d[j][k] for d in diffs) for k in ("axis_deg", "centre_mm")]
+                    row.append(max(d[j]["length_mm"] for d in diffs))
+                    print(f"| {fmt} | {m} | {j} | {row[0]:.4f} | {row[1]:.4f} | {row[2]:.4f} |")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    with contextlib.suppress(IndexError):
+        _measure(int(sys.argv[1]))
+        sys.exit(0)
+    _measure(5)
