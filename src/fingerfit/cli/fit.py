@@ -16,31 +16,39 @@ from ..io import load_session, read_pose_csv
 from ..io.atomic import atomic_write, check_target, refuse_writing_inputs
 from ..kinematics import compute_kinematics, kinematics_table
 from ..model import HandModel, load_model, save_model
+from ..plausibility import check_recording, enforce
 from ..session import FINGERS, UNITS_TO_MM
 from .app import app, notice, out, parse_list, say, user_errors
 
+#: One line per column of the fit table (``docs/methods.md`` explains each figure).
+TABLE_LEGEND = {
+    "finger": "finger name",
+    "joint": "mp, pip, dip (flexion joints, proximal to distal)",
+    "cycles": "grasp cycles (movement periods) the joint was fitted from",
+    "ROM° mean (min–max)": "range of motion per cycle, degrees: mean over cycles (smallest–largest)",
+    "c→axis mm": "mean distance of the per-cycle centres of rotation to the fitted axis (paper Fig. 8)",
+    "s5/s6": "median over cycles of the centre system's two smallest singular values' ratio: "
+    "rotation about the axis over rotation off it (large = one clear hinge axis)",
+    "vs cycles°": "angle between the fitted axis and the cycles' own rotation axis (SVD null vectors)",
+    "bone mm": "segment length from this joint's centre to the next joint's centre (dip: to the tip)",
+}
+
 
 def quality_table(model: HandModel) -> Table:
-    """Per joint: cycles, range of motion, centre-to-axis distance, conditioning, bone length."""
+    """Per joint: cycles, range of motion, centre-to-axis distance, conditioning, bone length.
+
+    The caption is a one-line legend per column (:data:`TABLE_LEGEND`).
+    """
     t = Table(
         title=f"{model.subject}: method {model.method}"
         + (", two-axis MP" if any(f.abduction is not None for f in model.fingers.values()) else ""),
         title_justify="left",
-        caption="c→axis: mean distance of the cycles' centres of rotation to the axis; "
-        "vs cycles: angle between the axis and the cycles' own rotation axis; "
-        "bone: from this joint's centre to the next (or to the tip)",
+        caption="\n".join(
+            f"{k}: {v}" for k, v in TABLE_LEGEND.items() if k not in ("finger", "joint")
+        ),
         caption_justify="left",
     )
-    for c in (
-        "finger",
-        "joint",
-        "cycles",
-        "ROM° mean (range)",
-        "c→axis mm",
-        "s5/s6",
-        "vs cycles°",
-        "bone mm",
-    ):
+    for c in TABLE_LEGEND:
         t.add_column(c, justify="left" if c in ("finger", "joint") else "right")
     for f, fm in model.fingers.items():
         for (j, jm), length in zip(fm.joints.items(), fm.segment_lengths.values(), strict=True):
@@ -50,7 +58,7 @@ def quality_table(model: HandModel) -> Table:
                 f,
                 j,
                 str(q.cycles),
-                f"{rom.min():.0f}–{rom.max():.0f}" if rom.size else "–",
+                f"{rom.mean():.0f} ({rom.min():.0f}–{rom.max():.0f})" if rom.size else "–",
                 f"{np.mean(q.centre_distance_mm):.2f}",
                 f"{np.median(q.conditioning):.0f}",
                 f"{q.null_agreement_deg:.1f}",
@@ -77,7 +85,12 @@ def fit(
         str | None, typer.Option(help="Comma-separated fingers (default: all).")
     ] = None,
     force: Annotated[
-        bool, typer.Option("--force", help="Fit joints the motion cannot determine, with warnings.")
+        bool,
+        typer.Option(
+            "--force",
+            help="Fit joints the motion cannot determine and data that fail the plausibility "
+            "checks (units, quaternion order); the warnings are stored in the model file.",
+        ),
     ] = False,
 ) -> None:
     """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
@@ -94,6 +107,8 @@ def fit(
         )
     for w in caught:
         notice("warning", str(w.message))
+    if model.warnings:
+        notice("warning", f"{len(model.warnings)} warning(s) stored in the model file (--force)")
     path = save_model(model, output or session / "model.json")
     out.print(quality_table(model))
     say("model written to [bold]{}[/]", path)
@@ -122,6 +137,14 @@ def angles(
             help="Also write the joint-angle trajectory (rad, URDF joint names, user-axis model).",
         ),
     ] = None,
+    force: Annotated[
+        bool,
+        typer.Option(
+            "--force",
+            help="Compute angles even when the recording does not fit the model (units, "
+            "quaternion order, sensors), with a warning.",
+        ),
+    ] = False,
 ) -> None:
     """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
     outputs = [output] if urdf_names is None else [output, urdf_names]
@@ -135,6 +158,13 @@ def angles(
     rec = read_pose_csv(recording, units=units, rate_hz=rate)
     for note in rec.notes:
         notice("note", note)
+    # The recording against the model: a wrong --units or quaternion order, or another
+    # subject's recording, gives wrong angles without complaint (fingerfit.plausibility).
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        enforce(check_recording(model, rec, units, recording), force)
+    for w in caught:
+        notice("warning", str(w.message))
     kin = compute_kinematics(model, rec)
     table = kinematics_table(kin, units=units)
     with atomic_write(output, newline="") as fh:

@@ -37,6 +37,7 @@ import numpy as np
 from ..errors import FingerfitError
 from ..kinematics import twist_angle, two_axis_angles
 from ..model import ANGLE_METHODS, FingerModel, HandModel, JointModel, JointQuality, assemble_finger
+from ..plausibility import check_model, check_session, enforce
 from ..session import HAND_SENSOR, JOINTS, Session, joint_sensors
 from ..transforms import FloatArray, angle_between_axes, relative_pose, rotation_vector
 from .axis import AxisFit, line_through_centres, mean_null_axis, orient_flexion
@@ -53,6 +54,10 @@ DEFAULT_METHOD = "twoaxis"
 
 class FitError(FingerfitError):
     """The motion cannot determine a joint (named in the message)."""
+
+
+class FitWarning(UserWarning):
+    """A joint fitted despite a quality problem (``force``); stored in the model's warnings."""
 
 
 @dataclass(frozen=True)
@@ -360,7 +365,7 @@ def _refuse_or_warn(
         hint = "" if hard else "; use --force to fit anyway"
         raise FitError(f"{finger} {joint}: {problems[0]}{hint}")
     for p in problems:
-        warnings.warn(f"{finger} {joint}: {p} (fitted anyway)", stacklevel=3)
+        warnings.warn(f"{finger} {joint}: {p} (fitted anyway)", FitWarning, stacklevel=3)
 
 
 def _check(finger: str, joint: str, data: JointData, options: FitOptions) -> list[str]:
@@ -486,6 +491,11 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
     ------
     FitError
         When a joint cannot be determined and ``force`` is not set.
+    PlausibilityError
+        When the data or the fitted model are physically implausible (wrong units, wrong
+        quaternion convention; ``docs/plausibility.md``) and ``force`` is not set. With
+        ``force`` every such problem, and every joint fitted despite a quality problem,
+        is warned about and stored in :attr:`HandModel.warnings`.
     """
     options = options or FitOptions()
     if options.method not in METHODS:
@@ -502,9 +512,18 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
     for f in fingers:
         if f not in session.fingers:
             raise FingerfitError(f"session has no finger '{f}'", path=session.path, field="fingers")
-    model_fingers = {f: fit_finger(session, f, reference, options) for f in fingers}
+    # Physical plausibility first (units, landmarks, quaternion convention): a wrong unit
+    # or quaternion order fits without complaint (fingerfit.plausibility).
+    forced = enforce(check_session(session, fingers, reference), options.force)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model_fingers = {f: fit_finger(session, f, reference, options) for f in fingers}
+    for w in caught:
+        warnings.warn(w.message, stacklevel=2)
+        if issubclass(w.category, FitWarning):
+            forced.append(str(w.message))
     used = {HAND_SENSOR} | {j.child for f in model_fingers.values() for j in f.joints.values()}
-    return HandModel(
+    model = HandModel(
         subject=session.subject,
         hand=session.hand,
         session_units=session.units,
@@ -513,6 +532,8 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
         fingers=model_fingers,
         angle_method=options.angle_method or METHOD_ANGLES[options.method],
     )
+    forced += enforce(check_model(model, session), options.force)
+    return replace(model, warnings=tuple(forced))
 
 
 __all__ = [
@@ -523,6 +544,7 @@ __all__ = [
     "AxisEstimate",
     "FitError",
     "FitOptions",
+    "FitWarning",
     "JointData",
     "fit_session",
 ]
