@@ -12,8 +12,9 @@ from rich.table import Table
 from ..estimate import FitOptions
 from ..estimate.fit import METHODS
 from ..evaluate import StudyResult, run_study
+from ..io.atomic import staged_directory
 from ..simulate import SimConfig, simulate_cohort, write_subject
-from .app import app, out, say, user_errors
+from .app import app, notice, out, say, user_errors
 
 
 def _progress() -> Progress:
@@ -24,6 +25,15 @@ def _progress() -> Progress:
         TimeElapsedColumn(),
         transient=True,
     )
+
+
+def _cell(d: dict) -> str:
+    m, sd = d["mean_mm"], d["sd_mm"]
+    return "—" if m is None else f"{m:.1f} ({'—' if sd is None else f'{sd:.1f}'})"
+
+
+def _pct(v: float | None) -> str:
+    return "—" if v is None else f"{v:.0f} %"
 
 
 def headline_table(result: StudyResult) -> Table:
@@ -38,16 +48,24 @@ def headline_table(result: StudyResult) -> Table:
         h, p = sm[key], sm["paper"][key]
         t.add_row(
             name,
-            f"{h['user_axis']['mean_mm']:.1f} ({h['user_axis']['sd_mm']:.1f})",
-            f"{h['orthogonal']['mean_mm']:.1f} ({h['orthogonal']['sd_mm']:.1f})",
-            f"{h['reduction_percent']:.0f} % / {h['sd_reduction_percent']:.0f} %",
+            _cell(h["user_axis"]),
+            _cell(h["orthogonal"]),
+            f"{_pct(h['reduction_percent'])} / {_pct(h['sd_reduction_percent'])}",
             f"{p['user_axis'][0]} ({p['user_axis'][1]}) vs {p['orthogonal'][0]} ({p['orthogonal'][1]}), "
             f"−{p['reduction_percent']} %",
         )
     return t
 
 
-def _run(sessions: list, out_dir: Path, method: str) -> StudyResult:
+def _run(
+    sessions: list,
+    out_dir: Path,
+    method: str,
+    *,
+    force: bool = False,
+    keep_going: bool = False,
+    overwrite: bool = False,
+) -> StudyResult:
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
     with _progress() as bar:
@@ -55,9 +73,16 @@ def _run(sessions: list, out_dir: Path, method: str) -> StudyResult:
         result = run_study(
             sessions,
             out_dir,
-            FitOptions(method=method),
+            FitOptions(method=method, force=force),
             progress=lambda msg: bar.update(task, advance=1, description=msg),
+            keep_going=keep_going,
+            overwrite=overwrite,
         )
+    for f in result.failures:
+        notice("warning", f"skipped {f.message}")
+    for subject, warned in result.summary.get("warnings", {}).items():
+        for w in warned:
+            notice("warning", f"{subject}: {w}")
     out.print(headline_table(result))
     return result
 
@@ -66,13 +91,34 @@ def _run(sessions: list, out_dir: Path, method: str) -> StudyResult:
 @user_errors
 def study(
     sessions: Annotated[list[Path], typer.Argument(help="Session directories.")],
-    out_dir: Annotated[Path, typer.Option("--out", help="Output folder.")],
+    out_dir: Annotated[
+        Path, typer.Option("--out", help="Output folder (absent or empty, or see --overwrite).")
+    ],
     method: Annotated[
         str, typer.Option(help=f"Axis estimator: {', '.join(METHODS)}.")
     ] = FitOptions.method,
+    force: Annotated[
+        bool,
+        typer.Option(
+            "--force", help="Fit past plausibility checks; the warnings go in the report."
+        ),
+    ] = False,
+    keep_going: Annotated[
+        bool,
+        typer.Option(
+            "--keep-going",
+            help="Skip sessions that fail (listed as warnings and in the report); "
+            "exit 2 only if none succeeds.",
+        ),
+    ] = False,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace a non-empty --out folder.")
+    ] = False,
 ) -> None:
     """The paper's evaluation over sessions: report.html, summary.json, CSV tables, PNG figures."""
-    result = _run(list(sessions), out_dir, method)
+    result = _run(
+        list(sessions), out_dir, method, force=force, keep_going=keep_going, overwrite=overwrite
+    )
     say("report: [bold]{}[/]", result.report)
 
 
@@ -80,20 +126,28 @@ def study(
 @user_errors
 def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="Output folder.")] = Path("fingerfit-demo"),
-    subjects: Annotated[int, typer.Option(min=2, help="Simulated subjects.")] = 5,
+    subjects: Annotated[int, typer.Option(min=1, help="Simulated subjects.")] = 5,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 2018,
     method: Annotated[
         str, typer.Option(help=f"Axis estimator: {', '.join(METHODS)}.")
     ] = FitOptions.method,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace a non-empty --out folder.")
+    ] = False,
 ) -> None:
-    """Simulate the paper's cohort (index finger, left hand, Liberty-like), fit, and run the study."""
+    """Simulate the paper's cohort (index finger, left hand, Liberty-like), fit, and run the study.
+
+    Writes ``OUT/sessions/<subject>`` and ``OUT/study``; all of it appears at once
+    when everything succeeded.
+    """
     config = SimConfig(fingers=("index",), hand="left")
-    with _progress() as bar:
-        task = bar.add_task(f"simulating {subjects} subjects", total=subjects)
-        dirs = []
-        for sim in simulate_cohort(config, subjects, seed):
-            dirs.append(write_subject(sim, out_dir / "sessions" / sim.session.subject))
-            bar.advance(task)
-    result = _run(dirs, out_dir / "study", method)
+    with staged_directory(out_dir, overwrite=overwrite) as tmp:
+        with _progress() as bar:
+            task = bar.add_task(f"simulating {subjects} subjects", total=subjects)
+            dirs = []
+            for sim in simulate_cohort(config, subjects, seed):
+                dirs.append(write_subject(sim, tmp / "sessions" / sim.session.subject))
+                bar.advance(task)
+        _run(dirs, tmp / "study", method)
     say("sessions: {}", out_dir / "sessions")
-    say("report: [bold]{}[/]", result.report)
+    say("report: [bold]{}[/]", out_dir / "study" / "report.html")

@@ -1,4 +1,11 @@
-"""Figures of the study (matplotlib, Agg backend), numbered as in the paper."""
+"""Figures of the study (matplotlib, Agg backend), numbered as in the paper.
+
+Each ``make_*`` function builds a :class:`matplotlib.figure.Figure` (so tests can
+inspect its layout); the function of the same name without ``make_`` writes it as
+PNG and closes it. Every axis is labelled with its quantity, frame and unit;
+legends sit outside the data and the layout is constrained, so no two labels
+overlap (``tests/test_report_layout.py`` checks this).
+"""
 
 from __future__ import annotations
 
@@ -11,6 +18,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
 from ..io.atomic import atomic_write
 
@@ -20,30 +28,44 @@ LABELS = {
     "user_axis": "user-axis model",
     "orthogonal": "orthogonal model",
 }
+DPI = 110
 
 
-def save(fig: plt.Figure, path: Path) -> Path:
+def save(fig: Figure, path: Path) -> Path:
     """Write a PNG atomically and close the figure."""
-    with atomic_write(path, "wb") as fh:
-        fig.savefig(fh, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        with atomic_write(path, "wb") as fh:
+            fig.savefig(fh, format="png", dpi=DPI, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path
 
 
-def axis_quality(distances: pd.DataFrame, path: Path) -> Path:
+def _tick_labels(ax, labels: list[str], axis_len_in: float) -> None:
+    """Category tick labels, rotated when they would not fit side by side."""
+    longest = max((len(str(s)) for s in labels), default=1)
+    per_label_in = axis_len_in / max(1, len(labels))
+    rotate = longest * 0.075 > per_label_in  # ~0.075 in per character at 9 pt
+    ax.set_xticks(
+        range(len(labels)), labels, rotation=45 if rotate else 0, ha="right" if rotate else "center"
+    )
+
+
+def make_axis_quality(distances: pd.DataFrame) -> Figure:
     """Fig. 8: distance of each cycle's centre of rotation to the fitted axis, per subject.
 
     ``distances`` has columns ``subject``, ``finger``, ``joint``, ``distance_mm``.
     """
-    subjects = sorted(distances["subject"].unique())
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=False)
+    subjects = list(pd.unique(distances["subject"]))  # study order
+    width_in = max(10.0, 1.0 * len(subjects) + 3)
+    fig, axes = plt.subplots(1, 2, figsize=(width_in, 4.0), layout="constrained")
     panels = ((axes[0], ("dip", "pip"), "(a) DIP and PIP"), (axes[1], ("mp",), "(b) MP"))
     colors = {"dip": "#d62728", "pip": "#2ca02c", "mp": "#1f77b4"}
     for ax, joints, title in panels:
         width = 0.8 / len(joints)
         for k, j in enumerate(joints):
             sel = distances[distances["joint"] == j]
-            data = [sel.loc[sel["subject"] == s, "distance_mm"] for s in subjects]
+            data = [sel.loc[sel["subject"] == s, "distance_mm"].dropna() for s in subjects]
             pos = np.arange(len(subjects)) + (k - (len(joints) - 1) / 2) * width
             bp = ax.boxplot(
                 data, positions=pos, widths=width * 0.9, patch_artist=True, showfliers=True
@@ -52,101 +74,166 @@ def axis_quality(distances: pd.DataFrame, path: Path) -> Path:
                 b.set_facecolor(colors[j])
                 b.set_alpha(0.6)
             ax.plot([], [], "s", color=colors[j], label=j.upper())
-        ax.set_xticks(range(len(subjects)), subjects)
-        ax.set_title(title, loc="left")
-        ax.set_ylabel("distance of c_i to axis (mm)")
-        ax.legend(frameon=False)
+        _tick_labels(ax, subjects, width_in / 2 - 1)
+        ax.set_xlabel("subject")
+        ax.set_title(title, loc="left", fontsize=10)
+        ax.set_ylabel("cycle centre to fitted axis (mm)")
+        ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     fig.suptitle(
         "Fig. 8 - axis quality: per-cycle centres of rotation vs the fitted axis", fontsize=10
     )
-    return save(fig, path)
+    return fig
 
 
-def trajectories(time: np.ndarray, tips: dict[str, np.ndarray], subject: str, path: Path) -> Path:
-    """Fig. 9: fingertip trajectories of both models against the distal-sensor reference, three planes."""
-    step = max(1, round(0.1 / np.median(np.diff(time))))
-    fig, axes = plt.subplots(1, 3, figsize=(12, 4))
+def axis_quality(distances: pd.DataFrame, path: Path) -> Path:
+    """Write Fig. 8 (see :func:`make_axis_quality`) as PNG."""
+    return save(make_axis_quality(distances), path)
+
+
+def make_trajectories(time: np.ndarray, tips: dict[str, np.ndarray], subject: str) -> Figure:
+    """Fig. 9: fingertip trajectories of both models and the distal-sensor reference.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Seconds.
+    tips : dict of str to ndarray, shape (n, 3)
+        ``reference``, ``user_axis``, ``orthogonal`` fingertips in the hand sensor
+        frame (mm); plotted relative to the mean reference fingertip.
+    subject : str
+        For the title.
+    """
+    dt = np.diff(time)
+    dt = dt[np.isfinite(dt) & (dt > 0)]
+    step = max(1, round(0.1 / np.median(dt))) if dt.size else 1
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4.6), layout="constrained")
     ref = tips["reference"]
     centre = np.nanmean(ref, axis=0)
-    for ax, (i, j, name) in zip(axes, ((0, 1, "X-Y"), (2, 1, "Z-Y"), (2, 0, "Z-X")), strict=True):
+    handles = []
+    for ax, (i, j) in zip(axes, ((0, 1), (2, 1), (2, 0)), strict=True):
         for src in ("user_axis", "orthogonal"):
             p = tips[src] - centre
-            ax.plot(p[:, i], p[:, j], "-", lw=0.7, color=COLORS[src], label=LABELS[src], alpha=0.8)
+            (h,) = ax.plot(
+                p[:, i], p[:, j], "-", lw=0.7, color=COLORS[src], label=LABELS[src], alpha=0.8
+            )
+            handles.append(h)
         r = ref[::step] - centre
-        ax.plot(
+        (h,) = ax.plot(
             r[:, i],
             r[:, j],
             ".",
             ms=3,
             color=COLORS["reference"],
-            label=LABELS["reference"] + " (0.1 s)",
+            label=LABELS["reference"] + " (every 0.1 s)",
         )
-        ax.set_xlabel(f"{'XYZ'[i]} (mm)")
-        ax.set_ylabel(f"{'XYZ'[j]} (mm)")
-        ax.set_title(name + " plane", loc="left")
+        handles.append(h)
+        ax.set_xlabel(f"hand-sensor {'xyz'[i]} (mm)")
+        ax.set_ylabel(f"hand-sensor {'xyz'[j]} (mm)")
+        ax.set_title(f"{'xyz'[i]}-{'xyz'[j]} plane", loc="left", fontsize=10)
         ax.set_aspect("equal", adjustable="datalim")
-    axes[0].legend(frameon=False, fontsize=8)
+        ax.locator_params(nbins=5)
+    fig.legend(handles=handles[:3], loc="outside lower center", ncols=3, frameon=False, fontsize=9)
     fig.suptitle(
-        f"Fig. 9 - grasp fingertip trajectories, subject {subject} (hand sensor frame)", fontsize=10
+        f"Fig. 9 - grasp fingertip trajectories, subject {subject}: hand-sensor frame, "
+        "origin at the mean reference fingertip",
+        fontsize=10,
     )
-    return save(fig, path)
+    return fig
 
 
-def paired_boxes(data: pd.DataFrame, by: str, title: str, ylabel: str, path: Path) -> Path:
-    """Box plots of ``user_axis`` vs ``orthogonal`` errors per value of ``by`` (Fig. 10 style)."""
-    groups = sorted(data[by].unique())
-    fig, ax = plt.subplots(figsize=(max(5, 1.2 * len(groups) + 2), 3.8))
+def trajectories(time: np.ndarray, tips: dict[str, np.ndarray], subject: str, path: Path) -> Path:
+    """Write Fig. 9 (see :func:`make_trajectories`) as PNG."""
+    return save(make_trajectories(time, tips, subject), path)
+
+
+def make_paired_boxes(
+    data: pd.DataFrame, by: str, title: str, ylabel: str, xlabel: str | None = None
+) -> Figure:
+    """Box plots of ``user_axis`` vs ``orthogonal`` errors (mm) per value of ``by`` (Fig. 10)."""
+    groups = list(pd.unique(data[by])) if by == "subject" else sorted(data[by].unique())
+    width_in = max(6.0, 1.2 * len(groups) + 3)
+    fig, ax = plt.subplots(figsize=(width_in, 4.0), layout="constrained")
     for k, src in enumerate(("user_axis", "orthogonal")):
         vals = [data.loc[data[by] == g, src].dropna() for g in groups]
         pos = np.arange(len(groups)) + (k - 0.5) * 0.38
-        bp = ax.boxplot(vals, positions=pos, widths=0.33, patch_artist=True)
+        bp = ax.boxplot(vals, positions=pos, widths=0.33, patch_artist=True, showfliers=False)
         for b in bp["boxes"]:
             b.set_facecolor(COLORS[src])
-            b.set_alpha(0.6)
+            b.set_alpha(0.4)
+        for x, v in zip(pos, vals, strict=True):  # every value, so small n stays readable
+            jitter = np.linspace(-0.08, 0.08, len(v)) if len(v) > 1 else np.zeros(len(v))
+            ax.plot(x + jitter, v, "o", ms=3, color=COLORS[src], mec="k", mew=0.3)
         ax.plot([], [], "s", color=COLORS[src], label=LABELS[src])
-    ax.set_xticks(range(len(groups)), groups)
+    _tick_labels(ax, groups, width_in - 3)
+    ax.set_xlabel(xlabel or by)
     ax.set_ylabel(ylabel)
-    ax.legend(frameon=False)
+    ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     ax.set_title(title, loc="left", fontsize=10)
-    return save(fig, path)
+    return fig
 
 
-def target_scatter(targets: pd.DataFrame, path: Path) -> Path:
-    """Fig. 11: fingertip offsets from the targets (X-Y of the tracker frame), by source and target."""
-    fig, ax = plt.subplots(figsize=(5.5, 5))
+def paired_boxes(
+    data: pd.DataFrame, by: str, title: str, ylabel: str, path: Path, xlabel: str | None = None
+) -> Path:
+    """Write a paired box plot (see :func:`make_paired_boxes`) as PNG."""
+    return save(make_paired_boxes(data, by, title, ylabel, xlabel), path)
+
+
+def make_target_scatter(targets: pd.DataFrame) -> Figure:
+    """Fig. 11: mean fingertip minus target, tracker x-y and x-z, by source and target.
+
+    ``targets`` has columns ``target``, ``source``, ``dx``, ``dy``, ``dz`` (mm,
+    tracker frame).
+    """
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.8), layout="constrained")
     labels = sorted(targets["target"].unique())
     shade = {t: 0.25 + 0.75 * i / max(1, len(labels) - 1) for i, t in enumerate(labels)}
     markers = {"reference": "^", "user_axis": "o", "orthogonal": "s"}
-    for src, g in targets.groupby("source"):
-        c = matplotlib.colors.to_rgb(COLORS[src])
-        cols = [tuple(1 - shade[t] * (1 - np.array(c))) for t in g["target"]]
-        ax.scatter(
-            g["dx"],
-            g["dy"],
-            c=cols,
-            marker=markers[src],
-            s=28,
-            label=LABELS[src],
-            edgecolors="k",
-            linewidths=0.3,
-        )
-    ax.axhline(0, color="k", lw=0.5)
-    ax.axvline(0, color="k", lw=0.5)
-    ax.set_xlabel("dx (mm)")
-    ax.set_ylabel("dy (mm)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(frameon=False, fontsize=8)
-    ax.set_title(
-        "Fig. 11 - fingertip minus target (darker = farther target)", loc="left", fontsize=10
+    for ax, (a, b) in zip(axes, (("dx", "dy"), ("dx", "dz")), strict=True):
+        for src in ("reference", "user_axis", "orthogonal"):
+            g = targets[targets["source"] == src]
+            if g.empty:
+                continue
+            c = matplotlib.colors.to_rgb(COLORS[src])
+            cols = [tuple(1 - shade[t] * (1 - np.array(c))) for t in g["target"]]
+            ax.scatter(
+                g[a],
+                g[b],
+                c=cols,
+                marker=markers[src],
+                s=28,
+                label=LABELS[src],
+                edgecolors="k",
+                linewidths=0.3,
+            )
+        ax.axhline(0, color="k", lw=0.5)
+        ax.axvline(0, color="k", lw=0.5)
+        ax.set_xlabel(f"fingertip - target, tracker {a[1]} (mm)")
+        ax.set_ylabel(f"fingertip - target, tracker {b[1]} (mm)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.locator_params(nbins=6)
+        ax.set_title(f"{a[1]}-{b[1]} plane", loc="left", fontsize=10)
+    handles, names = axes[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncols=3, frameon=False, fontsize=9)
+    fig.suptitle(
+        "Fig. 11 - mean fingertip minus stylus target during each touch "
+        "(darker = later target in the list)",
+        fontsize=10,
     )
-    return save(fig, path)
+    return fig
 
 
-def target_bars(targets: pd.DataFrame, path: Path) -> Path:
-    """Fig. 12: mean and SD of the target error per target and pooled, per source."""
+def target_scatter(targets: pd.DataFrame, path: Path) -> Path:
+    """Write Fig. 11 (see :func:`make_target_scatter`) as PNG."""
+    return save(make_target_scatter(targets), path)
+
+
+def make_target_bars(targets: pd.DataFrame) -> Figure:
+    """Fig. 12: mean and SD of the target error (mm) per target and pooled, per source."""
     labels = sorted(targets["target"].unique())
     groups = [*labels, "all"]
-    fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(groups) + 2), 3.8))
+    width_in = max(7.0, 0.9 * len(groups) + 3)
+    fig, ax = plt.subplots(figsize=(width_in, 4.0), layout="constrained")
     for k, src in enumerate(("reference", "user_axis", "orthogonal")):
         g = targets[targets["source"] == src]
         means = [g.loc[g["target"] == t, "error_mm"].mean() for t in labels] + [
@@ -159,14 +246,20 @@ def target_bars(targets: pd.DataFrame, path: Path) -> Path:
             np.arange(len(groups)) + (k - 1) * 0.27,
             means,
             0.25,
-            yerr=sds,
+            yerr=np.asarray(sds, dtype=float),  # NaN (a single touch): no bar drawn
             capsize=2,
             color=COLORS[src],
             alpha=0.8,
             label=LABELS[src],
         )
-    ax.set_xticks(range(len(groups)), groups)
-    ax.set_ylabel("fingertip error to target (mm)")
-    ax.legend(frameon=False, fontsize=8)
-    ax.set_title("Fig. 12 - target reaching: mean (SD)", loc="left", fontsize=10)
-    return save(fig, path)
+    _tick_labels(ax, groups, width_in - 3)
+    ax.set_xlabel("target")
+    ax.set_ylabel("fingertip to target distance (mm)")
+    ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+    ax.set_title("Fig. 12 - target reaching: mean (SD) over touches", loc="left", fontsize=10)
+    return fig
+
+
+def target_bars(targets: pd.DataFrame, path: Path) -> Path:
+    """Write Fig. 12 (see :func:`make_target_bars`) as PNG."""
+    return save(make_target_bars(targets), path)

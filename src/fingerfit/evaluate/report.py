@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -29,8 +30,9 @@ body{font-family:system-ui,-apple-system,Segoe UI,sans-serif;max-width:1100px;ma
 color:#222;line-height:1.45}
 h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}
 table{border-collapse:collapse;margin:.8em 0;font-size:.9em}td,th{border:1px solid #ccc;padding:.25em .6em;
-text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
-img{max-width:100%;border:1px solid #eee}.note{color:#555;font-size:.9em}
+text-align:left;vertical-align:top}th{background:#f3f3f3}td.num{text-align:right;font-variant-numeric:tabular-nums}
+img{max-width:100%;border:1px solid #eee}figure{margin:.8em 0}.note{color:#555;font-size:.9em}
+.warn{color:#8a4b00;font-weight:600}
 #view{border:1px solid #ccc;background:#fcfcfc;cursor:grab}code{background:#f4f4f4;padding:0 .2em}
 """
 
@@ -39,79 +41,189 @@ const data = JSON.parse(document.getElementById('model-data').textContent);
 const cv = document.getElementById('view'), ctx = cv.getContext('2d');
 const sel = document.getElementById('subject');
 for (const s of Object.keys(data)) { const o = document.createElement('option'); o.textContent = s; sel.appendChild(o); }
-let yaw = -0.5, pitch = 0.35, zoom = 1, drag = null, mid = [0, 0, 0];
-function fit() {  // centre the subject's finger(s) and fill the canvas
-  const pts = data[sel.value].flatMap(f => [...f.centres, f.tip]);
-  mid = [0, 1, 2].map(k => pts.reduce((a, p) => a + p[k], 0) / pts.length);
-  const r = Math.max(...pts.map(p => Math.hypot(p[0] - mid[0], p[1] - mid[1], p[2] - mid[2])));
-  zoom = 0.42 * Math.min(cv.width, cv.height) / Math.max(r, 1);
-}
-function proj(p) {
+let yaw = -0.5, pitch = 0.35, zoom = 1, drag = null, off = [0, 0];
+function rot(q) {  // view rotation of a vector (mm): screen right, depth, screen up
   const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
-  const q = [p[0] - mid[0], p[1] - mid[1], p[2] - mid[2]];
   const x = cy * q[0] - sy * q[1], y0 = sy * q[0] + cy * q[1];
-  const y = cp * y0 - sp * q[2], z = sp * y0 + cp * q[2];
-  return [cv.width / 2 + zoom * x, cv.height / 2 - zoom * z, y];
+  return [x, cp * y0 - sp * q[2], sp * y0 + cp * q[2]];
+}
+function proj(p) { const r = rot(p); return [cv.width / 2 + off[0] + zoom * r[0], cv.height / 2 + off[1] - zoom * r[2]]; }
+function points() { return data[sel.value].fingers.flatMap(f => [...f.centres, f.tip, ...f.landmarks]); }
+function fit() {  // frame the hand: every centre, tip and landmark fills ~80 % of the canvas
+  const r = points().map(rot);
+  const lo = [0, 2].map(k => Math.min(...r.map(p => p[k]))), hi = [0, 2].map(k => Math.max(...r.map(p => p[k])));
+  zoom = 0.8 * Math.min(cv.width / Math.max(hi[0] - lo[0], 1), cv.height / Math.max(hi[1] - lo[1], 1));
+  off = [-zoom * (lo[0] + hi[0]) / 2, zoom * (lo[1] + hi[1]) / 2];
 }
 function line(a, b, color, w) { const p = proj(a), q = proj(b); ctx.strokeStyle = color; ctx.lineWidth = w;
   ctx.beginPath(); ctx.moveTo(p[0], p[1]); ctx.lineTo(q[0], q[1]); ctx.stroke(); }
 function dot(a, color, r) { const p = proj(a); ctx.fillStyle = color; ctx.beginPath();
   ctx.arc(p[0], p[1], r, 0, 6.3); ctx.fill(); }
+function text(s, x, y, color) { ctx.fillStyle = color; ctx.fillText(s, x, y); }
+function triad() {  // the frame's axes, bottom left, rotating with the view
+  const o = [55, cv.height - 55], cols = ['#c0392b', '#27ae60', '#2c3e8f'];
+  ctx.font = '13px sans-serif'; ctx.textAlign = 'center'; ctx.textBaseline = 'middle';
+  for (let k = 0; k < 3; k++) {
+    const e = [0, 0, 0]; e[k] = 1; const r = rot(e);
+    const p = [o[0] + 36 * r[0], o[1] - 36 * r[2]];
+    ctx.strokeStyle = cols[k]; ctx.lineWidth = 2; ctx.beginPath(); ctx.moveTo(o[0], o[1]);
+    ctx.lineTo(p[0], p[1]); ctx.stroke();
+    text('xyz'[k], o[0] + 48 * r[0], o[1] - 48 * r[2], cols[k]);
+  }
+}
+function scalebar() {  // 10 mm at the current zoom, bottom right
+  const L = 10 * zoom, x1 = cv.width - 30, x0 = x1 - L, y = cv.height - 30;
+  ctx.strokeStyle = '#000'; ctx.lineWidth = 2; ctx.beginPath();
+  ctx.moveTo(x0, y - 5); ctx.lineTo(x0, y); ctx.lineTo(x1, y); ctx.lineTo(x1, y - 5); ctx.stroke();
+  ctx.font = '13px sans-serif'; ctx.textAlign = 'center'; ctx.textBaseline = 'bottom';
+  text('10 mm', (x0 + x1) / 2, y - 6, '#000');
+}
 function draw() {
   ctx.clearRect(0, 0, cv.width, cv.height);
-  line([0,0,0],[25,0,0],'#bbb',1); line([0,0,0],[0,25,0],'#bbb',1); line([0,0,0],[0,0,25],'#bbb',1);
-  for (const f of data[sel.value]) {
+  const d = data[sel.value];
+  for (const f of d.fingers) {
     const pts = [...f.centres, f.tip];
     for (let i = 0; i < 3; i++) line(pts[i], pts[i + 1], '#888', 5);
     for (let i = 0; i < 3; i++) {
       const c = f.centres[i];
       for (const [ax, col] of [[f.axes[i], '#1f77b4'], [f.orthogonal[i], '#d62728']])
-        line(c.map((v, k) => v - 18 * ax[k]), c.map((v, k) => v + 18 * ax[k]), col, 2);
+        line(c.map((v, k) => v - 12 * ax[k]), c.map((v, k) => v + 12 * ax[k]), col, 2);
       dot(c, '#000', 3.5);
     }
     if (f.abduction) { const [c, ax] = f.abduction;
-      line(c.map((v, k) => v - 18 * ax[k]), c.map((v, k) => v + 18 * ax[k]), '#9467bd', 2); }
+      line(c.map((v, k) => v - 12 * ax[k]), c.map((v, k) => v + 12 * ax[k]), '#9467bd', 2); }
     for (const l of f.landmarks) dot(l, '#2ca02c', 2.5);
     dot(f.tip, '#ff7f0e', 4);
+    const t = proj(f.tip); ctx.font = '13px sans-serif'; ctx.textAlign = 'left';
+    ctx.textBaseline = 'middle'; text(f.name, t[0] + 8, t[1], '#333');
   }
+  triad(); scalebar();
+  ctx.font = '12px sans-serif'; ctx.textAlign = 'left'; ctx.textBaseline = 'top';
+  text(d.frame, 10, 10, '#555');
 }
 cv.onmousedown = e => drag = [e.clientX, e.clientY, yaw, pitch];
 window.onmouseup = () => drag = null;
 window.onmousemove = e => { if (!drag) return; yaw = drag[2] + (e.clientX - drag[0]) / 150;
   pitch = drag[3] + (e.clientY - drag[1]) / 150; draw(); };
 cv.onwheel = e => { e.preventDefault(); zoom *= e.deltaY < 0 ? 1.1 : 0.9; draw(); };
+cv.ondblclick = () => { fit(); draw(); };
 sel.onchange = () => { fit(); draw(); }; fit(); draw();
 """
 
 
-def _img(path: Path) -> str:
+def _img(path: Path, alt: str) -> str:
     b64 = base64.b64encode(path.read_bytes()).decode()
-    return f'<img alt="{html.escape(path.stem)}" src="data:image/png;base64,{b64}">'
+    return f'<figure><img alt="{html.escape(alt)}" src="data:image/png;base64,{b64}"></figure>'
 
 
-def _table(df: pd.DataFrame, digits: int = 2) -> str:
-    return df.to_html(index=False, float_format=lambda v: f"{v:.{digits}f}", border=0, escape=True)
+_NUMERIC = re.compile(r"^[-−+]?\d|^—$")
+
+
+def _table(df: pd.DataFrame) -> str:
+    """An HTML table of pre-formatted cells: numbers right-aligned, text left-aligned."""
+
+    def cell(v: object, tag: str) -> str:
+        text = "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else str(v)
+        cls = " class=num" if tag == "td" and _NUMERIC.match(text) else ""
+        return f"<{tag}{cls}>{html.escape(text)}</{tag}>"
+
+    head = "".join(cell(c, "th") for c in df.columns)
+    body = "".join(
+        "<tr>" + "".join(cell(v, "td") for v in row) + "</tr>" for row in df.itertuples(index=False)
+    )
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+
+
+def _fmt(v: float | None, digits: int = 1, unit: str = "") -> str:
+    """A number to ``digits`` decimals (with ``unit``), or an em dash when undefined."""
+    if v is None or not np.isfinite(v):
+        return "—"
+    return f"{v:.{digits}f}{unit}"
 
 
 def _ms(d: dict) -> str:
-    return f"{d['mean_mm']:.1f} ({d['sd_mm']:.1f})"
+    """Mean (SD) to 0.1 mm."""
+    return f"{_fmt(d['mean_mm'])} ({_fmt(d['sd_mm'])})"
 
 
-def _p(v: float) -> str:
+def _pct(v: float | None) -> str:
+    """A percentage to the whole percent."""
+    return _fmt(v, 0, " %")
+
+
+def _p(v: float | None) -> str:
+    """A p-value: ``p < 0.001`` or three decimals."""
+    if v is None or not np.isfinite(v):
+        return "p undefined"
     return "p < 0.001" if v < 0.001 else f"p = {v:.3f}"
 
 
+def _ttest(d: dict) -> str:
+    """A t-test as ``t(df) = 2.31, p = 0.041``, or why it was not computed."""
+    if "skipped" in d:
+        return f"not computed: {d['skipped']}"
+    return f"t({d['df']:.0f}) = {_fmt(d['t'], 2)}, {_p(d['p'])}"
+
+
+def _factor(name: str) -> str:
+    return re.sub(r"C\((\w+)\)", r"\1", name).replace(":", " × ")
+
+
+def _anova(d: dict, name: str) -> str:
+    """One paragraph: the ANOVA's effects with F and p, or why it was not computed."""
+    if "skipped" in d:
+        return f"<p>Two-factor ANOVA ({name}): not computed: {html.escape(d['skipped'])}.</p>"
+    resid = d.get("Residual", {}).get("df")
+    effects = "; ".join(
+        f"{html.escape(_factor(k))}: F({v['df']:.0f}, {_fmt(resid, 0)}) = {_fmt(v['F'], 2)}, "
+        f"{_p(v['p'])}"
+        for k, v in d.items()
+        if k != "Residual" and v["F"] is not None
+    )
+    return f"<p>Two-factor ANOVA ({name}): {effects}.</p>"
+
+
+_STAT_NAMES = {
+    "axis_quality.t_tests.dip_vs_pip": "axis quality: t-test DIP vs PIP",
+    "axis_quality.t_tests.mp_vs_dip": "axis quality: t-test MP vs DIP",
+    "axis_quality.t_tests.mp_vs_pip": "axis quality: t-test MP vs PIP",
+    "max_flexion.paired_t_test": "maximal flexion: paired t-test, all subjects",
+    "max_flexion.anova_model_x_subject": "maximal flexion: ANOVA model × subject",
+    "targets.paired_t_test": "target reaching: paired t-test",
+    "targets.anova_model_x_target": "target reaching: ANOVA model × target",
+    "targets.anova_model_x_subject": "target reaching: ANOVA model × subject",
+}
+
+
+def _statistic_name(key: str) -> str:
+    """A reader's name for a ``summary.json`` statistic key."""
+    m = re.fullmatch(r"max_flexion\.per_subject\.(.+)\.paired_t_test", key)
+    if m:
+        return f"maximal flexion: paired t-test, subject {m.group(1)}"
+    return _STAT_NAMES.get(key, key)
+
+
+def _list(items: list[str]) -> str:
+    return "<ul>" + "".join(f"<li>{html.escape(i)}</li>" for i in items) + "</ul>"
+
+
 def _viewer_data(result: StudyResult) -> dict:
+    """Per subject: the fingers in one frame, the proximal-phalanx frame of its first finger.
+
+    Origin at that finger's MP centre (mm), x along its proximal phalanx; every finger of
+    the subject is drawn in this frame so several fingers keep their places on the hand.
+    """
     out = {}
     for s in result.subjects:
+        first, fm0 = next(iter(s.model.fingers.items()))
+        origin = fm0.joints["mp"].center
+        rot = fm0.frames["proximal"].rotation  # columns x, y, z (tracker)
+
+        def loc(p, origin=origin, rot=rot):
+            return ((np.asarray(p) - origin) @ rot).round(3).tolist()
+
         fingers = []
         for f, fm in s.model.fingers.items():
-            origin = fm.joints["mp"].center
-            rot = fm.frames["proximal"].rotation  # columns x, y, z (tracker)
-
-            def loc(p, origin=origin, rot=rot):
-                return ((np.asarray(p) - origin) @ rot).round(3).tolist()
-
             joints = list(fm.joints.values())
             fingers.append(
                 {
@@ -128,13 +240,24 @@ def _viewer_data(result: StudyResult) -> dict:
                     else [loc(fm.abduction.center), (fm.abduction.axis @ rot).round(4).tolist()],
                 }
             )
-        out[s.subject] = fingers
+        out[s.subject] = {
+            "frame": f"{s.subject}: {first} proximal-phalanx frame, origin at the {first} MP "
+            "centre, x along the phalanx (mm)",
+            "fingers": fingers,
+        }
     return out
 
 
-def write_report(result: StudyResult, path: Path) -> Path:
-    """Write ``report.html`` (self-contained) for a study result."""
-    sm, fig, tables = result.summary, result.figures, result.tables
+_TARGET_NOTE = (
+    "Targets are the session's stylus landmarks <code>target.&lt;name&gt;</code>; each touch "
+    "is an interval of <code>events.csv</code> and its error is the distance from the mean "
+    "fingertip over the touch to the target. In sessions written by <code>fingerfit "
+    "simulate</code>, targets t000 … t120 lie on a straight edge and the number is the "
+    "distance along the edge from the first target in mm."
+)
+
+
+def _headline(sm: dict) -> str:
     paper = sm["paper"]
     rows = []
     for key, name in (
@@ -145,155 +268,202 @@ def write_report(result: StudyResult, path: Path) -> Path:
             continue
         h, pp = sm[key], paper[key]
         rows.append(
-            f"<tr><td>{name}</td><td>{_ms(h['user_axis'])}</td><td>{_ms(h['orthogonal'])}</td>"
-            f"<td>{h['reduction_percent']:.0f} %</td><td>{h['sd_reduction_percent']:.0f} %</td>"
-            f"<td>{_p(h['paired_t_test']['p'])}</td>"
+            f"<tr><td>{name}</td><td>{h['user_axis']['n']}</td><td>{_ms(h['user_axis'])}</td>"
+            f"<td>{_ms(h['orthogonal'])}</td><td>{_pct(h['reduction_percent'])}</td>"
+            f"<td>{_pct(h['sd_reduction_percent'])}</td>"
+            f"<td>{html.escape(_ttest(h['paired_t_test']))}</td>"
             f"<td>{pp['user_axis'][0]} ({pp['user_axis'][1]}) vs {pp['orthogonal'][0]} "
             f"({pp['orthogonal'][1]}), −{pp['reduction_percent']} %</td></tr>"
         )
-    headline = (
-        "<table><tr><th>fingertip error, mean (SD) mm</th><th>user-axis</th><th>orthogonal</th>"
-        "<th>mean reduction</th><th>SD reduction</th><th>paired t-test</th><th>paper</th></tr>"
+    return (
+        "<table><tr><th>fingertip error</th><th>n</th><th>user-axis model, mean (SD) mm</th>"
+        "<th>orthogonal model, mean (SD) mm</th><th>mean reduction</th><th>SD reduction</th>"
+        "<th>paired t-test</th><th>paper: user-axis vs orthogonal, mean (SD) mm</th></tr>"
         + "".join(rows)
         + "</table>"
     )
+
+
+def _problems(result: StudyResult) -> list[str]:
+    """Failed sessions and forced-fit warnings, each naming the subject."""
+    sm = result.summary
+    parts = []
+    if result.failures:
+        parts += [
+            "<h2 id=failed>Sessions that failed</h2>",
+            f"<p class=warn>{len(result.failures)} session(s) could not be fitted and are not "
+            "in any number of this report (<code>--keep-going</code>):</p>",
+            _list([f.message for f in result.failures]),
+        ]
+    if sm.get("warnings"):
+        parts += [
+            "<h2 id=warnings>Warnings</h2>",
+            "<p class=warn>These models were fitted past plausibility or quality checks "
+            "(<code>--force</code>); their numbers below may be wrong:</p>",
+            _list([f"{subj}: {w}" for subj, ws in sm["warnings"].items() for w in ws]),
+        ]
+    return parts
+
+
+def write_report(result: StudyResult, path: Path) -> Path:
+    """Write ``report.html`` (self-contained) for a study result.
+
+    Numbers are shown to the precision of the measurement: 0.1 mm, 0.1 deg, whole
+    percent, p as ``p < 0.001`` or three decimals. Statistics that were not computed
+    are listed with the reason.
+    """
+    sm, fig, tables = result.summary, result.figures, result.tables
+    n_subj = len(result.subjects)
+    one = n_subj == 1
     aq = sm["axis_quality"]
-    aq_rows = "".join(
-        f"<tr><td>{j.upper()}</td><td>{v['mean_mm']:.2f}</td><td>{v['sd_mm']:.2f}</td>"
-        f"<td>{v['n']}</td></tr>"
-        for j, v in aq["per_joint"].items()
+    aq_table = pd.DataFrame(
+        [
+            {
+                "joint": j.upper(),
+                "cycles (n)": str(v["n"]),
+                "mean distance (mm)": _fmt(v["mean_mm"]),
+                "SD (mm)": _fmt(v["sd_mm"]),
+            }
+            for j, v in aq["per_joint"].items()
+        ]
     )
     tt = "; ".join(
-        f"{k.replace('_', ' ').upper()}: t = {v['t']:.2f}, {_p(v['p'])}"
+        f"{k.split('_vs_')[0].upper()} vs {k.split('_vs_')[1].upper()}: {_ttest(v)}"
         for k, v in aq["t_tests"].items()
     )
     parts = [
-        f"<h1>fingerfit study — {len(result.subjects)} subject(s)</h1>",
-        f"<p class=note>fingerfit {html.escape(sm['fingerfit_version'])}, method <code>{html.escape(sm['method'])}"
-        f"</code>, created {html.escape(sm['created'])}. Lengths in mm, tracker coordinates; angles in degrees. "
-        "Tables as CSV beside this file.</p>",
+        f"<h1>fingerfit study — {n_subj} subject{'' if one else 's'}</h1>",
+        f"<p class=note>fingerfit {html.escape(sm['fingerfit_version'])}, method "
+        f"<code>{html.escape(sm['method'])}</code>"
+        + (" (<b>forced</b>: <code>--force</code>)" if sm.get("forced") else "")
+        + f", created {html.escape(sm['created'])}. Lengths in mm (tracker coordinates unless "
+        "a figure says otherwise), angles in degrees. Tables as CSV beside this file.</p>",
+        *_problems(result),
         "<h2>Headline</h2>",
-        headline,
-        "<h2>Methods and parameters</h2>",
-        "<p>Per subject: reference poses = mean over the static reference recording; per joint, grasp cycles are "
-        "found from the joint's own angular speed (static holds excluded); a centre of rotation per cycle from the "
-        "two 6-DOF sensors (O'Brien et al. 2000, untruncated least squares) for the axis-quality figures; "
-        f"the axis by method <code>{html.escape(sm['method'])}</code>: "
-        f"{html.escape(METHOD_SUMMARY.get(sm['method'], sm['method']))}; the joint centre where the axis meets "
-        "the sagittal plane through the dorsal stylus landmarks. The orthogonal model uses the same centres and "
-        "lengths with each flexion axis made perpendicular to its bone. Joint angles by "
-        + "; ".join(html.escape(ANGLE_SUMMARY.get(m, m)) for m in sm["angle_methods"])
-        + "; fingertips by forward kinematics from the hand sensor. Reference fingertip = distal sensor pose "
-        "carrying the stylus-measured tip vector. Statistics: Student t-tests (scipy), two-factor ANOVA with "
-        "interaction (statsmodels, type II).</p>",
-        f"<p class=note>Subjects: {', '.join(html.escape(s) for s in sm['subjects'])}. See docs/methods.md for "
-        "equations and docs/conventions.md for frames and units.</p>",
-        "<h2>Axis quality (Fig. 8)</h2>",
-        _img(fig["fig08"]),
-        "<table><tr><th>joint</th><th>mean distance (mm)</th><th>SD</th><th>n</th></tr>"
-        + aq_rows
-        + "</table>",
-        f"<p>t-tests between joints: {tt}. Paper: DIP 0.2 (0.1) mm, PIP 0.3 (0.1) mm, MP larger.</p>",
-        "<h2>Grasp: fingertip trajectories (Fig. 9)</h2>",
-        *[_img(p) for k, p in fig.items() if k.startswith("fig09")],
-        "<h2>Grasp: error at maximal flexion (Fig. 10)</h2>",
-        _img(fig["fig10"]),
+        _headline(sm),
     ]
+    if one:
+        parts.append(
+            "<p class=note>One subject: statistics between subjects (ANOVA with subject as a "
+            "factor) are not computed; see <a href='#skipped'>Statistics not computed</a>.</p>"
+        )
+    if "targets" not in sm:
+        parts.append(
+            "<p class=note>No session has target recordings, so target reaching "
+            "(Figs. 11–12) is not evaluated.</p>"
+        )
+    parts += [
+        "<h2>Methods and parameters</h2>",
+        "<p>Per subject: reference poses = mean over the static reference recording; per joint, "
+        "grasp cycles are found from the joint's own angular speed (static holds excluded); a "
+        "centre of rotation per cycle from the two 6-DOF sensors (O'Brien et al. 2000, "
+        "untruncated least squares) for the axis-quality figures; "
+        f"the axis by method <code>{html.escape(sm['method'])}</code>: "
+        f"{html.escape(METHOD_SUMMARY.get(sm['method'], sm['method']))}; the joint centre where "
+        "the axis meets the sagittal plane through the dorsal stylus landmarks. The orthogonal "
+        "model uses the same centres and lengths with each flexion axis made perpendicular to "
+        "its bone. Joint angles by "
+        + "; ".join(html.escape(ANGLE_SUMMARY.get(m, m)) for m in sm["angle_methods"])
+        + "; fingertips by forward kinematics from the hand sensor. Reference fingertip = "
+        "distal sensor pose carrying the stylus-measured tip vector. Statistics: Student "
+        "t-tests (scipy), two-factor ANOVA with interaction (statsmodels, type II).</p>",
+        _subjects_table(result),
+        "<p class=note>See docs/methods.md for equations and docs/conventions.md for frames "
+        "and units.</p>",
+        "<h2>Axis quality (Fig. 8)</h2>",
+        _img(fig["fig08"], "Fig. 8 axis quality"),
+        _table(aq_table),
+        f"<p>Student t-tests between joints: {html.escape(tt)}. Paper: DIP 0.2 (0.1) mm, "
+        "PIP 0.3 (0.1) mm, MP larger.</p>",
+        "<h2>Grasp: fingertip trajectories (Fig. 9)</h2>",
+        *[_img(p, f"Fig. 9 {k[6:]}") for k, p in fig.items() if k.startswith("fig09")],
+        "<h2>Grasp: error at maximal flexion (Fig. 10)</h2>",
+        _img(fig["fig10"], "Fig. 10 maximal flexion"),
+    ]
+    mf = sm["max_flexion"]
     per = pd.DataFrame(
         [
             {
                 "subject": s,
-                "user-axis mean mm": v["user_axis_mean_mm"],
-                "orthogonal mean mm": v["orthogonal_mean_mm"],
-                "reduction %": v["reduction_percent"],
-                "paired t p": v["paired_t_test"]["p"],
+                "cycles (n)": str(v["n"]),
+                "user-axis error, mean (mm)": _fmt(v["user_axis_mean_mm"]),
+                "orthogonal error, mean (mm)": _fmt(v["orthogonal_mean_mm"]),
+                "reduction (%)": _fmt(v["reduction_percent"], 0),
+                "paired t-test": _ttest(v["paired_t_test"]),
             }
-            for s, v in sm["max_flexion"]["per_subject"].items()
+            for s, v in mf["per_subject"].items()
         ]
     )
-    parts.append(_table(per, 3))
-    if "anova_model_x_subject" in sm["max_flexion"]:
-        a = sm["max_flexion"]["anova_model_x_subject"]
-        parts.append(
-            "<p>Two-factor ANOVA (model × subject): "
-            + "; ".join(
-                f"{k}: F = {v['F']:.2f}, {_p(v['p'])}" for k, v in a.items() if v["F"] is not None
-            )
-            + "</p>"
-        )
+    parts += [_table(per), _anova(mf["anova_model_x_subject"], "model × subject")]
     if "targets" in sm:
         tg = sm["targets"]
-        parts += ["<h2>Target reaching (Figs. 11–12)</h2>", _img(fig["fig11"]), _img(fig["fig12"])]
+        without = [s for s in sm["subjects"] if s not in tg["subjects"]]
+        parts += [
+            "<h2>Target reaching (Figs. 11–12)</h2>",
+            f"<p class=note>{_TARGET_NOTE}"
+            + (
+                f" Subjects without target recordings (not included): "
+                f"{html.escape(', '.join(without))}."
+                if without
+                else ""
+            )
+            + "</p>",
+            _img(fig["fig11"], "Fig. 11 target offsets"),
+            _img(fig["fig12"], "Fig. 12 target errors"),
+        ]
         pt = pd.DataFrame(
             [
                 {
                     "target": t,
+                    "touches (n)": str(v["n"]),
                     **{
-                        f"{k} mean (SD) mm": f"{v[k]['mean_mm']:.1f} ({v[k]['sd_mm']:.1f})"
-                        for k in ("reference", "user_axis", "orthogonal")
+                        f"{name}, mean (SD) mm": _ms(v[k])
+                        for k, name in (
+                            ("reference", "distal sensor"),
+                            ("user_axis", "user-axis model"),
+                            ("orthogonal", "orthogonal model"),
+                        )
                     },
                 }
                 for t, v in tg["per_target"].items()
             ]
         )
-        parts.append(_table(pt))
-        parts.append(f"<p>Distal-sensor reference: {_ms(tg['reference'])} mm.</p>")
-        for key, name in (
-            ("anova_model_x_target", "model × target"),
-            ("anova_model_x_subject", "model × subject"),
-        ):
-            if key in tg:
-                parts.append(
-                    f"<p>Two-factor ANOVA ({name}): "
-                    + "; ".join(
-                        f"{k}: F = {v['F']:.2f}, {_p(v['p'])}"
-                        for k, v in tg[key].items()
-                        if v["F"] is not None
-                    )
-                    + "</p>"
-                )
-    if "truth" in sm:
         parts += [
-            "<h2>Against ground truth (simulated sessions)</h2>",
-            "<p>What the paper could not measure: the fitted axes against the true ones and the fingertip "
-            "against the true fingertip on every recording.</p>",
-            _img(fig["truth"]),
-            _table(
-                tables["truth_axes"]
-                .groupby("joint")[["axis_error_deg", "centre_to_axis_mm"]]
-                .agg(["mean", "max"])
-                .reset_index()
-                .set_axis(
-                    [
-                        "joint",
-                        "axis error mean (deg)",
-                        "axis error max (deg)",
-                        "centre→true axis mean (mm)",
-                        "centre→true axis max (mm)",
-                    ],
-                    axis=1,
-                )
-            ),
-            _table(
-                tables["truth_fingertip"]
-                .groupby(["recording", "variant"])[["mean_mm", "p95_mm"]]
-                .mean()
-                .reset_index()
-            ),
+            _table(pt),
+            f"<p>Distal-sensor reference over all touches: {_ms(tg['reference'])} mm.</p>",
+            _anova(tg["anova_model_x_target"], "model × target"),
+            _anova(tg["anova_model_x_subject"], "model × subject"),
         ]
+    if "truth" in sm:
+        parts += _truth(result)
+    models = tables["models"]
     parts += [
         "<h2>Fitted models</h2>",
         _table(
-            tables["models"].drop(
-                columns=["center_x", "center_y", "center_z", "axis_x", "axis_y", "axis_z"]
+            pd.DataFrame(
+                {
+                    "subject": models["subject"],
+                    "finger": models["finger"],
+                    "joint": models["joint"].str.upper(),
+                    "axis tilt from orthogonal (deg)": models["tilt_from_orthogonal_deg"].map(_fmt),
+                    "segment length (mm)": models["segment_length_mm"].map(_fmt),
+                }
             )
         ),
+        "<h2 id=skipped>Statistics not computed</h2>",
+        _list([f"{_statistic_name(d['statistic'])}: {d['reason']}" for d in sm["skipped"]])
+        if sm["skipped"]
+        else "<p>None: every statistic had enough data.</p>",
         "<h2>3D view of the fitted fingers</h2>",
-        "<p class=note>Drag to rotate, wheel to zoom. Grey: bones; black: joint centres; blue: fitted (user) "
-        "axes; red: orthogonal axes; purple: MP ab/adduction axis (two-axis models); green: stylus landmarks; orange: fingertip. Frame: origin at the MP "
-        "centre, x along the proximal phalanx (mm).</p>",
-        "<p>subject <select id=subject></select></p><canvas id=view width=760 height=460></canvas>",
-        f"<script type='application/json' id='model-data'>{json.dumps(_viewer_data(result))}</script>",
+        "<p class=note>Drag to rotate, wheel to zoom. Grey: bones; black: joint centres; blue: "
+        "fitted (user) axes; red: orthogonal axes; purple: MP ab/adduction axis (two-axis "
+        "models); green: stylus landmarks; orange: fingertip. Frame: the proximal-phalanx frame "
+        "of the subject's first finger, origin at its MP centre, x along the phalanx (axes in "
+        "the triad bottom left); the bar bottom right is 10 mm at the current zoom. "
+        "Double-click to re-frame.</p>",
+        "<p>subject <select id=subject></select></p><canvas id=view width=900 height=560></canvas>",
+        f"<script type='application/json' id='model-data'>{_json_script(_viewer_data(result))}"
+        "</script>",
         f"<script>{VIEWER_JS}</script>",
     ]
     doc = (
@@ -303,3 +473,72 @@ def write_report(result: StudyResult, path: Path) -> Path:
     with atomic_write(path, encoding="utf-8") as fh:
         fh.write(doc)
     return path
+
+
+def _json_script(data: dict) -> str:
+    """JSON safe inside a ``<script>`` element (no ``</script>`` in subject names)."""
+    return json.dumps(data).replace("<", "\\u003c").replace(">", "\\u003e")
+
+
+def _subjects_table(result: StudyResult) -> str:
+    sm = result.summary
+    rows = [
+        {
+            "subject": s.subject,
+            "fingers": ", ".join(s.model.fingers),
+            "grasp cycles at max. flexion (n)": str(
+                sm["max_flexion"]["per_subject"][s.subject]["n"]
+            ),
+            "target touches (n)": str(
+                int((s.targets["source"] == "reference").sum()) if len(s.targets) else 0
+            ),
+            "ground truth": "yes" if s.truth is not None else "no",
+            "warnings (n)": str(len(s.warnings)),
+        }
+        for s in result.subjects
+    ]
+    return _table(pd.DataFrame(rows))
+
+
+def _truth(result: StudyResult) -> list[str]:
+    sm, fig, tables = result.summary, result.figures, result.tables
+    ta, tt = tables["truth_axes"], tables["truth_fingertip"]
+    axes = (
+        ta.groupby("joint", sort=False)[["axis_error_deg", "centre_to_axis_mm"]]
+        .agg(["mean", "max"])
+        .reset_index()
+    )
+    axes_t = pd.DataFrame(
+        {
+            "joint": axes["joint"].str.upper(),
+            "axis error, mean (deg)": axes[("axis_error_deg", "mean")].map(_fmt),
+            "axis error, max (deg)": axes[("axis_error_deg", "max")].map(_fmt),
+            "centre to true axis, mean (mm)": axes[("centre_to_axis_mm", "mean")].map(_fmt),
+            "centre to true axis, max (mm)": axes[("centre_to_axis_mm", "max")].map(_fmt),
+        }
+    )
+    tips = tt.groupby(["recording", "variant"])[["mean_mm", "p95_mm"]].mean().reset_index()
+    rank = {"user_axis": "0", "orthogonal": "1"}
+    tips = tips.sort_values(
+        ["recording", "variant"], key=lambda c: c.astype(str).map(lambda v: rank.get(v, v))
+    )
+    tips_t = pd.DataFrame(
+        {
+            "recording": tips["recording"],
+            "model": tips["variant"].map(lambda v: v.replace("_", "-") + " model"),
+            "fingertip error, mean (mm)": tips["mean_mm"].map(_fmt),
+            "95th percentile (mm)": tips["p95_mm"].map(_fmt),
+        }
+    )
+    subj = sm["truth"]["subjects"]
+    parts = [
+        "<h2>Against ground truth (simulated sessions)</h2>",
+        "<p>What the paper could not measure: the fitted axes against the true ones and the "
+        "fingertip against the true fingertip on every recording "
+        f"({len(subj)} subject{'s' if len(subj) != 1 else ''} with ground truth: "
+        f"{html.escape(', '.join(subj))}). Fingertip errors: mean over subjects of each "
+        "recording's mean and 95th percentile.</p>",
+    ]
+    if "truth" in fig:
+        parts.append(_img(fig["truth"], "true fingertip error"))
+    return [*parts, _table(axes_t), _table(tips_t)]

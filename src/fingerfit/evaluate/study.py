@@ -9,6 +9,7 @@ Statistics and the headline as in the paper; outputs written to one folder.
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -18,21 +19,23 @@ import numpy as np
 import pandas as pd
 
 from .. import __version__
+from ..errors import FingerfitError
 from ..estimate import FitOptions, fit_session
 from ..io import load_session
-from ..io.atomic import atomic_write
+from ..io.atomic import atomic_write, staged_directory
 from ..kinematics import compute_kinematics
 from ..model import VARIANTS, HandModel, save_model
-from ..session import HAND_SENSOR, Session
+from ..session import HAND_SENSOR, Session, check_subject_id
 from ..transforms import angle_between_axes, apply_inverse_pose
 from . import figures
 from .fingertip import GraspEvaluation, evaluate_grasp, evaluate_targets
 from .stats import (
-    independent_ttest,
-    paired_ttest,
+    Skipped,
+    independent_ttest_or_skip,
+    paired_ttest_or_skip,
     reduction_percent,
     summarize,
-    two_way_anova,
+    two_way_anova_or_skip,
 )
 from .truth import Truth, axis_errors, load_truth
 
@@ -41,6 +44,8 @@ PAPER = {
     "targets": {"user_axis": (2.6, 0.9), "orthogonal": (4.7, 1.7), "reduction_percent": 45},
     "axis_quality_mm": {"dip": (0.2, 0.1), "pip": (0.3, 0.1)},
 }
+
+_TRUTH_TIP_COLUMNS = ["subject", "finger", "recording", "variant", "mean_mm", "p95_mm"]
 
 
 @dataclass
@@ -57,6 +62,30 @@ class SubjectResult:
     truth: Truth | None
     truth_axes: pd.DataFrame | None = None
     truth_tips: pd.DataFrame | None = None
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class SessionFailure:
+    """A session the study could not use.
+
+    Attributes
+    ----------
+    source : str
+        The session folder as given (or the subject of an in-memory session).
+    subject : str or None
+        Its subject ID, when the session could be read.
+    message : str
+        One line: ``"<subject>: <the session's own error>"`` (or the folder when the
+        subject is unknown).
+    """
+
+    source: str
+    subject: str | None
+    message: str
+
+    def as_dict(self) -> dict:
+        return {"session": self.source, "subject": self.subject, "error": self.message}
 
 
 @dataclass
@@ -69,10 +98,22 @@ class StudyResult:
     out_dir: Path
     figures: dict[str, Path] = field(default_factory=dict)
     report: Path | None = None
+    failures: list[SessionFailure] = field(default_factory=list)
+
+
+def _fit(session: Session, options: FitOptions) -> tuple[HandModel, tuple[str, ...]]:
+    """Fit a session; its warnings (``--force``) from the model and any the fit emitted."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        model = fit_session(session, options)
+    found = [*model.warnings]
+    found += [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+    return model, tuple(dict.fromkeys(found))
 
 
 def _subject(session: Session, options: FitOptions) -> SubjectResult:
-    model = fit_session(session, options)
+    model, warned = _fit(session, options)
     truth = load_truth(session.path)
     grasp, flex, dist = {}, [], []
     for f, fm in model.fingers.items():
@@ -98,159 +139,231 @@ def _subject(session: Session, options: FitOptions) -> SubjectResult:
         session,
         model,
         grasp,
-        pd.concat(flex, ignore_index=True),
+        _concat(flex, _FLEX_COLUMNS),
         targets,
-        pd.concat(dist, ignore_index=True),
+        _concat(dist, _DIST_COLUMNS),
         truth,
+        warnings=warned,
     )
     if truth is not None:
-        res.truth_axes = pd.concat([axis_errors(model, truth, f) for f in model.fingers]).assign(
-            subject=session.subject
+        fingers = [f for f in model.fingers if f in truth.document.get("fingers", {})]
+        res.truth_axes = _concat(
+            [axis_errors(model, truth, f).assign(subject=session.subject) for f in fingers],
+            ["subject", "finger", "joint", "axis_error_deg", "centre_to_axis_mm"],
         )
         rows = []
         for rec in session.recordings()[1:]:
             if rec.name not in truth.tips:
                 continue
-            kin = compute_kinematics(model, rec)
-            for f in model.fingers:
+            kin = compute_kinematics(model, rec, fingers=fingers)
+            for f in fingers:
                 for v in VARIANTS:
                     e = np.linalg.norm(kin.motions[v][f].tip - truth.tips[rec.name][f], axis=1)
+                    e = e[np.isfinite(e)]
+                    if not e.size:
+                        continue
                     rows.append(
                         (
                             session.subject,
                             f,
                             rec.name,
                             v,
-                            float(np.nanmean(e)),
-                            float(np.nanpercentile(e, 95)),
+                            float(e.mean()),
+                            float(np.percentile(e, 95)),
                         )
                     )
-        res.truth_tips = pd.DataFrame(
-            rows, columns=["subject", "finger", "recording", "variant", "mean_mm", "p95_mm"]
-        )
+        res.truth_tips = pd.DataFrame(rows, columns=_TRUTH_TIP_COLUMNS)
     return res
+
+
+def _stat(result) -> dict:
+    """A test result or a skip reason as the dict stored in ``summary.json``."""
+    return result.as_dict() if isinstance(result, Skipped) else dict(result.__dict__)
+
+
+def _num(v: float) -> float | None:
+    """A finite float, or None (JSON ``null``) for NaN/inf."""
+    v = float(v)
+    return v if np.isfinite(v) else None
 
 
 def _headline(table: pd.DataFrame, user: str = "user_axis", ortho: str = "orthogonal") -> dict:
     u, o = summarize(table[user]), summarize(table[ortho])
     return {
-        "user_axis": {"mean_mm": u.mean, "sd_mm": u.sd, "n": u.n},
-        "orthogonal": {"mean_mm": o.mean, "sd_mm": o.sd, "n": o.n},
-        "reduction_percent": reduction_percent(u.mean, o.mean),
-        "sd_reduction_percent": reduction_percent(u.sd, o.sd),
+        "user_axis": {"mean_mm": _num(u.mean), "sd_mm": _num(u.sd), "n": u.n},
+        "orthogonal": {"mean_mm": _num(o.mean), "sd_mm": _num(o.sd), "n": o.n},
+        "reduction_percent": _num(reduction_percent(u.mean, o.mean)),
+        "sd_reduction_percent": _num(reduction_percent(u.sd, o.sd)),
     }
 
 
-def _anova_dict(table: pd.DataFrame) -> dict:
+def _anova_dict(table: pd.DataFrame | Skipped) -> dict:
+    if isinstance(table, Skipped):
+        return table.as_dict()
     return {
-        idx: {
-            "F": None if np.isnan(r["F"]) else float(r["F"]),
-            "p": None if np.isnan(r["PR(>F)"]) else float(r["PR(>F)"]),
-            "df": float(r["df"]),
-        }
+        idx: {"F": _num(r["F"]), "p": _num(r["PR(>F)"]), "df": float(r["df"])}
         for idx, r in table.iterrows()
     }
 
 
+def _skips(node, where: str = "") -> list[dict]:
+    """Every ``{"skipped": reason}`` in a summary, with its dotted key."""
+    if isinstance(node, dict):
+        if set(node) == {"skipped"}:
+            return [{"statistic": where, "reason": node["skipped"]}]
+        return [x for k, v in node.items() for x in _skips(v, f"{where}.{k}".lstrip("."))]
+    return []
+
+
+_FLEX_COLUMNS = ["subject", "finger", "cycle", "user_axis", "orthogonal"]
+_TARGET_COLUMNS = ["subject", "finger", "target", "source", "error_mm", "dx", "dy", "dz"]
+_DIST_COLUMNS = ["subject", "finger", "joint", "cycle", "distance_mm"]
+
+
+def _concat(frames: list[pd.DataFrame], columns: list[str]) -> pd.DataFrame:
+    """Concatenate non-empty tables (an empty one would turn float columns into object)."""
+    frames = [f[columns] for f in frames if not f.empty]
+    if not frames:
+        return pd.DataFrame({c: pd.Series(dtype=float) for c in columns})
+    return pd.concat(frames, ignore_index=True)
+
+
 def summarize_study(
-    subjects: list[SubjectResult], options: FitOptions
+    subjects: list[SubjectResult],
+    options: FitOptions,
+    failures: list[SessionFailure] | None = None,
 ) -> tuple[dict, dict[str, pd.DataFrame]]:
-    """Statistics and headline of the study, plus its tables."""
-    flex = pd.concat([s.max_flexion for s in subjects], ignore_index=True)
-    dist = pd.concat([s.distances for s in subjects], ignore_index=True)
-    targets = pd.concat([s.targets for s in subjects], ignore_index=True)
+    """Statistics and headline of the study, plus its tables.
+
+    Parameters
+    ----------
+    subjects : list of SubjectResult
+        At least one; any mix of sessions with or without targets, test recordings,
+        ground truth, and different fingers.
+    options : FitOptions
+    failures : list of SessionFailure, optional
+        Sessions that could not be fitted (``--keep-going``), listed in the summary.
+
+    Returns
+    -------
+    summary : dict
+        The ``summary.json`` document (lengths mm, angles deg; NaN stored as null).
+        A statistic the data cannot support is ``{"skipped": reason}`` and listed
+        under ``"skipped"``.
+    tables : dict of str to DataFrame
+    """
+    flex = _concat([s.max_flexion for s in subjects], _FLEX_COLUMNS)
+    dist = _concat([s.distances for s in subjects], _DIST_COLUMNS)
+    targets = _concat([s.targets for s in subjects], _TARGET_COLUMNS)
     tables = {"max_flexion": flex, "axis_quality": dist, "targets": targets}
     summary: dict = {
         "format": "fingerfit.study/1",
         "fingerfit_version": __version__,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "method": options.method,
+        "forced": bool(options.force),
         "angle_methods": sorted({s.model.angle_method for s in subjects}),
         "subjects": [s.subject for s in subjects],
+        "sessions": {
+            s.subject: {
+                "path": None if s.session.path is None else str(s.session.path),
+                "fingers": list(s.model.fingers),
+                "has_targets": bool(len(s.targets)),
+                "has_truth": s.truth is not None,
+            }
+            for s in subjects
+        },
+        "failed": [f.as_dict() for f in failures or []],
+        "warnings": {s.subject: list(s.warnings) for s in subjects if s.warnings},
         "units": "mm",
         "paper": PAPER,
     }
     # Axis quality (Fig. 8) and the paper's t-tests between joints.
-    aq = {
-        j: {"mean_mm": float(g.mean()), "sd_mm": float(g.std(ddof=1)), "n": int(g.size)}
-        for j, g in dist.groupby("joint")["distance_mm"]
-    }
+    aq = {}
+    for j, g in dist.groupby("joint")["distance_mm"]:
+        sm = summarize(g)
+        aq[j] = {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
     tests = {}
     for a, b in (("dip", "pip"), ("mp", "dip"), ("mp", "pip")):
-        t = independent_ttest(
+        t = independent_ttest_or_skip(
             dist.loc[dist.joint == a, "distance_mm"], dist.loc[dist.joint == b, "distance_mm"]
         )
-        tests[f"{a}_vs_{b}"] = t.__dict__
+        tests[f"{a}_vs_{b}"] = _stat(t)
     summary["axis_quality"] = {"per_joint": aq, "t_tests": tests}
     # Maximal flexion (Fig. 10).
     mf = _headline(flex)
-    mf["paired_t_test"] = paired_ttest(flex["user_axis"], flex["orthogonal"]).__dict__
-    mf["per_subject"] = {
-        s: {
-            "user_axis_mean_mm": float(g["user_axis"].mean()),
-            "orthogonal_mean_mm": float(g["orthogonal"].mean()),
-            "reduction_percent": reduction_percent(g["user_axis"].mean(), g["orthogonal"].mean()),
-            "paired_t_test": paired_ttest(g["user_axis"], g["orthogonal"]).__dict__,
+    mf["paired_t_test"] = _stat(paired_ttest_or_skip(flex["user_axis"], flex["orthogonal"]))
+    mf["per_subject"] = {}
+    for s in subjects:
+        g = flex[flex["subject"] == s.subject]
+        u, o = summarize(g["user_axis"]), summarize(g["orthogonal"])
+        mf["per_subject"][s.subject] = {
+            "n": u.n,
+            "user_axis_mean_mm": _num(u.mean),
+            "orthogonal_mean_mm": _num(o.mean),
+            "reduction_percent": _num(reduction_percent(u.mean, o.mean)),
+            "paired_t_test": _stat(paired_ttest_or_skip(g["user_axis"], g["orthogonal"])),
         }
-        for s, g in flex.groupby("subject")
-    }
     long = flex.melt(
         id_vars=["subject", "cycle"],
         value_vars=list(VARIANTS),
         var_name="model",
         value_name="error",
     )
-    if flex["subject"].nunique() > 1:
-        mf["anova_model_x_subject"] = _anova_dict(two_way_anova(long, "error", "model", "subject"))
+    mf["anova_model_x_subject"] = _anova_dict(
+        two_way_anova_or_skip(long, "error", "model", "subject")
+    )
     summary["max_flexion"] = mf
-    # Targets (Figs. 11-12).
+    # Targets (Figs. 11-12): only the sessions with target recordings.
     if not targets.empty:
         wide = targets.pivot_table(
             index=["subject", "finger", "target"], columns="source", values="error_mm"
         ).reset_index()
         tg = _headline(wide)
         ref = summarize(wide["reference"])
-        tg["reference"] = {"mean_mm": ref.mean, "sd_mm": ref.sd, "n": ref.n}
-        tg["paired_t_test"] = paired_ttest(wide["user_axis"], wide["orthogonal"]).__dict__
-        tg["per_target"] = {
-            t: {
-                src: {"mean_mm": float(g[src].mean()), "sd_mm": float(g[src].std(ddof=1))}
-                for src in ("reference", *VARIANTS)
-            }
-            for t, g in wide.groupby("target")
-        }
+        tg["subjects"] = sorted(targets["subject"].unique())
+        tg["reference"] = {"mean_mm": _num(ref.mean), "sd_mm": _num(ref.sd), "n": ref.n}
+        tg["paired_t_test"] = _stat(paired_ttest_or_skip(wide["user_axis"], wide["orthogonal"]))
+        tg["per_target"] = {}
+        for t, g in wide.groupby("target"):
+            tg["per_target"][t] = {"n": len(g)}
+            for src in ("reference", *VARIANTS):
+                sm = summarize(g[src])
+                tg["per_target"][t][src] = {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd)}
         tl = targets[targets["source"].isin(VARIANTS)].rename(columns={"source": "model"})
-        tg["anova_model_x_target"] = _anova_dict(two_way_anova(tl, "error_mm", "model", "target"))
-        if tl["subject"].nunique() > 1:
-            tg["anova_model_x_subject"] = _anova_dict(
-                two_way_anova(tl, "error_mm", "model", "subject")
-            )
+        tg["anova_model_x_target"] = _anova_dict(
+            two_way_anova_or_skip(tl, "error_mm", "model", "target")
+        )
+        tg["anova_model_x_subject"] = _anova_dict(
+            two_way_anova_or_skip(tl, "error_mm", "model", "subject")
+        )
         summary["targets"] = tg
     # Ground truth (simulated sessions only).
     truth_axes = [s.truth_axes for s in subjects if s.truth_axes is not None]
     if truth_axes:
         ta = pd.concat(truth_axes, ignore_index=True)
-        tt = pd.concat(
-            [s.truth_tips for s in subjects if s.truth_tips is not None], ignore_index=True
+        tt = _concat(
+            [s.truth_tips for s in subjects if s.truth_tips is not None], _TRUTH_TIP_COLUMNS
         )
         tables["truth_axes"], tables["truth_fingertip"] = ta, tt
         summary["truth"] = {
+            "subjects": sorted(ta["subject"].unique()),
             "axis_error_deg": {
                 j: {
-                    "mean": float(g["axis_error_deg"].mean()),
-                    "max": float(g["axis_error_deg"].max()),
+                    "mean": _num(g["axis_error_deg"].mean()),
+                    "max": _num(g["axis_error_deg"].max()),
                 }
                 for j, g in ta.groupby("joint")
             },
             "centre_to_axis_mm": {
                 j: {
-                    "mean": float(g["centre_to_axis_mm"].mean()),
-                    "max": float(g["centre_to_axis_mm"].max()),
+                    "mean": _num(g["centre_to_axis_mm"].mean()),
+                    "max": _num(g["centre_to_axis_mm"].max()),
                 }
                 for j, g in ta.groupby("joint")
             },
             "fingertip_mm": {
-                f"{r}/{v}": {"mean": float(g["mean_mm"].mean()), "p95": float(g["p95_mm"].mean())}
+                f"{r}/{v}": {"mean": _num(g["mean_mm"].mean()), "p95": _num(g["p95_mm"].mean())}
                 for (r, v), g in tt.groupby(["recording", "variant"])
             },
         }
@@ -287,7 +400,49 @@ def summarize_study(
             "segment_length_mm",
         ],
     )
+    summary["skipped"] = _skips(
+        {k: summary[k] for k in ("axis_quality", "max_flexion", "targets") if k in summary}
+    )
     return summary, tables
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def _session_error(subject: str, exc: Exception) -> str:
+    """``"<subject>: <the session's own error>"``, one line."""
+    if isinstance(exc, FingerfitError):
+        return f"{subject}: {_one_line(exc)}"
+    return (
+        f"{subject}: unexpected {type(exc).__name__} while fitting and evaluating "
+        f"({_one_line(exc)}); please report this"
+    )
+
+
+_SESSION_FILES = {"session.toml", "landmarks.csv", "events.csv", "truth.json", "truth"}
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def _check_not_input(out_dir: Path, sessions: list[Session]) -> None:
+    """Refuse an output folder that is, holds, or sits on the files of an input session."""
+    out = out_dir.resolve()
+    for s in sessions:
+        if s.path is None:
+            continue
+        src = Path(s.path).resolve()
+        own = _SESSION_FILES | {r.name for r in s.recordings()}
+        if _inside(src, out) or (
+            out != src and _inside(out, src) and out.relative_to(src).parts[0] in own
+        ):
+            raise FingerfitError(
+                f"would replace the input session '{s.path}' (choose another --out)",
+                path=out_dir,
+            )
 
 
 def run_study(
@@ -295,38 +450,136 @@ def run_study(
     out_dir: Path,
     options: FitOptions | None = None,
     progress: Callable[[str], None] | None = None,
+    *,
+    keep_going: bool = False,
+    overwrite: bool = False,
 ) -> StudyResult:
     """Fit and evaluate sessions; write tables, figures, ``summary.json`` and ``report.html``.
+
+    Everything is built in a temporary sibling folder of ``out_dir`` and moved into
+    place at the end: after an error nothing is left behind.
 
     Parameters
     ----------
     sessions : list of Path or Session
-        Session directories (or loaded sessions).
+        Session directories (or loaded sessions), one subject each; any mix of
+        sessions with or without target recordings, test recordings, ground truth
+        and fingers.
     out_dir : Path
-        Output folder (created).
+        Output folder; must be absent or empty unless ``overwrite``.
     options : FitOptions, optional
-        Fit options (method etc.).
+        Fit options (method, ``force`` etc.).
     progress : callable, optional
         Called with a short description after each step.
+    keep_going : bool
+        Skip a session that cannot be read or fitted (listed in
+        :attr:`StudyResult.failures`, the summary and the report) instead of
+        stopping; an error still when no session succeeds.
+    overwrite : bool
+        Replace an existing non-empty ``out_dir``.
 
     Returns
     -------
     StudyResult
+        Paths point into ``out_dir``.
+
+    Raises
+    ------
+    FingerfitError
+        A session that cannot be read or fitted (``"<subject>: <its error>"``) unless
+        ``keep_going``; two sessions with one subject ID (both folders named); an
+        unusable output folder.
     """
     from .report import write_report
 
     options = options or FitOptions()
     step = progress or (lambda _msg: None)
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    subjects = []
-    for s in sessions:
-        session = s if isinstance(s, Session) else load_session(s)
-        subjects.append(_subject(session, options))
-        save_model(subjects[-1].model, out_dir / "models" / f"{session.subject}.json")
-        step(f"fitted and evaluated {session.subject}")
-    summary, tables = summarize_study(subjects, options)
-    result = StudyResult(subjects, summary, tables, out_dir)
+    failures: list[SessionFailure] = []
+
+    def failed(source: str, subject: str | None, message: str) -> None:
+        if not keep_going:
+            raise FingerfitError(message)
+        failures.append(SessionFailure(source, subject, message))
+
+    with staged_directory(out_dir, overwrite=overwrite) as tmp:
+        loaded: list[Session] = []
+        for s in sessions:
+            source = str(s) if not isinstance(s, Session) else str(s.path or s.subject)
+            try:
+                session = s if isinstance(s, Session) else load_session(s)
+                check_subject_id(
+                    session.subject,
+                    path=None if session.path is None else Path(session.path) / "session.toml",
+                )
+            except FingerfitError as exc:
+                msg = _one_line(exc)
+                failed(source, None, msg if source in msg else f"{source}: {msg}")
+                step(f"could not read {source}")
+                continue
+            loaded.append(session)
+        seen: dict[str, Session] = {}
+        for session in loaded:
+            first = seen.setdefault(session.subject, session)
+            if first is not session:
+                raise FingerfitError(
+                    f"subject ID '{session.subject}' is used by two sessions: "
+                    f"'{first.path or '(in memory)'}' and '{session.path or '(in memory)'}'",
+                    field="subject",
+                )
+        _check_not_input(out_dir, loaded)
+        subjects: list[SubjectResult] = []
+        for session in loaded:
+            try:
+                with np.errstate(all="ignore"), warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    result = _subject(session, options)
+            except Exception as exc:  # one bad session is named, never a traceback
+                failed(
+                    str(session.path or session.subject),
+                    session.subject,
+                    _session_error(session.subject, exc),
+                )
+                step(f"failed: {session.subject}")
+                continue
+            subjects.append(result)
+            save_model(result.model, tmp / "models" / f"{session.subject}.json")
+            step(f"fitted and evaluated {session.subject}")
+        if not subjects:
+            detail = "; ".join(f.message for f in failures) or "no sessions given"
+            raise FingerfitError(f"no session could be fitted and evaluated: {detail}")
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            summary, tables = summarize_study(subjects, options, failures)
+            result = StudyResult(subjects, summary, tables, tmp, failures=failures)
+            _write_outputs(result, tmp)
+        step("figures")
+        with atomic_write(tmp / "summary.json") as fh:
+            json.dump(_json_safe(summary), fh, indent=1, allow_nan=False)
+        result.report = write_report(result, tmp / "report.html")
+        step("report")
+    result.out_dir = out_dir
+    result.figures = {k: out_dir / p.relative_to(tmp) for k, p in result.figures.items()}
+    result.report = out_dir / "report.html"
+    return result
+
+
+def _json_safe(node):
+    """NaN/inf as None, NumPy scalars as Python numbers, tuples as lists (strict JSON)."""
+    if isinstance(node, dict):
+        return {str(k): _json_safe(v) for k, v in node.items()}
+    if isinstance(node, list | tuple):
+        return [_json_safe(v) for v in node]
+    if isinstance(node, np.generic):
+        node = node.item()
+    if isinstance(node, float) and not np.isfinite(node):
+        return None
+    return node
+
+
+def _write_outputs(result: StudyResult, out_dir: Path) -> None:
+    """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``."""
+    tables, subjects = result.tables, result.subjects
     for name, table in tables.items():
         with atomic_write(out_dir / f"{name}.csv", newline="") as fh:
             table.to_csv(fh, index=False, lineterminator="\n", float_format="%.6g")
@@ -345,15 +598,16 @@ def run_study(
         tables["max_flexion"],
         "subject",
         "Fig. 10 - fingertip error at maximal flexion (vs distal-sensor reference)",
-        "error (mm)",
+        "fingertip error at maximal flexion (mm)",
         out_dir / "fig10_max_flexion.png",
+        xlabel="subject",
     )
     if not tables["targets"].empty:
         fig["fig11"] = figures.target_scatter(
             tables["targets"], out_dir / "fig11_target_offsets.png"
         )
         fig["fig12"] = figures.target_bars(tables["targets"], out_dir / "fig12_target_errors.png")
-    if "truth_fingertip" in tables:
+    if "truth_fingertip" in tables and not tables["truth_fingertip"].empty:
         tt = tables["truth_fingertip"]
         wide = tt.pivot_table(
             index=["subject", "recording"], columns="variant", values="mean_mm"
@@ -362,12 +616,7 @@ def run_study(
             wide,
             "recording",
             "True fingertip error (simulation ground truth)",
-            "mean error per recording (mm)",
+            "mean fingertip error per recording (mm)",
             out_dir / "truth_fingertip.png",
+            xlabel="recording",
         )
-    step("figures")
-    with atomic_write(out_dir / "summary.json") as fh:
-        json.dump(summary, fh, indent=1, default=float)
-    result.report = write_report(result, out_dir / "report.html")
-    step("report")
-    return result

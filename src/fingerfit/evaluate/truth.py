@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..errors import FingerfitError
 from ..model import HandModel
 from ..transforms import FloatArray, angle_between_axes, distance_point_to_line
 
@@ -30,15 +31,34 @@ class Truth:
 
 
 def load_truth(session_dir: Path | None) -> Truth | None:
-    """The truth written by ``fingerfit simulate`` beside a session, or None."""
+    """The truth written by ``fingerfit simulate`` beside a session, or None.
+
+    Raises
+    ------
+    FingerfitError
+        ``truth.json`` or a ``truth/<recording>.csv`` that cannot be read, named.
+    """
     if session_dir is None or not (session_dir / "truth.json").is_file():
         return None
-    doc = json.loads((session_dir / "truth.json").read_text())
+    path = session_dir / "truth.json"
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise FingerfitError(f"not valid JSON ({exc})", path=path) from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("fingers"), dict):
+        raise FingerfitError("must be an object with 'fingers'", path=path, field="fingers")
     tips: dict[str, dict[str, FloatArray]] = {}
     for f in sorted((session_dir / "truth").glob("*.csv")):
-        table = pd.read_csv(f)
+        try:
+            table = pd.read_csv(f)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+            raise FingerfitError(f"not a valid CSV ({str(exc).splitlines()[0]})", path=f) from None
+        cols = [f"{finger}.tip.{c}" for finger in doc["fingers"] for c in "xyz"]
+        missing = [c for c in cols if c not in table.columns]
+        if missing:
+            raise FingerfitError(f"missing column '{missing[0]}'", path=f, line=1)
         tips[f.name] = {
-            finger: table[[f"{finger}.tip.{c}" for c in "xyz"]].to_numpy()
+            finger: table[[f"{finger}.tip.{c}" for c in "xyz"]].to_numpy(dtype=float)
             for finger in doc["fingers"]
         }
     return Truth(doc, tips)
