@@ -207,6 +207,7 @@ def staged_directory(target: str | Path, *, overwrite: bool = False) -> Iterator
         staging = Path(
             tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".partial", dir=target.parent)
         )
+        os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it 0700; the result is a normal folder
     except OSError as exc:
         raise FingerfitError(f"cannot create ({exc.strerror or exc})", path=target) from None
     try:
