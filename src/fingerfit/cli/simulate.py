@@ -24,6 +24,7 @@ from ..simulate.trackerfiles import (
     CONVERTED_DIR,
     SESSION_DIR,
     TrackerFiles,
+    require_ezc3d,
     write_tracker_subject,
 )
 from .app import app, out, parse_list, say, user_errors
@@ -127,6 +128,8 @@ def simulate(
         )
     if out_dir.exists() and not out_dir.is_dir():
         raise FingerfitError("exists and is not a folder", path=out_dir)
+    if fmt is SimFormat.c3d:
+        require_ezc3d()
     if fmt is not SimFormat.csv:
         _check_tracker_outputs(out_dir, subjects, overwrite)
     written: list[TrackerFiles] = []

@@ -165,10 +165,11 @@ def liberty_records(
     )
 
 
-def _ezc3d():
+def require_ezc3d():
+    """The ``ezc3d`` module, or a one-line error saying how to install it."""
     try:
         import ezc3d
-    except ImportError:  # pragma: no cover - depends on the environment
+    except ImportError:
         raise FingerfitError(
             "writing C3D files needs the optional package ezc3d: pip install 'fingerfit[c3d]'",
             field="--format",
@@ -198,7 +199,7 @@ def write_c3d_recording(
         in mm; ezc3d stores float32), NaN where a sample is missing, and the sensor
         origins as points ``<label>_ORIGIN`` (mm).
     """
-    ezc3d = _ezc3d()
+    ezc3d = require_ezc3d()
     path = Path(path)
     check_target(path)
     names = list(labels.values())
@@ -378,7 +379,7 @@ def write_tracker_subject(
             )
     stations = station_map(sensors)
     if fmt == "c3d":
-        _ezc3d()
+        require_ezc3d()
         mapping: dict = {c3d_label(n): n for n in stations.values()}
     else:
         mapping = dict(stations)
@@ -407,6 +408,7 @@ __all__ = [
     "TrackerFiles",
     "c3d_label",
     "liberty_records",
+    "require_ezc3d",
     "session_commands",
     "station_map",
     "write_c3d_recording",
