@@ -464,8 +464,8 @@ def check_model(model: HandModel, session: Session | None = None) -> list[Proble
 CONVENTIONS: dict[str, str] = {
     "as read": "w,x,y,z (as declared)",
     "conjugated": "conjugated (transposed rotations)",
-    "xyzw": "in x,y,z,w order",
-    "xyzw conjugated": "in x,y,z,w order and conjugated",
+    "xyzw": "written in x,y,z,w order",
+    "xyzw conjugated": "written in x,y,z,w order and conjugated",
 }
 
 
