@@ -181,6 +181,71 @@ def test_real_liberty_recordings_read_as_declared() -> None:
         assert all("look" not in p.message for p in problems), problems
 
 
+def geometry() -> None:  # pragma: no cover - ranges and cost quoted in docs/plausibility.md
+    import time
+
+    from fingerfit.session import SEGMENTS
+
+    stats: dict[str, list[float]] = {}
+    rec_res, scales = [], []
+    for seed in range(10):
+        s = subject("realistic", seed, ALL).session
+        ref = reference_poses(s)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = fit_session(s)
+        ends = ("mp", "pip", "dip", "tip")
+        for f in ALL:
+            lm = {k: s.landmark(f"{f}.{k}") for k in ends}
+            fm = m.fingers[f]
+            for i, seg in enumerate(SEGMENTS):
+                stats.setdefault(f"landmarks {ends[i]}-{ends[i + 1]}", []).append(
+                    float(np.linalg.norm(lm[ends[i + 1]] - lm[ends[i]]))
+                )
+                mid = 0.5 * (lm[ends[i]] + lm[ends[i + 1]])
+                stats.setdefault("sensor to landmark midpoint", []).append(
+                    float(np.linalg.norm(ref[f"{f}.{seg}"][0] - mid))
+                )
+                stats.setdefault(f"segment {seg}", []).append(fm.segment_lengths[seg])
+            stats.setdefault("finger length", []).append(sum(fm.segment_lengths.values()))
+            for j, jm in fm.joints.items():
+                stats.setdefault("landmark to centre", []).append(
+                    float(np.linalg.norm(lm[j] - jm.center))
+                )
+                for sensor in (jm.parent, jm.child):
+                    stats.setdefault("sensor to centre", []).append(
+                        float(np.linalg.norm(ref[sensor][0] - jm.center))
+                    )
+        for rec in [*s.grasp, *s.targets, *s.test]:
+            for c in recording_checks(m, rec):
+                rec_res.append(c.residual_mm["as read"])
+                scales.append(c.scale)
+    for k, v in stats.items():
+        print(f"{k}: {min(v):.1f}-{max(v):.1f} mm")
+    print(
+        f"recordings vs model: residual <= {max(rec_res):.2f} mm, "
+        f"scale {min(scales):.3f}-{max(scales):.3f}"
+    )
+    s = subject("realistic", 2).session
+    ref = reference_poses(s)
+
+    def median_ms(f) -> float:
+        ts = []
+        for _ in range(15):
+            t0 = time.perf_counter()
+            f()
+            ts.append(time.perf_counter() - t0)
+        return 1000 * float(np.median(ts))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit_ms = median_ms(lambda: fit_session(s))
+    print(
+        f"one finger, 10 cycles: fit_session {fit_ms:.1f} ms (checks included), "
+        f"check_session {median_ms(lambda: check_session(s, ['index'], ref)):.1f} ms"
+    )
+
+
 def main() -> None:  # pragma: no cover - prints the numbers quoted in docs/plausibility.md
     rows = []
     for seed in range(10):
@@ -230,6 +295,7 @@ def main() -> None:  # pragma: no cover - prints the numbers quoted in docs/plau
             f"written {kind}: as read {v[:, 0].min():.2f}-{v[:, 0].max():.2f} mm (median {np.median(v[:, 0]):.1f}); "
             f"read the right way {v[:, 1].min():.2f}-{v[:, 1].max():.2f} mm"
         )
+    geometry()
     if (LIBERTY / LIBERTY_FILES[0]).is_file():
         for name, res in liberty_checks().items():
             print(name, {k: round(v, 2) for k, v in res.items()})
