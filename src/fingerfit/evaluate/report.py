@@ -1,10 +1,13 @@
 """The self-contained HTML report of a study.
 
-Figures are embedded as base64 PNG, tables are HTML, and an interactive 3D
-view (plain JavaScript on a canvas, no external files) shows each subject's
-fitted finger: bones, joint centres, user axes (blue) and orthogonal axes
-(red), in the finger's own frame (origin at the MP centre, x along the
-proximal phalanx, mm).
+Figures are embedded as base64 PNG, tables are HTML with reader's column names and
+units, and an interactive 3D view (plain JavaScript on a canvas, no external files)
+shows each subject's fitted fingers: bones, joint centres, user axes (blue) and
+orthogonal axes (red), in the proximal-phalanx frame of the subject's first finger
+(origin at its MP centre, x along the phalanx, mm), with an axis triad and a 10 mm
+scale bar. Numbers carry the measurement's precision (0.1 mm, 0.1 deg, whole
+percent, ``p < 0.001`` or three decimals); statistics that were not computed,
+failed sessions and forced-fit warnings are listed by name.
 """
 
 from __future__ import annotations

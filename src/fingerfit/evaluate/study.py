@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib.figure import Figure
 
 from .. import __version__
 from ..errors import FingerfitError
@@ -25,7 +26,7 @@ from ..io import load_session
 from ..io.atomic import atomic_write, staged_directory
 from ..kinematics import compute_kinematics
 from ..model import VARIANTS, HandModel, save_model
-from ..session import HAND_SENSOR, Session, check_subject_id
+from ..session import HAND_SENSOR, JOINTS, Session, check_subject_id
 from ..transforms import angle_between_axes, apply_inverse_pose
 from . import figures
 from .fingertip import GraspEvaluation, evaluate_grasp, evaluate_targets
@@ -113,8 +114,8 @@ def _fit(session: Session, options: FitOptions) -> tuple[HandModel, tuple[str, .
 
 
 def _subject(session: Session, options: FitOptions) -> SubjectResult:
+    truth = load_truth(session.path)  # a broken truth file fails before the fit
     model, warned = _fit(session, options)
-    truth = load_truth(session.path)
     grasp, flex, dist = {}, [], []
     for f, fm in model.fingers.items():
         ev = evaluate_grasp(model, f, session.grasp[0], session.rate_hz)
@@ -280,8 +281,8 @@ def summarize_study(
     }
     # Axis quality (Fig. 8) and the paper's t-tests between joints.
     aq = {}
-    for j, g in dist.groupby("joint")["distance_mm"]:
-        sm = summarize(g)
+    for j in [j for j in JOINTS if (dist["joint"] == j).any()]:
+        sm = summarize(dist.loc[dist["joint"] == j, "distance_mm"])
         aq[j] = {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
     tests = {}
     for a, b in (("dip", "pip"), ("mp", "dip"), ("mp", "pip")):
@@ -577,46 +578,74 @@ def _json_safe(node):
     return node
 
 
-def _write_outputs(result: StudyResult, out_dir: Path) -> None:
-    """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``."""
-    tables, subjects = result.tables, result.subjects
-    for name, table in tables.items():
-        with atomic_write(out_dir / f"{name}.csv", newline="") as fh:
-            table.to_csv(fh, index=False, lineterminator="\n", float_format="%.6g")
-    fig = result.figures
-    fig["fig08"] = figures.axis_quality(tables["axis_quality"], out_dir / "fig08_axis_quality.png")
+def figure_builders(
+    subjects: list[SubjectResult], tables: dict[str, pd.DataFrame]
+) -> dict[str, tuple[str, Callable[[], Figure]]]:
+    """Every figure of a study: key -> (PNG file name, function building the Figure).
+
+    Fig. 8, Fig. 9 per subject (its first finger, hand-sensor frame), Fig. 10; Figs. 11-12
+    when any session has targets; the true fingertip error when any has ground truth.
+    """
+    out: dict[str, tuple[str, Callable[[], Figure]]] = {
+        "fig08": (
+            "fig08_axis_quality.png",
+            lambda: figures.make_axis_quality(tables["axis_quality"]),
+        )
+    }
     for s in subjects:
         f, ev = next(iter(s.grasp.items()))
         hand = s.session.grasp[0].pose(HAND_SENSOR)
         in_hand = {
             k: apply_inverse_pose(hand.rotation, hand.position, v) for k, v in ev.tips.items()
         }
-        fig[f"fig09_{s.subject}"] = figures.trajectories(
-            ev.time, in_hand, f"{s.subject} ({f})", out_dir / f"fig09_trajectories_{s.subject}.png"
+        out[f"fig09_{s.subject}"] = (
+            f"fig09_trajectories_{s.subject}.png",
+            lambda ev=ev, in_hand=in_hand, label=f"{s.subject} ({f})": figures.make_trajectories(
+                ev.time, in_hand, label
+            ),
         )
-    fig["fig10"] = figures.paired_boxes(
-        tables["max_flexion"],
-        "subject",
-        "Fig. 10 - fingertip error at maximal flexion (vs distal-sensor reference)",
-        "fingertip error at maximal flexion (mm)",
-        out_dir / "fig10_max_flexion.png",
-        xlabel="subject",
+    out["fig10"] = (
+        "fig10_max_flexion.png",
+        lambda: figures.make_paired_boxes(
+            tables["max_flexion"],
+            "subject",
+            "Fig. 10 - fingertip error at maximal flexion (vs distal-sensor reference)",
+            "fingertip error at maximal flexion (mm)",
+            xlabel="subject",
+        ),
     )
     if not tables["targets"].empty:
-        fig["fig11"] = figures.target_scatter(
-            tables["targets"], out_dir / "fig11_target_offsets.png"
+        out["fig11"] = (
+            "fig11_target_offsets.png",
+            lambda: figures.make_target_scatter(tables["targets"]),
         )
-        fig["fig12"] = figures.target_bars(tables["targets"], out_dir / "fig12_target_errors.png")
+        out["fig12"] = (
+            "fig12_target_errors.png",
+            lambda: figures.make_target_bars(tables["targets"]),
+        )
     if "truth_fingertip" in tables and not tables["truth_fingertip"].empty:
-        tt = tables["truth_fingertip"]
-        wide = tt.pivot_table(
-            index=["subject", "recording"], columns="variant", values="mean_mm"
-        ).reset_index()
-        fig["truth"] = figures.paired_boxes(
-            wide,
-            "recording",
-            "True fingertip error (simulation ground truth)",
-            "mean fingertip error per recording (mm)",
-            out_dir / "truth_fingertip.png",
-            xlabel="recording",
+        wide = (
+            tables["truth_fingertip"]
+            .pivot_table(index=["subject", "recording"], columns="variant", values="mean_mm")
+            .reset_index()
         )
+        out["truth"] = (
+            "truth_fingertip.png",
+            lambda: figures.make_paired_boxes(
+                wide,
+                "recording",
+                "True fingertip error (simulation ground truth)",
+                "mean fingertip error per recording (mm)",
+                xlabel="recording",
+            ),
+        )
+    return out
+
+
+def _write_outputs(result: StudyResult, out_dir: Path) -> None:
+    """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``."""
+    for name, table in result.tables.items():
+        with atomic_write(out_dir / f"{name}.csv", newline="") as fh:
+            table.to_csv(fh, index=False, lineterminator="\n", float_format="%.6g")
+    for key, (filename, build) in figure_builders(result.subjects, result.tables).items():
+        result.figures[key] = figures.save(build(), out_dir / filename)

@@ -1,0 +1,137 @@
+"""Report layout: every study figure is readable -- no two text labels overlap, every axis
+is labelled with its unit (and frame where it has one) -- for a two-subject mixed study
+and for a one-subject study; numbers in the report carry the measurement's precision."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import re
+
+import matplotlib.pyplot as plt
+import pytest
+from matplotlib.figure import Figure
+from matplotlib.text import Text
+from matplotlib.transforms import Bbox
+
+from fingerfit.estimate import FitOptions
+from fingerfit.evaluate import run_study
+from fingerfit.evaluate.report import _p, _pct, _ttest
+from fingerfit.evaluate.study import figure_builders, summarize_study
+from fingerfit.io.sessiondir import save_session
+from fingerfit.simulate import write_subject
+
+from .conftest import subject
+
+
+@pytest.fixture(scope="module")
+def mixed(tmp_path_factory):
+    """P01 (realistic: targets, test, truth) and P02 (exact: grasp only)."""
+    root = tmp_path_factory.mktemp("layout")
+    p01 = write_subject(subject("realistic", 2), root / "P01")
+    toml = p01 / "session.toml"
+    toml.write_text(toml.read_text().replace('subject = "S01"', 'subject = "P01"'))
+    exact = subject("exact", 11).session
+    bare = dataclasses.replace(exact, subject="P02", targets=[], test=[], events=[], path=None)
+    p02 = save_session(bare, root / "P02")
+    return run_study([p01, p02], root / "out", FitOptions(method="tang2018"))
+
+
+def _texts(fig: Figure) -> list[Text]:
+    """Every drawn, non-empty text of a figure (tick labels only for ticks in view)."""
+    hidden: set[int] = set()
+    for ax in fig.axes:
+        for axis, (lo, hi) in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+            lo, hi = min(lo, hi), max(lo, hi)
+            for tick in [*axis.get_major_ticks(), *axis.get_minor_ticks()]:
+                if not lo - 1e-9 * (hi - lo) <= tick.get_loc() <= hi + 1e-9 * (hi - lo):
+                    hidden.update((id(tick.label1), id(tick.label2)))
+    return [
+        t
+        for t in fig.findobj(Text)
+        if t.get_visible() and t.get_text().strip() and id(t) not in hidden
+    ]
+
+
+def overlaps(fig: Figure) -> list[tuple[str, str]]:
+    """Pairs of text labels whose drawn extents overlap (by more than half a pixel)."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    boxes = [(t.get_text(), t.get_window_extent(renderer)) for t in _texts(fig)]
+    bad = []
+    for (a, ba), (b, bb) in itertools.combinations(boxes, 2):
+        inter = Bbox.intersection(ba, bb)
+        if inter is not None and inter.width > 0.5 and inter.height > 0.5:
+            bad.append((a, b))
+    return bad
+
+
+def test_overlap_check_detects_overlap() -> None:
+    fig, ax = plt.subplots()
+    ax.text(0.5, 0.5, "first label")
+    ax.text(0.52, 0.5, "second label")
+    ax.text(0.1, 0.1, "")  # empty strings are ignored
+    try:
+        assert ("first label", "second label") in overlaps(fig)
+    finally:
+        plt.close(fig)
+
+
+def _check_figures(subjects, tables) -> set[str]:
+    built = figure_builders(subjects, tables)
+    for key, (_name, build) in built.items():
+        fig = build()
+        try:
+            assert overlaps(fig) == [], key
+            for ax in fig.axes:
+                xl, yl = ax.get_xlabel(), ax.get_ylabel()
+                assert xl and yl, (key, xl, yl)
+                assert "(mm)" in yl, (key, yl)
+                if key.startswith("fig09"):
+                    assert "hand-sensor" in xl and "(mm)" in xl and "hand-sensor" in yl
+                if key == "fig11":
+                    assert "tracker" in xl and "(mm)" in xl and "tracker" in yl
+        finally:
+            plt.close(fig)
+    return set(built)
+
+
+def test_figures_of_a_mixed_study_have_no_overlapping_labels(mixed) -> None:
+    keys = _check_figures(mixed.subjects, mixed.tables)
+    assert keys == {"fig08", "fig09_P01", "fig09_P02", "fig10", "fig11", "fig12", "truth"}
+
+
+def test_figures_of_a_one_subject_study_have_no_overlapping_labels(mixed) -> None:
+    one = [s for s in mixed.subjects if s.subject == "P01"]
+    _summary, tables = summarize_study(one, FitOptions(method="tang2018"))
+    assert _check_figures(one, tables) == {
+        "fig08",
+        "fig09_P01",
+        "fig10",
+        "fig11",
+        "fig12",
+        "truth",
+    }
+
+
+def test_number_formats() -> None:
+    assert _p(0.0) == "p < 0.001" and _p(0.00099) == "p < 0.001"
+    assert _p(0.0123) == "p = 0.012" and _p(float("nan")) == "p undefined"
+    assert _pct(77.201) == "77 %" and _pct(None) == "—"
+    assert _ttest({"t": -2.345, "p": 0.04, "df": 9.0}) == "t(9) = -2.35, p = 0.040"
+    assert _ttest({"skipped": "needs at least 2 pairs, has 1"}).startswith("not computed")
+
+
+def test_report_precision_and_names(mixed) -> None:
+    html = mixed.report.read_text()
+    body = re.sub(r"<script.*?</script>", "", html, flags=re.S)
+    body = re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "", body)
+    assert not re.search(r"p [=<] ?0\.000\b", body)
+    assert not re.search(r"\d\.\d{2,} ?%", body)  # whole percent
+    cells = re.findall(r"<td class=num>([^<]*)</td>", body)
+    for c in cells:  # 0.1 mm / 0.1 deg / counts / whole percent
+        assert re.fullmatch(r"-?\d+(\.\d)?( \(\d+\.\d\))?|—( \(—\))?|\d+\.\d \(—\)", c), c
+    for raw in ("user_axis", "tilt_from_orthogonal_deg", "segment_length_mm", "mean_mm", "p95_mm"):
+        assert f"<th>{raw}" not in body
+    assert "t000 … t120" in body  # target names explained
+    assert "3D view" in body and "10 mm" in html and "triad" in html
