@@ -285,8 +285,8 @@ def _measure(n_subjects: int) -> None:  # pragma: no cover - documentation helpe
         work = Path(d)
         ref = simulate_and_fit(work, "csv", SEED, n_subjects)
         print(f"max over {n_subjects} subjects (seed {SEED}) of |tracker path - CSV path|")
-        print("| format | method | joint | axis (deg) | centre (mm) | segment (mm) |")
-        print("|---|---|---|---|---|---|")
+        print("| format | method | joint | axis (deg) | centre (mm) | segment (mm) | worst axis |")
+        print("|---|---|---|---|---|---|---|")
         for fmt in FORMATS:
             got = simulate_and_fit(work, fmt, SEED, n_subjects)
             for m in METHODS:
@@ -294,7 +294,9 @@ def _measure(n_subjects: int) -> None:  # pragma: no cover - documentation helpe
                 for j in diffs[0]:
                     row = [max(d[j][k] for d in diffs) for k in ("axis_deg", "centre_mm")]
                     row.append(max(d[j]["length_mm"] for d in diffs))
-                    print(f"| {fmt} | {m} | {j} | {row[0]:.4f} | {row[1]:.4f} | {row[2]:.4f} |")
+                    worst = int(np.argmax([d[j]["axis_deg"] for d in diffs])) + 1
+                    cells = " | ".join(f"{v:.2g}" for v in row)
+                    print(f"| {fmt} | {m} | {j} | {cells} | S{worst:02d} |")
 
 
 if __name__ == "__main__":  # pragma: no cover
