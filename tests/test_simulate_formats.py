@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fingerfit.errors import FingerfitError
 from fingerfit.io import load_session
 from fingerfit.io.liberty import parse_liberty_ascii, parse_liberty_binary
 from fingerfit.model import HandModel, load_model
@@ -135,6 +136,27 @@ def tracker_models(work: Path, fmt: str) -> dict[str, list[HandModel]]:
 
 
 # ------------------------------------------------------------------ file layout and units
+
+
+def test_station_map_and_channel_labels() -> None:
+    sensors = ["middle.distal", "index.middle", "hand", "middle.proximal", "index.proximal"]
+    sensors += ["index.distal", "middle.middle"]
+    assert station_map(sensors) == {
+        1: "hand",
+        2: "index.proximal",
+        3: "index.middle",
+        4: "index.distal",
+        5: "middle.proximal",
+        6: "middle.middle",
+        7: "middle.distal",
+    }
+    assert [c3d_label(s) for s in ("hand", "index.proximal", "little.distal")] == [
+        "HAND",
+        "INDEX_PROX",
+        "LITTLE_DIST",
+    ]
+    with pytest.raises(FingerfitError, match="at most 16 stations"):
+        station_map(["hand"] + [f"s{i}" for i in range(16)])
 
 
 def test_liberty_ascii_layout_units_and_precision(work: Path, csv_models) -> None:

@@ -93,6 +93,16 @@ def sensor_order(sensors: Sequence[str]) -> list[str]:
 def station_map(sensors: Sequence[str]) -> dict[int, str]:
     """Liberty station number (1..) -> sensor name, in :func:`sensor_order`.
 
+    Parameters
+    ----------
+    sensors : sequence of str
+        Session sensor names.
+
+    Returns
+    -------
+    dict[int, str]
+        ``{1: "hand", 2: "index.proximal", 3: "index.middle", 4: "index.distal", ...}``.
+
     Raises
     ------
     FingerfitError
@@ -117,7 +127,17 @@ def c3d_label(sensor: str) -> str:
 
 
 def map_option(mapping: Mapping[int | str, str]) -> str:
-    """``fingerfit convert --map`` value of a station/channel -> sensor mapping."""
+    """``fingerfit convert --map`` value of a station/channel -> sensor mapping.
+
+    Parameters
+    ----------
+    mapping : mapping int or str -> str
+
+    Returns
+    -------
+    str
+        ``"1=hand,2=index.proximal,..."``.
+    """
     return ",".join(f"{k}={v}" for k, v in mapping.items())
 
 
