@@ -242,6 +242,7 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
             rh.weights,
             noise,
             data.finger_direction,
+            groups=rh.labels,
         )
         if tf.accepted:
             abduction = tf
@@ -251,6 +252,7 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
                 f"off the model {np.degrees(tf.rms_hinge_rad):.2f} -> "
                 f"{np.degrees(tf.rms_two_axis_rad):.2f} deg RMS"
             )
+            notes.extend(tf.stability_notes())
         else:
             notes.append(
                 f"one-axis MP: a second axis would explain too little (ab/adduction span "
@@ -274,6 +276,7 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
             migration=True,
             weights=rh.weights,
             noise_mm=noise,
+            groups=rh.labels,
             **extra,
         )
         point, mig = pts.centre, pts.migration

@@ -29,9 +29,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..transforms import FloatArray, axis_angle_matrix
+from .shrink import MIN_DATA_SHARE, data_share
 
 PRIOR_OFFSET_MM = 5.0  # SD of the ab/adduction axis offset from the flexion centre
 PRIOR_MIGRATION = 2.0  # SD of each migration component (mm/rad)
+# The offset between the axes of a two-axis joint enters with the data's share
+# 1 / (1 + (sd / HALF)^6) of the weight (twoaxis.data_share); the rest holds them intersecting.
+HALF_OFFSET_SD_MM = 0.15
 
 
 @dataclass(frozen=True)
@@ -50,6 +54,12 @@ class AxisPoints:
         Centre migration per radian of flexion (mm/rad), perpendicular to the axis.
     rms_mm : float
         RMS residual of the point equations per frame (mm).
+    offset_sd_mm : float
+        Two-axis joints fitted with ``groups``: cluster-robust SD (mm) of the distance
+        between the axes from the data alone (NaN otherwise).
+    offset_data_share : float
+        The data's weight (0-1) in that offset (:func:`.shrink.data_share`; 0: the axes
+        are held intersecting; NaN without ``groups``).
     """
 
     centre: FloatArray
@@ -57,6 +67,8 @@ class AxisPoints:
     abduction_point: FloatArray | None
     migration: FloatArray | None
     rms_mm: float
+    offset_sd_mm: float = float("nan")
+    offset_data_share: float = float("nan")
 
 
 def fit_axis_points(
@@ -71,6 +83,7 @@ def fit_axis_points(
     migration: bool = False,
     weights: FloatArray | None = None,
     noise_mm: float = 0.5,
+    groups: FloatArray | None = None,
 ) -> AxisPoints:
     """Least-squares points of known axes (and optionally the migration).
 
@@ -96,6 +109,11 @@ def fit_axis_points(
         Frame weights.
     noise_mm : float
         Per-coordinate SD of the equations (mm): scales the priors.
+    groups : ndarray, shape (n,), optional
+        Grasp cycle of each frame. With it, the prior on the offset between the two
+        axes of a two-axis joint is weighted against the data by the cluster-robust
+        (per-cycle) variance of that offset instead of ``noise_mm`` (``docs/methods.md``,
+        "Numerical stability").
 
     Returns
     -------
@@ -118,7 +136,12 @@ def fit_axis_points(
     big = (blocks * sw[:, None, None]).reshape(3 * n, p)
     rhs = (-translation * sw[:, None]).reshape(3 * n)
     ata = big.T @ big
+    data_ata = ata.copy()
     atb = big.T @ rhs
+    prior = np.zeros((p, p))  # both priors
+    extra = np.zeros((p, p))  # the migration prior only
+    d_off = np.zeros((3, p))
+    offset_sd = share = float("nan")
     nulls = [np.concatenate([reference_rotation.T @ axis, axis, np.zeros(p - 6)]) / np.sqrt(2)]
     lam = noise_mm**2
     k = 6
@@ -126,9 +149,8 @@ def fit_axis_points(
         b = abduction_axis
         nulls.append(np.concatenate([np.zeros(6), b, np.zeros(p - 9)]))
         pb = np.eye(3) - np.outer(b, b)
-        d = np.zeros((3, p))
-        d[:, 3:6], d[:, 6:9] = -pb, pb
-        ata += lam / PRIOR_OFFSET_MM**2 * (d.T @ d)
+        d_off[:, 3:6], d_off[:, 6:9] = -pb, pb
+        prior += lam / PRIOR_OFFSET_MM**2 * (d_off.T @ d_off)
         k = 9
     if migration:
         e = np.zeros(p)
@@ -136,10 +158,61 @@ def fit_axis_points(
         nulls.append(e)
         d = np.zeros((3, p))
         d[:, k : k + 3] = np.eye(3)
-        ata += lam / PRIOR_MIGRATION**2 * (d.T @ d)
+        extra += lam / PRIOR_MIGRATION**2 * (d.T @ d)
+    prior += extra
     nv = np.array(nulls)
     proj = np.eye(p) - nv.T @ nv
-    x = proj @ np.linalg.lstsq(proj @ ata @ proj + nv.T @ nv, proj @ atb, rcond=None)[0]
+
+    def solve(normal: FloatArray) -> FloatArray:
+        return proj @ np.linalg.lstsq(proj @ normal @ proj + nv.T @ nv, proj @ atb, rcond=None)[0]
+
+    x = solve(ata + prior)
+    if two and groups is not None:
+        # Offset along the common perpendicular of the axes: how well the data alone see
+        # it, per cycle (cluster-robust); the prior then weighs 1 / PRIOR_OFFSET_MM^2
+        # against that.
+        nrm = np.cross(axis, abduction_axis)
+        h_inv = proj @ np.linalg.pinv(proj @ data_ata @ proj) @ proj
+        r = (big @ x - rhs).reshape(n, 3)
+        uniq, idx = np.unique(np.asarray(groups), return_inverse=True)
+        scores = np.zeros((uniq.size, p))
+        np.add.at(scores, idx, np.einsum("nij,ni->nj", big.reshape(n, 3, p), r))
+        scores -= scores.mean(axis=0)
+        cov = h_inv @ (scores.T @ scores) @ h_inv * (uniq.size / max(uniq.size - 1, 1))
+        # Both directions across b: along the common perpendicular and along a.
+        scales, var_d = [], 0.0
+        for v in (nrm, axis - (axis @ abduction_axis) * abduction_axis):
+            g = np.zeros(p)
+            g[3:6], g[6:9] = -v, v
+            g /= max(np.linalg.norm(v), 1e-12)
+            var = float(g @ cov @ g)
+            var_d = var_d if v is not nrm else var
+            scales.append(var / max(float(g @ h_inv @ g), 1e-300))
+        offset_sd = float(np.sqrt(max(var_d, 0.0)))
+        share = data_share(offset_sd, HALF_OFFSET_SD_MM)
+        if share < MIN_DATA_SHARE:
+            # The axes are held intersecting: c_b = c_a (the c_b columns join c_a's).
+            keep = [i for i in range(p) if not 6 <= i < 9]
+            merged = big.copy()
+            merged[:, 3:6] += big[:, 6:9]
+            sub = merged[:, keep]
+            sub_ata = sub.T @ sub + extra[np.ix_(keep, keep)]
+            snv = np.array([nv[0][keep]] + ([nv[-1][keep]] if migration else []))
+            sproj = np.eye(len(keep)) - snv.T @ snv
+            y = (
+                sproj
+                @ np.linalg.lstsq(
+                    sproj @ sub_ata @ sproj + snv.T @ snv, sproj @ (sub.T @ rhs), rcond=None
+                )[0]
+            )
+            x = np.zeros(p)
+            x[keep] = y
+            x[6:9] = y[3:6]
+        else:
+            # The data's curvature along the offset is worth 1 / var; the prior gets
+            # (1 - share) / share times that, i.e. scale (1 - share) / (share var) per mm^2.
+            scale = float(np.mean(scales)) * (1.0 - share) / (share * max(var_d, 1e-300))
+            x = solve(data_ata + extra + scale * (d_off.T @ d_off))
     resid = big @ x - rhs
     rms = float(np.sqrt(resid @ resid / max(w.sum(), 1e-12)))
     return AxisPoints(
@@ -148,6 +221,8 @@ def fit_axis_points(
         abduction_point=x[6:9] if two else None,
         migration=x[k : k + 3] if migration else None,
         rms_mm=rms,
+        offset_sd_mm=offset_sd,
+        offset_data_share=share,
     )
 
 

@@ -53,6 +53,8 @@ class RobustHinge:
         Cycle indices (into ``periods``).
     rejected_frames : int
         Frames of kept cycles rejected by the frame rule.
+    labels : ndarray of int, shape (len(frames),)
+        Cycle index (into ``periods``) of each kept frame.
     """
 
     fit: PooledHinge
@@ -61,6 +63,7 @@ class RobustHinge:
     kept_cycles: list[int]
     rejected_cycles: list[int]
     rejected_frames: int
+    labels: np.ndarray | None = None
 
 
 def robust_z(values: FloatArray) -> FloatArray:
@@ -180,6 +183,7 @@ def robust_hinge(
         kept_cycles=cycles,
         rejected_cycles=sorted(rejected),
         rejected_frames=int((kept_cycle_frames & ~keep).sum()),
+        labels=labels[keep],
     )
 
 

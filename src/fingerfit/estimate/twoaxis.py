@@ -56,12 +56,16 @@ from scipy.optimize import least_squares
 from ..kinematics import two_axis_angles
 from ..transforms import FloatArray, axis_angle_matrix, orthonormal_basis, unit
 from .migration import fit_axis_points
+from .shrink import MIN_DATA_SHARE, data_share
 
 MAX_RESIDUAL_RATIO = 0.5
 MIN_RANGE_DEG = 1.5
 MAX_FRAMES = 600  # the direction fit uses at most this many frames (evenly strided)
 MAX_FLEXION_TILT_DEG = 20.0  # the flexion axis stays within this of the pooled hinge axis
 MAX_ABDUCTION_TURN_DEG = 60.0  # the ab/adduction axis within this of its starting direction
+# The tilt of b towards a enters the fit with the data's share 1 / (1 + (sd / HALF)^6) of
+# the weight, sd its cluster-robust SD from the data alone; the rest holds it perpendicular.
+HALF_TILT_SD_DEG = 1.5
 _BOUNDS = np.tan(np.radians([MAX_FLEXION_TILT_DEG] * 2 + [MAX_ABDUCTION_TURN_DEG] * 2))
 
 
@@ -87,6 +91,17 @@ class TwoAxisFit:
         Whether the data support the second axis (see module docstring).
     interior : bool
         Whether the direction fit found an optimum inside its search bounds.
+    flexion_sd_deg, abduction_sd_deg : float
+        Cluster-robust SD over the grasp cycles of the flexion axis direction and of
+        the turn of the ab/adduction axis about it (deg).
+    tilt_sd_deg, tilt_data_share : float
+        SD of the tilt of ``b`` towards ``a`` from the data alone (deg) and the data's
+        weight in it (0: held perpendicular).
+    offset_sd_mm, offset_data_share : float
+        SD of the distance between the axes from the data alone (mm) and the data's
+        weight in it (0: held intersecting).
+    data_condition : float
+        Condition number of the direction fit's data Jacobian (four parameters).
     """
 
     flexion_axis: FloatArray
@@ -98,6 +113,36 @@ class TwoAxisFit:
     abduction_range_deg: float
     accepted: bool
     interior: bool = True
+    flexion_sd_deg: float = 0.0
+    abduction_sd_deg: float = 0.0
+    tilt_sd_deg: float = 0.0
+    tilt_data_share: float = 1.0
+    offset_sd_mm: float = 0.0
+    offset_data_share: float = 1.0
+    data_condition: float = 1.0
+
+    def stability_notes(self) -> list[str]:
+        """Quality-note sentences on how well the motion determines the two axes."""
+        z = 1.96
+        notes = [
+            f"two-axis MP conditioning: direction fit condition number "
+            f"{self.data_condition:.0f}; flexion axis +/-{z * self.flexion_sd_deg:.2f} deg, "
+            f"ab/adduction axis +/-{z * self.abduction_sd_deg:.2f} deg about it "
+            "(95 %, from the spread over the grasp cycles)"
+        ]
+        if self.tilt_data_share < 0.5:
+            notes.append(
+                f"ab/adduction axis held perpendicular to the flexion axis (data weight "
+                f"{100 * self.tilt_data_share:.0f} %): the motion does not determine its "
+                f"tilt (+/-{self.tilt_sd_deg:.0f} deg from the data alone)"
+            )
+        if self.offset_data_share < 0.5:
+            notes.append(
+                f"MP axes held intersecting (data weight {100 * self.offset_data_share:.0f} "
+                f"%): the motion does not determine the distance between them "
+                f"(+/-{self.offset_sd_mm:.1f} mm from the data alone)"
+            )
+        return notes
 
 
 def _skew_residual(q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
@@ -118,13 +163,122 @@ def _hinge_residual(q: FloatArray, a: FloatArray) -> FloatArray:
     return np.linalg.norm(q @ a - a, axis=1)
 
 
+def _tangent_coords(v: FloatArray, v0: FloatArray, basis: FloatArray) -> FloatArray:
+    """Coordinates ``x (2,)`` with ``unit(v0 + x[0] e0 + x[1] e1) = v`` (``v . v0 > 0``)."""
+    return np.array([v @ basis[0], v @ basis[1]]) / (v @ v0)
+
+
+def _local_jacobian(
+    q: FloatArray, a: FloatArray, b: FloatArray, sw: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Weighted residual ``(3n,)`` and its Jacobian ``(3n, 4)`` in tangent coordinates.
+
+    The four coordinates turn ``a`` and ``b`` (rad) towards the two vectors of
+    :func:`orthonormal_basis` perpendicular to each; returned with those vectors
+    ``(4, 3)`` (two for ``a``, then two for ``b``).
+    """
+    ta, tb = orthonormal_basis(a), orthonormal_basis(b)
+
+    def res(z: FloatArray) -> FloatArray:
+        aa = unit(a + z[0] * ta[0] + z[1] * ta[1])
+        bb = unit(b + z[2] * tb[0] + z[3] * tb[1])
+        return (_skew_residual(q, aa, bb) * sw[:, None]).ravel()
+
+    h = 1e-6
+    jac = np.stack([(res(h * e) - res(-h * e)) / (2 * h) for e in np.eye(4)], axis=1)
+    return res(np.zeros(4)), jac, np.concatenate([ta[:2], tb[:2]])
+
+
+def _cluster_covariance(
+    jac: FloatArray, resid: FloatArray, groups: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Cluster-robust (sandwich) covariance of the direction parameters.
+
+    Parameters
+    ----------
+    jac : ndarray, shape (3n, p)
+    resid : ndarray, shape (3n,)
+    groups : ndarray, shape (n,)
+        Cluster label of each frame (grasp cycle).
+
+    Returns
+    -------
+    cov : ndarray, shape (p, p)
+        ``H^+ M H^+`` with ``H = J^T J`` and ``M`` the covariance of the per-cluster
+        scores ``J_c^T r_c`` (centred, times ``G / (G - 1)``): a systematic error
+        repeated within a cycle counts once per cycle, not once per frame.
+    h_inv : ndarray, shape (p, p)
+        ``H^+``.
+    """
+    p = jac.shape[1]
+    lab = np.repeat(np.asarray(groups), 3)
+    uniq, idx = np.unique(lab, return_inverse=True)
+    scores = np.zeros((uniq.size, p))
+    np.add.at(scores, idx, jac * resid[:, None])
+    g = uniq.size
+    scores -= scores.mean(axis=0)
+    m = scores.T @ scores * (g / max(g - 1, 1))
+    h_inv = np.linalg.pinv(jac.T @ jac)
+    return h_inv @ m @ h_inv, h_inv
+
+
+@dataclass(frozen=True)
+class TwoAxisDirections:
+    """Result of :func:`fit_two_axis_directions` (parent frame at the reference posture).
+
+    Attributes
+    ----------
+    flexion_axis, abduction_axis : ndarray, shape (3,)
+        Unit ``a`` and ``b``.
+    rms_rad : float
+        RMS residual rotation per frame (rad).
+    interior : bool
+        False when the optimum lies on the search bounds.
+    flexion_sd_deg : float
+        Cluster-robust SD of the flexion axis direction (largest over the two
+        directions perpendicular to it; deg).
+    abduction_sd_deg : float
+        Cluster-robust SD of the turn of ``b`` about ``a`` (deg): how well the direction
+        of the ab/adduction swing is known.
+    tilt_sd_deg : float
+        Cluster-robust SD (deg) of the tilt of ``b`` towards ``a`` from the data alone.
+    tilt_data_share : float
+        Weight (0-1) of the data in that tilt (:func:`.shrink.data_share` with
+        ``HALF_TILT_SD_DEG``); the rest holds ``b`` perpendicular to ``a``.
+    data_condition : float
+        Condition number (largest / smallest singular value) of the data Jacobian
+        over the four direction parameters, without the prior.
+    """
+
+    flexion_axis: FloatArray
+    abduction_axis: FloatArray
+    rms_rad: float
+    interior: bool
+    flexion_sd_deg: float
+    abduction_sd_deg: float
+    tilt_sd_deg: float
+    tilt_data_share: float
+    data_condition: float
+
+
 def fit_two_axis_directions(
     q: FloatArray,
     flexion_guess: FloatArray,
     weights: FloatArray | None = None,
     finger_direction: FloatArray | None = None,
-) -> tuple[FloatArray, FloatArray, float, bool]:
+    groups: FloatArray | None = None,
+) -> TwoAxisDirections:
     """Flexion and ab/adduction directions minimising the two-axis residual.
+
+    Two stages (``docs/methods.md``, "Numerical stability"): (1) ``b`` held
+    perpendicular to ``a`` (three parameters, well determined); there the
+    cluster-robust covariance over the grasp cycles gives how well the data alone
+    see the tilt ``gamma`` of ``b`` towards ``a`` (SD ``sigma``); (2) all four
+    parameters, with the Gaussian prior ``gamma ~ N(0, PRIOR_PERPENDICULAR_DEG)``
+    (``sin gamma = a . b``) weighted against the data by ``sigma``. The tilt is seen
+    by the data only at second order, so with realistic errors the prior holds it
+    (the fit no longer wanders along a flat valley), while exact data still
+    determine it exactly (``sigma = 0``).
 
     Parameters
     ----------
@@ -137,20 +291,23 @@ def fit_two_axis_directions(
     finger_direction : ndarray, shape (3,), optional
         Unit direction of the stretched finger (parent frame); the dorsal direction
         ``finger_direction x a`` is then the starting ab/adduction axis.
+    groups : ndarray, shape (n,), optional
+        Grasp cycle of each frame (clusters of the robust covariance); default: ten
+        contiguous blocks.
 
     Returns
     -------
-    a, b : ndarray, shape (3,)
-        Unit flexion and ab/adduction axes.
-    rms : float
-        Weighted RMS residual rotation (rad).
-    interior : bool
-        False when the best solution lies on the bounds of the search (the flexion
-        axis ``MAX_FLEXION_TILT_DEG`` from the hinge axis, or the ab/adduction axis
-        ``MAX_ABDUCTION_TURN_DEG`` from its start): no two-axis optimum in the data.
+    TwoAxisDirections
+        ``interior`` is False when the best solution lies on the bounds of the
+        search (the flexion axis ``MAX_FLEXION_TILT_DEG`` from the hinge axis, or the
+        ab/adduction axis ``MAX_ABDUCTION_TURN_DEG`` from its start): no two-axis
+        optimum in the data.
     """
     a0 = unit(flexion_guess)
-    sw = np.sqrt(np.ones(q.shape[0]) if weights is None else weights / np.mean(weights))
+    n = q.shape[0]
+    sw = np.sqrt(np.ones(n) if weights is None else weights / np.mean(weights))
+    if groups is None:
+        groups = np.arange(n) * 10 // max(n, 1)
     # Starting ab/adduction axes: the main direction of the rotation left off the hinge
     # (the swing of a), and the direction perpendicular to it and to a.
     swing = np.cross(a0, q @ a0) * sw[:, None]
@@ -160,6 +317,7 @@ def fit_two_axis_directions(
     if finger_direction is not None and np.linalg.norm(np.cross(finger_direction, a0)) > 0.1:
         starts = [unit(np.cross(finger_direction, a0))]
     ea = orthonormal_basis(a0)
+    lim = np.array([_BOUNDS[0], _BOUNDS[1], np.radians(MAX_ABDUCTION_TURN_DEG)])
     best = None
     for b0 in starts:
         eb = orthonormal_basis(b0)
@@ -169,18 +327,83 @@ def fit_two_axis_directions(
             b = unit(b0 + x[2] * eb[0] + x[3] * eb[1])
             return a, b
 
-        def resid(x: FloatArray, dirs=dirs) -> FloatArray:
-            return (_skew_residual(q, *dirs(x)) * sw[:, None]).ravel()
+        def perp(y: FloatArray, b0: FloatArray = b0) -> tuple:
+            # Stage 1: b perpendicular to a, turned by y[2] (rad) about a from b0.
+            a = unit(a0 + y[0] * ea[0] + y[1] * ea[1])
+            u = unit(b0 - (b0 @ a) * a)
+            return a, np.cos(y[2]) * u + np.sin(y[2]) * np.cross(a, u)
 
-        sol = least_squares(
-            resid, np.zeros(4), bounds=(-_BOUNDS, _BOUNDS), x_scale=0.05, xtol=1e-8, ftol=1e-10
+        def data_resid(a: FloatArray, b: FloatArray) -> FloatArray:
+            return (_skew_residual(q, a, b) * sw[:, None]).ravel()
+
+        s1 = least_squares(
+            lambda y, perp=perp: data_resid(*perp(y)),
+            np.zeros(3),
+            bounds=(-lim, lim),
+            x_scale=0.05,
+            xtol=1e-10,
+            ftol=1e-12,
         )
-        interior = bool(np.all(np.abs(sol.x) < 0.98 * _BOUNDS))
+        a1, b1 = perp(s1.x)
+        x1 = np.concatenate([_tangent_coords(a1, a0, ea), _tangent_coords(b1, b0, eb)])
+        x1 = np.clip(x1, -0.99 * _BOUNDS, 0.99 * _BOUNDS)
+
+        def resid(x: FloatArray, lam: float, dirs=dirs) -> FloatArray:
+            a, b = dirs(x)
+            return np.append(data_resid(a, b), lam * (a @ b))
+
+        # How well the data alone see the tilt of b towards a (cluster-robust, per
+        # cycle), first at the perpendicular solution, then once more at the fit it
+        # leads to (at the perpendicular one a real tilt shows up as misfit).
+        a, b = a1, b1
+        for _ in range(2):
+            r, jac, basis = _local_jacobian(q, a, b, sw)
+            cov, h_inv = _cluster_covariance(jac, r, groups)
+            e = np.concatenate([[0.0, 0.0], unit(basis[2:] @ a)])  # tilt of b towards a
+            var_tilt = max(float(e @ cov @ e), 0.0)
+            share = data_share(np.degrees(np.sqrt(var_tilt)), HALF_TILT_SD_DEG)
+            if share < MIN_DATA_SHARE:
+                break
+            # Prior row on a . b = sin(tilt): in cost units the data's curvature along the
+            # tilt is worth 1 / var_tilt; the prior gets (1 - share) / share times that.
+            curv = 1.0 / max(float(e @ h_inv @ e), 1e-300)
+            lam = np.sqrt(curv * (1.0 - share) / share)
+            sol = least_squares(
+                resid,
+                x1,
+                bounds=(-_BOUNDS, _BOUNDS),
+                x_scale=0.05,
+                xtol=1e-12,
+                ftol=1e-14,
+                kwargs={"lam": lam},
+            )
+            a, b = dirs(sol.x)
+        if share < MIN_DATA_SHARE:
+            # The data do not determine the tilt: b stays perpendicular to a.
+            a, b, cost = a1, b1, s1.cost
+            interior = bool(np.all(np.abs(s1.x) < 0.98 * lim))
+        else:
+            cost = 0.5 * float(np.sum(sol.fun[:-1] ** 2))
+            interior = bool(np.all(np.abs(sol.x) < 0.98 * _BOUNDS))
         # Interior optima beat boundary ones; then the lower cost wins.
-        if best is None or (interior, -sol.cost) > (best[3], -best[2]):
-            best = (*dirs(sol.x), sol.cost, interior)
-    a, b, cost, interior = best
-    return a, b, float(np.sqrt(2 * cost / q.shape[0])), interior
+        if best is None or (interior, -cost) > (best[3], -best[2]):
+            phi = np.concatenate([[0.0, 0.0], unit(basis[2:] @ np.cross(a, b))])
+            best = (a, b, cost, interior, var_tilt, cov, share, float(phi @ cov @ phi))
+    a, b, cost, interior, var_tilt, cov1, share, var_phi = best
+    _, jac, _ = _local_jacobian(q, a, b, sw)
+    sv = np.linalg.svd(jac, compute_uv=False)
+    tilt_sd = float(np.degrees(np.sqrt(var_tilt))) if var_tilt > 0 else 0.0
+    return TwoAxisDirections(
+        flexion_axis=a,
+        abduction_axis=b,
+        rms_rad=float(np.sqrt(2.0 * cost / n)),
+        interior=interior,
+        flexion_sd_deg=float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(cov1[:2, :2]).max(), 0)))),
+        abduction_sd_deg=float(np.degrees(np.sqrt(max(var_phi, 0.0)))),
+        tilt_sd_deg=tilt_sd,
+        tilt_data_share=float(share),
+        data_condition=float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf"),
+    )
 
 
 def fit_two_axis(
@@ -191,6 +414,7 @@ def fit_two_axis(
     weights: FloatArray | None = None,
     noise_mm: float = 0.5,
     finger_direction: FloatArray | None = None,
+    groups: FloatArray | None = None,
 ) -> TwoAxisFit:
     """Fit a two-axis joint to the movement frames of one joint.
 
@@ -212,6 +436,10 @@ def fit_two_axis(
     finger_direction : ndarray, shape (3,), optional
         Unit direction of the stretched finger in the parent frame (from the dorsal
         landmarks): gives the dorsal starting ab/adduction axis.
+    groups : ndarray, shape (n,), optional
+        Grasp cycle of each frame: the clusters of the robust variances that weigh the
+        priors (``docs/methods.md``, "Numerical stability"); default ten contiguous
+        blocks of frames.
 
     Returns
     -------
@@ -221,9 +449,13 @@ def fit_two_axis(
     w = np.ones(q.shape[0]) if weights is None else weights / np.mean(weights)
     hinge_rms = float(np.sqrt(np.average(_hinge_residual(q, unit(flexion_guess)) ** 2, weights=w)))
     stride = max(1, -(-q.shape[0] // MAX_FRAMES))
-    a, b, rms, interior = fit_two_axis_directions(
-        q[::stride], flexion_guess, w[::stride], finger_direction
+    if groups is None:
+        groups = np.arange(q.shape[0]) * 10 // max(q.shape[0], 1)
+    groups = np.asarray(groups)
+    dr = fit_two_axis_directions(
+        q[::stride], flexion_guess, w[::stride], finger_direction, groups[::stride]
     )
+    a, b, rms, interior = dr.flexion_axis, dr.abduction_axis, dr.rms_rad, dr.interior
     beta, theta = two_axis_angles(q, a, b)
     lo, hi = np.percentile(beta, [5, 95])
     span = float(np.degrees(hi - lo))
@@ -239,13 +471,31 @@ def fit_two_axis(
         beta=beta,
         weights=w,
         noise_mm=noise_mm,
+        groups=groups,
     )
     c_a, c_b = pts.centre, pts.abduction_point
     # The ab/adduction axis point nearest the flexion axis (common perpendicular foot).
     w0 = c_b - c_a
     ab = a @ b
     s = (ab * (a @ w0) - b @ w0) / (1.0 - ab * ab)
-    return TwoAxisFit(a, c_a, b, c_b + s * b, hinge_rms, rms, span, bool(accepted), interior)
+    return TwoAxisFit(
+        a,
+        c_a,
+        b,
+        c_b + s * b,
+        hinge_rms,
+        rms,
+        span,
+        bool(accepted),
+        interior,
+        flexion_sd_deg=dr.flexion_sd_deg,
+        abduction_sd_deg=dr.abduction_sd_deg,
+        tilt_sd_deg=dr.tilt_sd_deg,
+        tilt_data_share=dr.tilt_data_share,
+        offset_sd_mm=pts.offset_sd_mm,
+        offset_data_share=pts.offset_data_share,
+        data_condition=dr.data_condition,
+    )
 
 
 __all__ = ["TwoAxisFit", "fit_two_axis", "fit_two_axis_directions"]
