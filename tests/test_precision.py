@@ -18,75 +18,26 @@ from __future__ import annotations
 
 import re
 import warnings
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from fingerfit.estimate import FitOptions, fit_session
 from fingerfit.estimate.shrink import MIN_DATA_SHARE, data_share
-from fingerfit.io.liberty import ASCII_DECIMALS
 from fingerfit.model import HandModel
-from fingerfit.session import UNITS_TO_MM, PoseSeries, Recording, Session
+from fingerfit.session import Session
 from fingerfit.simulate import SimConfig, simulate_subject
-from fingerfit.transforms import angle_between_axes, matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from fingerfit.simulate.precision import DEVICES, device_rounded, round_rotations
+from fingerfit.transforms import angle_between_axes, axis_angle_matrix, unit
 
 MAX_AXIS_DEG = 0.2
 MAX_CENTRE_MM = 0.2
-DEVICES = ("liberty-ascii", "liberty-binary", "c3d")
 # SimConfig() seed 16, and subjects 3 and 4 (S03, S04) of simulate_cohort(SimConfig(), 5, 2018).
 SEEDS = {
     "seed 16": 16,
     "demo S03": int(np.random.SeedSequence(2018).spawn(5)[2].generate_state(1)[0]),
     "demo S04": int(np.random.SeedSequence(2018).spawn(5)[3].generate_state(1)[0]),
 }
-
-
-def _f32(x: np.ndarray) -> np.ndarray:
-    return x.astype(np.float32).astype(float)
-
-
-def _round_positions(p: np.ndarray, device: str) -> np.ndarray:
-    """Positions ``(..., 3)`` mm as the device stores them (Liberty: inches)."""
-    inch = UNITS_TO_MM["in"]
-    if device == "liberty-ascii":
-        return np.round(p / inch, ASCII_DECIMALS["position"]) * inch
-    if device == "liberty-binary":
-        return _f32(p / inch) * inch
-    return _f32(p)  # C3D: float32 in mm
-
-
-def _round_rotations(r: np.ndarray, device: str) -> np.ndarray:
-    """Rotations ``(n, 3, 3)`` as stored: Liberty quaternions w,x,y,z (ASCII 4 decimals,
-    binary float32), renormalised as the reader does; C3D float32 matrices."""
-    if device == "c3d":
-        return _f32(r)
-    q = quat_wxyz_from_matrix(r)
-    q = np.round(q, ASCII_DECIMALS["quaternion"]) if device == "liberty-ascii" else _f32(q)
-    return matrix_from_quat_wxyz(q)  # normalises, as read_liberty_* do
-
-
-def _round_recording(rec: Recording, device: str) -> Recording:
-    poses = {}
-    for name, ps in rec.poses.items():
-        ok = ps.valid
-        pos, rot = ps.position.copy(), ps.rotation.copy()
-        pos[ok] = _round_positions(ps.position[ok], device)
-        rot[ok] = _round_rotations(ps.rotation[ok], device)
-        poses[name] = PoseSeries(pos, rot)
-    return Recording(rec.name, rec.time, poses, list(rec.notes))
-
-
-def device_rounded(session: Session, device: str) -> Session:
-    """The session as recorded by ``device``: every pose and landmark at its precision."""
-    return replace(
-        session,
-        reference=_round_recording(session.reference, device),
-        grasp=[_round_recording(r, device) for r in session.grasp],
-        targets=[_round_recording(r, device) for r in session.targets],
-        test=[_round_recording(r, device) for r in session.test],
-        landmarks={k: _round_positions(v, device) for k, v in session.landmarks.items()},
-    )
 
 
 def _in_hand(model: HandModel, joint) -> tuple[np.ndarray, np.ndarray]:
@@ -164,3 +115,14 @@ def test_data_share_is_smooth_and_monotone() -> None:
     assert np.max(np.abs(np.diff(w))) < 0.01  # no step a small change could cross
     assert data_share(float("inf"), 1.5) == 0.0
     assert data_share(1.5 * (1 / MIN_DATA_SHARE) ** (1 / 6) * 1.01, 1.5) < MIN_DATA_SHARE
+
+
+def test_liberty_ascii_rounding_is_the_printed_precision() -> None:
+    rng = np.random.default_rng(0)
+    r = axis_angle_matrix(unit(rng.normal(size=3)), rng.uniform(-3, 3, 200))
+    for device, lo, hi in (("liberty-ascii", 1e-3, 0.02), ("liberty-binary", 0, 1e-4)):
+        d = round_rotations(r, device)
+        cos = (np.trace(d.transpose(0, 2, 1) @ r, axis1=1, axis2=2) - 1) / 2
+        ang = np.degrees(np.arccos(np.clip(cos, -1, 1)))
+        # 4 decimals of a unit quaternion: about 0.01 deg; float32: far below.
+        assert lo < ang.mean() < hi, (device, ang.mean())
