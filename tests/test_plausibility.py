@@ -105,8 +105,8 @@ def test_realistic_four_fingers_fit_without_warnings() -> None:
     assert check_model(model, s) == []
     for rec in [*s.test, *s.targets]:
         for c in recording_checks(model, rec):
-            assert c.residual_mm["as read"] < 0.3 * RECORDING_RESIDUAL_MM
-            assert c.scale == pytest.approx(1.0, abs=0.03)
+            assert c.residual_mm["as read"] < 0.5 * RECORDING_RESIDUAL_MM
+            assert c.scale == pytest.approx(1.0, abs=0.06)
 
 
 def _rewrite(series: PoseSeries, kind: str) -> PoseSeries:
