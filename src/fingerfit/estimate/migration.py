@@ -17,9 +17,12 @@ axis point is carried by the ab/adduction ``Rot(b, beta_k)`` about ``c_b``:
 
 Unknowns ``u_c, c (or c_a), [c_b], [m]``; the directions along the axes are
 null (any point of a line serves; ``(Q - I) a = 0``) and are projected out.
-The ab/adduction point and the migration get weak zero-mean priors
-(``docs/methods.md``) because they are seen only through a few degrees of
-ab/adduction and through a term quadratic in the flexion angle.
+The migration gets a weak zero-mean prior (``docs/methods.md``) because it is
+seen only through a term quadratic in the flexion angle. The offset between the two
+axes, seen only through a few degrees of ab/adduction, gets the same weak prior
+without ``groups``; with them (the grasp cycles) it gets the data's weight from its
+cluster-robust SD (:mod:`.shrink`) and, on realistic data, the axes are held
+intersecting (``docs/methods.md``, "Numerical stability").
 """
 
 from __future__ import annotations

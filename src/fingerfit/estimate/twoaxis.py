@@ -12,15 +12,17 @@ with ``a`` and ``b`` in the parent (hand) sensor frame at the reference posture.
 in closed form from :func:`fingerfit.kinematics.two_axis_angles` (the same
 decomposition the angles use later), and the residual is the small rotation
 ``vee(E - E^T) / 2`` of ``E = Rot(a, theta)^T Rot(b, beta)^T Q`` (rad).
-``scipy.optimize.least_squares`` minimises it over the four direction
-parameters, from the pooled hinge axis and, for ``b``, the dorsal direction
-(finger direction x hinge axis, from the landmarks) -- or, without landmarks, from
-both the main direction of the swing left off the hinge and the direction
-perpendicular to it and to the hinge axis (interior optima first, then the lower
-cost). With the ab/adduction partly coupled to flexion during a grasp, the
-flexion axis is told apart from the "effective" hinge axis only by the order of
-the two rotations (second order in the angles) and by the ab/adduction that
-varies independently of flexion; the fit starts from the pooled hinge axis.
+``scipy.optimize.least_squares`` minimises it, first with ``b`` held perpendicular
+to ``a`` (three parameters), then with the tilt of ``b`` towards ``a`` freed only as far
+as the grasp cycles determine it (:mod:`.shrink`; the tilt is seen only at second order
+and otherwise wanders along a flat valley: ``docs/methods.md``, "Numerical
+stability"). Starts: the pooled hinge axis and, for ``b``, the dorsal direction
+(finger direction x hinge axis, from the landmarks) -- or, without landmarks, both the
+main direction of the swing left off the hinge and the direction perpendicular to it
+and to the hinge axis (interior optima first, then the lower cost). With the
+ab/adduction partly coupled to flexion during a grasp, the flexion axis is told apart
+from the "effective" hinge axis only by the order of the two rotations (second order in
+the angles) and by the ab/adduction that varies independently of flexion.
 
 **Points** -- with the angles known the point equations are linear. A point
 ``u_c`` (child frame) of the flexion axis, ``c_a`` of the same line at the
@@ -28,10 +30,10 @@ reference posture and ``c_b`` of the ab/adduction axis (both parent frame):
 
     R(k) u_c + t(k) = Rot(b, beta_k) (c_a - c_b) + c_b.
 
-The two null directions (along ``a`` and along ``b``) are projected out, and the
-offset of ``b`` from ``c_a`` perpendicular to ``b`` -- seen only through the
-few degrees of ab/adduction -- gets a weak prior towards intersecting axes
-(:mod:`.migration`).
+The two null directions (along ``a`` and along ``b``) are projected out; the
+offset of ``b`` from ``c_a`` perpendicular to ``b`` -- seen only through the few
+degrees of ab/adduction -- is held at zero (intersecting axes) unless the grasp cycles
+determine it (:mod:`.migration`, :mod:`.shrink`).
 
 The search is bounded: the flexion axis within ``MAX_FLEXION_TILT_DEG`` of the
 pooled hinge axis (flexion dominates a grasp, so the hinge axis is the flexion
