@@ -29,6 +29,8 @@ VARIANTS = ("user_axis", "orthogonal")
 # projection of the child sensor origin (Fig. 6) or the swing-twist decomposition of the
 # full relative orientation. Files written before this field existed used "projection".
 ANGLE_METHODS = ("projection", "swing_twist")
+#: Largest coordinate or length accepted from a model file (mm): 1000 km.
+MAX_MODEL_MM = 1e9
 
 
 @dataclass(frozen=True)
@@ -381,16 +383,41 @@ class _Reader:
         return d[key]
 
     def vec(self, d: Any, key: str, where: str, n: int = 3, unit: bool = False) -> FloatArray:
-        w = f"{where}.{key}"
+        w = f"{where}.{key}".lstrip(".")
         v = self.get(d, key, where)
-        if not (isinstance(v, list) and len(v) == n and all(isinstance(x, int | float) for x in v)):
+        if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
             raise self.err(w, f"must be a list of {n} numbers")
-        a = np.array(v, dtype=float)
+        a = np.array([self.number(x, w) for x in v])
         if not np.isfinite(a).all():
             raise self.err(w, "must be finite")
+        if np.abs(a).max() > MAX_MODEL_MM:
+            raise self.err(
+                w, f"implausible value {np.abs(a).max():.6g} (more than {MAX_MODEL_MM:g})"
+            )
         if unit and abs(np.linalg.norm(a) - 1.0) > 1e-6:
             raise self.err(w, f"must have unit length (has {np.linalg.norm(a):.6g})")
         return a
+
+    def number(self, x: Any, where: str) -> float:
+        """A JSON number as a float (NaN and infinities kept; huge integers refused)."""
+        if not _is_number(x):
+            raise self.err(where, "must be a number")
+        try:
+            return float(x)
+        except OverflowError:
+            raise self.err(where, "number too large") from None
+
+    def numbers(self, v: Any, where: str, kind: type = float) -> list:
+        """A list of JSON numbers (``kind`` int: whole numbers >= 0)."""
+        if not isinstance(v, list):
+            raise self.err(where, "must be a list of numbers")
+        return [self.count(x, where) if kind is int else self.number(x, where) for x in v]
+
+    def count(self, x: Any, where: str) -> int:
+        """A whole number >= 0."""
+        if not isinstance(x, int) or isinstance(x, bool) or x < 0:
+            raise self.err(where, "must be a whole number >= 0")
+        return x
 
     def str_(self, d: Any, key: str, where: str, allowed: tuple[str, ...] | None = None) -> str:
         v = self.get(d, key, where)
@@ -402,9 +429,38 @@ class _Reader:
         return v
 
 
-def _quality(q: dict[str, Any]) -> JointQuality:
-    keys = JointQuality.__dataclass_fields__
-    return JointQuality(**{k: q[k] for k in keys if k in q})
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _quality(r: _Reader, q: Any, where: str) -> JointQuality:
+    """A joint's quality record, every field type-checked (unknown keys ignored)."""
+    if not isinstance(q, dict):
+        raise r.err(where, "must be an object")
+    out: dict[str, Any] = {}
+    for key in JointQuality.__dataclass_fields__:
+        w = f"{where}.{key}"
+        if key not in q:
+            if key in ("cycles", "rom_deg", "centre_distance_mm", "conditioning", "spread_mm",
+                       "residual_mm"):  # fmt: skip
+                raise r.err(w, "missing")
+            continue
+        v = q[key]
+        if key in ("cycles", "rejected_frames"):
+            out[key] = r.count(v, w)
+        elif key == "rejected_cycles":
+            out[key] = r.numbers(v, w, int)
+        elif key in ("rom_deg", "centre_distance_mm", "conditioning", "residual_mm"):
+            out[key] = r.numbers(v, w)
+        elif key == "notes":
+            if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+                raise r.err(w, "must be a list of strings")
+            out[key] = list(v)
+        elif key == "pooled_conditioning" and v is None:
+            out[key] = None
+        else:
+            out[key] = r.number(v, w)
+    return JointQuality(**out)
 
 
 def _load_joint(r: _Reader, jd: Any, name: str, wj: str, poses: dict) -> JointModel:
@@ -420,7 +476,7 @@ def _load_joint(r: _Reader, jd: Any, name: str, wj: str, poses: dict) -> JointMo
         r.vec(jd, "center", wj),
         r.vec(jd, "axis", wj, unit=True),
         r.vec(jd, "orthogonal_axis", wj, unit=True),
-        _quality(r.get(jd, "quality", wj)),
+        _quality(r, r.get(jd, "quality", wj), f"{wj}.quality"),
         r.vec(jd, "migration_mm_per_rad", wj) if "migration_mm_per_rad" in jd else None,
     )
     pp, pr = poses[parent]
@@ -454,11 +510,17 @@ def load_model(path: str | Path) -> HandModel:
     """
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        doc = json.loads(path.read_bytes().decode("utf-8"))
     except FileNotFoundError:
         raise FingerfitError("file not found", path=path) from None
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    except UnicodeDecodeError as exc:
+        raise FingerfitError(f"not UTF-8 text (byte {exc.start})", path=path) from None
     except json.JSONDecodeError as exc:
         raise FingerfitError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
+    except RecursionError:
+        raise FingerfitError("not valid JSON (nested too deeply)", path=path) from None
     r = _Reader(path)
     fmt = r.str_(doc, "format", "")
     if fmt != FORMAT:
@@ -466,7 +528,10 @@ def load_model(path: str | Path) -> HandModel:
     if r.str_(doc, "units", "") != "mm":
         raise r.err("units", "must be 'mm'")
     poses = {}
-    for name, p in r.get(doc, "reference_poses", "").items():
+    pdoc = r.get(doc, "reference_poses", "")
+    if not isinstance(pdoc, dict):
+        raise r.err("reference_poses", "must be an object")
+    for name, p in pdoc.items():
         w = f"reference_poses.{name}"
         q = r.vec(p, "quat_wxyz", w, n=4)
         if abs(np.linalg.norm(q) - 1) > 1e-6:
@@ -492,7 +557,7 @@ def load_model(path: str | Path) -> HandModel:
         lengths = {}
         for s in SEGMENTS:
             v = r.get(lengths_doc, s, f"{wf}.segment_lengths")
-            if not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+            if not _is_number(v) or not (0 < v <= MAX_MODEL_MM):
                 raise r.err(f"{wf}.segment_lengths.{s}", "must be a positive number (mm)")
             lengths[s] = float(v)
         frames = {}

@@ -26,13 +26,20 @@ import numpy as np
 
 from ..errors import FingerfitError
 from ..session import UNITS_TO_MM, PoseSeries, Recording
-from .hygiene import check_recording, sensor_missing_notes
+from .hygiene import (
+    check_recording,
+    implausible_message,
+    implausible_rows,
+    sensor_missing_notes,
+)
 from .rigid import ClusterFit, cluster_shape, fit_cluster
 
 #: Residual RMS (mm) above which a frame of a cluster fit is counted as suspect.
 MAX_RESIDUAL_MM = 5.0
 #: Largest deviation of a ROTATION channel's 3x3 block from orthonormal.
 ORTHONORMAL_TOLERANCE = 1e-3
+#: Largest frame rate accepted (Hz).
+MAX_RATE_HZ = 1e6
 _CLUSTER_RE = re.compile(r"^(.*?[^\d])(\d+)$")
 
 
@@ -169,7 +176,8 @@ def read_c3d_header(path: Path) -> C3DHeader:
             f"{proc}, expected 84 Intel, 85 DEC or 86 MIPS)",
             path=path,
         )
-    words = struct.unpack(_PROCESSORS[proc] + "12H", head[:24])
+    endian = _PROCESSORS[proc]
+    words = struct.unpack(endian + "12H", head[:24])
     header = C3DHeader(
         n_points=words[1],
         analog_per_frame=words[2],
@@ -179,7 +187,115 @@ def read_c3d_header(path: Path) -> C3DHeader:
         float_data=bool(head[_SCALE_SIGN_BYTE[proc]] & 0x80),
     )
     _check_size(header, size, path)
+    if header.data_start < block * 512:
+        raise FingerfitError(
+            f"not a readable C3D file (data start block {words[8]} is inside the parameter "
+            f"section at block {block})",
+            path=path,
+        )
+    try:
+        with path.open("rb") as fh:
+            fh.seek((block - 1) * 512)
+            section = fh.read(header.data_start - (block - 1) * 512)
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    params = _parameter_section(section, endian, path)
+    used = params.get(("POINT", "USED"))
+    if used is not None and used != header.n_points:
+        raise FingerfitError(
+            f"not a readable C3D file (POINT:USED is {used}, the header says "
+            f"{header.n_points} points)",
+            path=path,
+        )
     return header
+
+
+#: Parameter data types of the C3D format: char, byte, int16, float32 -> bytes per value.
+_PARAM_TYPES = {-1: 1, 1: 1, 2: 2, 4: 4}
+
+
+def _parameter_section(section: bytes, endian: str, path: Path) -> dict[tuple[str, str], int]:
+    """Walk the parameter records of a C3D file, checking every length and pointer.
+
+    ezc3d trusts these fields; a corrupted one can make it read out of bounds or try a
+    huge allocation, so the structure is checked here first.
+
+    Parameters
+    ----------
+    section : bytes
+        From the start of the parameter section to the start of the data.
+    endian : str
+        ``<`` or ``>``.
+    path : Path
+        For messages.
+
+    Returns
+    -------
+    dict
+        ``(GROUP, NAME) -> value`` of the scalar int16 parameters (e.g. ``POINT:USED``).
+
+    Raises
+    ------
+    FingerfitError
+        Naming the byte offset of the first malformed record.
+    """
+    groups: dict[int, str] = {}
+    pending: list[tuple[int, str, int]] = []
+    end = len(section)
+    pos = 4
+    seen = 0
+
+    def bad(what: str) -> FingerfitError:
+        return FingerfitError(
+            f"not a readable C3D file (parameter record at byte {pos} of the parameter "
+            f"section: {what})",
+            path=path,
+        )
+
+    while pos + 2 <= end:
+        n_name = abs(struct.unpack("b", section[pos : pos + 1])[0])
+        if n_name == 0:
+            break
+        gid = struct.unpack("b", section[pos + 1 : pos + 2])[0]
+        q = pos + 2 + n_name
+        if gid == 0 or q + 2 > end:
+            raise bad("group id 0 or name past the end")
+        name = section[pos + 2 : q]
+        if not all(32 < c < 127 for c in name):
+            raise bad("name is not ASCII text")
+        step = struct.unpack(endian + "H", section[q : q + 2])[0]
+        r = q + 2
+        if gid > 0:  # a parameter: type, dimensions, data
+            if r + 2 > end:
+                raise bad("type past the end")
+            kind = struct.unpack("b", section[r : r + 1])[0]
+            if kind not in _PARAM_TYPES:
+                raise bad(f"unknown data type {kind}")
+            n_dims = section[r + 1]
+            if r + 2 + n_dims > end:
+                raise bad("dimensions past the end")
+            dims = list(section[r + 2 : r + 2 + n_dims])
+            n_bytes = _PARAM_TYPES[kind] * int(np.prod(dims, dtype=np.int64))
+            r = r + 2 + n_dims + n_bytes
+            if r + 1 > end:
+                raise bad("data past the end of the section")
+            if kind == 2 and not dims:
+                v = struct.unpack(endian + "h", section[r - 2 : r])[0]
+                pending.append((gid, name.decode("ascii").upper(), v))
+        else:
+            groups[-gid] = name.decode("ascii").upper()
+            if r + 1 > end:
+                raise bad("description past the end")
+        r = r + 1 + section[r]  # description
+        if r > end:
+            raise bad("description past the end")
+        if step == 0:
+            break
+        if q + step < r or q + step > end:
+            raise bad(f"pointer to the next record ({step}) outside the record or section")
+        pos = q + step
+        seen += 1
+    return {(groups.get(g, "?"), n): v for g, n, v in pending}
 
 
 def _check_size(header: C3DHeader, size: int, path: Path, read: int | None = None) -> None:
@@ -271,9 +387,22 @@ def _markers(c, path: Path, units: str | None) -> C3DMarkers:
     if resid is not None and np.size(resid):
         bad = np.transpose(np.asarray(resid)[0], (1, 0)) < 0
         xyz[bad] = np.nan
+    big = implausible_rows(xyz.reshape(n_frames, -1))
+    if big.size:
+        k = int(big[0])
+        m, j = np.unravel_index(int(np.nanargmax(np.abs(xyz[k]))), xyz.shape[1:])
+        raise FingerfitError(
+            f"frame {k + 1}: " + implausible_message(float(xyz[k, m, j])),
+            path=path,
+            field=f"POINT:{labels[m]}",
+        )
     rate = float(_param(c, "POINT", "RATE", [0.0])[0])
-    if not rate > 0:
-        raise FingerfitError("POINT:RATE must be positive", path=path, field="POINT:RATE")
+    if not 0 < rate <= MAX_RATE_HZ:
+        raise FingerfitError(
+            f"POINT:RATE must be positive and at most {MAX_RATE_HZ:g} Hz, not {rate:g}",
+            path=path,
+            field="POINT:RATE",
+        )
     first = int(c["header"]["points"]["first_frame"])
     time = (first + np.arange(n_frames)) / rate
     return C3DMarkers(labels, xyz, time, rate)
@@ -375,6 +504,13 @@ def _rotation_channels(c, path: Path, scale: float) -> tuple[dict[str, PoseSerie
     for ch, label in enumerate(labels):
         r = m[ch, :, :3, :3].copy()
         t = m[ch, :, :3, 3] * scale
+        inf = np.flatnonzero(np.isinf(m[ch, :, :3, :]).any(axis=(1, 2)))
+        if inf.size:
+            raise FingerfitError(
+                f"frame {int(inf[0]) + 1}: infinite value (garbled data)",
+                path=path,
+                field=f"ROTATION:{label}",
+            )
         ok = np.isfinite(m[ch, :, :3, :]).all(axis=(1, 2))
         dev = np.abs(np.swapaxes(r[ok], 1, 2) @ r[ok] - eye).max(axis=(1, 2))
         det = np.linalg.det(r[ok])
@@ -389,6 +525,15 @@ def _rotation_channels(c, path: Path, scale: float) -> tuple[dict[str, PoseSerie
             )
         r[~ok] = np.nan
         t[~ok] = np.nan
+        big = implausible_rows(t)
+        if big.size:
+            k = int(big[0])
+            raise FingerfitError(
+                f"frame {k + 1}: "
+                + implausible_message(float(t[k, int(np.nanargmax(np.abs(t[k])))])),
+                path=path,
+                field=f"ROTATION:{label}",
+            )
         out[label] = PoseSeries(t, r)
     return out, rate, ratio
 

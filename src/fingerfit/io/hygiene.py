@@ -54,6 +54,80 @@ WORKSPACE_MM = 10_000.0
 
 _LIST_MAX = 8
 
+#: Largest coordinate accepted from any file (mm): 1000 km, far beyond any tracker, far
+#: below float trouble. Larger values (``1e308``, an overflowing unit conversion) are
+#: garbled data and an error, never a sample.
+MAX_COORDINATE_MM = 1e9
+#: A sampling grid may hold at most this many times the frames read (plus
+#: :data:`GRID_SLACK`): more means a garbled time or frame count, or a wrong rate.
+MAX_GRID_RATIO = 10
+GRID_SLACK = 1000
+
+
+def implausible_rows(values_mm: np.ndarray) -> np.ndarray:
+    """Rows holding a coordinate beyond :data:`MAX_COORDINATE_MM` (or infinite).
+
+    Parameters
+    ----------
+    values_mm : ndarray, shape (n, ...)
+        Coordinates in mm; NaN (missing) is ignored.
+
+    Returns
+    -------
+    ndarray of int
+        Indices of the offending rows, in order.
+    """
+    v = np.abs(np.asarray(values_mm, dtype=float)).reshape(len(values_mm), -1)
+    with np.errstate(invalid="ignore"):
+        return np.flatnonzero((v > MAX_COORDINATE_MM).any(axis=1))
+
+
+def implausible_message(value: float) -> str:
+    """The message for a coordinate beyond :data:`MAX_COORDINATE_MM`."""
+    return (
+        f"coordinate {value:.6g} mm is implausible (more than {MAX_COORDINATE_MM / 1e6:g} km "
+        "from the origin): a garbled value or wrong units"
+    )
+
+
+def check_grid_size(
+    index: np.ndarray, lines: np.ndarray, path: str | Path, what: str = "time"
+) -> None:
+    """Refuse a sampling grid far larger than the frames read (garbled time or rate).
+
+    Parameters
+    ----------
+    index : ndarray, shape (n,)
+        Grid position of each frame read, relative to the first (float, may be huge).
+    lines : ndarray of int, shape (n,)
+        File line (or record) of each frame, for the message.
+    path : str or Path
+    what : str
+        The quantity that sets the grid (``time``, ``frame count``).
+
+    Raises
+    ------
+    FingerfitError
+        Naming the line after the largest jump, when the grid would hold more than
+        :data:`MAX_GRID_RATIO` times the frames read plus :data:`GRID_SLACK`.
+    """
+    idx = np.asarray(index, dtype=float)
+    if idx.size < 2:
+        return
+    span = idx[-1] - idx[0]
+    if np.isfinite(span) and span <= MAX_GRID_RATIO * idx.size + GRID_SLACK:
+        return
+    with np.errstate(invalid="ignore"):
+        d = np.diff(idx)
+    i = int(np.nanargmax(np.where(np.isfinite(d), d, np.inf))) + 1
+    raise FingerfitError(
+        f"{what} jumps by {d[i - 1]:.6g} frames: {span:.6g} frames for {idx.size} read "
+        "(garbled value or wrong --rate?)",
+        path=path,
+        line=int(lines[i]),
+        field=what,
+    )
+
 
 def repeated_rows(values: np.ndarray) -> np.ndarray:
     """Rows that repeat the previous row exactly.
@@ -155,6 +229,7 @@ def place_on_grid(
     t = np.asarray(time, dtype=float)
     if t.size == 0:
         return t.copy(), np.zeros(0, dtype=np.int64)
+    check_grid_size((t - t[0]) * rate_hz, lines, path)
     idx = np.rint((t - t[0]) * rate_hz).astype(np.int64)
     off = np.abs(t - (t[0] + idx / rate_hz))
     bad = (off > 0.25 / rate_hz) | np.concatenate([[False], np.diff(idx) == 0])

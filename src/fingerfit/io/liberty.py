@@ -27,6 +27,7 @@ sensor into tracker coordinates (``docs/conventions.md``).
 
 from __future__ import annotations
 
+import csv
 import io
 import re
 from collections.abc import Mapping, Sequence
@@ -42,12 +43,16 @@ from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz
 from .atomic import atomic_write
 from .hygiene import (
+    check_grid_size,
     check_recording,
     frames_missing_note,
+    implausible_message,
+    implausible_rows,
     place_on_grid,
     repeated_rows,
     sensor_missing_notes,
 )
+from .posecsv import shown
 
 #: Number of values of each data item.
 ITEM_SIZE = {"position": 3, "euler": 3, "quaternion": 4, "timestamp": 1, "frame": 1}
@@ -79,6 +84,8 @@ DEFAULT_ITEMS = ("position", "euler")
 #: Decimals the ASCII writer uses per item (the device's standard precision).
 ASCII_DECIMALS = {"position": 3, "euler": 3, "quaternion": 4}
 MAX_STATION = 16
+#: Largest Euler angle magnitude accepted (deg); the device reports within +-180.
+MAX_EULER_DEG = 360.0
 QUAT_NORM_TOLERANCE = 1e-3
 _INT_ITEMS = ("timestamp", "frame")
 _MAGIC = (b"LY", b"PA")
@@ -293,6 +300,7 @@ def parse_liberty_ascii(
         skip_blank_lines=True,
         keep_default_na=False,
         na_values=[],
+        quoting=csv.QUOTE_NONE,
     )
     # Station tokens: few distinct values, so parse each distinct token once.
     tokens, inverse = np.unique(table[0].to_numpy(dtype=str), return_inverse=True)
@@ -301,7 +309,7 @@ def parse_liberty_ascii(
     if bad_tok:
         i = int(np.flatnonzero(np.isin(inverse, bad_tok))[0])
         raise FingerfitError(
-            f"'{table.iat[i, 0]}' is not a station number (1-2 digits and an optional "
+            f"'{shown(table.iat[i, 0])}' is not a station number (1-2 digits and an optional "
             "indicator character)",
             path=path,
             line=int(lines[i]),
@@ -322,7 +330,7 @@ def parse_liberty_ascii(
         i, j = (int(v[0]) for v in np.nonzero(bad))
         token = raw_text[j + 1].iat[i] if j + 1 in raw_text else table.iat[i, j + 1]
         raise FingerfitError(
-            f"not a finite number: '{token}' (garbled record)",
+            f"not a finite number: '{shown(token)}' (garbled record)",
             path=path,
             line=int(lines[i]),
             field=_field_name(items_t, j),
@@ -677,6 +685,7 @@ def records_to_recording(
         fcs = fc[rec_idx]
         frame_ids, frame_of = np.unique(fcs, return_inverse=True)
         first_rec = rec_idx[np.unique(frame_of, return_index=True)[1]]
+        check_grid_size(frame_ids - frame_ids[0], np.arange(frame_ids.size), path, "frame count")
         grid_idx = (frame_ids - frame_ids[0]).astype(np.int64)
         n = int(grid_idx[-1]) + 1
         if "timestamp" in items:
@@ -753,6 +762,13 @@ def records_to_recording(
         frame_of_rec = frame_of
 
     sel = rec_idx
+    big = implausible_rows(records.values["position"][sel] * scale)
+    if big.size:
+        i = int(sel[big[0]])
+        v = records.values["position"][i]
+        raise records.error(
+            implausible_message(v[int(np.argmax(np.abs(v)))] * scale), i, path, field="position"
+        )
     pos_all = records.values["position"][sel] * scale
     if "quaternion" in items:
         q = records.values["quaternion"][sel]
@@ -770,6 +786,17 @@ def records_to_recording(
             notes.append("orientation from the quaternion item (Euler angles not used)")
     else:
         e = records.values["euler"][sel]
+        wild = np.flatnonzero((np.abs(e) > MAX_EULER_DEG).any(axis=1))
+        if wild.size:
+            i = int(sel[wild[0]])
+            v = records.values["euler"][i]
+            raise records.error(
+                f"Euler angle {v[int(np.argmax(np.abs(v)))]:.6g} deg is outside "
+                f"+-{MAX_EULER_DEG:g} deg (garbled record or wrong --items?)",
+                i,
+                path,
+                field="euler",
+            )
         rot_all = Rotation.from_euler("ZYX", e, degrees=True).as_matrix()
     poses: dict[str, PoseSeries] = {}
     scol_sel = scol[sel]

@@ -19,6 +19,7 @@ from ..errors import FingerfitError
 from ..session import PoseSeries, Recording, is_sensor_name
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 from .atomic import atomic_write
+from .hygiene import check_grid_size, implausible_message, implausible_rows
 
 HEADER = ("time", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz")
 _NUMERIC = ("time", "x", "y", "z", "qw", "qx", "qy", "qz")
@@ -232,6 +233,16 @@ def read_pose_csv(
             )
 
     pose = np.column_stack([values[c] for c in ("x", "y", "z", "qw", "qx", "qy", "qz")])
+    big = implausible_rows(pose[:, :3] * scale_to_mm)
+    if big.size:
+        i = int(big[0])
+        j = int(np.nanargmax(np.abs(pose[i, :3])))
+        raise FingerfitError(
+            implausible_message(pose[i, j] * scale_to_mm),
+            path=path,
+            line=int(lines[i]),
+            field="xyz"[j],
+        )
     # Exact duplicates (same time, sensor and values) are dropped and counted;
     # conflicting duplicates are an error.
     key = pd.DataFrame({"t": time, "s": inverse})
@@ -268,6 +279,8 @@ def read_pose_csv(
     frame_times, frame_of_row = np.unique(time, return_inverse=True)
     if rate_hz is not None and frame_times.size > 1:
         t0 = frame_times[0]
+        row_of_frame = np.unique(frame_of_row, return_index=True)[1]
+        check_grid_size((frame_times - t0) * rate_hz, lines[row_of_frame], path)
         idx = np.rint((frame_times - t0) * rate_hz).astype(np.int64)
         off = np.abs(frame_times - (t0 + idx / rate_hz))
         if np.any(off > 0.25 / rate_hz) or np.any(np.diff(idx) == 0):

@@ -38,6 +38,7 @@ from ..session import (
     sensor_name,
 )
 from .atomic import atomic_write
+from .hygiene import implausible_message, implausible_rows
 from .posecsv import check_field_counts, read_pose_csv, shown, write_pose_csv
 
 SESSION_FILE = "session.toml"
@@ -235,7 +236,12 @@ def read_landmarks(path: str | Path, units: str = "mm") -> dict[str, np.ndarray]
         xyz = np.array(
             [_number(v, path, i, k, "coordinate") for k, v in zip("xyz", row[1:], strict=True)]
         )
-        out[name] = xyz * UNITS_TO_MM[units]
+        xyz = xyz * UNITS_TO_MM[units]
+        if implausible_rows(xyz[None]).size:
+            raise FingerfitError(
+                implausible_message(float(xyz[np.argmax(np.abs(xyz))])), path=path, line=i
+            )
+        out[name] = xyz
     return out
 
 

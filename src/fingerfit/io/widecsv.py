@@ -19,6 +19,7 @@ as samples. Positions come out in mm (tracker frame), rotations sensor -> tracke
 
 from __future__ import annotations
 
+import csv
 import io
 import re
 from collections.abc import Mapping
@@ -37,11 +38,13 @@ from .hygiene import (
     check_increasing,
     check_recording,
     frames_missing_note,
+    implausible_message,
+    implausible_rows,
     place_on_grid,
     repeated_rows,
     sensor_missing_notes,
 )
-from .posecsv import check_field_counts
+from .posecsv import check_field_counts, shown
 
 QUAT_NORM_TOLERANCE = 1e-3
 #: Largest relative disagreement between ``--rate`` and the rate implied by the time
@@ -220,7 +223,7 @@ def read_wide_csv(
     header = [h.strip() for h in first.split(",")]
     if len(set(header)) != len(header):
         dup = next(h for h in header if header.count(h) > 1)
-        raise FingerfitError(f"column '{dup}' appears twice", path=path, line=1)
+        raise FingerfitError(f"column '{shown(dup)}' appears twice", path=path, line=1)
     check_field_counts(raw, path, len(header))
     stations = _stations(header, lay, path)
     if not stations:
@@ -265,7 +268,14 @@ def read_wide_csv(
     else:
         names = [str(s) for s in stations]
 
-    df = pd.read_csv(io.BytesIO(raw), dtype=str, keep_default_na=False, skip_blank_lines=True)
+    df = pd.read_csv(
+        io.BytesIO(raw),
+        dtype=str,
+        keep_default_na=False,
+        skip_blank_lines=True,
+        quoting=csv.QUOTE_NONE,
+        encoding="utf-8",
+    )
     df.columns = header
     n_rows = df.shape[0]
     if n_rows == 0:
@@ -280,7 +290,10 @@ def read_wide_csv(
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise FingerfitError(
-                f"not a finite number: '{df[col].iat[i]}'", path=path, line=int(lines[i]), field=col
+                f"not a finite number: '{shown(df[col].iat[i])}'",
+                path=path,
+                line=int(lines[i]),
+                field=col,
             )
         return v
 
@@ -289,6 +302,16 @@ def read_wide_csv(
     for j, s in enumerate(stations):
         for m, key in enumerate(lay.keys):
             vals[:, j, m] = numeric(_column(lay.columns[key], s))
+    big = implausible_rows(vals[:, :, :3].reshape(n_rows, -1) * UNITS_TO_MM[units])
+    if big.size:
+        i = int(big[0])
+        j, m = np.unravel_index(int(np.nanargmax(np.abs(vals[i, :, :3]))), (len(stations), 3))
+        raise FingerfitError(
+            implausible_message(vals[i, j, m] * UNITS_TO_MM[units]),
+            path=path,
+            line=int(lines[i]),
+            field=_column(lay.columns[_POS[m]], stations[j]),
+        )
     tcol = None
     if lay.time is not None:
         tcol = numeric(lay.time)
