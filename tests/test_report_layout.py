@@ -130,7 +130,7 @@ def test_report_precision_and_names(mixed) -> None:
     assert not re.search(r"\d\.\d{2,} ?%", body)  # whole percent
     cells = re.findall(r"<td class=num>([^<]*)</td>", body)
     for c in cells:  # 0.1 mm / 0.1 deg / counts / whole percent
-        assert re.fullmatch(r"-?\d+(\.\d)?( \(\d+\.\d\))?|—( \(—\))?|\d+\.\d \(—\)", c), c
+        assert re.fullmatch(r"-?\d+(\.\d)?( \(\d+\.\d\))?|—( \(—\))?|\d+\.\d \(—\)|-?\d+ %", c), c
     for raw in ("user_axis", "tilt_from_orthogonal_deg", "segment_length_mm", "mean_mm", "p95_mm"):
         assert f"<th>{raw}" not in body
     assert "t000 … t120" in body  # target names explained

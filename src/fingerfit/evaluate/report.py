@@ -271,9 +271,10 @@ def _headline(sm: dict) -> str:
             continue
         h, pp = sm[key], paper[key]
         rows.append(
-            f"<tr><td>{name}</td><td>{h['user_axis']['n']}</td><td>{_ms(h['user_axis'])}</td>"
-            f"<td>{_ms(h['orthogonal'])}</td><td>{_pct(h['reduction_percent'])}</td>"
-            f"<td>{_pct(h['sd_reduction_percent'])}</td>"
+            f"<tr><td>{name}</td><td class=num>{h['user_axis']['n']}</td>"
+            f"<td class=num>{_ms(h['user_axis'])}</td><td class=num>{_ms(h['orthogonal'])}</td>"
+            f"<td class=num>{_pct(h['reduction_percent'])}</td>"
+            f"<td class=num>{_pct(h['sd_reduction_percent'])}</td>"
             f"<td>{html.escape(_ttest(h['paired_t_test']))}</td>"
             f"<td>{pp['user_axis'][0]} ({pp['user_axis'][1]}) vs {pp['orthogonal'][0]} "
             f"({pp['orthogonal'][1]}), −{pp['reduction_percent']} %</td></tr>"
