@@ -71,14 +71,18 @@ def _file_list(value, path: Path, key: str) -> list[str]:
     return value
 
 
-def _check_keys(table: dict, allowed: tuple[str, ...], path: Path, where: str) -> None:
+def _check_keys(
+    table: dict, allowed: tuple[str, ...], path: Path, where: str, prefix: str = ""
+) -> None:
     """Refuse unknown keys, suggesting the closest known one (``difflib``)."""
     for key in table:
         if key not in allowed:
             close = difflib.get_close_matches(str(key), allowed, n=1)
             hint = f", did you mean '{close[0]}'?" if close else f" (known: {', '.join(allowed)})"
             raise FingerfitError(
-                f"unknown key '{shown(key)}' in {where}{hint}", path=path, field=str(key)
+                f"unknown key '{shown(key)}' in {where}{hint}",
+                path=path,
+                field=prefix + shown(key),
             )
 
 
@@ -359,7 +363,7 @@ def load_session(directory: str | Path) -> Session:
             field="fingers",
         )
     recs = _require(meta, "recordings", dict, meta_path)
-    _check_keys(recs, RECORDING_KEYS, meta_path, "[recordings]")
+    _check_keys(recs, RECORDING_KEYS, meta_path, "[recordings]", "recordings.")
 
     def file(name: object, key: str) -> Path:
         return session_file(directory, name, meta_path, f"recordings.{key}")
