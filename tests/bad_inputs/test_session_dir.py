@@ -87,7 +87,10 @@ def test_session_toml_subject_is_checked(sess) -> None:
     [
         ('reference = "/etc/passwd"', "field 'recordings.reference': '/etc/passwd' is an absolute"),
         ('reference = "../outside.csv"', "field 'recordings.reference': '../outside.csv' leaves"),
-        ('reference = "a/../../outside.csv"', "reference': 'a/../../outside.csv' leaves the"),
+        (
+            'reference = "a/../../outside.csv"',
+            "field 'recordings.reference': 'a/../../outside.csv' leaves",
+        ),
         ('grasp = ["grasp.csv", "/tmp/x.csv"]', "field 'recordings.grasp': '/tmp/x.csv' is an"),
         ('events = "../outside.csv"', "field 'recordings.events': '../outside.csv' leaves"),
         ('test = ["."]', "field 'recordings.test': is not a regular file: '.'"),
