@@ -63,11 +63,11 @@ def check_target(path: str | Path, *, overwrite: bool = True) -> None:
             raise FingerfitError("is read-only; not replaced", path=path)
 
 
-def _temp_beside(path: Path) -> tuple[int, Path]:
+def _temp_beside(path: Path, suffix: str = ".part") -> tuple[int, Path]:
     """Create the parent folders and an empty temporary file beside ``path``."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
         os.chmod(tmp, 0o666 & ~_umask())
     except OSError as exc:
         raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=path) from None
@@ -75,26 +75,32 @@ def _temp_beside(path: Path) -> tuple[int, Path]:
 
 
 @contextlib.contextmanager
-def atomic_write(path: str | Path, mode: str = "w", **kwargs) -> Iterator[IO]:
-    """Open a temporary file beside ``path``; rename it over ``path`` on success.
+def atomic_path(path: str | Path, *, suffix: str = ".part") -> Iterator[Path]:
+    """A temporary path beside ``path``, renamed over ``path`` when the block succeeds.
 
-    If the block raises, the temporary file is removed and ``path`` is left
-    untouched, so no half-written output ever exists. ``path`` is checked first
-    with :func:`check_target` (an existing file is replaced).
+    For writers that take a file name (ezc3d): the block writes the yielded path. If
+    the block raises, the temporary file is removed and ``path`` is left untouched.
+    ``path`` is checked first with :func:`check_target` (an existing file is replaced).
 
     Parameters
     ----------
     path : str or Path
         The file to write.
-    mode : str
-        ``"w"`` (text) or ``"wb"`` (bytes); ``kwargs`` go to :func:`open`.
+    suffix : str
+        End of the temporary name (a writer that appends its own extension to other
+        names needs it here, e.g. ``".part.c3d"``).
+
+    Yields
+    ------
+    Path
+        The temporary file (created empty, with the usual permissions).
     """
     path = Path(path)
     check_target(path)
-    fd, tmp = _temp_beside(path)
+    fd, tmp = _temp_beside(path, suffix)
+    os.close(fd)
     try:
-        with os.fdopen(fd, mode, **kwargs) as fh:
-            yield fh
+        yield tmp
         os.replace(tmp, path)
     except OSError as exc:
         with contextlib.suppress(FileNotFoundError):
@@ -104,6 +110,24 @@ def atomic_write(path: str | Path, mode: str = "w", **kwargs) -> Iterator[IO]:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | Path, mode: str = "w", **kwargs) -> Iterator[IO]:
+    """Open a temporary file beside ``path``; rename it over ``path`` on success.
+
+    If the block raises, the temporary file is removed and ``path`` is left
+    untouched, so no half-written output ever exists (:func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    mode : str
+        ``"w"`` (text) or ``"wb"`` (bytes); ``kwargs`` go to :func:`open`.
+    """
+    with atomic_path(path) as tmp, open(tmp, mode, **kwargs) as fh:
+        yield fh
 
 
 def write_files(files: Mapping[Path, str | bytes], *, overwrite: bool = True) -> list[Path]:

@@ -29,11 +29,8 @@ the simulated time and the events.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
 import shlex
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,7 +39,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import FingerfitError
-from ..io.atomic import atomic_write, check_target, staged_directory
+from ..io.atomic import atomic_path, atomic_write, check_target, staged_directory
 from ..io.liberty import LibertyRecords, write_liberty_ascii, write_liberty_binary
 from ..io.sessiondir import EVENTS_FILE, EVENTS_HEADER, LANDMARKS_FILE
 from ..session import FINGERS, HAND_SENSOR, SEGMENTS, UNITS_TO_MM, Recording, sensor_name
@@ -241,21 +238,9 @@ def write_c3d_recording(
     c.add_parameter("ROTATION", "LABELS", list(labels))
     c.add_parameter("ROTATION", "RATE", [float(rate_hz)])
     c.add_parameter("ROTATION", "USED", [m])
-    path.parent.mkdir(parents=True, exist_ok=True)
     # ezc3d appends ".c3d" to a name not ending in it: the temporary name must end in it.
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part.c3d", dir=path.parent)
-    os.close(fd)
-    try:
-        c.write(tmp)
-        os.replace(tmp, path)
-    except OSError as exc:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=path) from None
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    with atomic_path(path, suffix=".part.c3d") as tmp:
+        c.write(str(tmp))
     return path
 
 
@@ -405,9 +390,6 @@ def write_tracker_subject(
         mapping = dict(stations)
     names = {rec.name: Path(rec.name).stem + EXTENSIONS[fmt] for rec in s.recordings()}
     with staged_directory(directory, overwrite=overwrite) as tmp:
-        mask = os.umask(0)
-        os.umask(mask)
-        tmp.chmod(0o777 & ~mask)  # the staging folder is private (0700); the result is not
         for rec in s.recordings():
             path = tmp / names[rec.name]
             if fmt == "c3d":
