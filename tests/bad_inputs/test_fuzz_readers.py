@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from fingerfit.errors import FingerfitError
@@ -52,7 +52,7 @@ from ..test_io_liberty import make_records
 WALL_CLOCK_S = 10.0
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 FUZZ = settings(
-    max_examples=120,
+    max_examples=200,
     deadline=None,
     derandomize=True,
     database=None,
@@ -87,8 +87,11 @@ def outcome(read: Callable[[], object], path: Path) -> object | None:
     """Run ``read``; a FingerfitError must be one line naming ``path`` (returns None)."""
     try:
         with wall_clock():
-            return read()
+            got = read()
+        event("read")
+        return got
     except FingerfitError as exc:
+        event("refused")
         msg = str(exc)
         assert "\n" not in msg and "\r" not in msg, msg
         assert exc.path is not None, msg
@@ -436,12 +439,14 @@ def test_fuzz_session_toml(tmp_path, small_session, data) -> None:
     shutil.copyfile(d / "grasp.csv" if (d / "grasp.csv").exists() else d / "reference.csv", outside)
     toml = d / "session.toml"
     base = toml.read_bytes()
-    if data.draw(st.booleans()):
+    how = data.draw(st.sampled_from(["as written", "edit", "mutate", "edit and mutate"]))
+    event(how)
+    if "edit" in how:
         lines = _lines(base)
         i = data.draw(st.integers(0, len(lines)))
         lines.insert(i, data.draw(st.sampled_from(TOML_EDITS)).encode() + b"\n")
         base = b"".join(lines)
-    toml.write_bytes(mutate_text(data.draw, base, sep=b" ") if data.draw(st.booleans()) else base)
+    toml.write_bytes(mutate_text(data.draw, base, sep=b" ") if "mutate" in how else base)
     session = outcome(lambda: load_session(d), d)
     if session is not None:
         assert session.units in ("mm", "cm", "m", "in")

@@ -62,6 +62,25 @@ def _session_args(src: Path, out: Path) -> list:
         ("landmarks.csv", 3, 3, "NaN", "landmarks.csv:3: field 'z': coordinate must be a finite"),
         ("events.csv", 2, 4, "Infinity", "events.csv:2: field 'end': start and end (s) must be"),
         ("events.csv", 2, 3, "abc", "events.csv:2: field 'start': start and end (s) must be a num"),
+        ("events.csv", 2, 4, "-1", "events.csv:2: need start < end, got "),
+        ("events.csv", 2, 1, "thumb", "events.csv:2: field 'finger': unknown finger 'thumb'"),
+        ("landmarks.csv", 3, 0, "index.knuckle", "landmarks.csv:3: field 'name': unknown landmark"),
+        (
+            "landmarks.csv",
+            3,
+            0,
+            "index.mp",
+            "landmarks.csv:3: field 'name': landmark 'index.mp' gi",
+        ),
+        (
+            "landmarks.csv",
+            1,
+            0,
+            "label",
+            "landmarks.csv:1: header must be 'name,x,y,z', found 'lab",
+        ),
+        ("grasp.csv", 6, 2, "1\x002", "grasp.csv:6: not text: byte 0x00 at offset"),
+        ("grasp.csv", 6, 2, "1\xe9", "grasp.csv:6: field 'x': not a number: '1\\xe9'"),
     ],
 )
 def test_non_finite_numbers_are_errors(
@@ -75,6 +94,22 @@ def test_non_finite_numbers_are_errors(
     _edit(src / file, line, column, value)
     before = listing(tmp_path)
     refused(run(*_session_args(src, tmp_path / "out")), expected)
+    assert listing(tmp_path) == before
+
+
+def test_garbled_time_cannot_blow_up_the_grid(tmp_path, source) -> None:
+    src = tmp_path / "src"
+    src.mkdir()
+    for f in source.iterdir():
+        if f.is_file():
+            (src / f.name).write_bytes(f.read_bytes())
+    lines = (src / "grasp.csv").read_text().splitlines()
+    last = len(lines)
+    _edit(src / "grasp.csv", last, 0, "1000000")
+    before = listing(tmp_path)
+    refused(
+        run(*_session_args(src, tmp_path / "out")), f"grasp.csv:{last}: field 'time': time jumps"
+    )
     assert listing(tmp_path) == before
 
 
@@ -113,6 +148,29 @@ def test_liberty_ascii_bad_numbers(tmp_path, token, expected) -> None:
     args += ["--map", "1=hand,2=index.proximal"]
     refused(run(*args), f"liberty.txt:7: {expected}")
     assert listing(tmp_path) == before
+
+
+@pytest.mark.parametrize(
+    ("items", "column", "value", "expected"),
+    [
+        ("2,4", 4, "720.000", "liberty.txt:7: field 'euler': Euler angle 720 deg is outside"),
+        ("2,7,9", 8, "4000000000", "liberty.txt:39: field 'frame count': frame count jumps by"),
+    ],
+)
+def test_liberty_garbled_angles_and_frame_counts(tmp_path, items, column, value, expected) -> None:
+    names = {"2": "position", "4": "euler", "7": "quaternion", "9": "frame"}
+    recs = make_records(20, stations=(1, 2), items=tuple(names[k] for k in items.split(",")))
+    lines = format_liberty_ascii(recs).splitlines()
+    for k in (38, 39) if column == 8 else (6,):  # both stations of the last frame
+        fields = lines[k].split()
+        fields[column] = value
+        lines[k] = " ".join(fields)
+    path = tmp_path / "liberty.txt"
+    path.write_text("\r\n".join(lines) + "\r\n", newline="")
+    args = ["convert", path, "-o", tmp_path / "out.csv", "--from", "liberty", "--items", items]
+    args += ["--map", "1=hand,2=index.proximal", "--rate", "240"]
+    refused(run(*args), expected)
+    assert not (tmp_path / "out.csv").exists()
 
 
 # ------------------------------------------------------------------------------- C3D

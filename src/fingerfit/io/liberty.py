@@ -685,7 +685,14 @@ def records_to_recording(
         fcs = fc[rec_idx]
         frame_ids, frame_of = np.unique(fcs, return_inverse=True)
         first_rec = rec_idx[np.unique(frame_of, return_index=True)[1]]
-        check_grid_size(frame_ids - frame_ids[0], np.arange(frame_ids.size), path, "frame count")
+        try:
+            check_grid_size(
+                frame_ids - frame_ids[0], np.arange(frame_ids.size), path, "frame count"
+            )
+        except FingerfitError as exc:  # name the record, not the frame index
+            raise records.error(
+                exc.reason, int(first_rec[exc.line or 0]), path, field=exc.field
+            ) from None
         grid_idx = (frame_ids - frame_ids[0]).astype(np.int64)
         n = int(grid_idx[-1]) + 1
         if "timestamp" in items:
