@@ -1,4 +1,4 @@
-"""Plausibility checks (``fingerfit.plausibility``): bounds, causes, pivot residuals.
+"""Plausibility checks (``fingerfit.estimate.plausibility``): bounds, causes, pivot residuals.
 
 The false-positive guard: realistic simulated subjects (all four fingers, several seeds)
 and the real Polhemus Liberty recordings are not refused, with the margins quoted in
@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from fingerfit.estimate import FitOptions, fit_session
+from fingerfit.estimate.centre import centre_of_rotation
 from fingerfit.estimate.fit import reference_poses
-from fingerfit.plausibility import (
+from fingerfit.estimate.plausibility import (
     CONVENTION_RATIO,
     PIVOT_FLOOR_MM,
     RECORDING_RESIDUAL_MM,
@@ -25,7 +26,6 @@ from fingerfit.plausibility import (
     check_session,
     convention_checks,
     convention_problems,
-    pivot_fit,
     pivot_residuals,
     recording_checks,
     segment_bound,
@@ -71,15 +71,16 @@ def test_unit_cause_says_when_no_unit_explains_it() -> None:
     assert "no unit mistake" in unit_cause(1e9, Bound(10, 20, ""), "mm")
 
 
-def test_pivot_fit_recovers_a_known_centre() -> None:
+def test_pivot_residual_of_a_known_centre() -> None:
     rng = np.random.default_rng(3)
     q = rng.normal(size=(300, 4))
     r = matrix_from_quat_wxyz(q)
     cp, cc = np.array([10.0, -5.0, 40.0]), np.array([-20.0, 3.0, 1.0])
     t = cp - r @ cc
-    fcp, fcc, rms = pivot_fit(r, t + rng.normal(0, 0.2, t.shape))
-    assert np.allclose(fcp, cp, atol=0.1) and np.allclose(fcc, cc, atol=0.1)
-    assert rms == pytest.approx(0.2 * np.sqrt(3), rel=0.1)
+    fit = centre_of_rotation(r, t + rng.normal(0, 0.2, t.shape))
+    assert np.allclose(fit.parent_point, cp, atol=0.1)
+    assert np.allclose(fit.child_point, cc, atol=0.1)
+    assert fit.rms_mm == pytest.approx(0.2 * np.sqrt(3), rel=0.1)
 
 
 @pytest.mark.parametrize("seed", [0, 2, 5])
@@ -171,7 +172,7 @@ def liberty_checks() -> dict[str, dict[str, float]]:
 )
 def test_real_liberty_recordings_read_as_declared() -> None:
     """No other quaternion reading explains the real recordings better (no refusal)."""
-    from fingerfit.plausibility import PivotCheck
+    from fingerfit.estimate.plausibility import PivotCheck
 
     for name, res in liberty_checks().items():
         assert min(res, key=res.get) == "as read", (name, res)

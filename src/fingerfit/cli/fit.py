@@ -12,11 +12,11 @@ from rich.table import Table
 
 from ..estimate import FitOptions, fit_session
 from ..estimate.fit import METHODS
+from ..estimate.plausibility import check_recording, enforce
 from ..io import load_session, read_pose_csv
 from ..io.atomic import atomic_write, check_target, refuse_writing_inputs
 from ..kinematics import compute_kinematics, kinematics_table
 from ..model import HandModel, load_model, save_model
-from ..plausibility import check_recording, enforce
 from ..session import FINGERS, UNITS_TO_MM
 from .app import app, notice, out, parse_list, say, user_errors
 
@@ -159,7 +159,7 @@ def angles(
     for note in rec.notes:
         notice("note", note)
     # The recording against the model: a wrong --units or quaternion order, or another
-    # subject's recording, gives wrong angles without complaint (fingerfit.plausibility).
+    # subject's recording, gives wrong angles without complaint (fingerfit.estimate.plausibility).
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         enforce(check_recording(model, rec, units, recording), force)

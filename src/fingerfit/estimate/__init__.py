@@ -4,6 +4,7 @@
 * :mod:`.centre` -- centre of rotation from two 6-DOF sensors (O'Brien et al. 2000);
 * :mod:`.axis` -- axis of rotation through the per-cycle centres (Tang et al. 2018, eq. 1);
 * :mod:`.sagittal` -- the finger's sagittal plane from stylus landmarks;
+* :mod:`.plausibility` -- physical plausibility: units, landmarks, quaternion convention;
 * :mod:`.fit` -- the whole fit of a session into a :class:`~fingerfit.model.FingerModel`.
 """
 

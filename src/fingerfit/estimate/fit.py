@@ -37,13 +37,13 @@ import numpy as np
 from ..errors import FingerfitError
 from ..kinematics import twist_angle, two_axis_angles
 from ..model import ANGLE_METHODS, FingerModel, HandModel, JointModel, JointQuality, assemble_finger
-from ..plausibility import check_model, check_session, enforce
 from ..session import HAND_SENSOR, JOINTS, Session, joint_sensors
 from ..transforms import FloatArray, angle_between_axes, relative_pose, rotation_vector
 from .axis import AxisFit, line_through_centres, mean_null_axis, orient_flexion
 from .centre import CentreFit, centre_of_rotation
 from .cycles import extract_cycles
 from .migration import fit_axis_points
+from .plausibility import check_model, check_session, enforce
 from .pooled import pooled_hinge
 from .robust import robust_hinge
 from .sagittal import intersect, sagittal_plane
@@ -516,7 +516,7 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
         if f not in session.fingers:
             raise FingerfitError(f"session has no finger '{f}'", path=session.path, field="fingers")
     # Physical plausibility first (units, landmarks, quaternion convention): a wrong unit
-    # or quaternion order fits without complaint (fingerfit.plausibility).
+    # or quaternion order fits without complaint (fingerfit.estimate.plausibility).
     forced = enforce(check_session(session, fingers, reference), options.force)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

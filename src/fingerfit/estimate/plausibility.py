@@ -34,8 +34,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import FingerfitError
-from .session import (
+from ..errors import FingerfitError
+from ..session import (
     FINGERS,
     HAND_SENSOR,
     SEGMENTS,
@@ -46,10 +46,11 @@ from .session import (
     joint_sensors,
     sensor_name,
 )
-from .transforms import FloatArray, matrix_from_quat_wxyz, relative_pose
+from ..transforms import FloatArray, matrix_from_quat_wxyz, quat_wxyz_from_matrix, relative_pose
+from .centre import centre_of_rotation
 
 if TYPE_CHECKING:
-    from .model import HandModel
+    from ..model import HandModel
 
 # --------------------------------------------------------------------------- bounds
 
@@ -469,84 +470,19 @@ CONVENTIONS: dict[str, str] = {
 }
 
 
-def _quat_wxyz(m: FloatArray) -> FloatArray:
-    """Quaternions ``(n, 4)`` ``(w, x, y, z)`` of rotation matrices ``(n, 3, 3)``.
-
-    Each component's magnitude from the diagonal, its sign (relative to the largest
-    component) from the off-diagonal sums: branch-free and cheap, exact for rotations.
-    """
-    tr = np.trace(m, axis1=1, axis2=2)
-    d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
-    mag = 0.5 * np.sqrt(
-        np.clip(
-            np.stack([1 + tr, 1 + d0 - d1 - d2, 1 - d0 + d1 - d2, 1 - d0 - d1 + d2], 1), 0, None
-        )
-    )
-    # 4 q_i q_j for every pair, from the off-diagonal elements.
-    wx, wy, wz = m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]
-    xy, xz, yz = m[:, 0, 1] + m[:, 1, 0], m[:, 0, 2] + m[:, 2, 0], m[:, 1, 2] + m[:, 2, 1]
-    prod = np.stack(
-        [
-            np.stack([mag[:, 0], wx, wy, wz], 1),
-            np.stack([wx, mag[:, 1], xy, xz], 1),
-            np.stack([wy, xy, mag[:, 2], yz], 1),
-            np.stack([wz, xz, yz, mag[:, 3]], 1),
-        ],
-        1,
-    )
-    k = np.argmax(mag, axis=1)
-    sign = np.sign(prod[np.arange(len(k)), k])
-    sign[np.arange(len(k)), k] = 1.0
-    return mag * np.where(sign == 0, 1.0, sign)
-
-
 def _alternatives(rotation: FloatArray) -> dict[str, FloatArray]:
     """Rotations ``(n, 3, 3)`` under each reading of :data:`CONVENTIONS`.
 
     A file written ``x,y,z,w`` but read as ``w,x,y,z`` gives ``q_read = (x, y, z, w)``;
     the true quaternion is ``(q_read[3], q_read[0], q_read[1], q_read[2])``.
     """
-    swapped = matrix_from_quat_wxyz(np.roll(_quat_wxyz(rotation), 1, axis=1))
+    swapped = matrix_from_quat_wxyz(np.roll(quat_wxyz_from_matrix(rotation), 1, axis=1))
     return {
         "as read": rotation,
         "conjugated": np.swapaxes(rotation, 1, 2),
         "xyzw": swapped,
         "xyzw conjugated": np.swapaxes(swapped, 1, 2),
     }
-
-
-def pivot_fit(
-    rotation: FloatArray, translation: FloatArray
-) -> tuple[FloatArray, FloatArray, float]:
-    """Least-squares joint centre of a relative motion: ``[I  -R(k)] [c_p; c_c] = t(k)``.
-
-    Parameters
-    ----------
-    rotation : ndarray, shape (n, 3, 3)
-        Child-in-parent rotations ``R_p^T R_c`` (finite).
-    translation : ndarray, shape (n, 3)
-        Child origin in the parent frame, ``R_p^T (t_c - t_p)`` (mm).
-
-    Returns
-    -------
-    centre_parent, centre_child : ndarray, shape (3,)
-        The centre in the parent and in the child frame (mm); for a hinge the point on
-        the axis nearest the origins (minimum norm).
-    rms_mm : float
-        RMS over frames of ``|c_p - R c_c - t|`` (mm).
-    """
-    n = rotation.shape[0]
-    sum_r = rotation.sum(axis=0)
-    m = np.zeros((6, 6))
-    m[:3, :3] = n * np.eye(3)
-    m[3:, 3:] = n * np.eye(3)
-    m[:3, 3:] = -sum_r
-    m[3:, :3] = -sum_r.T
-    rt = np.matmul(translation[:, None, :], rotation)[:, 0, :].sum(axis=0)  # sum R^T t
-    x = np.linalg.lstsq(m, np.concatenate([translation.sum(axis=0), -rt]), rcond=1e-9)[0]
-    cp, cc = x[:3], x[3:]
-    e = cp - rotation @ cc - translation
-    return cp, cc, float(np.sqrt(np.mean(np.sum(e * e, axis=1))))
 
 
 @dataclass(frozen=True)
@@ -606,7 +542,7 @@ def pivot_residuals(
     out = {}
     for k in CONVENTIONS:
         r, t = relative_pose(pa[k], parent.position[ok], ca[k], child.position[ok])
-        out[k] = pivot_fit(r, t)[2]
+        out[k] = centre_of_rotation(r, t).rms_mm
     return out, int(ok.size)
 
 
@@ -871,7 +807,6 @@ __all__ = [
     "finger_length_bound",
     "landmark_scale",
     "neighbour_bound",
-    "pivot_fit",
     "pivot_residuals",
     "recording_checks",
     "segment_bound",
