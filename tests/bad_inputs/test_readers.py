@@ -237,10 +237,10 @@ def test_c3d_header_garbage(tmp_path) -> None:
     res = run("convert", tmp_path / "key.c3d", "-o", tmp_path / "o.csv", "--from", "c3d")
     refused(res, "key.c3d: not a readable C3D file (byte 2 of the header is 0x51, not 0x50)")
     raw = bytearray(full.read_bytes())
-    raw[2:4] = struct.pack("<H", 5)  # header says 5 points, POINT:USED says 3
+    raw[2:4] = struct.pack("<H", 2)  # header says 2 points, POINT:USED says 3
     (tmp_path / "used.c3d").write_bytes(bytes(raw))
     res = run("convert", tmp_path / "used.c3d", "-o", tmp_path / "o.csv", "--from", "c3d")
-    refused(res, "used.c3d: ")
+    refused(res, "used.c3d: not a readable C3D file (POINT:USED is 3, the header says 2 points)")
     assert not (tmp_path / "o.csv").exists()
 
 

@@ -166,8 +166,15 @@ def test_unknown_keys_are_errors(sess, line, expected) -> None:
         ("rate_hz = 99999999999999999999999999", "field 'rate_hz': must be positive"),
         ('hand = "left\\nright"', "field 'hand': must be 'left' or 'right', not 'left\\nright'"),
         ("fingers = [[1], 2]", "field 'fingers': must be a non-empty list of distinct names"),
+        ("grasp = []", "field 'recordings.grasp': needs at least one grasp recording"),
+        ('grasp = "a\\u0001b"', "field 'recordings.grasp': 'a\\x01b' contains control characters"),
     ],
 )
 def test_odd_toml_values(sess, line, expected) -> None:
     _set(sess, line.split(" =")[0], line)
     refused(run("fit", sess), f"{sess / 'session.toml'}: {expected}")
+
+
+def test_not_a_session_directory(tmp_path) -> None:
+    refused(run("fit", tmp_path), f"{tmp_path}: not a session directory (no session.toml)")
+    assert not list(tmp_path.iterdir())
