@@ -244,6 +244,22 @@ def test_c3d_header_garbage(tmp_path) -> None:
     assert not (tmp_path / "o.csv").exists()
 
 
+def test_c3d_parameter_section_is_checked_before_ezc3d(tmp_path) -> None:
+    """Damaged parameter records that made ezc3d hang or the reader crash (found by fuzzing)."""
+    raw = _small_c3d(tmp_path / "full.c3d").read_bytes()
+    dims = bytearray(raw)
+    dims[raw.index(b"CONTACT") + 10] = 26  # 26 dimensions: a product beyond int64
+    (tmp_path / "dims.c3d").write_bytes(bytes(dims))
+    res = run("convert", tmp_path / "dims.c3d", "-o", tmp_path / "o.csv", "--from", "c3d")
+    refused(res, "dims.c3d: not a readable C3D file (parameter record at byte ")
+    ratio = bytearray(raw)
+    ratio[raw.index(b"RATIO") + 10] = 0x80  # ROTATION:RATIO -32768: ezc3d never returned
+    (tmp_path / "ratio.c3d").write_bytes(bytes(ratio))
+    res = run("convert", tmp_path / "ratio.c3d", "-o", tmp_path / "o.csv", "--from", "c3d")
+    refused(res, "ratio.c3d: not a readable C3D file (ROTATION:RATIO is -32768, must not be neg")
+    assert not (tmp_path / "o.csv").exists()
+
+
 # -------------------------------------------------------------------------- model files
 
 

@@ -16,6 +16,7 @@ lab coordinates (``docs/conventions.md``). Install with ``pip install fingerfit[
 
 from __future__ import annotations
 
+import math
 import re
 import struct
 from collections.abc import Mapping
@@ -200,6 +201,13 @@ def read_c3d_header(path: Path) -> C3DHeader:
     except OSError as exc:
         raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
     params = _parameter_section(section, endian, path)
+    for key in _COUNT_PARAMETERS:
+        value = params.get(key)
+        if value is not None and value < 0:
+            raise FingerfitError(
+                f"not a readable C3D file ({':'.join(key)} is {value}, must not be negative)",
+                path=path,
+            )
     used = params.get(("POINT", "USED"))
     if used is not None and used != header.n_points:
         raise FingerfitError(
@@ -210,6 +218,13 @@ def read_c3d_header(path: Path) -> C3DHeader:
     return header
 
 
+#: Scalar int16 parameters that count something: never negative (ezc3d trusts them).
+_COUNT_PARAMETERS = (
+    ("POINT", "USED"),
+    ("ANALOG", "USED"),
+    ("ROTATION", "USED"),
+    ("ROTATION", "RATIO"),
+)
 #: Parameter data types of the C3D format: char, byte, int16, float32 -> bytes per value.
 _PARAM_TYPES = {-1: 1, 1: 1, 2: 2, 4: 4}
 
@@ -243,7 +258,6 @@ def _parameter_section(section: bytes, endian: str, path: Path) -> dict[tuple[st
     pending: list[tuple[int, str, int]] = []
     end = len(section)
     pos = 4
-    seen = 0
 
     def bad(what: str) -> FingerfitError:
         return FingerfitError(
@@ -275,7 +289,7 @@ def _parameter_section(section: bytes, endian: str, path: Path) -> dict[tuple[st
             if r + 2 + n_dims > end:
                 raise bad("dimensions past the end")
             dims = list(section[r + 2 : r + 2 + n_dims])
-            n_bytes = _PARAM_TYPES[kind] * int(np.prod(dims, dtype=np.int64))
+            n_bytes = _PARAM_TYPES[kind] * math.prod(dims)  # Python ints: no overflow
             r = r + 2 + n_dims + n_bytes
             if r + 1 > end:
                 raise bad("data past the end of the section")
@@ -294,7 +308,6 @@ def _parameter_section(section: bytes, endian: str, path: Path) -> dict[tuple[st
         if q + step < r or q + step > end:
             raise bad(f"pointer to the next record ({step}) outside the record or section")
         pos = q + step
-        seen += 1
     return {(groups.get(g, "?"), n): v for g, n, v in pending}
 
 
