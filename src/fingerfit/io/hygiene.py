@@ -64,22 +64,24 @@ MAX_GRID_RATIO = 10
 GRID_SLACK = 1000
 
 
-def implausible_rows(values_mm: np.ndarray) -> np.ndarray:
-    """Rows holding a coordinate beyond :data:`MAX_COORDINATE_MM` (or infinite).
+def implausible_rows(values: np.ndarray, scale_to_mm: float = 1.0) -> np.ndarray:
+    """Rows holding a coordinate beyond :data:`MAX_COORDINATE_MM` (or infinite) in mm.
 
     Parameters
     ----------
-    values_mm : ndarray, shape (n, ...)
-        Coordinates in mm; NaN (missing) is ignored.
+    values : ndarray, shape (n, ...)
+        Coordinates in file units; NaN (missing) is ignored.
+    scale_to_mm : float
+        Millimetres per file unit (an overflowing conversion counts as implausible).
 
     Returns
     -------
     ndarray of int
         Indices of the offending rows, in order.
     """
-    v = np.abs(np.asarray(values_mm, dtype=float)).reshape(len(values_mm), -1)
-    with np.errstate(invalid="ignore"):
-        return np.flatnonzero((v > MAX_COORDINATE_MM).any(axis=1))
+    v = np.asarray(values, dtype=float).reshape(len(values), -1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.flatnonzero((np.abs(v * scale_to_mm) > MAX_COORDINATE_MM).any(axis=1))
 
 
 def implausible_message(value: float) -> str:

@@ -769,17 +769,21 @@ def records_to_recording(
         frame_of_rec = frame_of
 
     sel = rec_idx
-    big = implausible_rows(records.values["position"][sel] * scale)
+    big = implausible_rows(records.values["position"][sel], scale)
     if big.size:
         i = int(sel[big[0]])
         v = records.values["position"][i]
         raise records.error(
-            implausible_message(v[int(np.argmax(np.abs(v)))] * scale), i, path, field="position"
+            implausible_message(float(v[int(np.argmax(np.abs(v)))]) * scale),
+            i,
+            path,
+            field="position",
         )
     pos_all = records.values["position"][sel] * scale
     if "quaternion" in items:
         q = records.values["quaternion"][sel]
-        norm = np.linalg.norm(q, axis=1)
+        with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
+            norm = np.linalg.norm(q, axis=1)
         bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
         if bad.size:
             i = int(sel[bad[0]])

@@ -233,12 +233,12 @@ def read_pose_csv(
             )
 
     pose = np.column_stack([values[c] for c in ("x", "y", "z", "qw", "qx", "qy", "qz")])
-    big = implausible_rows(pose[:, :3] * scale_to_mm)
+    big = implausible_rows(pose[:, :3], scale_to_mm)
     if big.size:
         i = int(big[0])
         j = int(np.nanargmax(np.abs(pose[i, :3])))
         raise FingerfitError(
-            implausible_message(pose[i, j] * scale_to_mm),
+            implausible_message(float(pose[i, j]) * scale_to_mm),
             path=path,
             line=int(lines[i]),
             field="xyz"[j],
@@ -268,7 +268,8 @@ def read_pose_csv(
     partial = ~complete & np.isfinite(pose).any(axis=1)
     if partial.any():
         notes.append(f"{int(partial.sum())} samples with empty fields treated as missing")
-    norm = np.linalg.norm(pose[:, 3:], axis=1)
+    with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
+        norm = np.linalg.norm(pose[:, 3:], axis=1)
     bad = np.flatnonzero(complete & (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE))
     if bad.size:
         i = int(bad[0])

@@ -59,9 +59,10 @@ def technical_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     p = np.asarray(points, dtype=float)
     x = p[..., 1, :] - p[..., 0, :]
-    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
-    z = np.cross(x, p[..., 2, :] - p[..., 0, :])
-    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):  # coincident markers: NaN axes
+        x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+        z = np.cross(x, p[..., 2, :] - p[..., 0, :])
+        z = z / np.linalg.norm(z, axis=-1, keepdims=True)
     y = np.cross(z, x)
     return np.stack([x, y, z], axis=-1), p.mean(axis=-2)
 

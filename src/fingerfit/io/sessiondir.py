@@ -240,12 +240,10 @@ def read_landmarks(path: str | Path, units: str = "mm") -> dict[str, np.ndarray]
         xyz = np.array(
             [_number(v, path, i, k, "coordinate") for k, v in zip("xyz", row[1:], strict=True)]
         )
-        xyz = xyz * UNITS_TO_MM[units]
-        if implausible_rows(xyz[None]).size:
-            raise FingerfitError(
-                implausible_message(float(xyz[np.argmax(np.abs(xyz))])), path=path, line=i
-            )
-        out[name] = xyz
+        if implausible_rows(xyz[None], UNITS_TO_MM[units]).size:
+            big = float(xyz[np.argmax(np.abs(xyz))]) * UNITS_TO_MM[units]
+            raise FingerfitError(implausible_message(big), path=path, line=i)
+        out[name] = xyz * UNITS_TO_MM[units]
     return out
 
 

@@ -302,12 +302,12 @@ def read_wide_csv(
     for j, s in enumerate(stations):
         for m, key in enumerate(lay.keys):
             vals[:, j, m] = numeric(_column(lay.columns[key], s))
-    big = implausible_rows(vals[:, :, :3].reshape(n_rows, -1) * UNITS_TO_MM[units])
+    big = implausible_rows(vals[:, :, :3].reshape(n_rows, -1), UNITS_TO_MM[units])
     if big.size:
         i = int(big[0])
         j, m = np.unravel_index(int(np.nanargmax(np.abs(vals[i, :, :3]))), (len(stations), 3))
         raise FingerfitError(
-            implausible_message(vals[i, j, m] * UNITS_TO_MM[units]),
+            implausible_message(float(vals[i, j, m]) * UNITS_TO_MM[units]),
             path=path,
             line=int(lines[i]),
             field=_column(lay.columns[_POS[m]], stations[j]),
@@ -412,7 +412,8 @@ def read_wide_csv(
         fv = frame_vals[ok, j]
         pos[grid_idx[ok]] = fv[:, :3] * scale
         if lay.orientation == _QUAT:
-            norm = np.linalg.norm(fv[:, 3:], axis=1)
+            with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
+                norm = np.linalg.norm(fv[:, 3:], axis=1)
             bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
             if bad.size:
                 i = int(np.flatnonzero(ok)[bad[0]])
