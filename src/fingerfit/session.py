@@ -232,6 +232,9 @@ class Session:
     events : list[TargetEvent]
     path : Path or None
         Directory the session was loaded from.
+    files : tuple of Path
+        Every file the session was read from (``session.toml``, recordings, landmarks,
+        events); no command may write onto one of them.
     """
 
     subject: str
@@ -246,6 +249,7 @@ class Session:
     test: list[Recording] = field(default_factory=list)
     events: list[TargetEvent] = field(default_factory=list)
     path: Path | None = None
+    files: tuple[Path, ...] = ()
 
     def recordings(self) -> list[Recording]:
         """Every recording: reference, grasp, targets, test."""

@@ -6,6 +6,7 @@ exit 2, and the folders involved are unchanged.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import stat
@@ -17,6 +18,7 @@ import pytest
 
 from fingerfit import __version__
 from fingerfit.simulate import write_subject
+from fingerfit.simulate.trackerfiles import write_tracker_subject
 
 from ..conftest import subject
 from ._cli import listing, refused, run
@@ -92,10 +94,13 @@ def test_angles_urdf_names_onto_an_input_writes_nothing(fitted: Path, tmp_path: 
     assert listing(fitted, tmp_path) == before
 
 
-pytest.importorskip("yourdfpy")
-pytest.importorskip("mujoco")
+needs_robot = pytest.mark.skipif(
+    not all(importlib.util.find_spec(m) for m in ("yourdfpy", "mujoco")),
+    reason="robot export needs the extra fingerfit[robot] (yourdfpy, mujoco)",
+)
 
 
+@needs_robot
 def test_export_is_all_or_nothing_when_one_target_is_a_folder(fitted, tmp_path) -> None:
     (tmp_path / "h.urdf").mkdir()
     before = listing(tmp_path)
@@ -106,6 +111,7 @@ def test_export_is_all_or_nothing_when_one_target_is_a_folder(fitted, tmp_path) 
     assert listing(tmp_path) == before
 
 
+@needs_robot
 def test_export_replaces_only_with_overwrite(fitted: Path, tmp_path: Path) -> None:
     urdf, mjcf = tmp_path / "h.urdf", tmp_path / "h.xml"
     urdf.write_text("old urdf")
@@ -119,6 +125,7 @@ def test_export_replaces_only_with_overwrite(fitted: Path, tmp_path: Path) -> No
     assert sorted(p.name for p in tmp_path.iterdir()) == ["h.urdf", "h.xml"]
 
 
+@needs_robot
 def test_export_refuses_a_read_only_target_even_as_root(fitted: Path, tmp_path: Path) -> None:
     urdf, mjcf = tmp_path / "h.urdf", tmp_path / "h.xml"
     urdf.write_text("keep me")
@@ -129,6 +136,7 @@ def test_export_refuses_a_read_only_target_even_as_root(fitted: Path, tmp_path: 
     assert listing(tmp_path) == before and urdf.read_text() == "keep me"
 
 
+@needs_robot
 def test_export_never_writes_onto_its_model(fitted: Path) -> None:
     before = listing(fitted)
     res = run("export", fitted / "model.json", "--urdf", fitted / "model.json", "--overwrite")
@@ -150,3 +158,25 @@ def test_quick_start_environment_has_every_extra_the_readme_uses() -> None:
     if "fingerfit export" in readme:
         needed.add("robot")
     assert needed <= extras, f"make demo's environment lacks {needed - extras}"
+
+
+@pytest.mark.parametrize("name", ["grasp.csv", "session.toml", "landmarks.csv"])
+def test_fit_never_writes_onto_a_session_file(tmp_path: Path, name: str) -> None:
+    d = write_subject(subject("realistic", 2), tmp_path / "S")
+    before = listing(tmp_path)
+    line = refused(run("fit", d, "-o", d / name), "would overwrite the input")
+    assert str(d / name) in line
+    assert listing(tmp_path) == before
+
+
+def test_convert_never_writes_onto_its_source(tmp_path: Path) -> None:
+    d = write_subject(subject("realistic", 2), tmp_path / "S")
+    liberty = write_tracker_subject(subject("realistic", 2), tmp_path / "L", "liberty-ascii")
+    src = liberty.files["grasp.csv"]
+    alias = tmp_path / "alias.txt"
+    os.link(src, alias)  # a hard link: another name of the same file
+    before = listing(tmp_path)
+    res = run("convert", src, "-o", alias, "--from", "liberty", "--items", "2,7,9,1",
+              "--rate", "240", "--map", "1=hand,2=index.proximal,3=index.middle,4=index.distal")  # fmt: skip
+    refused(res, "would overwrite the input", str(alias))
+    assert listing(tmp_path) == before and d.is_dir()

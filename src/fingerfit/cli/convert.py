@@ -12,6 +12,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import FingerfitError
+from ..io.atomic import atomic_write, check_target, refuse_writing_inputs
 from ..session import UNITS_TO_MM, Recording, is_sensor_name
 from .app import app, notice, out, user_errors
 
@@ -74,8 +75,6 @@ def _check_units_option(units: str | None) -> None:
 
 
 def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
-    from ..io.atomic import atomic_write
-
     frames = []
     for name, fit in fits.items():
         frames.append(
@@ -196,10 +195,10 @@ def convert(
         raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--out-units")
     if not source.is_file():
         raise FingerfitError("file not found", path=source)
-    if output.exists() and output.resolve() == source.resolve():
-        raise FingerfitError("the output would overwrite the input", path=output)
-    if output.is_dir():
-        raise FingerfitError("is a directory; give a file name", path=output)
+    outputs = [output] if residuals is None else [output, residuals]
+    refuse_writing_inputs(outputs, [source] if static is None else [source, static])
+    for target in outputs:
+        check_target(target)
     numeric = fmt is not SourceFormat.c3d
     sensors = parse_map(map_, numeric=numeric)
     for opt, value, ok in (

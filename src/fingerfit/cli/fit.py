@@ -97,6 +97,9 @@ def fit(
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
     s = load_session(session)
+    target = output or session / "model.json"
+    refuse_writing_inputs([target], s.files)
+    check_target(target)
     for note in (n for r in s.recordings() for n in r.notes):
         notice("note", note)
     names = parse_list(fingers, FINGERS, "--fingers")
@@ -109,7 +112,7 @@ def fit(
         notice("warning", str(w.message))
     if model.warnings:
         notice("warning", f"{len(model.warnings)} warning(s) stored in the model file (--force)")
-    path = save_model(model, output or session / "model.json")
+    path = save_model(model, target)
     out.print(quality_table(model))
     say("model written to [bold]{}[/]", path)
 

@@ -410,6 +410,15 @@ def load_session(directory: str | Path) -> Session:
         test=test,
         events=events,
         path=directory,
+        files=(
+            meta_path,
+            ref_file,
+            *grasp_files,
+            *target_files,
+            *test_files,
+            landmarks_file,
+            *([events_file] if events_file is not None else []),
+        ),
     )
     _check_complete(session)
     return session
