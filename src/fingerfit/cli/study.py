@@ -39,7 +39,14 @@ def _pct(v: float | None) -> str:
 def headline_table(result: StudyResult) -> Table:
     """The paper's headline: user-axis vs orthogonal fingertip error, mean (SD) mm, next to the paper."""
     sm = result.summary
-    t = Table(title="Fingertip error, mean (SD) mm", title_justify="left")
+    t = Table(
+        title="Fingertip error, mean (SD) mm",
+        title_justify="left",
+        caption="user-axis, orthogonal: fingertip error of each model (max flexion: vs the "
+        "distal-sensor reference; targets: vs the stylus target); reduction: how much "
+        "smaller the user-axis mean and SD are; paper: Tang et al. 2018 (docs/study.md)",
+        caption_justify="left",
+    )
     for c in ("", "user-axis", "orthogonal", "reduction (mean / SD)", "paper"):
         t.add_column(c, justify="left" if not c else "right")
     for key, name in (("max_flexion", "max flexion"), ("targets", "targets")):
