@@ -8,6 +8,7 @@ from typing import Annotated
 
 import numpy as np
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from ..estimate import FitOptions, fit_session
@@ -40,7 +41,7 @@ def quality_table(model: HandModel) -> Table:
     The caption is a one-line legend per column (:data:`TABLE_LEGEND`).
     """
     t = Table(
-        title=f"{model.subject}: method {model.method}"
+        title=f"{escape(model.subject)}: method {escape(model.method)}"
         + (", two-axis MP" if any(f.abduction is not None for f in model.fingers.values()) else ""),
         title_justify="left",
         caption="\n".join(
