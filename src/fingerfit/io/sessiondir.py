@@ -37,6 +37,7 @@ from ..session import (
     is_landmark_name,
     sensor_name,
 )
+from ..transforms import FloatArray
 from .atomic import atomic_write
 from .hygiene import implausible_message, implausible_rows
 from .posecsv import check_field_counts, read_pose_csv, shown, write_pose_csv
@@ -505,17 +506,38 @@ def save_session(session: Session, directory: str | Path) -> Path:
     """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    scale = UNITS_TO_MM[session.units]
     for rec in session.recordings():
         write_pose_csv(directory / rec.name, rec, units=session.units)
-    lm = pd.DataFrame(
-        [(k, *(v / scale)) for k, v in session.landmarks.items()], columns=["name", "x", "y", "z"]
-    )
-    with atomic_write(directory / LANDMARKS_FILE, newline="") as fh:
-        lm.to_csv(fh, index=False, lineterminator="\n")
+    write_landmarks(directory / LANDMARKS_FILE, session.landmarks, session.units)
     if session.events:
-        ev = pd.DataFrame([e.__dict__ for e in session.events], columns=list(EVENTS_HEADER))
-        with atomic_write(directory / EVENTS_FILE, newline="") as fh:
-            ev.to_csv(fh, index=False, lineterminator="\n")
+        write_events(directory / EVENTS_FILE, session.events)
     write_session_toml(session, directory)
     return directory
+
+
+def write_landmarks(path: str | Path, landmarks: dict[str, FloatArray], units: str = "mm") -> Path:
+    """Write ``name,x,y,z`` landmarks, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    landmarks : dict[str, ndarray]
+        Name -> position ``(3,)`` in mm, tracker coordinates.
+    units : str
+        Units of the written coordinates.
+    """
+    scale = UNITS_TO_MM[units]
+    lm = pd.DataFrame(
+        [(k, *(v / scale)) for k, v in landmarks.items()], columns=["name", "x", "y", "z"]
+    )
+    with atomic_write(path, newline="") as fh:
+        lm.to_csv(fh, index=False, lineterminator="\n")
+    return Path(path)
+
+
+def write_events(path: str | Path, events: list[TargetEvent]) -> Path:
+    """Write ``recording,finger,target,start,end`` touch events (s), atomically."""
+    ev = pd.DataFrame([e.__dict__ for e in events], columns=list(EVENTS_HEADER))
+    with atomic_write(path, newline="") as fh:
+        ev.to_csv(fh, index=False, lineterminator="\n")
+    return Path(path)

@@ -409,12 +409,18 @@ def write_subject(sim: SimulatedSubject, directory: str | Path) -> Path:
     directory = Path(directory)
     sim.session.path = directory
     save_session(sim.session, directory)
+    write_truth(sim, directory)
+    return directory
+
+
+def write_truth(sim: SimulatedSubject, directory: str | Path) -> None:
+    """Write ``truth.json`` and ``truth/<recording>.csv`` into ``directory``."""
+    directory = Path(directory)
     with atomic_write(directory / "truth.json") as fh:
         json.dump(truth_document(sim), fh, indent=1)
     for name, frames in sim.truth.frames.items():
         with atomic_write(directory / "truth" / name, newline="") as fh:
             truth_table(frames).to_csv(fh, index=False, lineterminator="\n")
-    return directory
 
 
 def simulate_cohort(config: SimConfig, n_subjects: int, seed: int) -> list[SimulatedSubject]:

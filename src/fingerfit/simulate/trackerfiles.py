@@ -29,22 +29,20 @@ the simulated time and the events.
 
 from __future__ import annotations
 
-import json
 import shlex
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from ..errors import FingerfitError
-from ..io.atomic import atomic_path, atomic_write, check_target, staged_directory
+from ..io.atomic import atomic_path, check_target, staged_directory
 from ..io.liberty import LibertyRecords, write_liberty_ascii, write_liberty_binary
-from ..io.sessiondir import EVENTS_FILE, EVENTS_HEADER, LANDMARKS_FILE
+from ..io.sessiondir import EVENTS_FILE, LANDMARKS_FILE, write_events, write_landmarks
 from ..session import FINGERS, HAND_SENSOR, SEGMENTS, UNITS_TO_MM, Recording, sensor_name
 from ..transforms import quat_wxyz_from_matrix
-from .study import SimulatedSubject, truth_document, truth_table
+from .study import SimulatedSubject, write_truth
 
 #: Tracker formats ``fingerfit simulate --format`` can write (besides ``csv``).
 TRACKER_FORMATS = ("liberty-ascii", "liberty-binary", "c3d")
@@ -273,21 +271,10 @@ class TrackerFiles:
 def _write_csv_extras(sim: SimulatedSubject, directory: Path) -> None:
     """landmarks.csv (mm), events.csv (s), truth.json and truth/<recording>.csv."""
     session = sim.session
-    scale = UNITS_TO_MM[session.units]
-    lm = pd.DataFrame(
-        [(k, *(v / scale)) for k, v in session.landmarks.items()], columns=["name", "x", "y", "z"]
-    )
-    with atomic_write(directory / LANDMARKS_FILE, newline="") as fh:
-        lm.to_csv(fh, index=False, lineterminator="\n")
+    write_landmarks(directory / LANDMARKS_FILE, session.landmarks, session.units)
     if session.events:
-        ev = pd.DataFrame([e.__dict__ for e in session.events], columns=list(EVENTS_HEADER))
-        with atomic_write(directory / EVENTS_FILE, newline="") as fh:
-            ev.to_csv(fh, index=False, lineterminator="\n")
-    with atomic_write(directory / "truth.json") as fh:
-        json.dump(truth_document(sim), fh, indent=1)
-    for name, frames in sim.truth.frames.items():
-        with atomic_write(directory / "truth" / name, newline="") as fh:
-            truth_table(frames).to_csv(fh, index=False, lineterminator="\n")
+        write_events(directory / EVENTS_FILE, session.events)
+    write_truth(sim, directory)
 
 
 def session_commands(
