@@ -5,9 +5,22 @@
 * :mod:`.axis` -- axis of rotation through the per-cycle centres (Tang et al. 2018, eq. 1);
 * :mod:`.sagittal` -- the finger's sagittal plane from stylus landmarks;
 * :mod:`.plausibility` -- physical plausibility: units, landmarks, quaternion convention;
-* :mod:`.fit` -- the whole fit of a session into a :class:`~fingerfit.model.FingerModel`.
+* :mod:`.fit` -- the whole fit of a session into a :class:`~fingerfit.model.FingerModel`;
+* :mod:`.joint` -- one joint between any two tracked segments (:func:`fit_joint`,
+  :func:`hinge_axis`, :func:`two_axis`, :func:`joint_centre`; ``docs/joint.md``).
 """
 
 from .fit import FitError, FitOptions, fit_session
+from .joint import JointFit, JointQuality, fit_joint, hinge_axis, joint_centre, two_axis
 
-__all__ = ["FitError", "FitOptions", "fit_session"]
+__all__ = [
+    "FitError",
+    "FitOptions",
+    "JointFit",
+    "JointQuality",
+    "fit_joint",
+    "fit_session",
+    "hinge_axis",
+    "joint_centre",
+    "two_axis",
+]
