@@ -373,3 +373,20 @@ def test_real_liberty_problems_refused() -> None:
         ok = np.isfinite(p).all(axis=(1, 2)) & np.isfinite(c).all(axis=(1, 2))
         (pp, pq), (cp, cq) = pos_quat(p[ok]), pos_quat(c[ok])
         refused("x,y,z,w order", (pp, pq[:, [1, 2, 3, 0]]), (cp, cq[:, [1, 2, 3, 0]]), "hinge")
+
+
+@pytest.mark.parametrize("method", ["tang2018", "pooled", "robust", "twoaxis", "rolling"])
+def test_finger_estimators_without_cycles_refuse_in_one_line(method) -> None:
+    """Issue 16: pooled and robust crashed with a bare NumPy ValueError without cycles."""
+    from fingerfit.estimate.fit import METHODS, FitError, JointData
+    from fingerfit.estimate.robust import robust_hinge
+
+    p, c = motion("hinge", n=100)
+    r = np.einsum("nji,njk->nik", p[:, :3, :3], c[:, :3, :3])
+    t = np.einsum("nji,nj->ni", p[:, :3, :3], c[:, :3, 3] - p[:, :3, 3])
+    data = JointData(r, t, [], np.zeros(0), r[0], t[0], "pip")
+    with pytest.raises(FitError, match=r"^pip: no movement cycles found") as exc:
+        METHODS[method](data)
+    assert "\n" not in str(exc.value)
+    with pytest.raises(FingerfitError, match="no movement periods"):
+        robust_hinge(r, t, [])

@@ -169,6 +169,7 @@ class AxisEstimate:
 
 def tang2018(data: JointData) -> AxisEstimate:
     """The paper's estimator: untruncated O'Brien centre per cycle, line through them (eq. 1)."""
+    _need_cycles(data)
     centres = [centre_of_rotation(data.rotation[p], data.translation[p]) for p in data.periods]
     return AxisEstimate(line_through_centres(centres), centres)
 
@@ -191,8 +192,18 @@ def _axis_fit(point: FloatArray, direction: FloatArray, centres: list[CentreFit]
     return AxisFit(point, direction, distances, spread, False, agreement)
 
 
+def _need_cycles(data: JointData) -> None:
+    """Refuse (one line) a joint without movement cycles: the estimators pool their frames."""
+    if not data.periods:
+        raise FitError(
+            f"{data.joint or 'joint'}: no movement cycles found, nothing to fit (for continuous "
+            "motion or one swing use fingerfit.estimate.fit_joint or 'fingerfit joint')"
+        )
+
+
 def pooled(data: JointData) -> AxisEstimate:
     """SARA axis and axis-truncated SCoRE centre over all movement frames (:mod:`.pooled`)."""
+    _need_cycles(data)
     mv = np.concatenate(data.periods)
     h = pooled_hinge(data.rotation[mv], data.translation[mv])
     centres = _cycle_centres(data, list(range(len(data.periods))))
@@ -219,6 +230,7 @@ def rolling(data: JointData) -> AxisEstimate:
 
 
 def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisEstimate:
+    _need_cycles(data)
     rh = robust_hinge(data.rotation, data.translation, data.periods)
     h, k = rh.fit, rh.frames
     noise = max(float(np.sqrt(np.mean(h.centre_residual**2) / 3.0)), 1e-6)

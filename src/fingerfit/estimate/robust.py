@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import FingerfitError
 from ..transforms import FloatArray
 from .pooled import PooledHinge, pooled_hinge
 
@@ -128,6 +129,8 @@ def robust_hinge(
     -------
     RobustHinge
     """
+    if not periods:
+        raise FingerfitError("no movement periods to fit a hinge to")
     frames = np.concatenate(periods)
     labels = np.concatenate([np.full(p.size, i) for i, p in enumerate(periods)])
     keep = np.ones(frames.size, bool)
