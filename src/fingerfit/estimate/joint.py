@@ -63,6 +63,9 @@ MIN_HINGE_CONDITIONING = 3.0
 #: A ball joint needs rotation about more than one axis: ``s5/s6`` above this means the
 #: motion turns about one axis and the centre along it is not determined.
 MAX_BALL_CONDITIONING = 10.0
+#: ``kind="auto"`` takes a two-axis joint over a hinge only when its second axis spans at
+#: least this (deg, 5th-95th percentile); ``kind="two_axis"`` accepts from 1.5 deg.
+AUTO_MIN_SECOND_DEG = 5.0
 #: The segments share no fixed centre of rotation when the RMS pivot residual (mm) of the
 #: as-read poses exceeds this. Measured: a real mechanical hinge 1.2 mm clean and 2-3 mm on
 #: one fast swing (issue 16); hand-held Liberty rotations 4.1-8.6 mm (``docs/joint.md``);
@@ -707,7 +710,8 @@ def fit_joint(
         note scipy's order is x, y, z, w). Frames with a NaN or infinite value in either
         are dropped and counted.
     kind : {"hinge", "two_axis", "ball", "auto"}
-        Joint model. ``auto``: ``two_axis`` when a second axis is supported, else
+        Joint model. ``auto``: ``two_axis`` when a second axis is supported and spans
+        :data:`AUTO_MIN_SECOND_DEG` or more, else
         ``hinge`` when the rotation is about one axis (``s5/s6 >=``
         :data:`MIN_HINGE_CONDITIONING`), else ``ball``.
     units : {"mm", "cm", "m", "in"}
@@ -749,7 +753,9 @@ def fit_joint(
     cond = float(sv[0] / sv[1]) if sv[1] > 0 else math.inf
     fit = _two_axis(m, rom, conv, strict=False) if cond <= 1e6 else None
     if fit is not None:
-        return fit
+        lo, hi = np.percentile(fit.angles_deg[:, 1], [5, 95])
+        if hi - lo >= AUTO_MIN_SECOND_DEG or cond < MIN_HINGE_CONDITIONING:
+            return fit
     if cond >= MIN_HINGE_CONDITIONING:
         return _hinge(m, method, rom, conv)
     return _ball(m, rom, conv)
