@@ -17,8 +17,8 @@ from matplotlib.transforms import Bbox
 from fingerfit.estimate import FitOptions
 from fingerfit.evaluate import run_study
 from fingerfit.evaluate.report import _p, _pct, _ttest
-from fingerfit.evaluate.study import figure_builders, summarize_study
-from fingerfit.io.sessiondir import save_session
+from fingerfit.evaluate.study import _subject, figure_builders, summarize_study
+from fingerfit.io.sessiondir import load_session, save_session
 from fingerfit.simulate import write_subject
 
 from .conftest import subject
@@ -35,6 +35,12 @@ def mixed(tmp_path_factory):
     bare = dataclasses.replace(exact, subject="P02", targets=[], test=[], events=[], path=None)
     p02 = save_session(bare, root / "P02")
     return run_study([p01, p02], root / "out", FitOptions(method="tang2018"))
+
+
+def _full(study) -> list:
+    """The study's subjects with their per-frame arrays (the study keeps compact ones)."""
+    opts = FitOptions(method="tang2018")
+    return [_subject(load_session(s.session.path), opts) for s in study.subjects]
 
 
 def _texts(fig: Figure) -> list[Text]:
@@ -97,12 +103,12 @@ def _check_figures(subjects, tables) -> set[str]:
 
 
 def test_figures_of_a_mixed_study_have_no_overlapping_labels(mixed) -> None:
-    keys = _check_figures(mixed.subjects, mixed.tables)
+    keys = _check_figures(_full(mixed), mixed.tables)
     assert keys == {"fig08", "fig09_P01", "fig09_P02", "fig10", "fig11", "fig12", "truth"}
 
 
 def test_figures_of_a_one_subject_study_have_no_overlapping_labels(mixed) -> None:
-    one = [s for s in mixed.subjects if s.subject == "P01"]
+    one = [s for s in _full(mixed) if s.subject == "P01"]
     _summary, tables = summarize_study(one, FitOptions(method="tang2018"))
     assert _check_figures(one, tables) == {
         "fig08",

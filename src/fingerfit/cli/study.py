@@ -72,6 +72,8 @@ def _run(
     force: bool = False,
     keep_going: bool = False,
     overwrite: bool = False,
+    jobs: int = 1,
+    scheduler: str | None = None,
 ) -> StudyResult:
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
@@ -84,6 +86,8 @@ def _run(
             progress=lambda msg: bar.update(task, advance=1, description=msg),
             keep_going=keep_going,
             overwrite=overwrite,
+            jobs=jobs,
+            scheduler=scheduler,
         )
     for f in result.failures:
         notice("warning", f"skipped {f.message}")
@@ -121,10 +125,29 @@ def study(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace a non-empty --out folder.")
     ] = False,
+    jobs: Annotated[
+        int,
+        typer.Option("--jobs", "-j", min=1, help="Worker processes fitting subjects in parallel."),
+    ] = 1,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Dask distributed scheduler (tcp://HOST:PORT) whose workers fit the "
+            "subjects instead (needs fingerfit[cluster]; workers must read the sessions).",
+        ),
+    ] = None,
 ) -> None:
     """The paper's evaluation over sessions: report.html, summary.json, CSV tables, PNG figures."""
     result = _run(
-        list(sessions), out_dir, method, force=force, keep_going=keep_going, overwrite=overwrite
+        list(sessions),
+        out_dir,
+        method,
+        force=force,
+        keep_going=keep_going,
+        overwrite=overwrite,
+        jobs=jobs,
+        scheduler=scheduler,
     )
     say("report: [bold]{}[/]", result.report)
 

@@ -14,6 +14,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 from pathlib import Path
+from typing import BinaryIO
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -33,12 +34,17 @@ DPI = 110
 
 def save(fig: Figure, path: Path) -> Path:
     """Write a PNG atomically and close the figure."""
+    with atomic_write(path, "wb") as fh:
+        save_to(fig, fh)
+    return path
+
+
+def save_to(fig: Figure, fh: BinaryIO) -> None:
+    """Write a PNG to an open binary file (or ``io.BytesIO``) and close the figure."""
     try:
-        with atomic_write(path, "wb") as fh:
-            fig.savefig(fh, format="png", dpi=DPI, bbox_inches="tight")
+        fig.savefig(fh, format="png", dpi=DPI, bbox_inches="tight")
     finally:
         plt.close(fig)
-    return path
 
 
 def _tick_labels(ax, labels: list[str], axis_len_in: float) -> None:

@@ -8,10 +8,13 @@ Statistics and the headline as in the paper; outputs written to one folder.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import warnings
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -26,7 +29,7 @@ from ..io import load_session
 from ..io.atomic import atomic_write, staged_directory
 from ..kinematics import compute_kinematics
 from ..model import VARIANTS, HandModel, save_model
-from ..session import HAND_SENSOR, JOINTS, Session, check_subject_id
+from ..session import HAND_SENSOR, JOINTS, PoseSeries, Recording, Session, check_subject_id
 from ..transforms import angle_between_axes, apply_inverse_pose
 from . import figures
 from .fingertip import GraspEvaluation, evaluate_grasp, evaluate_targets
@@ -64,6 +67,32 @@ class SubjectResult:
     truth_axes: pd.DataFrame | None = None
     truth_tips: pd.DataFrame | None = None
     warnings: tuple[str, ...] = ()
+
+    def compact(self) -> SubjectResult:
+        """The same result without the per-frame arrays (what a study keeps per subject).
+
+        The session keeps its subject, path, landmarks and recording names (every
+        recording with zero frames); the grasp evaluations and the true fingertip
+        trajectories are dropped. Model, tables and warnings are kept as they are.
+        """
+        truth = None if self.truth is None else Truth(self.truth.document, {})
+        return replace(self, session=_without_frames(self.session), grasp={}, truth=truth)
+
+
+def _empty(rec: Recording) -> Recording:
+    """A recording with its name and sensors but no frames (no view on the original)."""
+    poses = {k: PoseSeries(np.empty((0, 3)), np.empty((0, 3, 3))) for k in rec.poses}
+    return Recording(rec.name, np.empty(0), poses, list(rec.notes))
+
+
+def _without_frames(session: Session) -> Session:
+    return replace(
+        session,
+        reference=_empty(session.reference),
+        grasp=[_empty(r) for r in session.grasp],
+        targets=[_empty(r) for r in session.targets],
+        test=[_empty(r) for r in session.test],
+    )
 
 
 @dataclass(frozen=True)
@@ -446,6 +475,143 @@ def _check_not_input(out_dir: Path, sessions: list[Session]) -> None:
             )
 
 
+@dataclass
+class SubjectOutcome:
+    """What one study task sends back: a compact result and its Fig. 9 PNG, or a failure.
+
+    Attributes
+    ----------
+    source : str
+        The session as given (folder path, or the subject of an in-memory session).
+    result : SubjectResult or None
+        :meth:`SubjectResult.compact` (no per-frame arrays); None when the session failed.
+    figure : tuple of (str, bytes) or None
+        File name and PNG bytes of the subject's Fig. 9 (fingertip trajectories).
+    read_error, fit_error : str or None
+        One-line messages: the session could not be read, or not be fitted and evaluated.
+    """
+
+    source: str
+    result: SubjectResult | None = None
+    figure: tuple[str, bytes] | None = None
+    read_error: str | None = None
+    fit_error: str | None = None
+    subject: str | None = None
+    path: str | None = None
+
+
+def study_subject(item: Path | str | Session, options: FitOptions) -> SubjectOutcome:
+    """Read, fit and evaluate one session; render its Fig. 9 (one study task).
+
+    Runs in a worker process (``--jobs``), on a Dask worker (``--scheduler``) or in
+    the calling process: it takes a session folder, so a worker holds one subject's
+    arrays at a time and returns only the compact result (model, tables, PNG bytes).
+
+    Parameters
+    ----------
+    item : Path, str or Session
+        Session folder (or an in-memory session).
+    options : FitOptions
+
+    Returns
+    -------
+    SubjectOutcome
+        Never raises for a bad session: its error comes back as one line.
+    """
+    if isinstance(item, Session):
+        source = str(item.path or item.subject)
+    else:
+        source = str(item)
+    try:
+        session = item if isinstance(item, Session) else load_session(Path(item))
+        check_subject_id(
+            session.subject,
+            path=None if session.path is None else Path(session.path) / "session.toml",
+        )
+    except FingerfitError as exc:
+        msg = _one_line(exc)
+        return SubjectOutcome(source, read_error=msg if source in msg else f"{source}: {msg}")
+    path = None if session.path is None else str(session.path)
+    try:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            result = _subject(session, options)
+            name, build = _trajectory_figure(result)
+            png = io.BytesIO()
+            figures.save_to(build(), png)
+    except Exception as exc:  # one bad session is named, never a traceback
+        return SubjectOutcome(
+            str(session.path or session.subject),
+            fit_error=_session_error(session.subject, exc),
+            subject=session.subject,
+            path=path,
+        )
+    return SubjectOutcome(
+        source, result.compact(), (name, png.getvalue()), subject=session.subject, path=path
+    )
+
+
+class _InProcess(Executor):
+    """An executor that runs each task at once in the calling process (``--jobs 1``)."""
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as exc:
+            future.set_exception(exc)
+        return future
+
+
+@contextlib.contextmanager
+def study_executor(jobs: int = 1, scheduler: str | None = None) -> Iterator[Executor]:
+    """The executor the study's per-subject tasks run on.
+
+    Parameters
+    ----------
+    jobs : int
+        Worker processes on this machine (1: in the calling process).
+    scheduler : str, optional
+        Address of a Dask distributed scheduler (``tcp://HOST:PORT``); its workers
+        run the tasks (they must be able to read the session folders and have
+        fingerfit installed). Overrides ``jobs``.
+
+    Raises
+    ------
+    FingerfitError
+        ``jobs`` < 1; dask.distributed not installed; scheduler unreachable.
+    """
+    if scheduler is not None:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise FingerfitError(
+                "needs dask.distributed: pip install 'fingerfit[cluster]'", field="--scheduler"
+            ) from None
+        try:
+            client = Client(scheduler, timeout=10, set_as_default=False)
+        except (OSError, ValueError, TypeError) as exc:
+            raise FingerfitError(
+                f"cannot connect to the scheduler '{scheduler}' ({_one_line(exc)})",
+                field="--scheduler",
+            ) from None
+        try:
+            yield client.get_executor(pure=False)
+        finally:
+            client.close()
+        return
+    if jobs < 1:
+        raise FingerfitError(f"must be at least 1, not {jobs}", field="--jobs")
+    if jobs == 1:
+        yield _InProcess()
+        return
+    import multiprocessing
+
+    # spawn: workers never inherit the parent's threads (progress bar, Dask) or locks.
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        yield pool
+
+
 def run_study(
     sessions: list[Path | Session],
     out_dir: Path,
@@ -454,11 +620,16 @@ def run_study(
     *,
     keep_going: bool = False,
     overwrite: bool = False,
+    jobs: int = 1,
+    scheduler: str | None = None,
 ) -> StudyResult:
     """Fit and evaluate sessions; write tables, figures, ``summary.json`` and ``report.html``.
 
     Everything is built in a temporary sibling folder of ``out_dir`` and moved into
-    place at the end: after an error nothing is left behind.
+    place at the end: after an error nothing is left behind. Each session is one task
+    (:func:`study_subject`) on :func:`study_executor`; the results are identical for
+    any ``jobs`` or scheduler, and this process keeps only each subject's compact
+    result (model and tables; no per-frame arrays).
 
     Parameters
     ----------
@@ -471,25 +642,32 @@ def run_study(
     options : FitOptions, optional
         Fit options (method, ``force`` etc.).
     progress : callable, optional
-        Called with a short description after each step.
+        Called with a short description after each step (one per session, then
+        figures and report).
     keep_going : bool
         Skip a session that cannot be read or fitted (listed in
         :attr:`StudyResult.failures`, the summary and the report) instead of
         stopping; an error still when no session succeeds.
     overwrite : bool
         Replace an existing non-empty ``out_dir``.
+    jobs : int
+        Worker processes (1: in this process).
+    scheduler : str, optional
+        Dask distributed scheduler address; see :func:`study_executor`.
 
     Returns
     -------
     StudyResult
-        Paths point into ``out_dir``.
+        Paths point into ``out_dir``; ``subjects`` are compact
+        (:meth:`SubjectResult.compact`).
 
     Raises
     ------
     FingerfitError
         A session that cannot be read or fitted (``"<subject>: <its error>"``) unless
         ``keep_going``; two sessions with one subject ID (both folders named); an
-        unusable output folder.
+        unusable output folder. Read errors come before the subject-ID and output
+        checks, which come before fit errors, each in the order the sessions were given.
     """
     from .report import write_report
 
@@ -504,48 +682,56 @@ def run_study(
         failures.append(SessionFailure(source, subject, message))
 
     with staged_directory(out_dir, overwrite=overwrite) as tmp:
-        loaded: list[Session] = []
-        for s in sessions:
-            source = str(s) if not isinstance(s, Session) else str(s.path or s.subject)
-            try:
-                session = s if isinstance(s, Session) else load_session(s)
-                check_subject_id(
-                    session.subject,
-                    path=None if session.path is None else Path(session.path) / "session.toml",
-                )
-            except FingerfitError as exc:
-                msg = _one_line(exc)
-                failed(source, None, msg if source in msg else f"{source}: {msg}")
-                step(f"could not read {source}")
-                continue
-            loaded.append(session)
-        seen: dict[str, Session] = {}
-        for session in loaded:
-            first = seen.setdefault(session.subject, session)
-            if first is not session:
+        outcomes: list[SubjectOutcome | None] = [None] * len(sessions)
+        fig09: dict[int, tuple[str, Path]] = {}
+        with study_executor(jobs, scheduler) as pool:
+            futures = {pool.submit(study_subject, s, options): i for i, s in enumerate(sessions)}
+            for future in as_completed(futures):
+                i = futures[future]
+                try:
+                    got = outcomes[i] = future.result()
+                except Exception as exc:  # a lost worker, not a bad session
+                    raise FingerfitError(
+                        f"a study worker failed on '{sessions[i]}' "
+                        f"({type(exc).__name__}: {_one_line(exc)})"
+                    ) from None
+                if got.result is not None and got.figure is not None:
+                    # Written as it arrives; only the path is kept.
+                    name, png = got.figure
+                    with atomic_write(tmp / name, "wb") as fh:
+                        fh.write(png)
+                    fig09[i] = (f"fig09_{got.subject}", tmp / name)
+                    got.figure = None
+                if got.read_error is not None:
+                    step(f"could not read {got.source}")
+                elif got.fit_error is not None:
+                    step(f"failed: {got.subject}")
+                else:
+                    step(f"fitted and evaluated {got.subject}")
+        done = [o for o in outcomes if o is not None]
+        for o in done:
+            if o.read_error is not None:
+                failed(o.source, None, o.read_error)
+        ok = [o for o in done if o.read_error is None]
+        seen: dict[str, SubjectOutcome] = {}
+        for o in ok:
+            assert o.subject is not None
+            first = seen.setdefault(o.subject, o)
+            if first is not o:
                 raise FingerfitError(
-                    f"subject ID '{session.subject}' is used by two sessions: "
-                    f"'{first.path or '(in memory)'}' and '{session.path or '(in memory)'}'",
+                    f"subject ID '{o.subject}' is used by two sessions: "
+                    f"'{first.path or '(in memory)'}' and '{o.path or '(in memory)'}'",
                     field="subject",
                 )
-        _check_not_input(out_dir, loaded)
+        _check_not_input(out_dir, [o.result.session for o in ok if o.result is not None])
         subjects: list[SubjectResult] = []
-        for session in loaded:
-            try:
-                with np.errstate(all="ignore"), warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                    result = _subject(session, options)
-            except Exception as exc:  # one bad session is named, never a traceback
-                failed(
-                    str(session.path or session.subject),
-                    session.subject,
-                    _session_error(session.subject, exc),
-                )
-                step(f"failed: {session.subject}")
+        for o in ok:
+            if o.fit_error is not None:
+                failed(o.source, o.subject, o.fit_error)
                 continue
-            subjects.append(result)
-            save_model(result.model, tmp / "models" / f"{session.subject}.json")
-            step(f"fitted and evaluated {session.subject}")
+            assert o.result is not None
+            subjects.append(o.result)
+            save_model(o.result.model, tmp / "models" / f"{o.result.subject}.json")
         if not subjects:
             detail = "; ".join(f.message for f in failures) or "no sessions given"
             raise FingerfitError(f"no session could be fitted and evaluated: {detail}")
@@ -553,7 +739,9 @@ def run_study(
             warnings.simplefilter("ignore", RuntimeWarning)
             summary, tables = summarize_study(subjects, options, failures)
             result = StudyResult(subjects, summary, tables, tmp, failures=failures)
-            _write_outputs(result, tmp)
+            kept = {o.subject for o in ok if o.fit_error is None}
+            drawn = dict(fig09[i] for i in sorted(fig09) if outcomes[i].subject in kept)
+            _write_outputs(result, tmp, drawn)
         step("figures")
         with atomic_write(tmp / "summary.json") as fh:
             json.dump(_json_safe(summary), fh, indent=1, allow_nan=False)
@@ -578,13 +766,26 @@ def _json_safe(node):
     return node
 
 
+def _trajectory_figure(s: SubjectResult) -> tuple[str, Callable[[], Figure]]:
+    """Fig. 9 of one subject (its first finger, hand-sensor frame): file name and builder."""
+    f, ev = next(iter(s.grasp.items()))
+    hand = s.session.grasp[0].pose(HAND_SENSOR)
+    in_hand = {k: apply_inverse_pose(hand.rotation, hand.position, v) for k, v in ev.tips.items()}
+    label = f"{s.subject} ({f})"
+    return (
+        f"fig09_trajectories_{s.subject}.png",
+        lambda: figures.make_trajectories(ev.time, in_hand, label),
+    )
+
+
 def figure_builders(
     subjects: list[SubjectResult], tables: dict[str, pd.DataFrame]
 ) -> dict[str, tuple[str, Callable[[], Figure]]]:
     """Every figure of a study: key -> (PNG file name, function building the Figure).
 
-    Fig. 8, Fig. 9 per subject (its first finger, hand-sensor frame), Fig. 10; Figs. 11-12
-    when any session has targets; the true fingertip error when any has ground truth.
+    Fig. 8, Fig. 9 per subject (its first finger, hand-sensor frame; not for a compact
+    result, whose study task drew it), Fig. 10; Figs. 11-12 when any session has targets;
+    the true fingertip error when any has ground truth.
     """
     out: dict[str, tuple[str, Callable[[], Figure]]] = {
         "fig08": (
@@ -593,17 +794,8 @@ def figure_builders(
         )
     }
     for s in subjects:
-        f, ev = next(iter(s.grasp.items()))
-        hand = s.session.grasp[0].pose(HAND_SENSOR)
-        in_hand = {
-            k: apply_inverse_pose(hand.rotation, hand.position, v) for k, v in ev.tips.items()
-        }
-        out[f"fig09_{s.subject}"] = (
-            f"fig09_trajectories_{s.subject}.png",
-            lambda ev=ev, in_hand=in_hand, label=f"{s.subject} ({f})": figures.make_trajectories(
-                ev.time, in_hand, label
-            ),
-        )
+        if s.grasp:  # a compact result's Fig. 9 was drawn by its study task
+            out[f"fig09_{s.subject}"] = _trajectory_figure(s)
     out["fig10"] = (
         "fig10_max_flexion.png",
         lambda: figures.make_paired_boxes(
@@ -642,10 +834,18 @@ def figure_builders(
     return out
 
 
-def _write_outputs(result: StudyResult, out_dir: Path) -> None:
-    """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``."""
+def _write_outputs(
+    result: StudyResult, out_dir: Path, drawn: dict[str, Path] | None = None
+) -> None:
+    """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``.
+
+    ``drawn``: figures already written (key -> path), the per-subject Fig. 9 drawn by
+    the study tasks; listed after Fig. 8 in the order given.
+    """
     for name, table in result.tables.items():
         with atomic_write(out_dir / f"{name}.csv", newline="") as fh:
             table.to_csv(fh, index=False, lineterminator="\n", float_format="%.6g")
     for key, (filename, build) in figure_builders(result.subjects, result.tables).items():
         result.figures[key] = figures.save(build(), out_dir / filename)
+        if key == "fig08":
+            result.figures.update(drawn or {})
