@@ -4,16 +4,14 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
-import pandas as pd
+if TYPE_CHECKING:
+    from ..session import Recording
 import typer
 from rich.markup import escape
 
 from ..errors import FingerfitError
-from ..io.atomic import atomic_write, check_target, refuse_writing_inputs
-from ..session import UNITS_TO_MM, Recording, is_sensor_name
 from .app import app, notice, out, user_errors
 
 
@@ -40,6 +38,8 @@ def parse_map(spec: str | None, *, numeric: bool) -> dict | None:
     dict or None
         Station number (int) or channel name (str) -> sensor name.
     """
+    from ..session import is_sensor_name
+
     if spec is None:
         return None
     out_map: dict = {}
@@ -70,11 +70,17 @@ def parse_map(spec: str | None, *, numeric: bool) -> dict | None:
 
 
 def _check_units_option(units: str | None) -> None:
+    from ..session import UNITS_TO_MM
+
     if units is not None and units not in UNITS_TO_MM:
         raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
 
 
 def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
+    import pandas as pd
+
+    from ..io.atomic import atomic_write
+
     frames = []
     for name, fit in fits.items():
         frames.append(
@@ -186,9 +192,13 @@ def convert(
     out_units: Annotated[str, typer.Option(help="Units of x,y,z in the written pose CSV.")] = "mm",
 ) -> None:
     """Convert Liberty/Patriot ASCII or binary, wide CSV or C3D to the pose CSV."""
+    import numpy as np
+
+    from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.hygiene import check_recording
     from ..io.hygiene import fill_gaps as fill
     from ..io.posecsv import write_pose_csv
+    from ..session import UNITS_TO_MM, is_sensor_name
 
     _check_units_option(units)
     if out_units not in UNITS_TO_MM:

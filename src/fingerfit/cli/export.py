@@ -8,11 +8,7 @@ from typing import Annotated
 import typer
 
 from ..errors import FingerfitError
-from ..export import mjcf_string, robot_hand, urdf_string
-from ..export import write_text as _write_text
-from ..export.geometry import DEFAULT_MARGIN_DEG
-from ..io.atomic import check_target, refuse_writing_inputs
-from ..model import VARIANTS, load_model, with_fixed_centres
+from ._names import DEFAULT_MARGIN_DEG, VARIANTS
 from .app import app, notice, out, user_errors
 
 
@@ -68,6 +64,11 @@ def _export(
     overwrite: bool = False,
 ) -> None:
     """Check the options, build every document, then write them all or none."""
+    from ..export import mjcf_string, robot_hand, urdf_string
+    from ..export import write_text as _write_text
+    from ..io.atomic import check_target, refuse_writing_inputs
+    from ..model import VARIANTS, load_model, with_fixed_centres
+
     if urdf is None and mjcf is None:
         raise FingerfitError("nothing to write: give --urdf and/or --mjcf")
     if urdf is not None and mjcf is not None and urdf.resolve() == mjcf.resolve():

@@ -4,21 +4,15 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
+if TYPE_CHECKING:
+    from ..model import HandModel
 import typer
 from rich.markup import escape
 from rich.table import Table
 
-from ..estimate import FitOptions, fit_session
-from ..estimate.fit import METHODS
-from ..estimate.plausibility import check_recording, enforce
-from ..io import load_session, read_pose_csv
-from ..io.atomic import atomic_write, check_target, refuse_writing_inputs
-from ..kinematics import compute_kinematics, kinematics_table
-from ..model import HandModel, load_model, save_model
-from ..session import FINGERS, UNITS_TO_MM
+from ._names import DEFAULT_METHOD, METHODS
 from .app import app, notice, out, parse_list, say, user_errors
 
 #: One line per column of the fit table (``docs/methods.md`` explains each figure).
@@ -40,6 +34,8 @@ def quality_table(model: HandModel) -> Table:
 
     The caption is a one-line legend per column (:data:`TABLE_LEGEND`).
     """
+    import numpy as np
+
     t = Table(
         title=f"{escape(model.subject)}: method {escape(model.method)}"
         + (", two-axis MP" if any(f.abduction is not None for f in model.fingers.values()) else ""),
@@ -81,7 +77,7 @@ def fit(
         typer.Option(
             help=f"Axis estimator: {', '.join(METHODS)} (docs/methods.md; tang2018 = the paper)."
         ),
-    ] = FitOptions.method,
+    ] = DEFAULT_METHOD,
     fingers: Annotated[
         str | None, typer.Option(help="Comma-separated fingers (default: all).")
     ] = None,
@@ -95,6 +91,13 @@ def fit(
     ] = False,
 ) -> None:
     """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
+    from ..estimate import FitOptions, fit_session
+    from ..estimate.fit import METHODS
+    from ..io import load_session
+    from ..io.atomic import check_target, refuse_writing_inputs
+    from ..model import save_model
+    from ..session import FINGERS
+
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
     s = load_session(session)
@@ -151,6 +154,13 @@ def angles(
     ] = False,
 ) -> None:
     """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
+    from ..estimate.plausibility import check_recording, enforce
+    from ..io import read_pose_csv
+    from ..io.atomic import atomic_write, check_target, refuse_writing_inputs
+    from ..kinematics import compute_kinematics, kinematics_table
+    from ..model import load_model
+    from ..session import UNITS_TO_MM
+
     outputs = [output] if urdf_names is None else [output, urdf_names]
     refuse_writing_inputs(outputs, [model_path, recording])
     for target in outputs:

@@ -5,15 +5,15 @@ from __future__ import annotations
 import json
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
+if TYPE_CHECKING:
+    from ..session import Recording
 import typer
 from rich.markup import escape
 from rich.table import Table
 
 from ..errors import FingerfitError
-from ..session import UNITS_TO_MM, Recording
 from .app import app, notice, out, say, user_errors
 
 
@@ -51,6 +51,8 @@ def read_any(
     Sensors keep the file's names: pose CSV names, Liberty station numbers (``1``, ``2``,
     ...), wide-CSV sensor numbers, C3D cluster or ROTATION channel names.
     """
+    from ..session import UNITS_TO_MM
+
     if units is not None and units not in UNITS_TO_MM:
         raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
     for opt, value, ok in (
@@ -87,6 +89,8 @@ def read_any(
 
 def _rate(rec: Recording) -> float | None:
     """Sampling rate (Hz) from the recording's time column, if regular enough to say."""
+    import numpy as np
+
     t = np.asarray(rec.time, dtype=float)
     dt = np.diff(t[np.isfinite(t)])
     if dt.size < 2 or not (np.median(dt) > 0):
@@ -96,6 +100,8 @@ def _rate(rec: Recording) -> float | None:
 
 def _table(fit) -> Table:
     """The printed summary of a :class:`~fingerfit.estimate.joint.JointFit`."""
+    import numpy as np
+
     q = fit.quality
 
     def vec(v) -> str:

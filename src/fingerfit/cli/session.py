@@ -9,16 +9,6 @@ from typing import Annotated
 import typer
 
 from ..errors import FingerfitError
-from ..io import load_session, read_pose_csv
-from ..io.atomic import staged_directory
-from ..io.sessiondir import (
-    EVENTS_FILE,
-    LANDMARKS_FILE,
-    read_events,
-    read_landmarks,
-    write_session_toml,
-)
-from ..session import FINGERS, UNITS_TO_MM, Session, check_subject_id
 from .app import app, notice, parse_list, say, user_errors
 
 
@@ -45,6 +35,17 @@ def session(
     Every file is read and checked first; the directory is written only if all are valid,
     and then loaded back and validated as a whole (sensors of every finger, landmarks).
     """
+    from ..io import load_session, read_pose_csv
+    from ..io.atomic import staged_directory
+    from ..io.sessiondir import (
+        EVENTS_FILE,
+        LANDMARKS_FILE,
+        read_events,
+        read_landmarks,
+        write_session_toml,
+    )
+    from ..session import FINGERS, UNITS_TO_MM, Session, check_subject_id
+
     if hand not in ("left", "right"):
         raise typer.BadParameter("must be left or right", param_hint="--hand")
     if units not in UNITS_TO_MM:

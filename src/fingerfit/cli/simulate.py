@@ -11,22 +11,15 @@ from __future__ import annotations
 import shlex
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.progress import Progress
 
 from ..errors import FingerfitError
-from ..io.atomic import atomic_write, check_target
-from ..session import FINGERS
-from ..simulate import SimConfig, simulate_cohort, write_subject
-from ..simulate.trackerfiles import (
-    CONVERTED_DIR,
-    SESSION_DIR,
-    TrackerFiles,
-    require_ezc3d,
-    write_tracker_subject,
-)
+
+if TYPE_CHECKING:
+    from ..simulate.trackerfiles import TrackerFiles
 from .app import app, out, parse_list, say, user_errors
 
 #: File (in the output folder) the printed command sequence is also saved to.
@@ -110,6 +103,10 @@ def simulate(
     ] = False,
 ) -> None:
     """Simulate sessions (reference, grasp, targets, free-motion test) with truth.json."""
+    from ..session import FINGERS
+    from ..simulate import SimConfig, simulate_cohort, write_subject
+    from ..simulate.trackerfiles import require_ezc3d, write_tracker_subject
+
     if hand not in ("left", "right"):
         raise typer.BadParameter("must be left or right", param_hint="--hand")
     names = tuple(parse_list(fingers, FINGERS, "--fingers") or ())
@@ -157,6 +154,9 @@ def simulate(
 
 def _check_tracker_outputs(out_dir: Path, subjects: int, overwrite: bool) -> None:
     """Refuse, before simulating, outputs that could not or must not be written."""
+    from ..io.atomic import check_target
+    from ..simulate.trackerfiles import CONVERTED_DIR, SESSION_DIR
+
     for i in range(subjects):
         sub = out_dir / f"S{i + 1:02d}"
         if sub.exists() and not sub.is_dir():
@@ -172,6 +172,9 @@ def _check_tracker_outputs(out_dir: Path, subjects: int, overwrite: bool) -> Non
 
 def _print_commands(out_dir: Path, written: list[TrackerFiles]) -> None:
     """Print the station map and the convert/session/fit commands; save them as commands.sh."""
+    from ..io.atomic import atomic_write
+    from ..simulate.trackerfiles import CONVERTED_DIR, SESSION_DIR
+
     first = written[0]
     kind = "ROTATION channels" if first.fmt == "c3d" else "Liberty stations"
     _plain(f"{kind}: " + ", ".join(f"{k}={v}" for k, v in first.mapping.items()))

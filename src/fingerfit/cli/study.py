@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from ..estimate import FitOptions
-from ..estimate.fit import METHODS
-from ..evaluate import StudyResult, run_study
-from ..io.atomic import staged_directory
-from ..simulate import SimConfig, simulate_cohort, write_subject
+if TYPE_CHECKING:
+    from ..evaluate import StudyResult
+from ._names import DEFAULT_METHOD, METHODS
 from .app import app, notice, out, say, user_errors
 
 
@@ -75,6 +73,10 @@ def _run(
     jobs: int = 1,
     scheduler: str | None = None,
 ) -> StudyResult:
+    from ..estimate import FitOptions
+    from ..estimate.fit import METHODS
+    from ..evaluate import run_study
+
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
     with _progress() as bar:
@@ -107,7 +109,7 @@ def study(
     ],
     method: Annotated[
         str, typer.Option(help=f"Axis estimator: {', '.join(METHODS)}.")
-    ] = FitOptions.method,
+    ] = DEFAULT_METHOD,
     force: Annotated[
         bool,
         typer.Option(
@@ -160,7 +162,7 @@ def demo(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 2018,
     method: Annotated[
         str, typer.Option(help=f"Axis estimator: {', '.join(METHODS)}.")
-    ] = FitOptions.method,
+    ] = DEFAULT_METHOD,
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace a non-empty --out folder.")
     ] = False,
@@ -170,6 +172,9 @@ def demo(
     Writes ``OUT/sessions/<subject>`` and ``OUT/study``; all of it appears at once
     when everything succeeded.
     """
+    from ..io.atomic import staged_directory
+    from ..simulate import SimConfig, simulate_cohort, write_subject
+
     config = SimConfig(fingers=("index",), hand="left")
     with staged_directory(out_dir, overwrite=overwrite) as tmp:
         with _progress() as bar:

@@ -1,0 +1,17 @@
+"""Names the command signatures show (choices, defaults), without importing NumPy.
+
+``fingerfit --help`` builds every command's signature; importing the modules these
+names come from would import NumPy, SciPy and pandas. ``tests/test_cli_startup.py``
+checks that each name here equals the one it mirrors.
+"""
+
+from __future__ import annotations
+
+#: :data:`fingerfit.estimate.fit.METHODS` (its keys, in order).
+METHODS = ("tang2018", "pooled", "robust", "twoaxis", "rolling")
+#: :attr:`fingerfit.estimate.FitOptions.method`.
+DEFAULT_METHOD = "twoaxis"
+#: :data:`fingerfit.model.VARIANTS`.
+VARIANTS = ("user_axis", "orthogonal")
+#: :data:`fingerfit.export.geometry.DEFAULT_MARGIN_DEG`.
+DEFAULT_MARGIN_DEG = 10.0

@@ -1,0 +1,84 @@
+"""Start-up: ``fingerfit --help`` and ``--version`` import no heavy module.
+
+Run in a subprocess so this process's own imports do not count. The wall time is
+measured by ``bench/speed.py`` (docs/performance.md), not asserted here.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = (
+    "numpy",
+    "scipy",
+    "pandas",
+    "matplotlib",
+    "statsmodels",
+    "ezc3d",
+    "mujoco",
+    "pinocchio",
+    "yourdfpy",
+    "dask",
+    "distributed",
+)
+
+_PROBE = """
+import json, sys
+from fingerfit.cli import main
+sys.argv = ["fingerfit", *{args!r}]
+try:
+    main()
+except SystemExit as exc:
+    code = exc.code
+else:
+    code = 0
+heavy = [m for m in {heavy!r} if m in sys.modules]
+print("\\n" + json.dumps({{"code": code, "heavy": heavy}}))
+"""
+
+
+@pytest.mark.parametrize("args", [["--help"], ["--version"], [], ["study", "--help"]])
+def test_no_heavy_module_at_help_or_version(args) -> None:
+    res = subprocess.run(
+        [sys.executable, "-c", _PROBE.format(args=args, heavy=HEAVY)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    found = json.loads(res.stdout.strip().splitlines()[-1])
+    assert found["heavy"] == [], found
+    assert found["code"] in (0, 2, None), res.stderr  # no arguments: help, exit 2 (click)
+    if args in (["--help"], []):
+        for command in ("convert", "session", "fit", "angles", "study", "demo", "simulate"):
+            assert command in res.stdout + res.stderr
+
+
+def test_the_probe_sees_a_command_import_numpy(tmp_path) -> None:
+    """The check can fail: a command that runs does import NumPy, and the probe sees it."""
+    args = ["simulate", str(tmp_path / "sim"), "--subjects", "1", "--exact"]
+    res = subprocess.run(
+        [sys.executable, "-c", _PROBE.format(args=args, heavy=HEAVY)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    found = json.loads(res.stdout.strip().splitlines()[-1])
+    assert found["code"] in (0, None), res.stderr
+    assert "numpy" in found["heavy"] and (tmp_path / "sim" / "S01" / "session.toml").is_file()
+
+
+def test_signature_names_mirror_the_real_ones() -> None:
+    from fingerfit.cli import _names
+    from fingerfit.estimate import FitOptions
+    from fingerfit.estimate.fit import METHODS
+    from fingerfit.export.geometry import DEFAULT_MARGIN_DEG
+    from fingerfit.model import VARIANTS
+
+    assert _names.METHODS == tuple(METHODS)
+    assert FitOptions.method == _names.DEFAULT_METHOD
+    assert _names.VARIANTS == VARIANTS
+    assert _names.DEFAULT_MARGIN_DEG == DEFAULT_MARGIN_DEG
