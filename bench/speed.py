@@ -54,6 +54,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--frames", type=int, default=1_200_000)
+    ap.add_argument(
+        "--study-subjects", type=int, default=100, help="0: no start-up and study benchmark"
+    )
     args = ap.parse_args()
 
     sim = simulate_subject(SimConfig(), 0)
@@ -110,6 +113,11 @@ def main() -> None:
 {fit_rows}
 | NumPy copy of the input ({n:,} frames, {a["input_bytes"] / 1e6:.0f} MB) | {a["copy_frames_per_s"] / 1e6:.1f} M frames/s |
 {chr(10).join(angle_rows)}""")
+    if args.study_subjects:
+        import study_speed  # bench/study_speed.py, beside this file
+
+        results["study_speed"] = study_speed.run(args.study_subjects)
+        print(study_speed.table(results["study_speed"]))
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
 

@@ -10,13 +10,16 @@ from __future__ import annotations
 import functools
 import sys
 from collections.abc import Callable
-from typing import TypeVar
+from typing import TYPE_CHECKING, Annotated, TypeVar
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 
 from ..errors import FingerfitError
+
+if TYPE_CHECKING:
+    from rich.progress import Progress
 
 app = typer.Typer(
     name="fingerfit",
@@ -31,6 +34,45 @@ console = Console(stderr=True, emoji=False, highlight=False)
 out = Console(emoji=False, highlight=False)
 
 F = TypeVar("F", bound=Callable)
+
+
+#: The ``--quiet`` option of every command that shows a progress bar.
+Quiet = Annotated[
+    bool,
+    typer.Option(
+        "--quiet",
+        "-q",
+        help="No progress bar (there is none either when stderr is not a terminal).",
+    ),
+]
+
+
+def progress(quiet: bool = False) -> Progress:
+    """The progress bar of every command: on stderr, transient, off when quiet or piped.
+
+    Use as ``with progress(quiet) as bar: task = bar.add_task("reading", total=n)`` and
+    ``bar.update(task, advance=1, description=...)``. Notes and warnings printed through
+    :data:`console` meanwhile appear above the bar.
+    """
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        SpinnerColumn,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+
+    return Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=quiet or not console.is_terminal,
+    )
 
 
 def fail(message: str) -> typer.Exit:

@@ -12,7 +12,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import FingerfitError
-from .app import app, notice, out, user_errors
+from .app import Quiet, app, notice, out, progress, user_errors
 
 
 class SourceFormat(StrEnum):
@@ -190,6 +190,7 @@ def convert(
         ),
     ] = True,
     out_units: Annotated[str, typer.Option(help="Units of x,y,z in the written pose CSV.")] = "mm",
+    quiet: Quiet = False,
 ) -> None:
     """Convert Liberty/Patriot ASCII or binary, wide CSV or C3D to the pose CSV."""
     import numpy as np
@@ -222,56 +223,61 @@ def convert(
         if value is not None and not ok:
             raise FingerfitError(f"does not apply to --from {fmt.value}", field=opt)
 
-    fits: dict = {}
-    if fmt in (SourceFormat.liberty, SourceFormat.liberty_binary):
-        from ..io.liberty import read_liberty_ascii, read_liberty_binary
+    with progress(quiet) as bar:
+        task = bar.add_task(f"reading {source.name}", total=3)
+        fits: dict = {}
+        if fmt in (SourceFormat.liberty, SourceFormat.liberty_binary):
+            from ..io.liberty import read_liberty_ascii, read_liberty_binary
 
-        reader = read_liberty_ascii if fmt is SourceFormat.liberty else read_liberty_binary
-        rec = reader(
-            source,
-            items=items,
-            units=units or "in",
-            rate_hz=rate,
-            sensors=sensors,
-            keep_repeats=keep_repeats,
-            check=False,
-        )
-    elif fmt is SourceFormat.wide_csv:
-        from ..io.widecsv import read_wide_csv
+            reader = read_liberty_ascii if fmt is SourceFormat.liberty else read_liberty_binary
+            rec = reader(
+                source,
+                items=items,
+                units=units or "in",
+                rate_hz=rate,
+                sensors=sensors,
+                keep_repeats=keep_repeats,
+                check=False,
+            )
+        elif fmt is SourceFormat.wide_csv:
+            from ..io.widecsv import read_wide_csv
 
-        rec = read_wide_csv(
-            source, units=units, layout=columns, rate_hz=rate, sensors=sensors, check=False
-        )
-    else:
-        from ..io.c3d import parse_clusters, read_c3d_segments
+            rec = read_wide_csv(
+                source, units=units, layout=columns, rate_hz=rate, sensors=sensors, check=False
+            )
+        else:
+            from ..io.c3d import parse_clusters, read_c3d_segments
 
-        seg = read_c3d_segments(
-            source,
-            units=units,
-            clusters=None if clusters is None else parse_clusters(clusters),
-            segments=sensors,
-            static=static,
-            check=False,
-        )
-        rec, fits = seg.recording, seg.fits
+            seg = read_c3d_segments(
+                source,
+                units=units,
+                clusters=None if clusters is None else parse_clusters(clusters),
+                segments=sensors,
+                static=static,
+                check=False,
+            )
+            rec, fits = seg.recording, seg.fits
 
-    bad = [s for s in rec.sensors if not is_sensor_name(s)]
-    if bad:
-        raise FingerfitError(
-            f"'{bad[0]}' is not a sensor name of the session format; name every "
-            f"{'station' if numeric else 'segment'} with --map (found: {', '.join(rec.sensors)}; "
-            f"e.g. --map {rec.sensors[0]}=hand)",
-            path=source,
-            field="--map",
+        bad = [s for s in rec.sensors if not is_sensor_name(s)]
+        if bad:
+            raise FingerfitError(
+                f"'{bad[0]}' is not a sensor name of the session format; name every "
+                f"{'station' if numeric else 'segment'} with --map (found: {', '.join(rec.sensors)}; "
+                f"e.g. --map {rec.sensors[0]}=hand)",
+                path=source,
+                field="--map",
+            )
+        bar.update(task, advance=1, description="checking the recording")
+        if fill_gaps:
+            rec = fill(rec, fill_gaps)
+        check_recording(
+            rec, source, units=unit_check, max_speed_mm_s=max_speed, max_turn_deg_s=max_turn
         )
-    if fill_gaps:
-        rec = fill(rec, fill_gaps)
-    check_recording(
-        rec, source, units=unit_check, max_speed_mm_s=max_speed, max_turn_deg_s=max_turn
-    )
-    write_pose_csv(output, rec, units=out_units)
-    if residuals is not None:
-        _write_residuals(residuals, rec, fits)
+        bar.update(task, advance=1, description=f"writing {output.name}")
+        write_pose_csv(output, rec, units=out_units)
+        if residuals is not None:
+            _write_residuals(residuals, rec, fits)
+        bar.advance(task)
     n_valid = {s: int(p.valid.sum()) for s, p in rec.poses.items()}
     span = float(rec.time[-1] - rec.time[0]) if rec.n_frames else 0.0
     for note in rec.notes:

@@ -13,7 +13,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ._names import DEFAULT_METHOD, METHODS
-from .app import app, notice, out, parse_list, say, user_errors
+from .app import Quiet, app, notice, out, parse_list, progress, say, user_errors
 
 #: One line per column of the fit table (``docs/methods.md`` explains each figure).
 TABLE_LEGEND = {
@@ -89,6 +89,7 @@ def fit(
             "checks (units, quaternion order); the warnings are stored in the model file.",
         ),
     ] = False,
+    quiet: Quiet = False,
 ) -> None:
     """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
     from ..estimate import FitOptions, fit_session
@@ -100,18 +101,23 @@ def fit(
 
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
-    s = load_session(session)
-    target = output or session / "model.json"
-    refuse_writing_inputs([target], s.files)
-    check_target(target)
-    for note in (n for r in s.recordings() for n in r.notes):
-        notice("note", note)
     names = parse_list(fingers, FINGERS, "--fingers")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        model = fit_session(
-            s, FitOptions(method=method, force=force, fingers=tuple(names) if names else None)
-        )
+    with progress(quiet) as bar:
+        task = bar.add_task(f"reading {session}", total=2)
+        s = load_session(session)
+        target = output or session / "model.json"
+        refuse_writing_inputs([target], s.files)
+        check_target(target)
+        for note in (n for r in s.recordings() for n in r.notes):
+            notice("note", note)
+        n_fingers = len(names or s.fingers)
+        bar.update(task, advance=1, description=f"fitting {n_fingers} finger(s) ({method})")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model = fit_session(
+                s, FitOptions(method=method, force=force, fingers=tuple(names) if names else None)
+            )
+        bar.advance(task)
     for w in caught:
         notice("warning", str(w.message))
     if model.warnings:
@@ -119,6 +125,10 @@ def fit(
     path = save_model(model, target)
     out.print(quality_table(model))
     say("model written to [bold]{}[/]", path)
+
+
+#: Rows of the angles CSV written per step of the progress bar.
+_CSV_CHUNK = 100_000
 
 
 @app.command()
@@ -152,6 +162,7 @@ def angles(
             "quaternion order, sensors), with a warning.",
         ),
     ] = False,
+    quiet: Quiet = False,
 ) -> None:
     """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
     from ..estimate.plausibility import check_recording, enforce
@@ -179,10 +190,18 @@ def angles(
         enforce(check_recording(model, rec, units, recording), force)
     for w in caught:
         notice("warning", str(w.message))
-    kin = compute_kinematics(model, rec)
-    table = kinematics_table(kin, units=units)
-    with atomic_write(output, newline="") as fh:
-        table.to_csv(fh, index=False, lineterminator="\n")
+    with progress(quiet) as bar:
+        n = rec.n_frames
+        task = bar.add_task("angles and fingertips", total=n + n)
+        kin = compute_kinematics(model, rec)
+        table = kinematics_table(kin, units=units)
+        bar.update(task, advance=n, description=f"writing {output.name}")
+        with atomic_write(output, newline="") as fh:
+            # In chunks of rows, for the progress bar; the same bytes as one to_csv call.
+            for start in range(0, max(n, 1), _CSV_CHUNK):
+                chunk = table.iloc[start : start + _CSV_CHUNK]
+                chunk.to_csv(fh, index=False, lineterminator="\n", header=start == 0)
+                bar.advance(task, len(chunk))
     if urdf_names is not None:
         from ..export.trajectory import write_trajectory
 

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from ..errors import FingerfitError
-from .app import app, notice, parse_list, say, user_errors
+from .app import Quiet, app, notice, parse_list, progress, say, user_errors
 
 
 @app.command()
@@ -29,6 +29,7 @@ def session(
     ] = None,
     test: Annotated[list[Path] | None, typer.Option(help="Free-motion test recording(s).")] = None,
     events: Annotated[Path | None, typer.Option(help="Touch events CSV.")] = None,
+    quiet: Quiet = False,
 ) -> None:
     """Build a fingerfit.session/1 directory from pose CSVs (e.g. from `fingerfit convert`).
 
@@ -55,39 +56,53 @@ def session(
         raise FingerfitError("already exists; choose a new directory", path=out_dir)
     names = parse_list(fingers, FINGERS, "--fingers") or []
 
-    def read(paths: list[Path] | None) -> list:
-        return [read_pose_csv(p, units=units, rate_hz=rate) for p in paths or []]
+    n_files = 1 + len(grasp) + len(targets or []) + len(test or [])
+    with progress(quiet) as bar:
+        task = bar.add_task("reading recordings", total=n_files + 1)
 
-    s = Session(
-        subject=subject,
-        hand=hand,
-        units=units,
-        rate_hz=rate,
-        fingers=names,
-        reference=read([reference])[0],
-        grasp=read(grasp),
-        landmarks=read_landmarks(landmarks, units),
-        targets=read(targets),
-        test=read(test),
-        events=read_events(events) if events else [],
-    )
-    names_used = [r.name for r in s.recordings()]
-    if len(set(names_used)) != len(names_used) or {LANDMARKS_FILE, EVENTS_FILE} & set(names_used):
-        raise FingerfitError(
-            "recordings need distinct file names (not landmarks.csv or events.csv)"
+        def read(paths: list[Path] | None) -> list:
+            recs = []
+            for p in paths or []:
+                bar.update(task, description=f"reading {p.name}")
+                recs.append(read_pose_csv(p, units=units, rate_hz=rate))
+                bar.advance(task)
+            return recs
+
+        s = Session(
+            subject=subject,
+            hand=hand,
+            units=units,
+            rate_hz=rate,
+            fingers=names,
+            reference=read([reference])[0],
+            grasp=read(grasp),
+            landmarks=read_landmarks(landmarks, units),
+            targets=read(targets),
+            test=read(test),
+            events=read_events(events) if events else [],
         )
-    for rec in s.recordings():
-        for note in rec.notes:
-            notice("note", f"{rec.name}: {note}")
-    # Copy the checked files byte for byte, write session.toml, validate the whole session,
-    # and only then let the directory appear (errors name OUT_DIR, not the staging folder).
-    sources = [reference, *grasp, *(targets or []), *(test or [])]
-    with staged_directory(out_dir) as tmp:
-        for src in sources:
-            shutil.copyfile(src, tmp / src.name)
-        shutil.copyfile(landmarks, tmp / LANDMARKS_FILE)
-        if events:
-            shutil.copyfile(events, tmp / EVENTS_FILE)
-        write_session_toml(s, tmp)
-        load_session(tmp)
+        names_used = [r.name for r in s.recordings()]
+        if len(set(names_used)) != len(names_used) or {LANDMARKS_FILE, EVENTS_FILE} & set(
+            names_used
+        ):
+            raise FingerfitError(
+                "recordings need distinct file names (not landmarks.csv or events.csv)"
+            )
+        for rec in s.recordings():
+            for note in rec.notes:
+                notice("note", f"{rec.name}: {note}")
+        # Copy the checked files byte for byte, write session.toml, validate the whole
+        # session, and only then let the directory appear (errors name OUT_DIR, not the
+        # staging folder).
+        bar.update(task, description="writing and checking the session")
+        sources = [reference, *grasp, *(targets or []), *(test or [])]
+        with staged_directory(out_dir) as tmp:
+            for src in sources:
+                shutil.copyfile(src, tmp / src.name)
+            shutil.copyfile(landmarks, tmp / LANDMARKS_FILE)
+            if events:
+                shutil.copyfile(events, tmp / EVENTS_FILE)
+            write_session_toml(s, tmp)
+            load_session(tmp)
+        bar.advance(task)
     say("session written to [bold]{}[/]", out_dir)

@@ -14,13 +14,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.progress import Progress
 
 from ..errors import FingerfitError
 
 if TYPE_CHECKING:
     from ..simulate.trackerfiles import TrackerFiles
-from .app import app, out, parse_list, say, user_errors
+from .app import Quiet, app, out, parse_list, progress, say, user_errors
 
 #: File (in the output folder) the printed command sequence is also saved to.
 COMMANDS_FILE = "commands.sh"
@@ -101,6 +100,7 @@ def simulate(
             "commands.sh) instead of refusing.",
         ),
     ] = False,
+    quiet: Quiet = False,
 ) -> None:
     """Simulate sessions (reference, grasp, targets, free-motion test) with truth.json."""
     from ..session import FINGERS
@@ -130,7 +130,7 @@ def simulate(
     if fmt is not SimFormat.csv:
         _check_tracker_outputs(out_dir, subjects, overwrite)
     written: list[TrackerFiles] = []
-    with Progress(transient=True) as bar:
+    with progress(quiet) as bar:
         task = bar.add_task("simulating", total=subjects)
         cohort = simulate_cohort(config, subjects, seed)
         for sim in cohort:

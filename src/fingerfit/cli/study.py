@@ -6,23 +6,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 if TYPE_CHECKING:
     from ..evaluate import StudyResult
 from ._names import DEFAULT_METHOD, METHODS
-from .app import app, notice, out, say, user_errors
-
-
-def _progress() -> Progress:
-    return Progress(
-        SpinnerColumn(),
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TimeElapsedColumn(),
-        transient=True,
-    )
+from .app import Quiet, app, notice, out, progress, say, user_errors
 
 
 def _cell(d: dict) -> str:
@@ -72,6 +61,7 @@ def _run(
     overwrite: bool = False,
     jobs: int = 1,
     scheduler: str | None = None,
+    quiet: bool = False,
 ) -> StudyResult:
     from ..estimate import FitOptions
     from ..estimate.fit import METHODS
@@ -79,7 +69,7 @@ def _run(
 
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
-    with _progress() as bar:
+    with progress(quiet) as bar:
         task = bar.add_task("fitting and evaluating", total=len(sessions) + 2)
         result = run_study(
             sessions,
@@ -139,6 +129,7 @@ def study(
             "subjects instead (needs fingerfit[cluster]; workers must read the sessions).",
         ),
     ] = None,
+    quiet: Quiet = False,
 ) -> None:
     """The paper's evaluation over sessions: report.html, summary.json, CSV tables, PNG figures."""
     result = _run(
@@ -150,6 +141,7 @@ def study(
         overwrite=overwrite,
         jobs=jobs,
         scheduler=scheduler,
+        quiet=quiet,
     )
     say("report: [bold]{}[/]", result.report)
 
@@ -166,6 +158,10 @@ def demo(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace a non-empty --out folder.")
     ] = False,
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", min=1, help="Worker processes fitting subjects.")
+    ] = 1,
+    quiet: Quiet = False,
 ) -> None:
     """Simulate the paper's cohort (index finger, left hand, Liberty-like), fit, and run the study.
 
@@ -177,12 +173,12 @@ def demo(
 
     config = SimConfig(fingers=("index",), hand="left")
     with staged_directory(out_dir, overwrite=overwrite) as tmp:
-        with _progress() as bar:
+        with progress(quiet) as bar:
             task = bar.add_task(f"simulating {subjects} subjects", total=subjects)
             dirs = []
             for sim in simulate_cohort(config, subjects, seed):
                 dirs.append(write_subject(sim, tmp / "sessions" / sim.session.subject))
                 bar.advance(task)
-        _run(dirs, tmp / "study", method)
+        _run(dirs, tmp / "study", method, jobs=jobs, quiet=quiet)
     say("sessions: {}", out_dir / "sessions")
     say("report: [bold]{}[/]", out_dir / "study" / "report.html")
