@@ -5,6 +5,7 @@ Part of ``make bench`` (``bench/speed.py`` calls :func:`run`); alone:
 
 - start-up: median wall time of ``fingerfit --help`` / ``--version`` beside ``python -c pass``;
 - a simulated cohort (4 fingers per subject; simulated in 2 processes, timed separately);
+  the studies run with ``--keep-going`` and report how many sessions failed to fit;
 - ``fingerfit study --jobs 1`` and ``--jobs 2`` on the small cohort, ``--jobs 2`` on the
   large one, and the large one on a local Dask cluster (2 worker processes, 1 thread each)
   through ``--scheduler``. Each study runs in a fresh process that reports its own peak
@@ -97,13 +98,15 @@ def simulate(root: Path, n: int, seed: int = 2018) -> tuple[float, int]:
 
 
 def study(sessions: list[Path], out: Path, *extra: str) -> dict:
-    args = [*map(str, sessions), "--out", str(out), "--quiet", *extra]
+    args = [*map(str, sessions), "--out", str(out), "--quiet", "--keep-going", *extra]
     res = subprocess.run(
         [sys.executable, "-c", _STUDY.format(args=args)], capture_output=True, text=True
     )
     if res.returncode:
-        raise RuntimeError(res.stderr[-2000:])
-    return json.loads(res.stdout.strip().splitlines()[-1])
+        raise RuntimeError("\n".join(ln for ln in res.stderr.splitlines() if "error" in ln))
+    found = json.loads(res.stdout.strip().splitlines()[-1])
+    found["failed"] = len(json.loads((out / "summary.json").read_text())["failed"])
+    return found
 
 
 def on_local_cluster(sessions: list[Path], out: Path) -> dict:
@@ -177,7 +180,9 @@ def table(results: dict) -> str:
         rows.append(
             f"| `fingerfit study`, {name} | {r['wall_s']:.1f} s, "
             f"{r['frames_per_s'] / 1e3:.0f} k frames/s; peak RSS {r['parent_peak_mb']:.0f} MB "
-            f"(parent), {r['largest_child_peak_mb']:.0f} MB (largest worker) |"
+            f"(parent), {r['largest_child_peak_mb']:.0f} MB (largest worker)"
+            + (f"; {r['failed']} session(s) failed (--keep-going)" if r["failed"] else "")
+            + " |"
         )
     return "\n".join(rows)
 
