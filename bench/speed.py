@@ -38,6 +38,18 @@ def best_of(fn, repeat: int) -> float:
     return min(times)
 
 
+def load_kinematics(path: Path):
+    """Another version of ``fingerfit/kinematics.py`` as a module of the installed package."""
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location("fingerfit._kinematics_before", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 def long_recording(rec: Recording, n_frames: int) -> Recording:
     """Tile a recording up to ``n_frames`` frames (hand + one finger's sensors)."""
     reps = -(-n_frames // rec.n_frames)
@@ -56,6 +68,13 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=1_200_000)
     ap.add_argument(
         "--study-subjects", type=int, default=100, help="0: no start-up and study benchmark"
+    )
+    ap.add_argument(
+        "--before",
+        type=Path,
+        default=None,
+        help="a kinematics.py to time beside the current one in the same run "
+        "(e.g. from `git worktree add /tmp/kbefore <commit>`)",
     )
     args = ap.parse_args()
 
@@ -86,6 +105,7 @@ def main() -> None:
         "copy_frames_per_s": n / t_copy,
     }
     angle_rows = []
+    old = load_kinematics(args.before) if args.before is not None else None
     for method in ("tang2018", FitOptions.method):
         model = fit_session(session, FitOptions(method=method))
         t_user = best_of(lambda m=model: compute_kinematics(m, rec, variants=("user_axis",)), 3)
@@ -97,6 +117,13 @@ def main() -> None:
             "both_variants_frames_per_s": n / t_both,
             "user_axis_time_over_copy": t_user / t_copy,
         }
+        if old is not None:
+            tb = best_of(lambda m=model: old.compute_kinematics(m, rec, variants=("user_axis",)), 3)
+            results["angles"][method]["before_user_axis_frames_per_s"] = n / tb
+            angle_rows.append(
+                f"| angles + fingertip, `{method}` model, user-axis, one finger, `{args.before}` "
+                f"| {n / tb / 1e6:.1f} M frames/s ({tb / t_copy:.1f}x the copy time) |"
+            )
         angle_rows.append(
             f"| angles + fingertip, `{method}` model ({kind}), user-axis, one finger "
             f"| {n / t_user / 1e6:.1f} M frames/s ({t_user / t_copy:.1f}x the copy time) |\n"

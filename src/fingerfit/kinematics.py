@@ -23,7 +23,9 @@ all in tracker coordinates at the reference posture), then about the MP
 ab/adduction axis of a two-axis model, and carried by the hand sensor's motion
 relative to its reference pose.
 
-Both run over whole recordings with NumPy; no per-frame Python loop.
+Both run over whole recordings with NumPy; no per-frame Python loop. For a
+``swing_twist`` model ``compute_kinematics`` computes the same numbers block by block
+in cache (``_swing_twist_kinematics``; ``docs/performance.md``).
 Angles rad, lengths mm, tracker coordinates (``docs/conventions.md``).
 """
 
@@ -36,7 +38,13 @@ import pandas as pd
 
 from .model import ANGLE_METHODS, VARIANTS, FingerModel, HandModel
 from .session import HAND_SENSOR, JOINTS, UNITS_TO_MM, Recording
-from .transforms import FloatArray, rotate_about_line, rotate_about_lines, skew
+from .transforms import (
+    FloatArray,
+    orthonormal_basis,
+    rotate_about_line,
+    rotate_about_lines,
+    skew,
+)
 
 ABDUCTION = "mp_abduction"
 
@@ -415,9 +423,12 @@ def compute_kinematics(
         Frames with a missing sensor give NaN. Angles by the model's
         ``angle_method``.
     """
+    fingers = fingers or list(model.fingers)
+    if model.angle_method == "swing_twist" and recording.n_frames > 0:
+        return _swing_twist_kinematics(model, recording, tuple(variants), fingers)
     hand = recording.pose(HAND_SENSOR)
     motions: dict[str, dict[str, FingerMotion]] = {v: {} for v in variants}
-    for f in fingers or list(model.fingers):
+    for f in fingers:
         angles = finger_angles(model, f, recording, variants)
         for v in variants:
             local = chain_points(model.fingers[f], v, angles[v], model.fingers[f].tip)
@@ -440,3 +451,171 @@ def kinematics_table(kin: Kinematics, units: str = "mm") -> pd.DataFrame:
             for i, c in enumerate("xyz"):
                 cols[f"{prefix}{f}.tip.{c}"] = m.tip[:, i] / scale
     return pd.DataFrame(cols)
+
+
+# --- Block kernel for swing-twist models (the default) --------------------------------------
+# Frames are processed in blocks that stay in cache, with rotations in a (9, m) layout
+# (row 3i + k is element (i, k)). Per joint: G = R_p^T R_c as nine 3-term sums, then every
+# trace tr(Q C) = tr(G R_ref^T C) of every variant in one BLAS product with constant
+# weights. The chain needs cos and sin of each angle, which come from the same two numbers
+# the angle's atan2 takes, so no cos/sin call is made.
+
+BLOCK_FRAMES = 16384
+
+
+def _rows(rotation: FloatArray) -> FloatArray:
+    """``(m, 3, 3)`` rotations as a contiguous ``(9, m)`` array."""
+    return np.ascontiguousarray(rotation.reshape(-1, 9).T)
+
+
+def _product_rows(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``A^T B`` for ``(9, m)`` rows of ``A`` and ``B``: ``(9, m)``."""
+    g = np.empty_like(a)
+    for i in range(3):
+        for k in range(3):
+            o = g[3 * i + k]
+            np.multiply(a[i], b[k], out=o)
+            o += a[3 + i] * b[3 + k]
+            o += a[6 + i] * b[6 + k]
+    return g
+
+
+def _weights(reference: FloatArray, mats: list[FloatArray]) -> FloatArray:
+    """Rows ``w_k (9,)`` with ``w_k · vec(G) = tr(G reference^T C_k)``."""
+    return np.stack([(reference.T @ c).T.reshape(9) for c in mats])
+
+
+def _half_angle(y: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``theta = 2 atan2(y, x)`` with its cosine and sine (1 and 0 where ``x = y = 0``)."""
+    r2 = x * x + y * y
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = np.where(r2 == 0.0, 1.0, (x * x - y * y) / r2)
+        sin = np.where(r2 == 0.0, 0.0, 2.0 * x * y / r2)
+    return 2.0 * np.arctan2(y, x), cos, sin
+
+
+def _full_angle(y: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``beta = atan2(y, x)`` with its cosine and sine (1 and 0 where ``x = y = 0``)."""
+    h = np.hypot(x, y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = np.where(h == 0.0, 1.0, x / h)
+        sin = np.where(h == 0.0, 0.0, y / h)
+    return np.arctan2(y, x), cos, sin
+
+
+def _swing_twist_kinematics(
+    model: HandModel, recording: Recording, variants: tuple[str, ...], fingers: list[str]
+) -> Kinematics:
+    """:func:`compute_kinematics` for a ``swing_twist`` model, block by block."""
+    n = recording.n_frames
+    hand = recording.pose(HAND_SENSOR)
+    p0, r0 = model.reference_poses[HAND_SENSOR]
+    plans = {}
+    sensors = {HAND_SENSOR}
+    angles: dict[str, dict[str, dict[str, FloatArray]]] = {v: {} for v in variants}
+    tips: dict[str, dict[str, FloatArray]] = {v: {} for v in variants}
+    for f in fingers:
+        fm = model.fingers[f]
+        joints = []
+        for j, jm in fm.joints.items():
+            pr, cr = model.reference_poses[jm.parent][1], model.reference_poses[jm.child][1]
+            ref = pr.T @ cr
+            two_axis = j == "mp" and fm.abduction is not None
+            mats = []
+            for v in variants:
+                a = model.in_parent(f, j, v)[1]
+                if two_axis:
+                    b = pr.T @ fm.abduction.axis
+                    ap = a - (a @ b) * b
+                    kb = skew(b)
+                    xs, ys = (np.eye(3), skew(a).T), (np.eye(3), kb, kb @ kb)
+                    mats += [np.outer(a, np.cross(b, ap)), np.outer(a, ap)]
+                    mats += [x @ y for x in xs for y in ys]
+                else:
+                    mats += [np.eye(3), skew(a).T]
+            recording.pose(jm.parent), recording.pose(jm.child)  # a clear error if absent
+            sensors |= {jm.parent, jm.child}
+            joints.append((j, jm.parent, jm.child, two_axis, _weights(ref, mats)))
+        plans[f] = joints
+        for v in variants:
+            keys = [*JOINTS] + ([ABDUCTION] if fm.abduction is not None else [])
+            angles[v][f] = {k: np.empty(n) for k in keys}
+            tips[v][f] = np.empty((n, 3))
+    for s in range(0, n, BLOCK_FRAMES):
+        e = min(n, s + BLOCK_FRAMES)
+        rows = {k: _rows(recording.poses[k].rotation[s:e]) for k in sensors}
+        h = rows[HAND_SENSOR]
+        hp = hand.position[s:e].T
+        for f in fingers:
+            fm = model.fingers[f]
+            cs: dict[str, dict[str, tuple[FloatArray, FloatArray, FloatArray]]] = {
+                v: {} for v in variants
+            }
+            for j, parent, child, two_axis, w in plans[f]:
+                t = w @ _product_rows(rows[parent], rows[child])
+                step = 8 if two_axis else 2
+                for iv, v in enumerate(variants):
+                    tv = t[iv * step : (iv + 1) * step]
+                    if two_axis:
+                        beta, cb, sb = _full_angle(tv[0], tv[1])
+                        c1 = 1.0 - cb
+                        tr_i = tv[2] - sb * tv[3] + c1 * tv[4]
+                        tr_k = tv[5] - sb * tv[6] + c1 * tv[7]
+                        cs[v][ABDUCTION] = (beta, cb, sb)
+                        cs[v][j] = _half_angle(tr_k, 1.0 + tr_i)
+                    else:
+                        cs[v][j] = _half_angle(tv[1], 1.0 + tv[0])
+            for v in variants:
+                for k, (ang, _, _) in cs[v].items():
+                    angles[v][f][k][s:e] = ang
+                steps = [(fm.joints[j], fm.joints[j].axis_for(v), j) for j in reversed(JOINTS)]
+                y = basis = centre = None
+                for jm, axis, j in steps:
+                    ang, cos, sin = cs[v][j]
+                    c = jm.center[:, None]
+                    if jm.migration is not None:
+                        c = c + np.multiply.outer(jm.migration, ang)
+                    y, basis, centre = _turn(y, basis, centre, c, axis, cos, sin, fm.tip)
+                if fm.abduction is not None:
+                    _, cos, sin = cs[v][ABDUCTION]
+                    ab = fm.abduction
+                    y, basis, centre = _turn(
+                        y, basis, centre, ab.center[:, None], ab.axis, cos, sin, fm.tip
+                    )
+                # Tip at the reference posture, then in the hand sensor's frame, then carried.
+                local = (r0.T @ basis.T) @ y + r0.T @ (centre - p0[:, None])
+                tip = tips[v][f][s:e]
+                for i in range(3):
+                    o = tip[:, i]
+                    o[:] = h[3 * i] * local[0]
+                    o += h[3 * i + 1] * local[1]
+                    o += h[3 * i + 2] * local[2]
+                    o += hp[i]
+    motions = {v: {f: FingerMotion(angles[v][f], tips[v][f]) for f in fingers} for v in variants}
+    return Kinematics(recording.time, motions)
+
+
+def _turn(
+    y: FloatArray | None,
+    basis: FloatArray | None,
+    centre: FloatArray | None,
+    c: FloatArray,
+    axis: FloatArray,
+    cos: FloatArray,
+    sin: FloatArray,
+    point: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """One step of :func:`~fingerfit.transforms.rotate_about_lines` with ``cos``/``sin`` given.
+
+    ``y (3, m)``: coordinates in the previous line's ``basis`` about its ``centre (3, 1|m)``
+    (``None`` before the first step, which starts from ``point (3,)``). Returns the new ones.
+    """
+    b = orthonormal_basis(axis)
+    x = b @ (point[:, None] - c) if y is None else (b @ basis.T) @ y + b @ (centre - c)
+    out = np.empty((3, cos.shape[0]))
+    np.multiply(x[0], cos, out=out[0])
+    out[0] -= x[1] * sin
+    np.multiply(x[0], sin, out=out[1])
+    out[1] += x[1] * cos
+    out[2] = x[2]
+    return out, b, c

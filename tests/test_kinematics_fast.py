@@ -1,0 +1,113 @@
+"""The block kernel of ``compute_kinematics`` (swing-twist models) against the plain path.
+
+The reference is the straightforward computation from the public pieces: ``finger_angles``
+(relative rotation, then traces and atan2), ``chain_points`` (cos/sin of each angle) and
+``carry_by_hand``. Random sensor rotations and positions, NaN frames, several blocks, a
+two-axis MP joint, hinge-only fingers and a migrating (rolling-contact) centre.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fingerfit import kinematics as kin
+from fingerfit.errors import FingerfitError
+from fingerfit.estimate import FitOptions, fit_session
+from fingerfit.model import VARIANTS, HandModel
+from fingerfit.session import HAND_SENSOR, PoseSeries, Recording
+
+from .conftest import subject
+
+
+def reference(model: HandModel, rec: Recording, variants: tuple[str, ...]) -> dict:
+    hand = rec.pose(HAND_SENSOR)
+    out = {}
+    for f in model.fingers:
+        angles = kin.finger_angles(model, f, rec, variants, method="swing_twist")
+        for v in variants:
+            local = kin.chain_points(model.fingers[f], v, angles[v], model.fingers[f].tip)
+            out[v, f] = angles[v], kin.carry_by_hand(model, hand.rotation, hand.position, local)
+    return out
+
+
+def random_recording(model: HandModel, n: int, seed: int) -> Recording:
+    """Sensor poses near the reference ones (tens of degrees away) plus a few NaN frames."""
+    rng = np.random.default_rng(seed)
+    poses = {}
+    for sensor, (p, r) in model.reference_poses.items():
+        turn = Rotation.from_rotvec(rng.normal(scale=0.6, size=(n, 3))).as_matrix()
+        position = p + rng.normal(scale=20.0, size=(n, 3))
+        rotation = turn @ r
+        rotation[rng.integers(0, n, 3)] = np.nan
+        poses[sensor] = PoseSeries(position, rotation)
+    # Exactly the reference posture (zero angles, a twist atan2(0, 2)) on the first frame.
+    for sensor, (p, r) in model.reference_poses.items():
+        poses[sensor].position[0], poses[sensor].rotation[0] = p, r
+    return Recording("random", np.arange(n) / 240.0, poses)
+
+
+@pytest.fixture(scope="module")
+def models() -> dict[str, HandModel]:
+    session = subject("realistic", 2).session
+    two_axis = fit_session(session, FitOptions())  # the default: swing-twist, two-axis MP
+    hinge = fit_session(session, FitOptions(method="pooled", angle_method="swing_twist"))
+    rng = np.random.default_rng(5)
+    fm = hinge.fingers["index"]
+    rolling = replace(
+        hinge,
+        fingers={
+            "index": replace(
+                fm,
+                joints={
+                    j: replace(jm, migration=rng.normal(scale=2.0, size=3))
+                    for j, jm in fm.joints.items()
+                },
+            )
+        },
+    )
+    return {"two_axis": two_axis, "hinge": hinge, "rolling": rolling}
+
+
+@pytest.mark.parametrize("kind", ["two_axis", "hinge", "rolling"])
+def test_block_kernel_equals_reference(
+    models: dict[str, HandModel], kind: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    model = models[kind]
+    assert model.angle_method == "swing_twist"
+    assert (model.fingers["index"].abduction is not None) == (kind == "two_axis")
+    rec = random_recording(model, 2500, seed=len(kind))
+    monkeypatch.setattr(kin, "BLOCK_FRAMES", 1000)  # three blocks, the last one short
+    got = kin.compute_kinematics(model, rec)
+    want = reference(model, rec, VARIANTS)
+    for (v, f), (angles, tip) in want.items():
+        motion = got.motions[v][f]
+        assert list(motion.angles) == list(angles)
+        for j, a in angles.items():
+            np.testing.assert_array_equal(np.isnan(motion.angles[j]), np.isnan(a))
+            np.testing.assert_allclose(motion.angles[j], a, rtol=0, atol=1e-10)
+            assert np.nanmax(np.abs(a)) > 0.3  # the random poses really move the joints
+        assert np.isnan(tip).any(axis=1).sum() > 0
+        np.testing.assert_array_equal(np.isnan(motion.tip), np.isnan(tip))
+        np.testing.assert_allclose(motion.tip, tip, rtol=0, atol=1e-10)
+        assert np.all(np.abs(motion.angles["mp"][0]) < 1e-12)  # reference posture
+
+
+def test_block_kernel_single_variant_and_missing_sensor(models: dict[str, HandModel]) -> None:
+    model = models["two_axis"]
+    rec = random_recording(model, 300, seed=1)
+    got = kin.compute_kinematics(model, rec, variants=("orthogonal",))
+    angles, tip = reference(model, rec, ("orthogonal",))["orthogonal", "index"]
+    np.testing.assert_allclose(
+        got.motions["orthogonal"]["index"].angles["mp_abduction"],
+        angles["mp_abduction"],
+        atol=1e-10,
+    )
+    np.testing.assert_allclose(got.motions["orthogonal"]["index"].tip, tip, atol=1e-10)
+    assert list(got.motions) == ["orthogonal"]
+    poses = {k: v for k, v in rec.poses.items() if k != "index.middle"}
+    with pytest.raises(FingerfitError, match=r"index\.middle"):
+        kin.compute_kinematics(model, Recording("r", rec.time, poses))
