@@ -269,7 +269,9 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
             notes.append(
                 f"one-axis MP: a second axis would explain too little (ab/adduction span "
                 f"{tf.abduction_range_deg:.1f} deg, rotation off the model "
-                f"{np.degrees(tf.rms_hinge_rad):.2f} -> {np.degrees(tf.rms_two_axis_rad):.2f} deg)"
+                f"{np.degrees(tf.rms_hinge_rad):.2f} -> {np.degrees(tf.rms_two_axis_rad):.2f} deg, "
+                f"ab/adduction at rest varying between cycles by >= "
+                f"{tf.rest_spread_low_deg:.2f} deg SD (95 %; need more than the two-axis RMS))"
             )
     mig = None
     if migration:

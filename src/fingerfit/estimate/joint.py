@@ -621,7 +621,9 @@ def _two_axis(m: _Motion, rom: float, conv: dict[str, float], *, strict: bool = 
         raise FingerfitError(
             f"only one axis is excited: a second axis spans {tf.abduction_range_deg:.1f} deg "
             f"(need >= {MIN_RANGE_DEG:g}) and leaves {np.degrees(tf.rms_two_axis_rad):.2f} deg "
-            f"RMS of the hinge's {np.degrees(tf.rms_hinge_rad):.2f} deg (need half or less); "
+            f"RMS of the hinge's {np.degrees(tf.rms_hinge_rad):.2f} deg (need half or less), "
+            f"and the ab/adduction at zero flexion varies between blocks of frames by >= "
+            f"{tf.rest_spread_low_deg:.2f} deg SD (95 %; need more than the two-axis RMS); "
             "use kind='hinge'",
             field="kind",
         )
