@@ -39,15 +39,14 @@ from ..kinematics import twist_angle, two_axis_angles
 from ..model import ANGLE_METHODS, FingerModel, HandModel, JointModel, JointQuality, assemble_finger
 from ..session import HAND_SENSOR, JOINTS, Session, joint_sensors
 from ..transforms import FloatArray, angle_between_axes, relative_pose, rotation_vector
-from .axis import AxisFit, line_through_centres, mean_null_axis, orient_flexion
+from .axis import AxisFit, mean_null_axis, orient_flexion
 from .centre import CentreFit, centre_of_rotation
 from .cycles import extract_cycles
+from .joint import estimate_hinge, estimate_two_axis
 from .migration import fit_axis_points
 from .plausibility import check_model, check_session, enforce
-from .pooled import pooled_hinge
-from .robust import robust_hinge
 from .sagittal import intersect, sagittal_plane
-from .twoaxis import TwoAxisFit, fit_two_axis
+from .twoaxis import TwoAxisFit
 
 DEFAULT_METHOD = "twoaxis"
 
@@ -170,8 +169,9 @@ class AxisEstimate:
 def tang2018(data: JointData) -> AxisEstimate:
     """The paper's estimator: untruncated O'Brien centre per cycle, line through them (eq. 1)."""
     _need_cycles(data)
-    centres = [centre_of_rotation(data.rotation[p], data.translation[p]) for p in data.periods]
-    return AxisEstimate(line_through_centres(centres), centres)
+    est = estimate_hinge(data.rotation, data.translation, "tang2018", data.periods)
+    assert est.line is not None
+    return AxisEstimate(est.line, est.centres)
 
 
 def _cycle_centres(data: JointData, cycles: list[int]) -> list[CentreFit]:
@@ -204,13 +204,12 @@ def _need_cycles(data: JointData) -> None:
 def pooled(data: JointData) -> AxisEstimate:
     """SARA axis and axis-truncated SCoRE centre over all movement frames (:mod:`.pooled`)."""
     _need_cycles(data)
-    mv = np.concatenate(data.periods)
-    h = pooled_hinge(data.rotation[mv], data.translation[mv])
+    est = estimate_hinge(data.rotation, data.translation, "sara", data.periods)
     centres = _cycle_centres(data, list(range(len(data.periods))))
     return AxisEstimate(
-        _axis_fit(h.centre_parent, h.axis_parent, centres),
+        _axis_fit(est.point, est.axis, centres),
         centres,
-        pooled_conditioning=h.conditioning,
+        pooled_conditioning=est.conditioning,
     )
 
 
@@ -231,11 +230,12 @@ def rolling(data: JointData) -> AxisEstimate:
 
 def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisEstimate:
     _need_cycles(data)
-    rh = robust_hinge(data.rotation, data.translation, data.periods)
-    h, k = rh.fit, rh.frames
-    noise = max(float(np.sqrt(np.mean(h.centre_residual**2) / 3.0)), 1e-6)
+    est = estimate_hinge(data.rotation, data.translation, "robust", data.periods)
+    rh = est.robust
+    assert rh is not None
+    k = est.frames
     centres = _cycle_centres(data, rh.kept_cycles)
-    point, direction = h.centre_parent, h.axis_parent
+    point, direction = est.point, est.axis
     notes = []
     if rh.rejected_cycles:
         notes.append(
@@ -246,15 +246,8 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
         notes.append(f"{rh.rejected_frames} outlier frame(s) rejected")
     abduction = None
     if two_axis and data.joint == "mp":
-        tf = fit_two_axis(
-            data.rotation[k],
-            data.translation[k],
-            data.reference_rotation,
-            direction,
-            rh.weights,
-            noise,
-            data.finger_direction,
-            groups=rh.labels,
+        tf = estimate_two_axis(
+            data.rotation, data.translation, data.reference_rotation, est, data.finger_direction
         )
         if tf.accepted:
             abduction = tf
@@ -288,9 +281,9 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
             direction,
             theta,
             migration=True,
-            weights=rh.weights,
-            noise_mm=noise,
-            groups=rh.labels,
+            weights=est.weights,
+            noise_mm=est.noise_mm,
+            groups=est.groups,
             **extra,
         )
         point, mig = pts.centre, pts.migration
@@ -301,7 +294,7 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
         centres,
         abduction=abduction,
         migration=mig,
-        pooled_conditioning=h.conditioning,
+        pooled_conditioning=est.conditioning,
         rejected_frames=rh.rejected_frames,
         rejected_cycles=rh.rejected_cycles,
         notes=notes,

@@ -40,13 +40,13 @@ from ..transforms import (
     relative_pose,
     rotation_vector,
 )
-from .axis import line_through_centres
-from .centre import centre_of_rotation
+from .axis import AxisFit, line_through_centres
+from .centre import CentreFit, centre_of_rotation
 from .cycles import extract_cycles
 from .plausibility import CONVENTION_RATIO, CONVENTIONS, PIVOT_MIN_MM, pivot_residuals
-from .pooled import pooled_hinge, sara_axis
-from .robust import robust_hinge
-from .twoaxis import MIN_RANGE_DEG, fit_two_axis
+from .pooled import PooledHinge, pooled_hinge, sara_axis
+from .robust import RobustHinge, robust_hinge
+from .twoaxis import MIN_RANGE_DEG, TwoAxisFit, fit_two_axis
 
 KINDS = ("hinge", "two_axis", "ball", "auto")
 HINGE_METHODS = ("sara", "robust", "tang2018")
@@ -506,6 +506,167 @@ def _centre_bootstrap_mm(
 # --------------------------------------------------------------------------- estimators
 
 
+@dataclass(frozen=True)
+class HingeEstimate:
+    """One hinge estimator's result on relative poses (parent frame, mm).
+
+    :func:`estimate_hinge` is the one place the hinge estimators are invoked and
+    configured, for :func:`fit_joint` and the finger pipeline (:mod:`.fit`) alike.
+
+    Attributes
+    ----------
+    method : str
+        ``"sara"``, ``"robust"`` or ``"tang2018"``.
+    axis : ndarray, shape (3,)
+        Unit axis in the parent frame (sign as the estimator gives it).
+    point : ndarray, shape (3,)
+        A point of the axis in the parent frame (mm): the SCoRE centre, or the point of
+        the line through the per-cycle centres.
+    frames : ndarray of int
+        Frames (indices into the given arrays) the axis was fitted to; ``tang2018``: all
+        given frames (the conditioning is computed over them).
+    weights : ndarray, shape (len(frames),) or None
+        Frame weights of the fit (``robust``; mean 1).
+    groups : ndarray of int, shape (len(frames),) or None
+        Cycle index of each frame (``robust``).
+    singular_values : ndarray, shape (2,)
+        ``(s5, s6)`` of the SARA system over ``frames`` (with ``weights``).
+    hinge : PooledHinge or None
+        The SARA/SCoRE fit (``sara``, ``robust``): axis and centre in both frames and the
+        per-frame residuals.
+    robust : RobustHinge or None
+        The outlier rules' result (``robust``).
+    centres : list of CentreFit
+        Per-cycle O'Brien centres (``tang2018``).
+    line : AxisFit or None
+        The line through the per-cycle centres (``tang2018``).
+    """
+
+    method: str
+    axis: FloatArray
+    point: FloatArray
+    frames: np.ndarray
+    weights: FloatArray | None
+    groups: np.ndarray | None
+    singular_values: FloatArray
+    hinge: PooledHinge | None = None
+    robust: RobustHinge | None = None
+    centres: list[CentreFit] = field(default_factory=list)
+    line: AxisFit | None = None
+
+    @property
+    def conditioning(self) -> float:
+        """``s5 / s6`` (inf for an exact hinge)."""
+        s5, s6 = self.singular_values
+        return float(s5 / s6) if s6 > 0 else math.inf
+
+    @property
+    def noise_mm(self) -> float:
+        """Per-coordinate noise of the SCoRE residual (mm, ``sqrt(mean |r|^2 / 3)``,
+        at least 1e-6); ``sara`` and ``robust`` only."""
+        if self.hinge is None:
+            raise ValueError(f"method '{self.method}' has no SCoRE residual")
+        return max(float(np.sqrt(np.mean(self.hinge.centre_residual**2) / 3.0)), 1e-6)
+
+
+def estimate_hinge(
+    rotation: FloatArray,
+    translation: FloatArray,
+    method: str,
+    periods: list[np.ndarray] | None = None,
+) -> HingeEstimate:
+    """Fit a hinge to relative poses by one of :data:`HINGE_METHODS`.
+
+    Parameters
+    ----------
+    rotation : ndarray, shape (n, 3, 3)
+        Child-in-parent rotations, time order, no NaN.
+    translation : ndarray, shape (n, 3)
+        Child origin in the parent frame (mm).
+    method : {"sara", "robust", "tang2018"}
+        ``sara``: SARA axis and SCoRE centre (:func:`.pooled.pooled_hinge`) over the
+        frames of ``periods``, or every frame without them; ``robust``: the same after the
+        outlier rules (:func:`.robust.robust_hinge`) with ``periods`` as the cycles, or one
+        period of every frame without them; ``tang2018``: O'Brien centre per period and
+        the line through them (:func:`.axis.line_through_centres`; two or more periods).
+    periods : list of ndarray, optional
+        Frame indices of each movement cycle.
+
+    Returns
+    -------
+    HingeEstimate
+    """
+    n = rotation.shape[0]
+    if method == "tang2018":
+        if periods is None or len(periods) < 2:
+            found = 0 if periods is None else len(periods)
+            raise FingerfitError(
+                f"method 'tang2018' needs at least 2 movement cycles (found {found})",
+                field="method",
+            )
+        centres = [centre_of_rotation(rotation[p], translation[p]) for p in periods]
+        line = line_through_centres(centres)
+        return HingeEstimate(
+            method, line.direction, line.point, np.arange(n), None, None,
+            sara_axis(rotation)[2], centres=centres, line=line,
+        )  # fmt: skip
+    if method == "robust":
+        rh = robust_hinge(rotation, translation, periods or [np.arange(n)])
+        h = rh.fit
+        return HingeEstimate(
+            method, h.axis_parent, h.centre_parent, rh.frames, rh.weights, rh.labels,
+            h.singular_values, hinge=h, robust=rh,
+        )  # fmt: skip
+    if method == "sara":
+        used = np.concatenate(periods) if periods else np.arange(n)
+        h = pooled_hinge(rotation[used], translation[used])
+        return HingeEstimate(
+            method, h.axis_parent, h.centre_parent, used, None, None, h.singular_values, hinge=h
+        )
+    raise FingerfitError(
+        f"unknown hinge method '{method}' (have: {', '.join(HINGE_METHODS)})", field="method"
+    )
+
+
+def estimate_two_axis(
+    rotation: FloatArray,
+    translation: FloatArray,
+    reference_rotation: FloatArray,
+    hinge: HingeEstimate,
+    finger_direction: FloatArray | None = None,
+) -> TwoAxisFit:
+    """Two-axis joint (flexion, then ab/adduction) started from a hinge fit.
+
+    Parameters
+    ----------
+    rotation, translation : ndarray, shapes (n, 3, 3) and (n, 3)
+        The relative poses ``hinge`` was fitted to (parent frame, mm).
+    reference_rotation : ndarray, shape (3, 3)
+        Relative rotation at zero flexion and ab/adduction.
+    hinge : HingeEstimate
+        A ``sara`` or ``robust`` fit: its frames, weights, axis (initial flexion axis) and
+        SCoRE noise are used; its cycles group the frames for the stability test, else
+        :data:`BOOTSTRAP_BLOCKS` contiguous time blocks do.
+    finger_direction : ndarray, shape (3,), optional
+        Unit direction of the stretched finger (parent frame), for the initial
+        ab/adduction axis.
+
+    Returns
+    -------
+    TwoAxisFit
+        :func:`.twoaxis.fit_two_axis`'s result; ``accepted`` says whether the data
+        support the second axis.
+    """
+    k = hinge.frames
+    groups = hinge.groups
+    if groups is None:
+        groups = np.arange(k.size) * BOOTSTRAP_BLOCKS // k.size
+    return fit_two_axis(
+        rotation[k], translation[k], reference_rotation, hinge.axis, hinge.weights,
+        hinge.noise_mm, finger_direction, groups,
+    )  # fmt: skip
+
+
 def _orient(axis: FloatArray) -> float:
     """Sign that makes the largest-magnitude component of ``axis`` positive."""
     return 1.0 if axis[int(np.argmax(np.abs(axis)))] >= 0 else -1.0
@@ -527,7 +688,6 @@ def _hinge(m: _Motion, method: str, rom: float, conv: dict[str, float]) -> Joint
     ref = _reference(m.rotation)
     periods = _cycles(m)
     notes: list[str] = []
-    weights = None
     if method == "tang2018":
         if len(periods) < 2:
             raise FingerfitError(
@@ -535,34 +695,31 @@ def _hinge(m: _Motion, method: str, rom: float, conv: dict[str, float]) -> Joint
                 f"{'' if m.rate_hz else '; give rate_hz to look for them'}); use method='sara'",
                 field="method",
             )
-        centres = [centre_of_rotation(m.rotation[p], m.translation[p]) for p in periods]
-        line = line_through_centres(centres)
-        a_p = line.direction
-        h = pooled_hinge(m.rotation, m.translation)
+        est = estimate_hinge(m.rotation, m.translation, method, periods)
+        a_p = est.axis
         a_c = m.rotation[ref].T @ a_p
         # The point of the line in the child frame, through the reference pose.
-        u_p = line.point
+        u_p = est.point
         u_c = m.rotation[ref].T @ (u_p - m.translation[ref])
-        used = np.arange(m.rotation.shape[0])
         resid = np.linalg.norm(u_p - m.rotation @ u_c - m.translation, axis=1)
-        sv = h.singular_values
     else:
-        if method == "robust":
-            # Cycles when found (the cycle rule needs them), else one period of every frame.
-            per = periods if len(periods) >= 3 else [np.arange(m.rotation.shape[0])]
-            if len(periods) < 3:
-                notes.append("robust: no repeated cycles; frame rule only")
-            rh = robust_hinge(m.rotation, m.translation, per)
-            h, used, weights = rh.fit, rh.frames, rh.weights
-            if rh.rejected_frames:
-                notes.append(f"{rh.rejected_frames} outlier frame(s) rejected")
-            if rh.rejected_cycles:
-                notes.append(f"cycles {', '.join(str(i + 1) for i in rh.rejected_cycles)} rejected")
-        else:
-            h = pooled_hinge(m.rotation, m.translation)
-            used = np.arange(m.rotation.shape[0])
+        # robust: the cycles when found (the cycle rule needs them), else one period of
+        # every frame; sara: every frame.
+        cycles = periods if method == "robust" and len(periods) >= 3 else None
+        if method == "robust" and cycles is None:
+            notes.append("robust: no repeated cycles; frame rule only")
+        est = estimate_hinge(m.rotation, m.translation, method, cycles)
+        h = est.hinge
+        assert h is not None
+        if est.robust is not None:
+            if est.robust.rejected_frames:
+                notes.append(f"{est.robust.rejected_frames} outlier frame(s) rejected")
+            if est.robust.rejected_cycles:
+                rej = ", ".join(str(i + 1) for i in est.robust.rejected_cycles)
+                notes.append(f"cycles {rej} rejected")
         a_p, a_c, u_p, u_c = h.axis_parent, h.axis_child, h.centre_parent, h.centre_child
-        resid, sv = h.centre_residual, h.singular_values
+        resid = h.centre_residual
+    used, weights, sv = est.frames, est.weights, est.singular_values
     cond = float(sv[0] / sv[1]) if sv[1] > 0 else math.inf
     if cond < MIN_HINGE_CONDITIONING:
         raise FingerfitError(
@@ -607,14 +764,10 @@ def _ball(m: _Motion, rom: float, conv: dict[str, float]) -> JointFit:
 
 def _two_axis(m: _Motion, rom: float, conv: dict[str, float], *, strict: bool = True):
     ref = _reference(m.rotation)
-    h = pooled_hinge(m.rotation, m.translation)
+    h = estimate_hinge(m.rotation, m.translation, "sara")
     cond = h.conditioning
-    noise = max(float(np.sqrt(np.mean(h.centre_residual**2) / 3.0)), 1e-6)
     n = m.rotation.shape[0]
-    groups = np.arange(n) * BOOTSTRAP_BLOCKS // n
-    tf = fit_two_axis(
-        m.rotation, m.translation, m.rotation[ref], h.axis_parent, None, noise, None, groups
-    )
+    tf = estimate_two_axis(m.rotation, m.translation, m.rotation[ref], h)
     if not tf.accepted:
         if not strict:
             return None
@@ -789,9 +942,12 @@ def two_axis(parent: object, child: object, **kwargs) -> JointFit:
 __all__ = [
     "HINGE_METHODS",
     "KINDS",
+    "HingeEstimate",
     "JointFit",
     "JointQuality",
     "axis_bootstrap_deg",
+    "estimate_hinge",
+    "estimate_two_axis",
     "fit_joint",
     "hinge_axis",
     "joint_centre",
