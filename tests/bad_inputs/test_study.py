@@ -193,6 +193,20 @@ def test_out_must_not_replace_an_input_session(sessions, tmp_path) -> None:
     _no_leftovers(tmp_path, before)
 
 
+def test_keep_going_overwrite_never_replaces_a_failed_or_unreadable_session(
+    sessions, tmp_path
+) -> None:
+    failing = shutil.copytree(sessions["P07"], tmp_path / "P07")  # fits no grasp cycle
+    unreadable = tmp_path / "broken"
+    unreadable.mkdir()
+    (unreadable / "notes.txt").write_text("not a session")
+    before = listing(tmp_path)
+    for victim in (failing, unreadable):
+        res = run("study", sessions["P01"], victim, "--out", victim, "--keep-going", "--overwrite")
+        refused(res, "would replace the input session", str(victim))
+    _no_leftovers(tmp_path, before)
+
+
 def test_subject_ids_must_be_unique(sessions, tmp_path) -> None:
     other = _set_subject(shutil.copytree(sessions["P02"], tmp_path / "again"), "P01")
     before = listing(tmp_path)

@@ -458,19 +458,21 @@ def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-def _check_not_input(out_dir: Path, sessions: list[Session]) -> None:
-    """Refuse an output folder that is, holds, or sits on the files of an input session."""
+def _check_not_input(out_dir: Path, folders: list[Path]) -> None:
+    """Refuse an output folder that is, holds, or sits on a file of an input session folder.
+
+    Every folder given is checked, whether or not its session could be read or fitted
+    (with ``--keep-going --overwrite`` a failed session's folder must survive too).
+    """
     out = out_dir.resolve()
-    for s in sessions:
-        if s.path is None:
-            continue
-        src = Path(s.path).resolve()
-        own = _SESSION_FILES | {r.name for r in s.recordings()}
+    for folder in folders:
+        src = Path(folder).resolve()
+        first = out.relative_to(src).parts[0] if out != src and _inside(out, src) else None
         if _inside(src, out) or (
-            out != src and _inside(out, src) and out.relative_to(src).parts[0] in own
+            first is not None and (first in _SESSION_FILES or (src / first).is_file())
         ):
             raise FingerfitError(
-                f"would replace the input session '{s.path}' (choose another --out)",
+                f"would replace the input session '{folder}' (choose another --out)",
                 path=out_dir,
             )
 
@@ -723,7 +725,8 @@ def run_study(
                     f"'{first.path or '(in memory)'}' and '{o.path or '(in memory)'}'",
                     field="subject",
                 )
-        _check_not_input(out_dir, [o.result.session for o in ok if o.result is not None])
+        given = [x.path if isinstance(x, Session) else Path(x) for x in sessions]
+        _check_not_input(out_dir, [p for p in given if p is not None])
         subjects: list[SubjectResult] = []
         for o in ok:
             if o.fit_error is not None:
