@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import FingerfitError
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from .hygiene import (
+    MAX_RATE_HZ,
     check_recording,
     implausible_message,
     implausible_rows,
@@ -39,8 +40,6 @@ from .rigid import ClusterFit, cluster_shape, fit_cluster
 MAX_RESIDUAL_MM = 5.0
 #: Largest deviation of a ROTATION channel's 3x3 block from orthonormal.
 ORTHONORMAL_TOLERANCE = 1e-3
-#: Largest frame rate accepted (Hz).
-MAX_RATE_HZ = 1e6
 _CLUSTER_RE = re.compile(r"^(.*?[^\d])(\d+)$")
 
 

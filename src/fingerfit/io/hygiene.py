@@ -58,6 +58,9 @@ _LIST_MAX = 8
 #: below float trouble. Larger values (``1e308``, an overflowing unit conversion) are
 #: garbled data and an error, never a sample.
 MAX_COORDINATE_MM = 1e9
+#: Largest sampling rate accepted from any file (Hz): far above any tracker, far below
+#: float trouble.
+MAX_RATE_HZ = 1e6
 #: A sampling grid may hold at most this many times the frames read (plus
 #: :data:`GRID_SLACK`): more means a garbled time or frame count, or a wrong rate.
 MAX_GRID_RATIO = 10

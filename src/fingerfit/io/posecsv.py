@@ -286,7 +286,7 @@ def read_pose_csv(
         off = np.abs(frame_times - (t0 + idx / rate_hz))
         if np.any(off > 0.25 / rate_hz) or np.any(np.diff(idx) == 0):
             i = int(np.flatnonzero((off > 0.25 / rate_hz) | np.r_[False, np.diff(idx) == 0])[0])
-            row = int(np.flatnonzero(frame_of_row == i)[0])
+            row = int(row_of_frame[i])
             raise FingerfitError(
                 f"time {frame_times[i]:.6f} s is not on the {rate_hz:g} Hz sampling grid",
                 path=path,

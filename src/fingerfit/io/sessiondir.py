@@ -39,7 +39,7 @@ from ..session import (
 )
 from ..transforms import FloatArray
 from .atomic import atomic_write
-from .hygiene import implausible_message, implausible_rows
+from .hygiene import MAX_RATE_HZ, implausible_message, implausible_rows
 from .posecsv import check_field_counts, read_pose_csv, shown, write_pose_csv
 
 SESSION_FILE = "session.toml"
@@ -51,8 +51,6 @@ EVENTS_HEADER = ("recording", "finger", "target", "start", "end")
 #: Keys of ``session.toml``: top level and ``[recordings]``.
 TOP_KEYS = ("format", "subject", "hand", "units", "rate_hz", "fingers", "recordings")
 RECORDING_KEYS = ("reference", "grasp", "targets", "test", "events")
-#: Largest sampling rate accepted (Hz): far above any tracker, far below float trouble.
-MAX_RATE_HZ = 1e6
 
 
 def _require(table: dict, key: str, kind: type | tuple[type, ...], path: Path, where: str = ""):

@@ -18,8 +18,9 @@ import numpy as np
 from ..io.liberty import ASCII_DECIMALS
 from ..session import UNITS_TO_MM, PoseSeries, Recording, Session
 from ..transforms import FloatArray, matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from .trackerfiles import TRACKER_FORMATS
 
-DEVICES = ("liberty-ascii", "liberty-binary", "c3d")
+DEVICES = TRACKER_FORMATS
 
 
 def _f32(x: FloatArray) -> FloatArray:

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FingerfitError
-from ..io.atomic import atomic_path, check_target, staged_directory
+from ..io.atomic import atomic_path, staged_directory
 from ..io.liberty import LibertyRecords, write_liberty_ascii, write_liberty_binary
 from ..io.sessiondir import EVENTS_FILE, LANDMARKS_FILE, write_events, write_landmarks
 from ..session import FINGERS, HAND_SENSOR, SEGMENTS, UNITS_TO_MM, Recording, sensor_name
@@ -216,7 +216,6 @@ def write_c3d_recording(
     """
     ezc3d = require_ezc3d()
     path = Path(path)
-    check_target(path)
     names = list(labels.values())
     n, m = recording.n_frames, len(names)
     pos = np.stack([recording.poses[s].position for s in names], axis=1)  # (n, m, 3)
