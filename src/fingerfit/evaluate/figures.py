@@ -91,11 +91,6 @@ def make_axis_quality(distances: pd.DataFrame) -> Figure:
     return fig
 
 
-def axis_quality(distances: pd.DataFrame, path: Path) -> Path:
-    """Write Fig. 8 (see :func:`make_axis_quality`) as PNG."""
-    return save(make_axis_quality(distances), path)
-
-
 def make_trajectories(time: np.ndarray, tips: dict[str, np.ndarray], subject: str) -> Figure:
     """Fig. 9: fingertip trajectories of both models and the distal-sensor reference.
 
@@ -147,11 +142,6 @@ def make_trajectories(time: np.ndarray, tips: dict[str, np.ndarray], subject: st
     return fig
 
 
-def trajectories(time: np.ndarray, tips: dict[str, np.ndarray], subject: str, path: Path) -> Path:
-    """Write Fig. 9 (see :func:`make_trajectories`) as PNG."""
-    return save(make_trajectories(time, tips, subject), path)
-
-
 def make_paired_boxes(
     data: pd.DataFrame, by: str, title: str, ylabel: str, xlabel: str | None = None
 ) -> Figure:
@@ -176,13 +166,6 @@ def make_paired_boxes(
     ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     ax.set_title(title, loc="left", fontsize=10)
     return fig
-
-
-def paired_boxes(
-    data: pd.DataFrame, by: str, title: str, ylabel: str, path: Path, xlabel: str | None = None
-) -> Path:
-    """Write a paired box plot (see :func:`make_paired_boxes`) as PNG."""
-    return save(make_paired_boxes(data, by, title, ylabel, xlabel), path)
 
 
 def make_target_scatter(targets: pd.DataFrame) -> Figure:
@@ -229,11 +212,6 @@ def make_target_scatter(targets: pd.DataFrame) -> Figure:
     return fig
 
 
-def target_scatter(targets: pd.DataFrame, path: Path) -> Path:
-    """Write Fig. 11 (see :func:`make_target_scatter`) as PNG."""
-    return save(make_target_scatter(targets), path)
-
-
 def make_target_bars(targets: pd.DataFrame) -> Figure:
     """Fig. 12: mean and SD of the target error (mm) per target and pooled, per source."""
     labels = sorted(targets["target"].unique())
@@ -264,8 +242,3 @@ def make_target_bars(targets: pd.DataFrame) -> Figure:
     ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     ax.set_title("Fig. 12 - target reaching: mean (SD) over touches", loc="left", fontsize=10)
     return fig
-
-
-def target_bars(targets: pd.DataFrame, path: Path) -> Path:
-    """Write Fig. 12 (see :func:`make_target_bars`) as PNG."""
-    return save(make_target_bars(targets), path)
