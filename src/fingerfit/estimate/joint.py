@@ -217,6 +217,12 @@ class JointFit:
         }
 
 
+def _conditioning(singular_values: FloatArray) -> float:
+    """``s5 / s6`` of a hinge fit's two smallest singular values (inf for an exact hinge)."""
+    s5, s6 = singular_values
+    return float(s5 / s6) if s6 > 0 else math.inf
+
+
 def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
@@ -557,8 +563,7 @@ class HingeEstimate:
     @property
     def conditioning(self) -> float:
         """``s5 / s6`` (inf for an exact hinge)."""
-        s5, s6 = self.singular_values
-        return float(s5 / s6) if s6 > 0 else math.inf
+        return _conditioning(self.singular_values)
 
     @property
     def noise_mm(self) -> float:
@@ -719,8 +724,8 @@ def _hinge(m: _Motion, method: str, rom: float, conv: dict[str, float]) -> Joint
                 notes.append(f"cycles {rej} rejected")
         a_p, a_c, u_p, u_c = h.axis_parent, h.axis_child, h.centre_parent, h.centre_child
         resid = h.centre_residual
-    used, weights, sv = est.frames, est.weights, est.singular_values
-    cond = float(sv[0] / sv[1]) if sv[1] > 0 else math.inf
+    used, weights = est.frames, est.weights
+    cond = est.conditioning
     if cond < MIN_HINGE_CONDITIONING:
         raise FingerfitError(
             f"not a hinge: rotation about the best axis is only {cond:.1f} times the rotation "
@@ -741,8 +746,7 @@ def _hinge(m: _Motion, method: str, rom: float, conv: dict[str, float]) -> Joint
 
 def _ball(m: _Motion, rom: float, conv: dict[str, float]) -> JointFit:
     ref = _reference(m.rotation)
-    _, _, sv = sara_axis(m.rotation)
-    cond = float(sv[0] / sv[1]) if sv[1] > 0 else math.inf
+    cond = _conditioning(sara_axis(m.rotation)[2])
     if cond > MAX_BALL_CONDITIONING:
         raise FingerfitError(
             f"the motion turns about one axis only (rotation about it {cond:.0f} times the "
@@ -904,8 +908,7 @@ def fit_joint(
         return _ball(m, rom, conv)
     if kind == "two_axis":
         return _two_axis(m, rom, conv)
-    _, _, sv = sara_axis(m.rotation)
-    cond = float(sv[0] / sv[1]) if sv[1] > 0 else math.inf
+    cond = _conditioning(sara_axis(m.rotation)[2])
     fit = _two_axis(m, rom, conv, strict=False) if cond <= 1e6 else None
     if fit is not None:
         lo, hi = np.percentile(fit.angles_deg[:, 1], [5, 95])

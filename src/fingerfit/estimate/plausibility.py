@@ -586,6 +586,11 @@ def convention_checks(session: Session, fingers: Sequence[str]) -> list[PivotChe
     return checks
 
 
+def _pooled_rms(checks: Sequence[PivotCheck], reading: str) -> float:
+    """RMS over joints of the pivot residual under one reading of the quaternions (mm)."""
+    return float(np.sqrt(np.mean([c.residual_mm[reading] ** 2 for c in checks])))
+
+
 def convention_problems(checks: Sequence[PivotCheck], path: Path | None = None) -> list[Problem]:
     """Refusals from :func:`convention_checks`.
 
@@ -598,7 +603,7 @@ def convention_problems(checks: Sequence[PivotCheck], path: Path | None = None) 
         return []
 
     def pooled(k: str) -> float:
-        return float(np.sqrt(np.mean([c.residual_mm[k] ** 2 for c in checks])))
+        return _pooled_rms(checks, k)
 
     read = pooled("as read")
     alt = min((k for k in CONVENTIONS if k != "as read"), key=pooled)
@@ -770,12 +775,8 @@ def check_recording(
             "(--units)"
         )
     else:
-
-        def pooled(k: str) -> float:
-            return float(np.sqrt(np.mean([c.residual_mm[k] ** 2 for c in checks])))
-
-        alt = min((k for k in CONVENTIONS if k != "as read"), key=pooled)
-        if pooled(alt) < CONVENTION_RATIO * pooled("as read"):
+        alt = min((k for k in CONVENTIONS if k != "as read"), key=lambda k: _pooled_rms(checks, k))
+        if _pooled_rms(checks, alt) < CONVENTION_RATIO * _pooled_rms(checks, "as read"):
             cause = (
                 f"quaternions look {CONVENTIONS[alt]}, not w,x,y,z (residual "
                 f"{worst.residual_mm[alt]:.1f} mm read that way)"
