@@ -11,6 +11,13 @@ from __future__ import annotations
 from pathlib import Path
 
 
+def shown(value: object, n: int = 40) -> str:
+    """A value as shown in a one-line message: control characters and non-ASCII escaped
+    (``\\n``, ``\\xe9``), at most ``n`` characters (longer ones end in ``...``)."""
+    s = str(value).encode("unicode_escape").decode("ascii")
+    return s if len(s) <= n else s[: n - 3] + "..."
+
+
 class FingerfitError(ValueError):
     """A problem with user input, reported as one line.
 

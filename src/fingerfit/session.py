@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .errors import FingerfitError
+from .errors import FingerfitError, shown
 from .transforms import FloatArray
 
 FORMAT = "fingerfit.session/1"
@@ -79,10 +79,8 @@ def check_subject_id(
             f"subject ID must be a string, not {type(value).__name__}", path=path, field=field
         )
     if not _SUBJECT_RE.fullmatch(value):
-        shown = value.encode("unicode_escape").decode("ascii")
-        shown = shown if len(shown) <= 70 else shown[:67] + "..."
         raise FingerfitError(
-            f"subject ID '{shown}' must be 1-{SUBJECT_ID_MAX} letters, digits, '_', '.' or '-', "
+            f"subject ID '{shown(value, 70)}' must be 1-{SUBJECT_ID_MAX} letters, digits, '_', '.' or '-', "
             "not starting with '.'",
             path=path,
             field=field,

@@ -38,7 +38,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from ..errors import FingerfitError
+from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz
 from .atomic import atomic_write
@@ -52,7 +52,6 @@ from .hygiene import (
     repeated_rows,
     sensor_missing_notes,
 )
-from .posecsv import shown
 
 #: Number of values of each data item.
 ITEM_SIZE = {"position": 3, "euler": 3, "quaternion": 4, "timestamp": 1, "frame": 1}

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import FingerfitError
+from ..errors import FingerfitError, shown
 from ..session import PoseSeries, Recording, is_sensor_name
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 from .atomic import atomic_write
@@ -130,13 +130,6 @@ def _to_float(
             f"not a finite number: '{shown(text[i])}'", path=path, line=int(lines[i]), field=col
         )
     return values
-
-
-def shown(value: object, n: int = 40) -> str:
-    """A value as shown in a one-line message: control characters and non-ASCII escaped
-    (``\\n``, ``\\xe9``), at most ``n`` characters (longer ones end in ``...``)."""
-    s = str(value).encode("unicode_escape").decode("ascii")
-    return s if len(s) <= n else s[: n - 3] + "..."
 
 
 def read_pose_csv(

@@ -23,7 +23,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import numpy as np
 import pandas as pd
 
-from ..errors import FingerfitError
+from ..errors import FingerfitError, shown
 from ..session import (
     FINGERS,
     FORMAT,
@@ -40,7 +40,7 @@ from ..session import (
 from ..transforms import FloatArray
 from .atomic import atomic_write
 from .hygiene import MAX_RATE_HZ, implausible_message, implausible_rows
-from .posecsv import check_field_counts, read_pose_csv, shown, write_pose_csv
+from .posecsv import check_field_counts, read_pose_csv, write_pose_csv
 
 SESSION_FILE = "session.toml"
 LANDMARKS_FILE = "landmarks.csv"

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from ..errors import FingerfitError
+from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
 from .atomic import atomic_write
@@ -44,7 +44,7 @@ from .hygiene import (
     repeated_rows,
     sensor_missing_notes,
 )
-from .posecsv import check_field_counts, shown
+from .posecsv import check_field_counts
 
 QUAT_NORM_TOLERANCE = 1e-3
 #: Largest relative disagreement between ``--rate`` and the rate implied by the time
