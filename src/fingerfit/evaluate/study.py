@@ -525,11 +525,14 @@ def study_subject(item: Path | str | Session, options: FitOptions) -> SubjectOut
     else:
         source = str(item)
     try:
-        session = item if isinstance(item, Session) else load_session(Path(item))
-        check_subject_id(
-            session.subject,
-            path=None if session.path is None else Path(session.path) / "session.toml",
-        )
+        if isinstance(item, Session):  # load_session checks the ID of a session folder
+            session = item
+            check_subject_id(
+                session.subject,
+                path=None if session.path is None else Path(session.path) / "session.toml",
+            )
+        else:
+            session = load_session(Path(item))
     except FingerfitError as exc:
         msg = _one_line(exc)
         return SubjectOutcome(source, read_error=msg if source in msg else f"{source}: {msg}")
