@@ -54,7 +54,7 @@ from fingerfit.estimate.axis import orient_flexion
 from fingerfit.estimate.fit import DEFAULT_METHOD, joint_data, reference_poses
 from fingerfit.estimate.sagittal import intersect, sagittal_plane
 from fingerfit.kinematics import carry_by_hand, chain_points, compute_kinematics
-from fingerfit.model import HandModel, JointQuality, assemble_finger
+from fingerfit.model import HandModel, JointQuality, assemble_digit
 from fingerfit.session import HAND_SENSOR, JOINTS, joint_sensors
 from fingerfit.simulate import SimConfig, SimulatedSubject, simulate_subject
 from fingerfit.simulate.study import relative_truth_in_parent
@@ -164,7 +164,7 @@ def model_from_lines(
         session_units="mm",
         method=name,
         reference_poses={k: v for k, v in ref.items() if k in used},
-        fingers={FINGER: assemble_finger(FINGER, joints, s.landmark(f"{FINGER}.tip"))},
+        fingers={FINGER: assemble_digit(FINGER, joints, s.landmark(f"{FINGER}.tip"))},
         angle_method="swing_twist",
     )
 
@@ -219,7 +219,7 @@ def run_subject(task: tuple[str, dict, int]) -> dict:
                 for j in JOINTS
             ]
         err = tip_errors(sim, model, variant)
-        two_axis = model.fingers[FINGER].abduction is not None
+        two_axis = model.fingers[FINGER].second_axes.get("mp") is not None
         out["rows"][label] = {
             "two_axis": two_axis,
             "deg": deg,

@@ -31,7 +31,7 @@ def movement(m0, m1) -> dict[str, float]:
         c1, a1 = m1.in_parent("index", j)
         out[f"{j} deg"] = float(np.degrees(angle_between_axes(a0, a1)))
         out[f"{j} mm"] = float(np.linalg.norm(c1 - c0))
-    f0, f1 = m0.fingers["index"].abduction, m1.fingers["index"].abduction
+    f0, f1 = m0.fingers["index"].second_axes.get("mp"), m1.fingers["index"].second_axes.get("mp")
     out["flips"] = float((f0 is None) != (f1 is None))
     if f0 is not None and f1 is not None:
         p0, r0 = m0.reference_poses[f0.parent]

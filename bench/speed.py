@@ -110,7 +110,7 @@ def main() -> None:
         model = fit_session(session, FitOptions(method=method))
         t_user = best_of(lambda m=model: compute_kinematics(m, rec, variants=("user_axis",)), 3)
         t_both = best_of(lambda m=model: compute_kinematics(m, rec), 3)
-        kind = f"{model.angle_method}{', two-axis MP' if model.fingers['index'].abduction else ''}"
+        kind = f"{model.angle_method}{', two-axis MP' if model.fingers['index'].second_axes.get('mp') else ''}"
         results["angles"][method] = {
             "angle_method": kind,
             "user_axis_frames_per_s": n / t_user,

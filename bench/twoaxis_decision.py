@@ -78,7 +78,7 @@ def run_subject(task: tuple[str, int, int]) -> dict:
         "index": index,
         "mp_deg": deg[0],
         "tip_mm": float(np.nanmean(tip_errors(sim, model))),
-        "two_axis": model.fingers[FINGER].abduction is not None,
+        "two_axis": model.fingers[FINGER].second_axes.get("mp") is not None,
         "rest_ratio": rest_ratio(sim),
     }
 

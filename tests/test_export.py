@@ -16,10 +16,10 @@ from scipy.spatial.transform import Rotation
 
 from fingerfit.estimate import fit_session
 from fingerfit.export import mjcf_string, robot_hand, urdf_string
-from fingerfit.export.geometry import capsule_inertial
+from fingerfit.export.geometry import SYMMETRIC, capsule_inertial
 from fingerfit.kinematics import chain_points
 from fingerfit.model import (
-    FingerModel,
+    DigitModel,
     HandModel,
     JointModel,
     JointQuality,
@@ -103,7 +103,7 @@ def synthetic_model(
                 Rotation.random(random_state=seed * 10 + i + k).as_matrix(),
             )
             frames[s] = SegmentFrame(ends[i], np.column_stack([x, y, z]))
-        out[f] = FingerModel(
+        out[f] = DigitModel(
             f,
             joints,
             tip,
@@ -116,7 +116,7 @@ def synthetic_model(
                 )
             },
             frames,
-            ab,
+            {"mp": ab} if ab is not None else {},
         )
     return HandModel("SYN", "right", "mm", "synthetic", poses, out)
 
@@ -158,23 +158,20 @@ def reference_frames(model: HandModel, finger: str, variant: str, q: dict[str, f
     r0 = model.reference_poses["hand"][1]
     ang = {k: np.array([v]) for k, v in q.items()}
     out = {}
-    kinds = (["mp_abduction"] if fm.abduction is not None else []) + list(JOINTS)
-    for kind in kinds:
-        if kind == "mp_abduction":
-            jm, depth, a_ang = fm.abduction, 1, {**ang, "mp": np.zeros(1)}
-            axis = jm.axis
-        else:
-            jm, depth, a_ang = fm.joints[kind], JOINTS.index(kind) + 1, ang
-            axis = jm.axis_for(variant)
-        c = jm.center
-        pts = np.stack([c, c + axis, *(c + r0[:, i] for i in range(3))])
-        moved = np.stack([chain_points(fm, variant, a_ang, p, depth)[0] for p in pts])
-        moved_h = _to_hand(model, moved) * 1000.0  # mm, hand frame
-        out[kind] = (
-            moved_h[0] / 1000.0,
-            moved_h[1] - moved_h[0],
-            (moved_h[2:] - moved_h[0]).T,
-        )
+    for depth, j in enumerate(fm.joints, start=1):
+        axes = fm.axes(j)
+        for k, jm in enumerate(axes):
+            # The frame after axis k of joint j: the joint's more distal axis held at 0.
+            a_ang = {**ang, **{x.name: np.zeros(1) for x in axes[k + 1 :]}}
+            c, axis = jm.center, jm.axis_for(variant)
+            pts = np.stack([c, c + axis, *(c + r0[:, i] for i in range(3))])
+            moved = np.stack([chain_points(fm, variant, a_ang, p, depth)[0] for p in pts])
+            moved_h = _to_hand(model, moved) * 1000.0  # mm, hand frame
+            out[jm.name] = (
+                moved_h[0] / 1000.0,
+                moved_h[1] - moved_h[0],
+                (moved_h[2:] - moved_h[0]).T,
+            )
     out["tip"] = _to_hand(model, chain_points(fm, variant, ang, fm.tip)[0])
     return out
 
@@ -318,12 +315,10 @@ def test_names_order_limits_axes(case: str, tmp: str) -> None:
     r0 = model.reference_poses["hand"][1]
     expected = []
     for f, fm in model.fingers.items():
-        kinds = (["mp_abduction"] if fm.abduction is not None else []) + list(JOINTS)
-        for k in kinds:
-            jm = fm.abduction if k == "mp_abduction" else fm.joints[k]
+        for jm in (jm for j in fm.joints for jm in fm.axes(j)):
             top = max(jm.quality.rom_deg) + MARGIN_DEG
-            lim = (-top, top) if k == "mp_abduction" else (-MARGIN_DEG, top)
-            expected.append((f"{f}_{k}", np.radians(lim), r0.T @ jm.axis))
+            lim = (-top, top) if jm.name in SYMMETRIC else (-MARGIN_DEG, top)
+            expected.append((f"{f}_{jm.name}", np.radians(lim), r0.T @ jm.axis))
     for label, ld in exported(case, "user_axis", tmp).items():
         names = [e[0] for e in expected]
         if label.startswith("pinocchio"):
@@ -455,7 +450,7 @@ def test_limits_without_recorded_range(tmp: str) -> None:
     fm = dataclasses.replace(
         fm,
         joints={k: dataclasses.replace(j, quality=empty) for k, j in fm.joints.items()},
-        abduction=dataclasses.replace(fm.abduction, quality=empty),
+        second_axes={"mp": dataclasses.replace(fm.second_axes["mp"], quality=empty)},
     )
     model = dataclasses.replace(model, fingers={"index": fm})
     got = {j.kind: (j.lower, j.upper) for j in robot_hand(model, margin_deg=5.0).joints}

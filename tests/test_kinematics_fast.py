@@ -78,7 +78,7 @@ def test_block_kernel_equals_reference(
 ) -> None:
     model = models[kind]
     assert model.angle_method == "swing_twist"
-    assert (model.fingers["index"].abduction is not None) == (kind == "two_axis")
+    assert (model.fingers["index"].second_axes.get("mp") is not None) == (kind == "two_axis")
     rec = random_recording(model, 2500, seed=len(kind))
     monkeypatch.setattr(kin, "BLOCK_FRAMES", 1000)  # three blocks, the last one short
     got = kin.compute_kinematics(model, rec)

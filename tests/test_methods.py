@@ -51,7 +51,7 @@ def test_pooled_methods_are_exact_on_noise_free_data(exact_subject, method) -> N
     for j, (deg, mm) in errors(exact_subject, model).items():
         assert deg < 1e-6, (j, deg)
         assert mm < 1e-6, (j, mm)
-    assert model.fingers["index"].abduction is None  # no second axis in the data
+    assert model.fingers["index"].second_axes.get("mp") is None  # no second axis in the data
     assert model.angle_method == "swing_twist"
     assert tip_error(exact_subject, model).max() < 1e-6
 
@@ -83,19 +83,21 @@ def test_two_axis_mp_recovers_both_axes(two_axis_subject) -> None:
     sim = two_axis_subject
     model = fit_session(sim.session, FitOptions(method="twoaxis"))
     fm = model.fingers["index"]
-    assert fm.abduction is not None
+    assert fm.second_axes.get("mp") is not None
     for j, (deg, mm) in errors(sim, model).items():
         assert deg < 1e-5, (j, deg)
         assert mm < 1e-3, (j, mm)
     # Ab/adduction axis: direction and line, in the hand sensor frame; same sign convention.
     anat = sim.truth.fingers["index"]
-    np.testing.assert_allclose(fm.abduction.axis, anat.abduction_axis, atol=1e-4)
+    np.testing.assert_allclose(fm.second_axes.get("mp").axis, anat.abduction_axis, atol=1e-4)
     assert (
-        distance_point_to_line(fm.abduction.center, anat.abduction_point, anat.abduction_axis)
+        distance_point_to_line(
+            fm.second_axes.get("mp").center, anat.abduction_point, anat.abduction_axis
+        )
         < 0.02
     )
     # The axes neither meet nor stand at right angles.
-    assert abs(fm.abduction.axis @ fm.joints["mp"].axis) > 1e-3
+    assert abs(fm.second_axes.get("mp").axis @ fm.joints["mp"].axis) > 1e-3
     # Angles and fingertip exact, including the ab/adduction.
     kin = compute_kinematics(model, sim.session.test[0])
     truth = sim.truth.frames["test.csv"]
@@ -119,7 +121,8 @@ def test_two_axis_model_file_and_angles_csv(tmp_path, two_axis_subject) -> None:
     back = load_model(path)
     assert back.angle_method == "swing_twist" and back.method == "rolling"
     np.testing.assert_allclose(
-        back.fingers["index"].abduction.axis, model.fingers["index"].abduction.axis
+        back.fingers["index"].second_axes.get("mp").axis,
+        model.fingers["index"].second_axes.get("mp").axis,
     )
     for j in JOINTS:
         m0 = model.fingers["index"].joints[j].migration
@@ -133,17 +136,27 @@ def test_two_axis_model_file_and_angles_csv(tmp_path, two_axis_subject) -> None:
         "index.mp_abduction",
     ]
     assert "orthogonal.index.mp_abduction" in table.columns
-    # A file written before angle_method / migration existed loads with the old defaults.
+    assert json.loads(path.read_text())["fingers"]["index"]["axis_order"] == {
+        "mp": ["mp_abduction", "mp"]
+    }
+    # A file written before angle_method / migration / axis_order existed, with the second
+    # MP axis under "abduction", loads with the old defaults.
     doc = json.loads(path.read_text())
     doc.pop("angle_method")
-    for jd in doc["fingers"]["index"]["joints"].values():
-        jd.pop("migration_mm_per_rad")
-        jd["in_parent"].pop("migration_mm_per_rad")
+    fd = doc["fingers"]["index"]
+    fd.pop("axis_order")
+    fd["abduction"] = fd["joints"].pop("mp_abduction")
+    for j in JOINTS:
+        fd["joints"][j].pop("migration_mm_per_rad")
+        fd["joints"][j]["in_parent"].pop("migration_mm_per_rad")
     old = tmp_path / "old.json"
     old.write_text(json.dumps(doc))
     legacy = load_model(old)
     assert legacy.angle_method == "projection"
     assert all(j.migration is None for j in legacy.fingers["index"].joints.values())
+    np.testing.assert_array_equal(
+        legacy.fingers["index"].second_axes["mp"].axis, back.fingers["index"].second_axes["mp"].axis
+    )
 
 
 def test_rolling_recovers_centre_migration() -> None:

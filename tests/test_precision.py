@@ -78,10 +78,13 @@ def test_device_precision_does_not_move_the_model(subject_fit, device) -> None:
         assert deg <= MAX_AXIS_DEG, (name, device, j, deg)
         assert mm <= MAX_CENTRE_MM, (name, device, j, mm)
     # The two-axis/one-axis choice does not flip.
-    assert (f0.abduction is None) == (f1.abduction is None), (name, device)
-    if f0.abduction is None:
+    assert (f0.second_axes.get("mp") is None) == (f1.second_axes.get("mp") is None), (name, device)
+    if f0.second_axes.get("mp") is None:
         return
-    (p0, b0), (p1, b1) = _in_hand(m0, f0.abduction), _in_hand(m1, f1.abduction)
+    (p0, b0), (p1, b1) = (
+        _in_hand(m0, f0.second_axes.get("mp")),
+        _in_hand(m1, f1.second_axes.get("mp")),
+    )
     mm = float(np.linalg.norm(p1 - p0))
     assert mm <= MAX_CENTRE_MM, (name, device, "ab/adduction point", mm)
     # The ab/adduction axis direction is seen through a few degrees of ab/adduction only:
@@ -94,14 +97,14 @@ def test_device_precision_does_not_move_the_model(subject_fit, device) -> None:
 def test_weakly_determined_parameters_are_held_and_reported(subject_fit) -> None:
     name, _, model = subject_fit
     fm = model.fingers["index"]
-    assert fm.abduction is not None, name
+    assert fm.second_axes.get("mp") is not None, name
     notes = " ".join(fm.joints["mp"].quality.notes)
     # Realistic data do not determine the tilt of the ab/adduction axis towards the
     # flexion axis, nor the distance between the axes: held, and said so.
     assert "held perpendicular to the flexion axis (data weight 0 %)" in notes, notes
     assert "MP axes held intersecting (data weight 0 %)" in notes, notes
     c, a = model.in_parent("index", "mp")
-    pb, b = _in_hand(model, fm.abduction)
+    pb, b = _in_hand(model, fm.second_axes.get("mp"))
     assert abs(float(a @ b)) < 1e-9
     assert float(np.linalg.norm(np.cross(pb - c, a))) < 1e-4  # b's point lies on the MP axis
     assert "condition number" in notes

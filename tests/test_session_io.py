@@ -99,7 +99,7 @@ CSV_CASES = [
     (1, "time,sensor,x,y,z,qx,qy,qz,qw", {}, "header must be exactly", 1),
     (5, "0.0,hand,1,2,3,1,0,0", {}, "expected 9 comma-separated fields, found 8", 5),
     (7, None, {"y": "abc"}, "field 'y': not a number: 'abc'", 7),
-    (9, None, {"sensor": "thumb.distal"}, "unknown sensor name 'thumb.distal'", 9),
+    (9, None, {"sensor": "thumb.middle"}, "unknown sensor name 'thumb.middle'", 9),
     (11, None, {"qw": "1.2", "qx": "0", "qy": "0", "qz": "0"}, "has norm 1.2, not 1", 11),
     (20, None, {"time": "0.0"}, "time goes backwards", 20),
     (30, None, {"time": "0.0150"}, "not on the 240 Hz sampling grid", 30),
@@ -165,7 +165,7 @@ def test_gaps_stay_visible_and_are_counted(session_dir, tmp_path) -> None:
         (("format", 'format = "other/2"'), "field 'format': unsupported format 'other/2'"),
         (("units", 'units = "furlong"'), "field 'units': must be one of"),
         (("rate_hz", "rate_hz = -3"), "field 'rate_hz': must be positive"),
-        (("fingers", 'fingers = ["thumb"]'), "field 'fingers': must be a non-empty list"),
+        (("fingers", 'fingers = ["pinky"]'), "field 'fingers': must be a non-empty list"),
         (
             ("grasp", 'grasp = ["nope.csv"]'),
             "field 'recordings.grasp': names a file that does not exist",

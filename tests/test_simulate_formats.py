@@ -107,10 +107,16 @@ def model_differences(a: HandModel, b: HandModel) -> dict[str, dict[str, float]]
                 "centre_mm": float(np.linalg.norm(ja.center - jb.center)),
                 "length_mm": abs(fa.segment_lengths[seg] - fb.segment_lengths[seg]),
             }
-        if fa.abduction is not None and fb.abduction is not None:
+        if fa.second_axes.get("mp") is not None and fb.second_axes.get("mp") is not None:
             out["mp_abduction"] = {
-                "axis_deg": _angle_deg(fa.abduction.axis, fb.abduction.axis),
-                "centre_mm": float(np.linalg.norm(fa.abduction.center - fb.abduction.center)),
+                "axis_deg": _angle_deg(
+                    fa.second_axes.get("mp").axis, fb.second_axes.get("mp").axis
+                ),
+                "centre_mm": float(
+                    np.linalg.norm(
+                        fa.second_axes.get("mp").center - fb.second_axes.get("mp").center
+                    )
+                ),
                 "length_mm": 0.0,
             }
     return out

@@ -64,6 +64,6 @@ def test_default_fit_rejects_soft_tissue_second_axis_and_keeps_real_one() -> Non
     # before this test the soft-tissue artefact passed the other three conditions there.
     sim = simulate_subject(SimConfig(abduction=False), 1618992604)
     model = fit_session(sim.session, FitOptions(force=True))
-    assert model.fingers["index"].abduction is None
+    assert model.fingers["index"].second_axes.get("mp") is None
     real = fit_session(subject("realistic", 2).session, FitOptions(force=True))
-    assert real.fingers["index"].abduction is not None
+    assert real.fingers["index"].second_axes.get("mp") is not None

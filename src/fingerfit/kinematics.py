@@ -13,15 +13,18 @@ Two ways to get a joint angle from the two sensors of a joint (the model's
   the joint axis ``a`` and a swing perpendicular to it; the angle is the twist,
   ``theta = 2 atan2(vee(Q - Q^T)·a, 1 + tr Q)`` (no quaternion needed): traces of
   ``Q``, one BLAS product over the whole recording. For a
-  two-axis MP joint ``Q = Rot(b, beta) Rot(a, theta)``: ``beta`` turns ``a``
-  to ``Q a`` about ``b``, and ``theta`` is the twist of ``Rot(b, -beta) Q``.
+  two-axis joint ``Q = Rot(b, beta) Rot(a, theta)`` (``b`` the proximal axis, ``a``
+  the distal one): ``beta`` turns ``a`` to ``Q a`` about ``b``, and ``theta`` is the
+  twist of ``Rot(b, -beta) Q``.
 
-Fingertip: a product of exponentials at the reference posture. The tip point
-is rotated about the DIP, then PIP, then MP axis (each through its centre --
-moved by ``theta * migration`` where the model has rolling-contact migration --
-all in tracker coordinates at the reference posture), then about the MP
-ab/adduction axis of a two-axis model, and carried by the hand sensor's motion
-relative to its reference pose.
+Tip and pad: a product of exponentials at the reference posture. The point is
+rotated about each axis of the digit from the distal one to the proximal one
+(a finger: DIP, PIP, MP flexion, then the MP ab/adduction of a two-axis model;
+the thumb: IP, MCP (ab/adduction, flexion), CMC ab/adduction, CMC flexion --
+``docs/conventions.md``), each through its centre (moved by ``theta * migration``
+where the model has rolling-contact migration), all in tracker coordinates at the
+reference posture, and carried by the hand sensor's motion relative to its
+reference pose.
 
 Both run over whole recordings with NumPy; no per-frame Python loop. For a
 ``swing_twist`` model ``compute_kinematics`` computes the same numbers block by block
@@ -36,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from .model import ANGLE_METHODS, VARIANTS, FingerModel, HandModel
-from .session import HAND_SENSOR, JOINTS, UNITS_TO_MM, Recording
+from .model import ANGLE_METHODS, VARIANTS, DigitModel, HandModel
+from .session import HAND_SENSOR, UNITS_TO_MM, Recording
 from .transforms import (
     FloatArray,
     orthonormal_basis,
@@ -46,24 +49,27 @@ from .transforms import (
     skew,
 )
 
-ABDUCTION = "mp_abduction"
-
 
 @dataclass(frozen=True)
 class FingerMotion:
-    """One finger's kinematics under one model variant.
+    """One digit's kinematics under one model variant.
 
     Attributes
     ----------
     angles : dict[str, ndarray]
-        ``mp``, ``pip``, ``dip`` -> ``(n_frames,)`` flexion angles (rad), then
-        ``mp_abduction`` (rad, radial deviation positive) for a two-axis MP joint.
+        Flexion joints (``mp``, ``pip``, ``dip``; the thumb's ``cmc``, ``mcp``, ``ip``)
+        -> ``(n_frames,)`` angles (rad), then ``<joint>_abduction`` (rad) of each
+        two-axis joint (:meth:`~fingerfit.model.DigitModel.angle_names`).
     tip : ndarray, shape (n_frames, 3)
-        Fingertip in tracker coordinates (mm).
+        Tip (nail-edge point) in tracker coordinates (mm).
+    pad : ndarray, shape (n_frames, 3) or None
+        Pad point (pulp centre) in tracker coordinates (mm); ``None`` for a model
+        without pads.
     """
 
     angles: dict[str, FloatArray]
     tip: FloatArray
+    pad: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -75,7 +81,7 @@ class Kinematics:
     time : ndarray, shape (n_frames,)
         Seconds.
     motions : dict[str, dict[str, FingerMotion]]
-        variant (``user_axis``, ``orthogonal``) -> finger -> motion.
+        variant (``user_axis``, ``orthogonal``) -> digit -> motion.
     """
 
     time: FloatArray
@@ -177,29 +183,32 @@ def twist_angle(rotation: FloatArray, axis: FloatArray) -> FloatArray:
 
 
 def two_axis_angles(
-    rotation: FloatArray, flexion_axis: FloatArray, abduction_axis: FloatArray
+    rotation: FloatArray, distal_axis: FloatArray, proximal_axis: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Angles of a two-axis joint ``Q = Rot(b, beta) Rot(a, theta)``.
+
+    A finger's MP has its ab/adduction axis proximal (``b``) and its flexion axis distal
+    (``a``); the thumb's CMC and MCP the reverse (:mod:`fingerfit.digits`).
 
     Parameters
     ----------
     rotation : ndarray, shape (n, 3, 3)
         Rotations ``Q`` away from the reference posture (parent frame).
-    flexion_axis : ndarray, shape (3,)
-        Unit flexion axis ``a`` (parent frame at the reference posture; carried by
-        the ab/adduction).
-    abduction_axis : ndarray, shape (3,)
-        Unit ab/adduction axis ``b``, fixed in the parent frame, not parallel to ``a``.
+    distal_axis : ndarray, shape (3,)
+        Unit distal axis ``a`` (parent frame at the reference posture; carried by the
+        rotation about ``b``).
+    proximal_axis : ndarray, shape (3,)
+        Unit proximal axis ``b``, fixed in the parent frame, not parallel to ``a``.
 
     Returns
     -------
     beta, theta : ndarray, shape (n,)
-        Ab/adduction and flexion (rad). ``beta`` is the angle about ``b`` from the
-        part of ``a`` perpendicular to ``b`` to that of ``Q a`` (the flexion axis is
-        all the ab/adduction moves); ``theta`` is the twist of ``Rot(b, -beta) Q``
-        about ``a``. Exact when ``Q`` is of the two-axis form.
+        Angles about the proximal and the distal axis (rad). ``beta`` is the angle
+        about ``b`` from the part of ``a`` perpendicular to ``b`` to that of ``Q a``
+        (the distal axis is all the proximal rotation moves); ``theta`` is the twist
+        of ``Rot(b, -beta) Q`` about ``a``. Exact when ``Q`` is of the two-axis form.
     """
-    a, b = flexion_axis, abduction_axis
+    a, b = distal_axis, proximal_axis
     n = rotation.shape[0]
     ap = a - (a @ b) * b
     # beta = atan2((Q a)·(b x ap), (Q a)·ap), and (Q a)·w = tr(Q a w^T). The twist needs
@@ -228,10 +237,10 @@ def _projected(r: FloatArray, centre: FloatArray, axis: FloatArray, r0: FloatArr
 def two_axis_projection_angles(
     points: FloatArray,
     reference_point: FloatArray,
-    flexion_point: FloatArray,
-    flexion_axis: FloatArray,
-    abduction_point: FloatArray,
-    abduction_axis: FloatArray,
+    distal_point: FloatArray,
+    distal_axis: FloatArray,
+    proximal_point: FloatArray,
+    proximal_axis: FloatArray,
     iterations: int = 8,
 ) -> tuple[FloatArray, FloatArray]:
     """Two-axis joint angles from the child sensor origin alone (projection family).
@@ -246,19 +255,19 @@ def two_axis_projection_angles(
         Child sensor origin in the parent sensor frame (mm).
     reference_point : ndarray, shape (3,)
         The same at the reference posture (mm).
-    flexion_point, flexion_axis : ndarray, shape (3,)
-        A point (mm) and the unit direction of the flexion axis (parent frame).
-    abduction_point, abduction_axis : ndarray, shape (3,)
-        The same for the ab/adduction axis.
+    distal_point, distal_axis : ndarray, shape (3,)
+        A point (mm) and the unit direction of the distal axis ``a`` (parent frame).
+    proximal_point, proximal_axis : ndarray, shape (3,)
+        The same for the proximal axis ``b``.
     iterations : int
         Gauss-Newton steps.
 
     Returns
     -------
     beta, theta : ndarray, shape (n,)
-        Ab/adduction and flexion (rad).
+        Angles about the proximal and the distal axis (rad).
     """
-    a, b, ca, cb = flexion_axis, abduction_axis, flexion_point, abduction_point
+    a, b, ca, cb = distal_axis, proximal_axis, distal_point, proximal_point
     beta = _projected(points, cb, b, reference_point)
     theta = _projected(rotate_about_line(points, cb, b, -beta), ca, a, reference_point)
     v = reference_point - ca
@@ -278,41 +287,41 @@ def two_axis_projection_angles(
 
 
 def chain_points(
-    finger: FingerModel,
+    finger: DigitModel,
     variant: str,
     angles: dict[str, FloatArray],
     points: FloatArray,
     depth: int = 3,
 ) -> FloatArray:
-    """Move reference-posture points through the finger's joint rotations.
+    """Move reference-posture points through a digit's joint rotations.
 
     Parameters
     ----------
-    finger : FingerModel
+    finger : DigitModel
     variant : {"user_axis", "orthogonal"}
     angles : dict
-        ``mp``, ``pip``, ``dip`` (and ``mp_abduction`` for two-axis models) -> ``(n,)`` rad.
+        Every axis of the first ``depth`` joints (flexion joints and, for two-axis
+        joints, ``<joint>_abduction``) -> ``(n,)`` rad.
     points : ndarray, shape (3,) or (n, 3)
         Points on the segment distal to joint ``depth`` (tracker frame at the
         reference posture, mm); ``depth = 3`` for the distal phalanx.
     depth : int
-        Number of joints (from the MP) the points are carried by.
+        Number of joints (from the first) the points are carried by.
 
     Returns
     -------
     ndarray, shape (n, 3)
-        The points with the hand at its reference pose (mm).
+        The points with the hand at its reference pose (mm): turned about each axis
+        through its centre (moved by ``theta * migration`` where the model has
+        rolling-contact migration), distal axes first.
     """
     steps = []
-    for j in reversed(JOINTS[:depth]):
-        jm = finger.joints[j]
-        centre = jm.center
-        if jm.migration is not None:
-            centre = centre + np.multiply.outer(angles[j], jm.migration)
-        steps.append((centre, jm.axis_for(variant), angles[j]))
-    if finger.abduction is not None and depth > 0 and ABDUCTION in angles:
-        ab = finger.abduction
-        steps.append((ab.center, ab.axis, angles[ABDUCTION]))
+    for j in reversed(list(finger.joints)[:depth]):
+        for jm in reversed(finger.axes(j)):
+            centre = jm.center
+            if jm.migration is not None:
+                centre = centre + np.multiply.outer(angles[jm.name], jm.migration)
+            steps.append((centre, jm.axis_for(variant), angles[jm.name]))
     return rotate_about_lines(points, steps)
 
 
@@ -332,12 +341,13 @@ def finger_angles(
     variants: tuple[str, ...] = VARIANTS,
     method: str | None = None,
 ) -> dict[str, dict[str, FloatArray]]:
-    """Joint angles of one finger under several model variants (sensor data read once).
+    """Joint angles of one digit under several model variants (sensor data read once).
 
     Parameters
     ----------
     model : HandModel
     finger : str
+        Digit name.
     recording : Recording
     variants : tuple of str
         ``user_axis`` and/or ``orthogonal``.
@@ -347,8 +357,10 @@ def finger_angles(
     Returns
     -------
     dict
-        variant -> ``mp``, ``pip``, ``dip`` (and ``mp_abduction`` for a two-axis MP)
-        -> ``(n_frames,)`` rad; NaN where a sensor is missing.
+        variant -> angle name (:meth:`~fingerfit.model.DigitModel.angle_names`) ->
+        ``(n_frames,)`` rad; NaN where a sensor is missing. A two-axis joint
+        ``Q = Rot(p, alpha) Rot(d, delta)`` (``p`` its proximal axis, ``d`` its distal one,
+        :mod:`fingerfit.digits`) gives ``alpha`` and ``delta`` to the two axes' names.
     """
     method = method or model.angle_method
     if method not in ANGLE_METHODS:
@@ -359,29 +371,32 @@ def finger_angles(
         parent, child = recording.pose(jm.parent), recording.pose(jm.child)
         pp, pr = model.reference_poses[jm.parent]
         cp, cr = model.reference_poses[jm.child]
-        two_axis = j == "mp" and fm.abduction is not None
-        b = pr.T @ fm.abduction.axis if two_axis else None
         if method == "swing_twist":
             q = relative_rotation(parent.rotation, child.rotation, pr.T @ cr)
         else:
             r = np.einsum("ni,nij->nj", child.position - parent.position, parent.rotation)
             r0 = pr.T @ (cp - pp)
         for v in variants:
-            c, a = model.in_parent(finger, j, v)
-            if method == "swing_twist":
-                if two_axis:
-                    out[v][ABDUCTION], out[v][j] = two_axis_angles(q, a, b)
-                else:
+            if j not in fm.second_axes:
+                c, a = model.in_parent(finger, j, v)
+                if method == "swing_twist":
                     out[v][j] = twist_angle(q, a)
-            elif two_axis:
-                cb = pr.T @ (fm.abduction.center - pp)
-                out[v][ABDUCTION], out[v][j] = two_axis_projection_angles(r, r0, c, a, cb, b)
+                else:
+                    out[v][j] = projection_angle(
+                        parent.rotation, parent.position, child.position, c, a, r0
+                    )
+                continue
+            prox, dist = fm.axes(j)
+            cb, b = model.in_parent(finger, prox.name, v)
+            ca, a = model.in_parent(finger, dist.name, v)
+            if method == "swing_twist":
+                out[v][prox.name], out[v][dist.name] = two_axis_angles(q, a, b)
             else:
-                out[v][j] = projection_angle(
-                    parent.rotation, parent.position, child.position, c, a, r0
+                out[v][prox.name], out[v][dist.name] = two_axis_projection_angles(
+                    r, r0, ca, a, cb, b
                 )
-    # Column order: the three flexion angles, then the ab/adduction.
-    return {v: {k: d[k] for k in (*JOINTS, ABDUCTION) if k in d} for v, d in out.items()}
+    # Column order: the flexion angles, then the ab/adductions.
+    return {v: {k: d[k] for k in fm.angle_names()} for v, d in out.items()}
 
 
 def joint_angles(
@@ -391,11 +406,10 @@ def joint_angles(
     variant: str = "user_axis",
     method: str | None = None,
 ) -> dict[str, FloatArray]:
-    """Joint angles ``(n_frames,)`` rad of ``finger`` over ``recording`` (one variant).
+    """Joint angles ``(n_frames,)`` rad of digit ``finger`` over ``recording`` (one variant).
 
-    ``mp``, ``pip``, ``dip`` flexion and, for a two-axis MP joint, ``mp_abduction``;
-    computed by ``method`` (default: the model's ``angle_method``). See
-    :func:`finger_angles`.
+    Flexion and, for two-axis joints, ``<joint>_abduction``; computed by ``method``
+    (default: the model's ``angle_method``). See :func:`finger_angles`.
     """
     return finger_angles(model, finger, recording, (variant,), method)[variant]
 
@@ -429,18 +443,26 @@ def compute_kinematics(
     hand = recording.pose(HAND_SENSOR)
     motions: dict[str, dict[str, FingerMotion]] = {v: {} for v in variants}
     for f in fingers:
+        fm = model.fingers[f]
         angles = finger_angles(model, f, recording, variants)
         for v in variants:
-            local = chain_points(model.fingers[f], v, angles[v], model.fingers[f].tip)
-            tip = carry_by_hand(model, hand.rotation, hand.position, local)
-            motions[v][f] = FingerMotion(angles[v], tip)
+            tip, pad = (
+                None
+                if point is None
+                else carry_by_hand(
+                    model, hand.rotation, hand.position, chain_points(fm, v, angles[v], point)
+                )
+                for point in (fm.tip, fm.pad)
+            )
+            motions[v][f] = FingerMotion(angles[v], tip, pad)
     return Kinematics(recording.time, motions)
 
 
 def kinematics_table(kin: Kinematics, units: str = "mm") -> pd.DataFrame:
-    """Angles CSV table: ``time``, ``<finger>.mp|pip|dip`` (deg), ``<finger>.mp_abduction``
-    (deg, two-axis MP models only), ``<finger>.tip.x|y|z`` (``units``); the orthogonal
-    variant's columns carry the prefix ``orthogonal.``."""
+    """Angles CSV table: ``time``, per digit its angles ``<digit>.<joint>`` (deg; flexion
+    joints, then ``<joint>_abduction`` of two-axis joints), ``<digit>.tip.x|y|z`` and,
+    for models with pads, ``<digit>.pad.x|y|z`` (``units``); the orthogonal variant's
+    columns carry the prefix ``orthogonal.``."""
     scale = UNITS_TO_MM[units]
     cols: dict[str, FloatArray] = {"time": kin.time}
     for v, fingers in kin.motions.items():
@@ -448,8 +470,10 @@ def kinematics_table(kin: Kinematics, units: str = "mm") -> pd.DataFrame:
         for f, m in fingers.items():
             for j, a in m.angles.items():
                 cols[f"{prefix}{f}.{j}"] = np.degrees(a)
-            for i, c in enumerate("xyz"):
-                cols[f"{prefix}{f}.tip.{c}"] = m.tip[:, i] / scale
+            for point, xyz in (("tip", m.tip), ("pad", m.pad)):
+                if xyz is not None:
+                    for i, c in enumerate("xyz"):
+                        cols[f"{prefix}{f}.{point}.{c}"] = xyz[:, i] / scale
     return pd.DataFrame(cols)
 
 
@@ -513,34 +537,34 @@ def _swing_twist_kinematics(
     plans = {}
     sensors = {HAND_SENSOR}
     angles: dict[str, dict[str, dict[str, FloatArray]]] = {v: {} for v in variants}
-    tips: dict[str, dict[str, FloatArray]] = {v: {} for v in variants}
+    points: dict[str, dict[str, dict[str, FloatArray]]] = {v: {} for v in variants}
     for f in fingers:
         fm = model.fingers[f]
         joints = []
         for j, jm in fm.joints.items():
             pr, cr = model.reference_poses[jm.parent][1], model.reference_poses[jm.child][1]
             ref = pr.T @ cr
-            two_axis = j == "mp" and fm.abduction is not None
+            axes = fm.axes(j)
             mats = []
             for v in variants:
-                a = model.in_parent(f, j, v)[1]
-                if two_axis:
-                    b = pr.T @ fm.abduction.axis
+                if len(axes) == 2:
+                    b = model.in_parent(f, axes[0].name, v)[1]
+                    a = model.in_parent(f, axes[1].name, v)[1]
                     ap = a - (a @ b) * b
                     kb = skew(b)
                     xs, ys = (np.eye(3), skew(a).T), (np.eye(3), kb, kb @ kb)
                     mats += [np.outer(a, np.cross(b, ap)), np.outer(a, ap)]
                     mats += [x @ y for x in xs for y in ys]
                 else:
-                    mats += [np.eye(3), skew(a).T]
+                    mats += [np.eye(3), skew(model.in_parent(f, j, v)[1]).T]
             recording.pose(jm.parent), recording.pose(jm.child)  # a clear error if absent
             sensors |= {jm.parent, jm.child}
-            joints.append((j, jm.parent, jm.child, two_axis, _weights(ref, mats)))
+            joints.append(([x.name for x in axes], jm.parent, jm.child, _weights(ref, mats)))
         plans[f] = joints
+        wanted = {"tip": fm.tip} | ({} if fm.pad is None else {"pad": fm.pad})
         for v in variants:
-            keys = [*JOINTS] + ([ABDUCTION] if fm.abduction is not None else [])
-            angles[v][f] = {k: np.empty(n) for k in keys}
-            tips[v][f] = np.empty((n, 3))
+            angles[v][f] = {k: np.empty(n) for k in fm.angle_names()}
+            points[v][f] = {k: np.empty((n, 3)) for k in wanted}
     for s in range(0, n, BLOCK_FRAMES):
         e = min(n, s + BLOCK_FRAMES)
         rows = {k: _rows(recording.poses[k].rotation[s:e]) for k in sensors}
@@ -551,47 +575,51 @@ def _swing_twist_kinematics(
             cs: dict[str, dict[str, tuple[FloatArray, FloatArray, FloatArray]]] = {
                 v: {} for v in variants
             }
-            for j, parent, child, two_axis, w in plans[f]:
+            for names, parent, child, w in plans[f]:
                 t = w @ _product_rows(rows[parent], rows[child])
-                step = 8 if two_axis else 2
+                step = 8 if len(names) == 2 else 2
                 for iv, v in enumerate(variants):
                     tv = t[iv * step : (iv + 1) * step]
-                    if two_axis:
+                    if len(names) == 2:
                         beta, cb, sb = _full_angle(tv[0], tv[1])
                         c1 = 1.0 - cb
                         tr_i = tv[2] - sb * tv[3] + c1 * tv[4]
                         tr_k = tv[5] - sb * tv[6] + c1 * tv[7]
-                        cs[v][ABDUCTION] = (beta, cb, sb)
-                        cs[v][j] = _half_angle(tr_k, 1.0 + tr_i)
+                        cs[v][names[0]] = (beta, cb, sb)
+                        cs[v][names[1]] = _half_angle(tr_k, 1.0 + tr_i)
                     else:
-                        cs[v][j] = _half_angle(tv[1], 1.0 + tv[0])
+                        cs[v][names[0]] = _half_angle(tv[1], 1.0 + tv[0])
             for v in variants:
                 for k, (ang, _, _) in cs[v].items():
                     angles[v][f][k][s:e] = ang
-                steps = [(fm.joints[j], fm.joints[j].axis_for(v), j) for j in reversed(JOINTS)]
-                y = basis = centre = None
-                for jm, axis, j in steps:
-                    ang, cos, sin = cs[v][j]
-                    c = jm.center[:, None]
-                    if jm.migration is not None:
-                        c = c + np.multiply.outer(jm.migration, ang)
-                    y, basis, centre = _turn(y, basis, centre, c, axis, cos, sin, fm.tip)
-                if fm.abduction is not None:
-                    _, cos, sin = cs[v][ABDUCTION]
-                    ab = fm.abduction
-                    y, basis, centre = _turn(
-                        y, basis, centre, ab.center[:, None], ab.axis, cos, sin, fm.tip
-                    )
-                # Tip at the reference posture, then in the hand sensor's frame, then carried.
-                local = (r0.T @ basis.T) @ y + r0.T @ (centre - p0[:, None])
-                tip = tips[v][f][s:e]
-                for i in range(3):
-                    o = tip[:, i]
-                    o[:] = h[3 * i] * local[0]
-                    o += h[3 * i + 1] * local[1]
-                    o += h[3 * i + 2] * local[2]
-                    o += hp[i]
-    motions = {v: {f: FingerMotion(angles[v][f], tips[v][f]) for f in fingers} for v in variants}
+                steps = [jm for j in reversed(list(fm.joints)) for jm in reversed(fm.axes(j))]
+                for name, out in points[v][f].items():
+                    point = fm.tip if name == "tip" else fm.pad
+                    y = basis = centre = None
+                    for jm in steps:
+                        ang, cos, sin = cs[v][jm.name]
+                        c = jm.center[:, None]
+                        if jm.migration is not None:
+                            c = c + np.multiply.outer(jm.migration, ang)
+                        y, basis, centre = _turn(
+                            y, basis, centre, c, jm.axis_for(v), cos, sin, point
+                        )
+                    # The point at the reference posture, in the hand sensor's frame, carried.
+                    local = (r0.T @ basis.T) @ y + r0.T @ (centre - p0[:, None])
+                    block = out[s:e]
+                    for i in range(3):
+                        o = block[:, i]
+                        o[:] = h[3 * i] * local[0]
+                        o += h[3 * i + 1] * local[1]
+                        o += h[3 * i + 2] * local[2]
+                        o += hp[i]
+    motions = {
+        v: {
+            f: FingerMotion(angles[v][f], points[v][f]["tip"], points[v][f].get("pad"))
+            for f in fingers
+        }
+        for v in variants
+    }
     return Kinematics(recording.time, motions)
 
 

@@ -1,4 +1,4 @@
-"""The individual finger model and its file format ``fingerfit.model/1`` (JSON).
+"""The individual hand model (five digits at most) and its file format ``fingerfit.model/1`` (JSON).
 
 Everything geometric is stored in **tracker coordinates at the reference
 posture, in mm** (and, for each joint, also in its parent sensor's frame),
@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 
 from . import __version__
+from .digits import DIGIT_NAMES, DIGITS, second_axis
 from .errors import FingerfitError
 from .io.atomic import atomic_write
-from .session import FINGERS, JOINTS, SEGMENTS
 from .transforms import FloatArray, matrix_from_quat_wxyz, quat_wxyz_from_matrix
 
 FORMAT = "fingerfit.model/1"
@@ -84,15 +84,20 @@ class JointModel:
 
     Attributes
     ----------
-    name : {"mp", "pip", "dip"}
+    name : str
+        A flexion joint (``mp``, ``pip``, ``dip``; the thumb's ``cmc``, ``mcp``, ``ip``)
+        or a second axis (``<joint>_abduction``).
     parent, child : str
         Sensor names on the two segments.
     center : ndarray, shape (3,)
         Joint centre (on the sagittal plane).
     axis : ndarray, shape (3,)
-        Fitted ("user") flexion axis, unit, oriented so flexion is positive.
+        Fitted ("user") axis, unit, oriented so flexion (ab/adduction: radial or, for
+        the thumb, palmar abduction; ``docs/conventions.md``) is positive.
     orthogonal_axis : ndarray, shape (3,)
-        The axis made perpendicular to the bone (the classic model).
+        The axis of the classic model robot hands use: a flexion axis made perpendicular
+        to the bone; a second axis perpendicular to the bone and to the orthogonal
+        flexion axis.
     quality : JointQuality
     migration : ndarray, shape (3,), optional
         Rolling-contact migration of the centre (mm/rad, tracker coordinates at
@@ -124,24 +129,33 @@ class SegmentFrame:
 
 
 @dataclass(frozen=True)
-class FingerModel:
-    """One finger: three joints, the fingertip point, segment lengths and frames (mm).
+class DigitModel:
+    """One digit: three flexion joints, second axes, tip and pad points, segment lengths
+    and frames (mm, tracker coordinates at the reference posture).
 
     Attributes
     ----------
+    name : str
+        ``thumb``, ``index``, ``middle``, ``ring`` or ``little`` (:mod:`fingerfit.digits`).
     joints : dict[str, JointModel]
-        ``mp``, ``pip``, ``dip`` flexion joints.
+        The flexion joints, proximal to distal: ``mp``, ``pip``, ``dip`` (the thumb:
+        ``cmc``, ``mcp``, ``ip``).
     tip : ndarray, shape (3,)
-        Fingertip (nail-edge landmark), tracker coordinates at the reference posture.
+        Tip point (nail-edge landmark).
     segment_lengths : dict[str, float]
-        ``proximal``, ``middle``, ``distal`` (mm, centre to centre / to the tip).
+        Per segment (``proximal``, ``middle``, ``distal``; the thumb: ``metacarpal``,
+        ``proximal``, ``distal``), mm, centre to centre / to the tip.
     frames : dict[str, SegmentFrame]
-    abduction : JointModel, optional
-        Two-axis MP models only: the MP ab/adduction axis (parent ``hand``, child
-        the proximal sensor). In the chain it acts **proximal** to MP flexion:
-        ``tip = Rot_ab(Rot_mp(Rot_pip(Rot_dip(tip_ref))))``, all about fixed
-        reference-posture axes. Its ``orthogonal_axis`` is the same axis (the
-        orthogonal variant only changes flexion axes).
+    second_axes : dict[str, JointModel]
+        Flexion joint -> its second (ab/adduction) axis ``<joint>_abduction`` (same
+        parent and child sensors), for two-axis joints only. Which of the two axes is
+        proximal is :meth:`order` (:mod:`fingerfit.digits`): a finger's MP turns about
+        the ab/adduction axis proximally, ``tip = Rot_ab(Rot_mp(Rot_pip(Rot_dip(tip))))``;
+        the thumb's CMC and MCP about the flexion axis proximally, all about fixed
+        reference-posture lines.
+    pad : ndarray, shape (3,), optional
+        Pad point (pulp centre), carried by the distal segment; ``None`` in models
+        written before pads existed.
     """
 
     name: str
@@ -149,7 +163,30 @@ class FingerModel:
     tip: FloatArray
     segment_lengths: dict[str, float]
     frames: dict[str, SegmentFrame]
-    abduction: JointModel | None = None
+    second_axes: dict[str, JointModel] = field(default_factory=dict)
+    pad: FloatArray | None = None
+
+    @property
+    def segments(self) -> tuple[str, str, str]:
+        """Segment names, proximal to distal."""
+        return DIGITS[self.name].segments
+
+    def order(self, joint: str) -> str:
+        """``abduction_first`` or ``flexion_first``: which axis of a two-axis joint is proximal."""
+        return DIGITS[self.name].order[joint]
+
+    def axes(self, joint: str) -> list[JointModel]:
+        """The axes of ``joint``, proximal first (one for a hinge, two for a two-axis joint)."""
+        first = self.joints[joint]
+        second = self.second_axes.get(joint)
+        if second is None:
+            return [first]
+        return [second, first] if self.order(joint) == "abduction_first" else [first, second]
+
+    def angle_names(self) -> tuple[str, ...]:
+        """Angle names of the digit: flexion joints, then ``<joint>_abduction`` of each
+        two-axis joint (the angles CSV's column order)."""
+        return DIGITS[self.name].angle_names(tuple(self.second_axes))
 
 
 @dataclass(frozen=True)
@@ -165,7 +202,8 @@ class HandModel:
     reference_poses : dict[str, tuple[ndarray, ndarray]]
         Sensor name -> (position ``(3,)`` mm, rotation ``(3, 3)`` sensor -> tracker)
         at the reference posture.
-    fingers : dict[str, FingerModel]
+    fingers : dict[str, DigitModel]
+        Digit name -> model (the thumb included; the JSON key is ``fingers``).
     version : str
         fingerfit version that wrote it.
     angle_method : {"projection", "swing_twist"}
@@ -182,7 +220,7 @@ class HandModel:
     session_units: str
     method: str
     reference_poses: dict[str, tuple[FloatArray, FloatArray]]
-    fingers: dict[str, FingerModel]
+    fingers: dict[str, DigitModel]
     version: str = __version__
     angle_method: str = "projection"
     warnings: tuple[str, ...] = ()
@@ -190,10 +228,21 @@ class HandModel:
     def in_parent(
         self, finger: str, joint: str, variant: str = "user_axis"
     ) -> tuple[FloatArray, FloatArray]:
-        """Joint centre ``(3,)`` mm and axis ``(3,)`` in the parent sensor's frame."""
-        j = self.fingers[finger].joints[joint]
+        """Centre ``(3,)`` mm and axis ``(3,)`` of a joint or second axis (by its name,
+        e.g. ``pip`` or ``mp_abduction``) in the parent sensor's frame."""
+        j = self.axis(finger, joint)
         p, r = self.reference_poses[j.parent]
         return r.T @ (j.center - p), r.T @ j.axis_for(variant)
+
+    def axis(self, finger: str, name: str) -> JointModel:
+        """A digit's joint or second axis by name (``pip``, ``cmc_abduction``, ...)."""
+        fm = self.fingers[finger]
+        if name in fm.joints:
+            return fm.joints[name]
+        for j, second in fm.second_axes.items():
+            if second_axis(j) == name:
+                return second
+        raise KeyError(f"{finger} has no axis '{name}'")
 
 
 def with_fixed_centres(model: HandModel) -> tuple[HandModel, dict[str, float]]:
@@ -235,56 +284,81 @@ def orthogonal_axis(axis: FloatArray, bone: FloatArray) -> FloatArray:
     return y / np.linalg.norm(y)
 
 
-def assemble_finger(
+def orthogonal_second_axis(axis: FloatArray, flexion: FloatArray, bone: FloatArray) -> FloatArray:
+    """A second axis ``(3,)`` of the orthogonal model: perpendicular to the unit ``bone``
+    and to the orthogonal ``flexion`` axis ``(3,)``, with the sense of ``axis (3,)``."""
+    y = np.cross(flexion, bone)
+    y /= np.linalg.norm(y)
+    return y if y @ axis >= 0 else -y
+
+
+def assemble_digit(
     name: str,
     joints: dict[str, tuple[str, str, FloatArray, FloatArray, JointQuality]],
     tip: FloatArray,
-    abduction: JointModel | None = None,
+    second_axes: dict[str, JointModel] | None = None,
     migration: dict[str, FloatArray] | None = None,
-) -> FingerModel:
-    """Segment lengths, local frames and orthogonal axes of a finger from its joints.
+    pad: FloatArray | None = None,
+) -> DigitModel:
+    """Segment lengths, local frames and orthogonal axes of a digit from its joints.
 
     Parameters
     ----------
     name : str
-        Finger name.
+        Digit name (:data:`fingerfit.digits.DIGIT_NAMES`).
     joints : dict
-        ``mp``, ``pip``, ``dip`` -> ``(parent, child, centre (3,), axis (3,), quality)``;
+        The digit's three flexion joints, proximal to distal (``mp``, ``pip``, ``dip``;
+        ``cmc``, ``mcp``, ``ip``) -> ``(parent, child, centre (3,), axis (3,), quality)``;
         centres (mm) and unit axes (oriented so flexion is positive) in tracker
         coordinates at the reference posture.
     tip : ndarray, shape (3,)
-        Fingertip landmark (mm, same frame).
-    abduction : JointModel, optional
-        MP ab/adduction axis of a two-axis MP joint.
+        Tip landmark (mm, same frame).
+    second_axes : dict, optional
+        Flexion joint -> its second axis (``orthogonal_axis`` is recomputed here).
     migration : dict, optional
         Joint -> centre migration ``(3,)`` mm/rad (tracker frame at the reference posture).
+    pad : ndarray, shape (3,), optional
+        Pad point (mm, same frame).
 
     Returns
     -------
-    FingerModel
-        Bones run centre to centre (and DIP centre to tip); the orthogonal axis of
-        each joint is its axis made perpendicular to the bone of the segment ending
-        at it (the metacarpal is taken collinear with the proximal phalanx); the
-        local frame of each segment is the paper's Fig. 4 frame at its distal end.
+    DigitModel
+        Bones run centre to centre (and from the last centre to the tip); the
+        orthogonal axis of each flexion joint is its axis made perpendicular to the bone
+        of the segment ending at it (for the first joint the bone it moves: a finger's
+        metacarpal is taken collinear with the proximal phalanx, the thumb's CMC moves
+        the metacarpal); a second axis's orthogonal axis is perpendicular to that bone
+        and to the orthogonal flexion axis. The local frame of each segment is the
+        paper's Fig. 4 frame at its distal end.
     """
-    ends = [joints["mp"][2], joints["pip"][2], joints["dip"][2], tip]
+    names = DIGITS[name].joints
+    ends = [joints[j][2] for j in names] + [tip]
     bones = [(ends[i + 1] - ends[i]) / np.linalg.norm(ends[i + 1] - ends[i]) for i in range(3)]
-    bone_at = {"mp": bones[0], "pip": bones[0], "dip": bones[1]}
+    bone_at = {names[0]: bones[0], names[1]: bones[0], names[2]: bones[1]}
     migration = migration or {}
     out: dict[str, JointModel] = {}
-    for j, (parent, child, c, a, quality) in joints.items():
+    for j in names:
+        parent, child, c, a, quality = joints[j]
         out[j] = JointModel(
             j, parent, child, c, a, orthogonal_axis(a, bone_at[j]), quality, migration.get(j)
         )
+    seconds = {
+        j: replace(
+            jm, orthogonal_axis=orthogonal_second_axis(jm.axis, out[j].orthogonal_axis, bone_at[j])
+        )
+        for j, jm in (second_axes or {}).items()
+    }
     frames = {}
-    axes_at_end = [out["pip"].axis, out["dip"].axis, out["dip"].axis]
-    for i, s in enumerate(SEGMENTS):
+    axes_at_end = [out[names[1]].axis, out[names[2]].axis, out[names[2]].axis]
+    for i, s in enumerate(DIGITS[name].segments):
         x = bones[i]
         z = np.cross(x, axes_at_end[i])
         z /= np.linalg.norm(z)
         frames[s] = SegmentFrame(ends[i + 1], np.column_stack([x, np.cross(z, x), z]))
-    lengths = {s: float(np.linalg.norm(ends[i + 1] - ends[i])) for i, s in enumerate(SEGMENTS)}
-    return FingerModel(name, out, tip, lengths, frames, abduction)
+    lengths = {
+        s: float(np.linalg.norm(ends[i + 1] - ends[i])) for i, s in enumerate(DIGITS[name].segments)
+    }
+    return DigitModel(name, out, tip, lengths, frames, seconds, pad)
 
 
 # --------------------------------------------------------------------------- JSON
@@ -320,12 +394,18 @@ def model_to_dict(model: HandModel) -> dict[str, Any]:
     fingers = {}
     for fname, f in model.fingers.items():
         joints = {jname: _joint_doc(j, model) for jname, j in f.joints.items()}
-        dp, dr = model.reference_poses[f.joints["dip"].child]
+        joints |= {second_axis(j): _joint_doc(ab, model) for j, ab in f.second_axes.items()}
+        dp, dr = model.reference_poses[f.joints[DIGITS[fname].joints[-1]].child]
         fingers[fname] = {
             "joints": joints,
-            **({"abduction": _joint_doc(f.abduction, model)} if f.abduction is not None else {}),
+            "axis_order": {j: [a.name for a in f.axes(j)] for j in f.second_axes},
             "tip": _v(f.tip),
             "tip_in_distal": _v(dr.T @ (f.tip - dp)),
+            **(
+                {"pad": _v(f.pad), "pad_in_distal": _v(dr.T @ (f.pad - dp))}
+                if f.pad is not None
+                else {}
+            ),
             "segment_lengths": {k: float(v) for k, v in f.segment_lengths.items()},
             "frames": {
                 k: {
@@ -498,8 +578,10 @@ def load_model(path: str | Path) -> HandModel:
     """Read and validate a ``fingerfit.model/1`` file.
 
     Files written before the optional fields existed (``angle_method``, a joint's
-    ``migration_mm_per_rad``, a finger's ``abduction``) load with their defaults:
-    projection angles, fixed centres, a one-axis MP joint.
+    ``migration_mm_per_rad``, a digit's ``pad``) load with their defaults: projection
+    angles, fixed centres, no pad. A finger's second MP axis is read from
+    ``joints.mp_abduction`` or, in older files, from ``abduction``; a stated
+    ``axis_order`` must be the digit's (:mod:`fingerfit.digits`).
 
     Raises
     ------
@@ -542,33 +624,7 @@ def load_model(path: str | Path) -> HandModel:
     if not isinstance(fdoc, dict) or not fdoc:
         raise r.err("fingers", "must be a non-empty object")
     for fname, fd in fdoc.items():
-        wf = f"fingers.{fname}"
-        if fname not in FINGERS:
-            raise r.err(wf, f"unknown finger (expected one of {', '.join(FINGERS)})")
-        jdoc = r.get(fd, "joints", wf)
-        joints = {
-            j: _load_joint(r, r.get(jdoc, j, f"{wf}.joints"), j, f"{wf}.joints.{j}", poses)
-            for j in JOINTS
-        }
-        abduction = None
-        if "abduction" in fd:
-            abduction = _load_joint(r, fd["abduction"], "mp_abduction", f"{wf}.abduction", poses)
-        lengths_doc = r.get(fd, "segment_lengths", wf)
-        lengths = {}
-        for s in SEGMENTS:
-            v = r.get(lengths_doc, s, f"{wf}.segment_lengths")
-            if not _is_number(v) or not (0 < v <= MAX_MODEL_MM):
-                raise r.err(f"{wf}.segment_lengths.{s}", "must be a positive number (mm)")
-            lengths[s] = float(v)
-        frames = {}
-        for s in SEGMENTS:
-            fr = r.get(r.get(fd, "frames", wf), s, f"{wf}.frames")
-            w = f"{wf}.frames.{s}"
-            rot = np.column_stack([r.vec(fr, k, w, unit=True) for k in "xyz"])
-            frames[s] = SegmentFrame(r.vec(fr, "origin", w), rot)
-        fingers[fname] = FingerModel(
-            fname, joints, r.vec(fd, "tip", wf), lengths, frames, abduction
-        )
+        fingers[fname] = _load_digit(r, fd, fname, poses)
     return HandModel(
         subject=r.str_(doc, "subject", ""),
         hand=r.str_(doc, "hand", "", ("left", "right")),
@@ -584,6 +640,55 @@ def load_model(path: str | Path) -> HandModel:
         ),
         warnings=_warnings(r, doc),
     )
+
+
+def _load_digit(r: _Reader, fd: Any, fname: str, poses: dict) -> DigitModel:
+    """One digit entry of a model file, checked (see :func:`load_model`)."""
+    wf = f"fingers.{fname}"
+    if fname not in DIGIT_NAMES:
+        raise r.err(wf, f"unknown digit (expected one of {', '.join(DIGIT_NAMES)})")
+    digit = DIGITS[fname]
+    jdoc = r.get(fd, "joints", wf)
+    joints = {
+        j: _load_joint(r, r.get(jdoc, j, f"{wf}.joints"), j, f"{wf}.joints.{j}", poses)
+        for j in digit.joints
+    }
+    seconds = {}
+    for j in digit.second_axes:
+        name = second_axis(j)
+        if isinstance(jdoc, dict) and name in jdoc:
+            seconds[j] = _load_joint(r, jdoc[name], name, f"{wf}.joints.{name}", poses)
+        elif j == "mp" and isinstance(fd, dict) and "abduction" in fd:  # files before 0.2
+            seconds[j] = _load_joint(r, fd["abduction"], name, f"{wf}.abduction", poses)
+    unknown = set(jdoc) - set(digit.joints) - {second_axis(j) for j in digit.second_axes}
+    if unknown:
+        raise r.err(f"{wf}.joints.{sorted(unknown)[0]}", f"not a joint of the {fname}")
+    for j in digit.required_second:
+        if j not in seconds:
+            raise r.err(f"{wf}.joints.{second_axis(j)}", "missing (a two-axis joint)")
+    lengths_doc = r.get(fd, "segment_lengths", wf)
+    lengths = {}
+    for s in digit.segments:
+        v = r.get(lengths_doc, s, f"{wf}.segment_lengths")
+        if not _is_number(v) or not (0 < v <= MAX_MODEL_MM):
+            raise r.err(f"{wf}.segment_lengths.{s}", "must be a positive number (mm)")
+        lengths[s] = float(v)
+    frames = {}
+    for s in digit.segments:
+        fr = r.get(r.get(fd, "frames", wf), s, f"{wf}.frames")
+        w = f"{wf}.frames.{s}"
+        rot = np.column_stack([r.vec(fr, k, w, unit=True) for k in "xyz"])
+        frames[s] = SegmentFrame(r.vec(fr, "origin", w), rot)
+    pad = r.vec(fd, "pad", wf) if "pad" in fd else None
+    model = DigitModel(fname, joints, r.vec(fd, "tip", wf), lengths, frames, seconds, pad)
+    order = fd.get("axis_order", {})
+    for j in seconds:
+        want = [a.name for a in model.axes(j)]
+        if j in order and order[j] != want:
+            raise r.err(
+                f"{wf}.axis_order.{j}", f"must be {want} (proximal first; docs/conventions.md)"
+            )
+    return model
 
 
 def _warnings(r: _Reader, doc: dict[str, Any]) -> tuple[str, ...]:

@@ -15,22 +15,27 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .digits import DIGIT_NAMES, DIGITS, FINGER_JOINTS, FINGER_SEGMENTS
+from .digits import FINGERS as FINGERS
 from .errors import FingerfitError, shown
 from .transforms import FloatArray
 
 FORMAT = "fingerfit.session/1"
-FINGERS = ("index", "middle", "ring", "little")
-SEGMENTS = ("proximal", "middle", "distal")
-JOINTS = ("mp", "pip", "dip")
+# The fingers' segment and joint names (the thumb's are in ``digits.DIGITS["thumb"]``).
+SEGMENTS = FINGER_SEGMENTS
+JOINTS = FINGER_JOINTS
 HAND_SENSOR = "hand"
 UNITS_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
-_SENSOR_RE = re.compile(r"^(hand|stylus|(index|middle|ring|little)\.(proximal|middle|distal))$")
+_FINGER = "(index|middle|ring|little)"
+_SENSOR_RE = re.compile(
+    rf"^(hand|stylus|{_FINGER}\.(proximal|middle|distal)|thumb\.(metacarpal|proximal|distal))$"
+)
 _SUBJECT_RE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]{0,63}$")
 #: Longest subject identifier (characters).
 SUBJECT_ID_MAX = 64
 _LANDMARK_RE = re.compile(
-    r"^((index|middle|ring|little)\.(mp|pip|dip|tip)|target\.[A-Za-z0-9_\-]+)$"
+    rf"^({_FINGER}\.(mp|pip|dip|tip|pad)|thumb\.(cmc|mcp|ip|tip|pad)|target\.[A-Za-z0-9_\-]+)$"
 )
 
 
@@ -94,10 +99,15 @@ def true_runs(mask: np.ndarray) -> np.ndarray:
     return np.column_stack([np.flatnonzero(d == 1), np.flatnonzero(d == -1)])
 
 
-def joint_sensors(finger: str) -> dict[str, tuple[str, str]]:
-    """(parent, child) sensor names of each joint of a finger, ordered MP, PIP, DIP."""
-    seg = [HAND_SENSOR] + [sensor_name(finger, s) for s in SEGMENTS]
-    return {j: (seg[i], seg[i + 1]) for i, j in enumerate(JOINTS)}
+def joint_sensors(digit: str) -> dict[str, tuple[str, str]]:
+    """(parent, child) sensor names of each joint of a digit, proximal to distal
+    (``mp``, ``pip``, ``dip``; the thumb's ``cmc``, ``mcp``, ``ip``)."""
+    return DIGITS[digit].joint_sensors()
+
+
+def digit_sensors(digit: str) -> list[str]:
+    """The hand sensor and the digit's three segment sensors, proximal to distal."""
+    return [HAND_SENSOR, *(sensor_name(digit, s) for s in DIGITS[digit].segments)]
 
 
 @dataclass(frozen=True)
@@ -200,13 +210,23 @@ class Recording:
 
 @dataclass(frozen=True)
 class TargetEvent:
-    """The fingertip of ``finger`` touches landmark ``target.<target>`` during [start, end] s."""
+    """The tip of digit ``finger`` touches something during [start, end] s.
+
+    ``target`` is either a landmark's name after ``target.`` (the tip touches landmark
+    ``target.<target>``) or a digit's name (a pinch: the pads of ``finger`` and of that
+    digit touch).
+    """
 
     recording: str
     finger: str
     target: str
     start: float
     end: float
+
+    @property
+    def is_pinch(self) -> bool:
+        """Whether the event is a pinch of two digits (``target`` names a digit)."""
+        return self.target in DIGIT_NAMES
 
 
 @dataclass
@@ -221,6 +241,7 @@ class Session:
         Units declared by the files; arrays here are always mm.
     rate_hz : float
     fingers : list[str]
+        Digits of the session: any of ``thumb``, ``index``, ``middle``, ``ring``, ``little``.
     reference : Recording
         Static recording at the stretched reference posture (all joint angles 0).
     grasp, targets, test : list[Recording]

@@ -63,7 +63,7 @@ def _session_args(src: Path, out: Path) -> list:
         ("events.csv", 2, 4, "Infinity", "events.csv:2: field 'end': start and end (s) must be"),
         ("events.csv", 2, 3, "abc", "events.csv:2: field 'start': start and end (s) must be a num"),
         ("events.csv", 2, 4, "-1", "events.csv:2: need start < end, got "),
-        ("events.csv", 2, 1, "thumb", "events.csv:2: field 'finger': unknown finger 'thumb'"),
+        ("events.csv", 2, 1, "pinky", "events.csv:2: field 'finger': unknown digit 'pinky'"),
         ("landmarks.csv", 3, 0, "index.knuckle", "landmarks.csv:3: field 'name': unknown landmark"),
         (
             "landmarks.csv",

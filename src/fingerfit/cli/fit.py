@@ -38,7 +38,11 @@ def quality_table(model: HandModel) -> Table:
 
     t = Table(
         title=f"{escape(model.subject)}: method {escape(model.method)}"
-        + (", two-axis MP" if any(f.abduction is not None for f in model.fingers.values()) else ""),
+        + (
+            ", two-axis MP"
+            if any(f.second_axes.get("mp") is not None for f in model.fingers.values())
+            else ""
+        ),
         title_justify="left",
         caption="\n".join(
             f"{k}: {v}" for k, v in TABLE_LEGEND.items() if k not in ("finger", "joint")

@@ -5,7 +5,7 @@
 * :mod:`.axis` -- axis of rotation through the per-cycle centres (Tang et al. 2018, eq. 1);
 * :mod:`.sagittal` -- the finger's sagittal plane from stylus landmarks;
 * :mod:`.plausibility` -- physical plausibility: units, landmarks, quaternion convention;
-* :mod:`.fit` -- the whole fit of a session into a :class:`~fingerfit.model.FingerModel`;
+* :mod:`.fit` -- the whole fit of a session into a :class:`~fingerfit.model.DigitModel`;
 * :mod:`.joint` -- one joint between any two tracked segments (:func:`fit_joint`,
   :func:`hinge_axis`, :func:`two_axis`, :func:`joint_centre`; ``docs/joint.md``).
 """

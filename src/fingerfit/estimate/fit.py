@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import FingerfitError
 from ..kinematics import twist_angle, two_axis_angles
-from ..model import ANGLE_METHODS, FingerModel, HandModel, JointModel, JointQuality, assemble_finger
+from ..model import ANGLE_METHODS, DigitModel, HandModel, JointModel, JointQuality, assemble_digit
 from ..session import HAND_SENSOR, JOINTS, Session, joint_sensors
 from ..transforms import FloatArray, angle_between_axes, relative_pose, rotation_vector
 from .axis import AxisFit, mean_null_axis, orient_flexion
@@ -423,7 +423,7 @@ def _quality(data: JointData, est: AxisEstimate, notes: list[str]) -> JointQuali
     )
 
 
-def fit_finger(session: Session, finger: str, reference: dict, options: FitOptions) -> FingerModel:
+def fit_finger(session: Session, finger: str, reference: dict, options: FitOptions) -> DigitModel:
     """Fit one finger (see module docstring); tracker coordinates at the reference posture."""
     estimator = METHODS[options.method]
     fitted: dict[str, tuple[str, str, FloatArray, FloatArray, AxisEstimate, JointData, list[str]]]
@@ -463,7 +463,7 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             # The migration is per radian of the angle about the estimator's axis sense.
             sense = np.sign(a @ (reference[parent][1] @ est.axis.direction))
             migration[j] = sense * (reference[parent][1] @ est.migration)
-    abduction = None
+    second_axes = {}
     mp_est = fitted["mp"][4]
     if mp_est.abduction is not None:
         parent, child = fitted["mp"][0], fitted["mp"][1]
@@ -476,10 +476,10 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
         side = 1.0 if session.hand == "right" else -1.0
         if side * (b @ np.cross(plane.direction, joints["mp"][3])) < 0:
             b = -b
-        abduction = JointModel(
+        second_axes["mp"] = JointModel(
             "mp_abduction", parent, child, pr @ tf.abduction_point + pp, b, b, joints["mp"][4]
         )
-    return assemble_finger(finger, joints, tip, abduction, migration)
+    return assemble_digit(finger, joints, tip, second_axes, migration)
 
 
 def fit_session(session: Session, options: FitOptions | None = None) -> HandModel:

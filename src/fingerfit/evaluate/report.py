@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
+from ..digits import DIGITS
 from ..estimate.fit import ANGLE_SUMMARY, METHOD_SUMMARY
 from ..io.atomic import atomic_write
 
@@ -93,8 +94,8 @@ function draw() {
         line(c.map((v, k) => v - 12 * ax[k]), c.map((v, k) => v + 12 * ax[k]), col, 2);
       dot(c, '#000', 3.5);
     }
-    if (f.abduction) { const [c, ax] = f.abduction;
-      line(c.map((v, k) => v - 12 * ax[k]), c.map((v, k) => v + 12 * ax[k]), '#9467bd', 2); }
+    for (const [c, ax] of f.second_axes)
+      line(c.map((v, k) => v - 12 * ax[k]), c.map((v, k) => v + 12 * ax[k]), '#9467bd', 2);
     for (const l of f.landmarks) dot(l, '#2ca02c', 2.5);
     dot(f.tip, '#ff7f0e', 4);
     const t = proj(f.tip); ctx.font = '13px sans-serif'; ctx.textAlign = 'left';
@@ -235,12 +236,11 @@ def _viewer_data(result: StudyResult) -> dict:
                     "tip": loc(fm.tip),
                     "axes": [(j.axis @ rot).round(4).tolist() for j in joints],
                     "orthogonal": [(j.orthogonal_axis @ rot).round(4).tolist() for j in joints],
-                    "landmarks": [
-                        loc(s.session.landmark(f"{f}.{k}")) for k in ("mp", "pip", "dip", "tip")
+                    "landmarks": [loc(s.session.landmark(f"{f}.{k}")) for k in DIGITS[f].landmarks],
+                    "second_axes": [
+                        [loc(ab.center), (ab.axis @ rot).round(4).tolist()]
+                        for ab in fm.second_axes.values()
                     ],
-                    "abduction": None
-                    if fm.abduction is None
-                    else [loc(fm.abduction.center), (fm.abduction.axis @ rot).round(4).tolist()],
                 }
             )
         out[s.subject] = {

@@ -1,4 +1,4 @@
-"""The finger chains of a hand model in robot terms: links, joints, limits, inertials.
+"""The digit chains of a hand model in robot terms: links, joints, limits, inertials.
 
 One computation shared by the URDF and MJCF writers (and the trajectory writer's
 joint names), so the two files cannot disagree.
@@ -17,13 +17,16 @@ joint's origin in its parent link is the difference of the two joint centres
 (no rotation, ``rpy = 0``), its axis is the fitted axis expressed in the hand
 frame (the same vector in the parent and child link frames at ``q = 0``), and
 the chain ``T(c1) Rot(a1, q1) T(c2 - c1) Rot(a2, q2) ...`` equals the product of
-exponentials of :func:`fingerfit.kinematics.chain_points` exactly. A two-axis MP
-gets an intermediate link: ab/adduction first (proximal), then MP flexion.
+exponentials of :func:`fingerfit.kinematics.chain_points` exactly. A two-axis joint
+gets an intermediate link between its two axes, proximal axis first: a finger's MP
+ab/adduction then flexion; the thumb's CMC (and a two-axis MCP) flexion then
+ab/adduction, with the fitted offset between the two lines kept.
 
 Joint limits
 ------------
-Flexion joints: ``[-margin, max(rom_deg) + margin]``; MP ab/adduction:
-``±(max(rom_deg) + margin)`` (its sign can go either way). ``rom_deg`` is the
+Flexion joints: ``[-margin, max(rom_deg) + margin]``; ab/adduction axes
+(``<joint>_abduction``) and the thumb's CMC flexion: ``±(max(rom_deg) + margin)``
+(their sign can go either way). ``rom_deg`` is the
 per-cycle range of motion recorded in the model's :class:`~fingerfit.model.JointQuality`;
 angles are 0 at the reference (stretched) posture and flexion is positive.
 Without a recorded range, anatomical defaults (:data:`DEFAULT_RANGE_DEG`) are
@@ -38,8 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FingerfitError
-from ..model import VARIANTS, FingerModel, HandModel, JointModel
-from ..session import HAND_SENSOR, JOINTS, SEGMENTS
+from ..model import VARIANTS, HandModel, JointModel
+from ..session import HAND_SENSOR
 from ..transforms import FloatArray
 
 HAND_LINK = "hand"
@@ -50,13 +53,30 @@ DEFAULT_RANGE_DEG = {
     "mp": (-30.0, 90.0),
     "pip": (-10.0, 110.0),
     "dip": (-20.0, 90.0),
+    "cmc": (-40.0, 40.0),
+    "cmc_abduction": (-40.0, 40.0),
+    "mcp": (-20.0, 70.0),
+    "mcp_abduction": (-20.0, 20.0),
+    "ip": (-20.0, 90.0),
 }
+#: Joints whose angle can go either way from the reference posture (symmetric limits).
+SYMMETRIC = ("mp_abduction", "cmc", "cmc_abduction", "mcp_abduction")
 #: Soft tissue and bone, kg/m^3.
 DENSITY = 1100.0
 #: Capsule radius of each segment as a fraction of the proximal segment length.
-RADIUS_FRACTION = {"proximal": 0.17, "middle": 0.15, "distal": 0.13}
+RADIUS_FRACTION = {"metacarpal": 0.2, "proximal": 0.17, "middle": 0.15, "distal": 0.13}
 #: Viscous joint damping, N m s/rad.
-DAMPING = {"mp_abduction": 0.005, "mp": 0.005, "pip": 0.003, "dip": 0.002}
+DAMPING = {
+    "mp_abduction": 0.005,
+    "mp": 0.005,
+    "pip": 0.003,
+    "dip": 0.002,
+    "cmc": 0.008,
+    "cmc_abduction": 0.008,
+    "mcp": 0.005,
+    "mcp_abduction": 0.005,
+    "ip": 0.003,
+}
 #: Joint effort (N m) and velocity (rad/s) limits required by URDF.
 EFFORT_NM = 2.0
 VELOCITY_RAD_S = 20.0
@@ -203,14 +223,16 @@ def joint_limits(joint: JointModel, kind: str, margin_deg: float) -> tuple[float
     ----------
     joint : JointModel
         ``joint.quality.rom_deg`` holds per-cycle ranges of motion (deg).
-    kind : {"mp_abduction", "mp", "pip", "dip"}
+    kind : str
+        The joint or axis name (a key of :data:`DEFAULT_RANGE_DEG`).
     margin_deg : float
         Added on both sides (deg).
 
     Returns
     -------
     (float, float)
-        Flexion: ``(-margin, max ROM + margin)``; ab/adduction: ``±(max ROM + margin)``;
+        Flexion: ``(-margin, max ROM + margin)``; :data:`SYMMETRIC` joints:
+        ``±(max ROM + margin)``;
         :data:`DEFAULT_RANGE_DEG` widened by the margin if no finite ROM is recorded (rad).
     """
     rom = np.asarray(joint.quality.rom_deg, dtype=float)
@@ -218,7 +240,7 @@ def joint_limits(joint: JointModel, kind: str, margin_deg: float) -> tuple[float
     if rom.size == 0:
         lo, hi = DEFAULT_RANGE_DEG[kind]
         lo, hi = lo - margin_deg, hi + margin_deg
-    elif kind == "mp_abduction":
+    elif kind in SYMMETRIC:
         hi = float(rom.max()) + margin_deg
         lo = -hi
     else:
@@ -227,7 +249,7 @@ def joint_limits(joint: JointModel, kind: str, margin_deg: float) -> tuple[float
 
 
 def joint_names(model: HandModel) -> list[str]:
-    """Robot joint names of a model, finger by finger, proximal to distal.
+    """Robot joint names of a model, digit by digit, proximal to distal.
 
     Parameters
     ----------
@@ -236,16 +258,18 @@ def joint_names(model: HandModel) -> list[str]:
     Returns
     -------
     list of str
-        ``<finger>_mp_abduction`` (two-axis models), ``<finger>_mp``, ``<finger>_pip``,
-        ``<finger>_dip`` -- the order of :attr:`RobotHand.joints`, of the joints in the
-        URDF/MJCF files and of the columns of the ``--urdf-names`` trajectory.
+        ``<digit>_<axis>`` for every axis proximal to distal, e.g. ``index_mp_abduction``
+        (two-axis MP), ``index_mp``, ``index_pip``, ``index_dip``; ``thumb_cmc``,
+        ``thumb_cmc_abduction``, ``thumb_mcp``, ``thumb_ip`` -- the order of
+        :attr:`RobotHand.joints`, of the joints in the URDF/MJCF files and of the
+        columns of the ``--urdf-names`` trajectory.
     """
-    return [f"{f}_{k}" for f, fm in model.fingers.items() for k in _kinds(fm)]
+    return [f"{f}_{jm.name}" for f, fm in model.fingers.items() for jm in _chain(fm)]
 
 
-def _kinds(finger: FingerModel) -> tuple[str, ...]:
-    """Joint kinds of a finger chain, proximal to distal."""
-    return (("mp_abduction",) if finger.abduction is not None else ()) + JOINTS
+def _chain(digit) -> list[JointModel]:
+    """Every axis of a digit chain, proximal to distal."""
+    return [jm for j in digit.joints for jm in digit.axes(j)]
 
 
 def capsule_inertial(
@@ -295,8 +319,8 @@ def robot_hand(
     model : HandModel
         Geometry in tracker coordinates at the reference posture (mm).
     variant : {"user_axis", "orthogonal"}
-        Fitted (tilted) flexion axes, or the axes made perpendicular to the bones.
-        The ab/adduction axis is the same in both.
+        Fitted (tilted) axes, or the axes made perpendicular to the bones (a second
+        axis also perpendicular to the orthogonal flexion axis; ``docs/export.md``).
     margin_deg : float
         Joint-limit margin (deg, >= 0), see :func:`joint_limits`.
 
@@ -320,63 +344,56 @@ def robot_hand(
     r0 = model.reference_poses[HAND_SENSOR][1]
     fingers = []
     for fname, fm in model.fingers.items():
-        flex = [fm.joints[j] for j in JOINTS]
-        centres = to_hand_frame(model, np.stack([j.center for j in flex] + [fm.tip]))
+        names = list(fm.joints)
+        centres = to_hand_frame(model, np.stack([fm.joints[j].center for j in names] + [fm.tip]))
         prox_len = float(np.linalg.norm(centres[1] - centres[0]))
-        spec = [
-            (k, fm.abduction, fm.abduction.axis)
-            if k == "mp_abduction"
-            else (k, fm.joints[k], fm.joints[k].axis_for(variant))
-            for k in _kinds(fm)
-        ]
-        for k, jm, _ in spec:
-            migration = getattr(jm, "migration", None)
-            if migration is not None and np.any(np.asarray(migration) != 0):
+        for jm in _chain(fm):
+            if jm.migration is not None and np.any(np.asarray(jm.migration) != 0):
                 raise FingerfitError(
                     "rolling-contact centre migration cannot be exported as a fixed "
                     "revolute joint; export with --fix-centres to fix each centre at its "
                     "mid-range position",
-                    field=f"fingers.{fname}."
-                    + ("abduction" if k == "mp_abduction" else f"joints.{k}")
-                    + ".migration_mm_per_rad",
+                    field=f"fingers.{fname}.joints.{jm.name}.migration_mm_per_rad",
                 )
-        link_names = [f"{fname}_{s}" for s in SEGMENTS]
-        if fm.abduction is not None:
-            link_names.insert(0, f"{fname}_mp_abduction_link")
         joints, links = [], []
         parent, parent_origin = HAND_LINK, np.zeros(3)
-        for (kind, jm, axis), child in zip(spec, link_names, strict=True):
-            centre = to_hand_frame(model, jm.center)
-            a = r0.T @ np.asarray(axis, dtype=float)
-            lo, hi = joint_limits(jm, kind, margin_deg)
-            joints.append(
-                RobotJoint(
-                    f"{fname}_{kind}",
-                    kind,
-                    parent,
-                    child,
-                    centre,
-                    centre - parent_origin,
-                    a / np.linalg.norm(a),
-                    lo,
-                    hi,
-                    DAMPING[kind],
-                )
-            )
-            if kind == "mp_abduction":
-                links.append(_gimbal(child))
-            else:
-                seg = SEGMENTS[JOINTS.index(kind)]
-                end = centres[JOINTS.index(kind) + 1] - centre
-                if np.linalg.norm(end) < 1e-4:
-                    raise FingerfitError(
-                        "segment shorter than 0.1 mm (joint centres coincide)",
-                        field=f"fingers.{fname}.segment_lengths.{seg}",
+        for i, j in enumerate(names):
+            axes = fm.axes(j)
+            for k, jm in enumerate(axes):
+                last = k == len(axes) - 1
+                seg = fm.segments[i]
+                # The link between two axes is named after the proximal one.
+                child = f"{fname}_{seg}" if last else f"{fname}_{jm.name}_link"
+                centre = to_hand_frame(model, jm.center)
+                a = r0.T @ np.asarray(jm.axis_for(variant), dtype=float)
+                lo, hi = joint_limits(jm, jm.name, margin_deg)
+                joints.append(
+                    RobotJoint(
+                        f"{fname}_{jm.name}",
+                        jm.name,
+                        parent,
+                        child,
+                        centre,
+                        centre - parent_origin,
+                        a / np.linalg.norm(a),
+                        lo,
+                        hi,
+                        DAMPING[jm.name],
                     )
-                radius = RADIUS_FRACTION[seg] * prox_len
-                mass, com, inertia = capsule_inertial(np.zeros(3), end, radius)
-                links.append(RobotLink(child, (np.zeros(3), end), radius, mass, com, inertia))
-            parent, parent_origin = child, centre
+                )
+                if not last:
+                    links.append(_gimbal(child))
+                else:
+                    end = centres[i + 1] - centre
+                    if np.linalg.norm(end) < 1e-4:
+                        raise FingerfitError(
+                            "segment shorter than 0.1 mm (joint centres coincide)",
+                            field=f"fingers.{fname}.segment_lengths.{seg}",
+                        )
+                    radius = RADIUS_FRACTION[seg] * prox_len
+                    mass, com, inertia = capsule_inertial(np.zeros(3), end, radius)
+                    links.append(RobotLink(child, (np.zeros(3), end), radius, mass, com, inertia))
+                parent, parent_origin = child, centre
         tip = centres[3] - parent_origin
         fingers.append(RobotFinger(fname, tuple(joints), tuple(links), tip, f"{fname}_tip"))
     name = f"fingerfit_{model.subject}_{model.hand}"
@@ -384,7 +401,7 @@ def robot_hand(
 
 
 def _gimbal(name: str) -> RobotLink:
-    """The massless-in-reality link between MP ab/adduction and flexion (a small sphere)."""
+    """The massless-in-reality link between the two axes of a joint (a small sphere)."""
     i = 2.0 / 5.0 * GIMBAL_MASS_KG * GIMBAL_RADIUS_M**2
     return RobotLink(name, None, GIMBAL_RADIUS_M, GIMBAL_MASS_KG, np.zeros(3), i * np.eye(3))
 

@@ -38,14 +38,13 @@ def trajectory_table(kin: Kinematics, model: HandModel, variant: str = "user_axi
     -------
     DataFrame
         ``time`` (s, ``(n_frames,)``) and one column per robot joint (rad), in the
-        order of :func:`~fingerfit.export.geometry.joint_names`. A two-axis MP whose
-        ab/adduction angle the kinematics did not compute gets 0 (as in fingerfit's
-        own fingertip), NaN where the MP angle is NaN.
+        order of :func:`~fingerfit.export.geometry.joint_names`; NaN where a sensor
+        is missing.
 
     Raises
     ------
     FingerfitError
-        If ``kin`` lacks the variant or a finger of the model.
+        If ``kin`` lacks the variant, a digit or an angle of the model.
     """
     if variant not in kin.motions:
         raise FingerfitError(f"the kinematics have no '{variant}' variant", field="variant")
@@ -55,10 +54,11 @@ def trajectory_table(kin: Kinematics, model: HandModel, variant: str = "user_axi
         motion = kin.motions[variant].get(finger)
         if motion is None:
             raise FingerfitError(f"the kinematics have no finger '{finger}'", field=finger)
-        if kind in motion.angles:
-            cols[name] = np.asarray(motion.angles[kind], dtype=float)
-        else:  # ab/adduction not estimated: 0 where the finger's angles exist
-            cols[name] = np.where(np.isfinite(motion.angles["mp"]), 0.0, np.nan)
+        if kind not in motion.angles:
+            raise FingerfitError(
+                f"the kinematics have no angle '{kind}' of the {finger}", field=name
+            )
+        cols[name] = np.asarray(motion.angles[kind], dtype=float)
     return pd.DataFrame(cols)
 
 

@@ -29,8 +29,9 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation, Slerp
 
+from ..digits import DIGIT_NAMES, DIGITS
 from ..errors import FingerfitError
-from ..session import FINGERS, HAND_SENSOR, PoseSeries, Recording, sensor_name, true_runs
+from ..session import PoseSeries, Recording, digit_sensors, true_runs
 
 #: Default thresholds of :func:`find_jumps`: faster than any finger moves.
 MAX_SPEED_MM_S = 3000.0
@@ -48,6 +49,11 @@ NEIGHBOUR_RANGE_MM = {
     ("hand", "proximal"): (15.0, 250.0),
     ("proximal", "middle"): (8.0, 150.0),
     ("middle", "distal"): (6.0, 120.0),
+    # The thumb: its metacarpal sensor sits on the first metacarpal, radial and palmar of
+    # the hand sensor; its phalanges are shorter than a finger's proximal one.
+    ("hand", "metacarpal"): (15.0, 250.0),
+    ("metacarpal", "proximal"): (8.0, 150.0),
+    ("proximal", "distal"): (6.0, 120.0),
 }
 #: Largest plausible median distance (mm) of any sensor from the tracker origin.
 WORKSPACE_MM = 10_000.0
@@ -503,9 +509,9 @@ def check_units(recording: Recording, path: str | Path | None = None) -> None:
                     path=path,
                     field="units",
                 )
-    for finger in FINGERS:
-        chain = [HAND_SENSOR] + [sensor_name(finger, s) for s in ("proximal", "middle", "distal")]
-        kinds = ["hand", "proximal", "middle", "distal"]
+    for digit in DIGIT_NAMES:
+        kinds = ["hand", *DIGITS[digit].segments]
+        chain = digit_sensors(digit)
         for i in range(3):
             a, b = chain[i], chain[i + 1]
             if a not in poses or b not in poses:

@@ -219,7 +219,7 @@ def read_pose_csv(
         if not is_sensor_name(name):
             i = int(np.flatnonzero(inverse == k)[0])
             raise FingerfitError(
-                f"unknown sensor name '{shown(name)}' (expected hand, stylus or <finger>.<segment>)",
+                f"unknown sensor name '{shown(name)}' (expected hand, stylus or <digit>.<segment>)",
                 path=path,
                 line=int(lines[i]),
                 field="sensor",

@@ -23,19 +23,17 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 import numpy as np
 import pandas as pd
 
+from ..digits import DIGIT_NAMES, DIGITS
 from ..errors import FingerfitError, shown
 from ..session import (
-    FINGERS,
     FORMAT,
-    HAND_SENSOR,
-    SEGMENTS,
     UNITS_TO_MM,
     Recording,
     Session,
     TargetEvent,
     check_subject_id,
+    digit_sensors,
     is_landmark_name,
-    sensor_name,
 )
 from ..transforms import FloatArray
 from .atomic import atomic_write
@@ -274,9 +272,16 @@ def read_events(path: str | Path) -> list[TargetEvent]:
             raise FingerfitError(
                 f"need start < end, got {start:g} and {end:g} s", path=path, line=i
             )
-        if row.finger not in FINGERS:
+        if row.finger not in DIGIT_NAMES:
             raise FingerfitError(
-                f"unknown finger '{shown(row.finger)}'", path=path, line=i, field="finger"
+                f"unknown digit '{shown(row.finger)}' (expected one of {', '.join(DIGIT_NAMES)})",
+                path=path,
+                line=i,
+                field="finger",
+            )
+        if row.target == row.finger:
+            raise FingerfitError(
+                f"digit '{row.finger}' cannot pinch itself", path=path, line=i, field="target"
             )
         events.append(TargetEvent(row.recording, row.finger, row.target, start, end))
     return events
@@ -351,11 +356,11 @@ def load_session(directory: str | Path) -> Session:
     if (
         not fingers
         or not all(isinstance(f, str) for f in fingers)
-        or any(f not in FINGERS for f in fingers)
+        or any(f not in DIGIT_NAMES for f in fingers)
         or len(set(fingers)) != len(fingers)
     ):
         raise FingerfitError(
-            f"must be a non-empty list of distinct names from {', '.join(FINGERS)}",
+            f"must be a non-empty list of distinct names from {', '.join(DIGIT_NAMES)}",
             path=meta_path,
             field="fingers",
         )
@@ -427,7 +432,7 @@ def _check_complete(session: Session) -> None:
     """Every listed finger has its sensors in the reference and grasp recordings and its landmarks."""
     assert session.path is not None
     for finger in session.fingers:
-        needed = [HAND_SENSOR] + [sensor_name(finger, s) for s in SEGMENTS]
+        needed = digit_sensors(finger)
         for rec in [session.reference, *session.grasp]:
             for s in needed:
                 if s not in rec.poses or not rec.poses[s].valid.any():
@@ -435,7 +440,7 @@ def _check_complete(session: Session) -> None:
                         f"no samples for sensor '{s}' (finger '{finger}' is listed in {SESSION_FILE})",
                         path=session.path / rec.name,
                     )
-        for lm in ("mp", "pip", "dip", "tip"):
+        for lm in DIGITS[finger].landmarks:
             if f"{finger}.{lm}" not in session.landmarks:
                 raise FingerfitError(
                     f"missing landmark '{finger}.{lm}' (finger '{finger}' is listed in {SESSION_FILE})",
@@ -447,7 +452,14 @@ def _check_complete(session: Session) -> None:
             raise FingerfitError(
                 f"event names unknown recording '{ev.recording}'", path=session.path / "events.csv"
             )
-        if f"target.{ev.target}" not in session.landmarks:
+        if ev.is_pinch:
+            if ev.target not in session.fingers or ev.finger not in session.fingers:
+                raise FingerfitError(
+                    f"pinch event of '{ev.finger}' and '{ev.target}' names a digit not listed "
+                    f"in {SESSION_FILE}",
+                    path=session.path / "events.csv",
+                )
+        elif f"target.{ev.target}" not in session.landmarks:
             raise FingerfitError(
                 f"event names target '{ev.target}' with no landmark 'target.{ev.target}'",
                 path=session.path / "events.csv",

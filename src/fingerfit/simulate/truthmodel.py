@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import HandModel, JointModel, JointQuality, assemble_finger
+from ..model import HandModel, JointModel, JointQuality, assemble_digit
 from ..session import HAND_SENSOR, JOINTS, joint_sensors, sensor_name
 from .study import SimulatedSubject
 
@@ -50,9 +50,9 @@ def truth_model(
             j: (parent, child, anat.centre[i], anat.axis[i], quality)
             for i, (j, (parent, child)) in enumerate(joint_sensors(f).items())
         }
-        abduction = None
+        second_axes = {}
         if two_axis and truth.config.abduction:
-            abduction = JointModel(
+            second_axes["mp"] = JointModel(
                 "mp_abduction",
                 HAND_SENSOR,
                 sensor_name(f, "proximal"),
@@ -64,7 +64,7 @@ def truth_model(
         rolling = {}
         if migration and np.any(anat.rolling):
             rolling = {j: anat.rolling[i] for i, j in enumerate(JOINTS)}
-        fingers[f] = assemble_finger(f, joints, anat.tip, abduction, rolling)
+        fingers[f] = assemble_digit(f, joints, anat.tip, second_axes, rolling)
     poses = {name: (m.position, m.rotation) for name, m in truth.mounts.items()}
     return HandModel(
         subject=sim.session.subject,
