@@ -12,13 +12,16 @@
 
 from .fit import FitError, FitOptions, fit_session
 from .joint import JointFit, JointQuality, fit_joint, hinge_axis, joint_centre, two_axis
+from .saddle import SaddleFit, fit_saddle
 
 __all__ = [
     "FitError",
     "FitOptions",
     "JointFit",
     "JointQuality",
+    "SaddleFit",
     "fit_joint",
+    "fit_saddle",
     "fit_session",
     "hinge_axis",
     "joint_centre",
