@@ -1,0 +1,243 @@
+"""``fingerfit stream``: a person's fitted hand, live, to LSL, ROS 2 and files."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from .app import Quiet, app, notice, say, user_errors
+
+
+@app.command()
+@user_errors
+def stream(
+    model_path: Annotated[
+        Path, typer.Argument(metavar="MODEL", help="Model JSON from `fingerfit fit`.")
+    ],
+    source: Annotated[
+        str,
+        typer.Option(
+            "--source",
+            help="replay:FILE[@SPEED] (a pose CSV, SPEED times real time), "
+            "liberty:PORT[@BAUD] (a Polhemus Liberty) or lsl:NAME (an LSL MoCap stream).",
+        ),
+    ],
+    lsl: Annotated[
+        bool, typer.Option("--lsl", help="LSL outlets PREFIX-angles (deg) and PREFIX-tips (mm).")
+    ] = False,
+    lsl_name: Annotated[
+        str, typer.Option("--lsl-name", help="LSL stream name prefix.")
+    ] = "fingerfit",
+    ros2: Annotated[
+        str | None,
+        typer.Option(
+            "--ros2",
+            metavar="TOPIC",
+            help="Publish sensor_msgs/JointState (rad) on this ROS 2 topic over DDS "
+            "(domain ROS_DOMAIN_ID).",
+        ),
+    ] = None,
+    ros2_bag: Annotated[
+        Path | None,
+        typer.Option(
+            "--ros2-bag", help="Write the JointState messages to this rosbag2 folder (new)."
+        ),
+    ] = None,
+    record: Annotated[
+        Path | None,
+        typer.Option("--record", help="Write the angles CSV `fingerfit angles` writes."),
+    ] = None,
+    tips_frame: Annotated[
+        str, typer.Option("--tips-frame", help="LSL fingertips in the tracker or hand frame.")
+    ] = "tracker",
+    units: Annotated[
+        str | None,
+        typer.Option(help="Units of a replayed recording (default: the model's session units)."),
+    ] = None,
+    rate: Annotated[
+        float | None,
+        typer.Option(
+            min=1e-6,
+            help="Replay: sampling rate to keep dropped frames as rows (as `angles`); "
+            "liberty: the device rate (default 240 Hz).",
+        ),
+    ] = None,
+    stations: Annotated[
+        str | None,
+        typer.Option(
+            help="Liberty station -> sensor, e.g. 1=hand,2=index.proximal,... "
+            "(default: 1 = hand, then the model's sensors in order)."
+        ),
+    ] = None,
+    wait: Annotated[
+        bool,
+        typer.Option(
+            "--wait", help="Replay only: wait for a consumer on every LSL/DDS output first."
+        ),
+    ] = False,
+    wait_timeout: Annotated[
+        float, typer.Option(min=0.0, help="Seconds --wait waits before giving up.")
+    ] = 60.0,
+    duration: Annotated[
+        float | None, typer.Option(min=0.0, help="Stop after this many seconds.")
+    ] = None,
+    force: Annotated[
+        bool,
+        typer.Option(
+            "--force",
+            help="Replay a recording that does not fit the model (units, quaternion order, "
+            "sensors), with a warning.",
+        ),
+    ] = False,
+    quiet: Quiet = False,
+) -> None:
+    """Stream joint angles and fingertips of a live or replayed hand (Ctrl-C to stop).
+
+    The values are those of `fingerfit angles` (same kinematics). A frame with a missing
+    sensor holds the last values and has valid = 0.
+    """
+    import numpy as np
+
+    from ..errors import FingerfitError
+    from ..io.atomic import check_target, refuse_writing_inputs
+    from ..kinematics import compute_kinematics
+    from ..live import sources as src
+    from ..live.outputs import BagOutput, LslOutput, RecordOutput, Ros2Output, dds_topic
+    from ..live.stream import Streamer, channels_of, empty_recording, model_sensors, run
+    from ..model import load_model
+    from ..session import UNITS_TO_MM
+
+    if tips_frame not in ("tracker", "hand"):
+        raise typer.BadParameter("must be tracker or hand", param_hint="--tips-frame")
+    kind, _, _ = src.split_spec(source)
+    replay_path = src.parse_replay(source)[0] if kind == "replay" else None
+    if ros2 is not None:
+        dds_topic(ros2)
+    if wait and kind != "replay":
+        raise FingerfitError("only a replay source waits for consumers", field="--wait")
+    if stations is not None and kind != "liberty":
+        raise FingerfitError("only a liberty source has stations", field="--stations")
+    inputs = [model_path] + ([replay_path] if replay_path is not None else [])
+    files = [p for p in (record, ros2_bag) if p is not None]
+    refuse_writing_inputs(files, inputs)
+    if record is not None:
+        check_target(record)
+    if (
+        ros2_bag is not None
+        and ros2_bag.exists()
+        and not (ros2_bag.is_dir() and not any(ros2_bag.iterdir()))
+    ):
+        raise FingerfitError("exists; choose a new folder for the bag", path=ros2_bag)
+    model = load_model(model_path)
+    units = units or model.session_units
+    if units not in UNITS_TO_MM:
+        raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
+    sensors = model_sensors(model)
+
+    # The source first: a file that does not read, or a device that does not open, fails
+    # before any output exists.
+    if kind == "replay":
+        from ..estimate.plausibility import check_recording, enforce
+        from ..io import read_pose_csv
+
+        path, speed = src.parse_replay(source)
+        rec = read_pose_csv(path, units=units, rate_hz=rate)
+        for note in rec.notes:
+            notice("note", note)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            enforce(check_recording(model, rec, units, path), force)
+        for w in caught:
+            notice("warning", str(w.message))
+        the_source = src.ReplaySource(rec, speed)
+        nominal = float(
+            rate or (1.0 / max(float(rec.time[1] - rec.time[0]), 1e-9) if rec.n_frames > 1 else 0.0)
+        )
+    elif kind == "liberty":
+        port, baud = src.parse_liberty(source)
+        mapping = (
+            src.parse_stations(stations, sensors) if stations else src.default_stations(sensors)
+        )
+        nominal = rate or src.LIBERTY_RATE_HZ
+        the_source = src.LibertySource(port, baud, mapping, nominal)
+    else:
+        name = src.split_spec(source)[1]
+        the_source = src.LslSource(name, sensors)
+        nominal = 0.0
+
+    from ..export.geometry import joint_names
+
+    names = joint_names(model)
+    streamer = None
+    try:
+        lsl_out = ros_out = bag_out = rec_out = None
+        if lsl:
+            ch = channels_of(
+                model, compute_kinematics(model, empty_recording(sensors), ("user_axis",))
+            )
+            lsl_out = LslOutput(lsl_name, ch.angle_labels, ch.tip_labels, nominal, tips_frame)
+        if ros2 is not None:
+            ros_out = Ros2Output(ros2, names)
+        if ros2_bag is not None:
+            bag_out = BagOutput(ros2_bag, ros2 or "/joint_states", names)
+        if record is not None:
+            rec_out = RecordOutput(record)
+        streamer = Streamer(
+            model,
+            lsl=lsl_out,
+            ros2=ros_out,
+            bag=bag_out,
+            record=rec_out,
+            record_units=units,
+            tips_frame=tips_frame,
+        )
+    except BaseException:
+        the_source.close()
+        for o in (lsl_out, ros_out):
+            if o is not None:
+                o.close()
+        for o in (bag_out, rec_out):
+            if o is not None:
+                o.close(ok=False)
+        raise
+    try:
+        summary = run(
+            the_source,
+            streamer,
+            wait=wait_timeout if wait else None,
+            status=not quiet,
+            duration=duration,
+        )
+    except FingerfitError as exc:
+        if streamer.summary.frames:
+            kept = [str(p) for p in (record, ros2_bag) if p is not None]
+            extra = f"; kept {', '.join(kept)}" if kept else ""
+            raise FingerfitError(f"{exc} (after {streamer.summary.frames} frames{extra})") from None
+        raise
+    lat = summary.latency_ms()
+    lat_text = (
+        f"; arrival -> sent p50 {np.percentile(lat, 50):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms"
+        if lat.size
+        else ""
+    )
+    say(
+        "{} frames streamed in {} s ({} lost, {} with a missing sensor held){}{}",
+        summary.frames,
+        f"{summary.seconds:.1f}",
+        summary.lost,
+        summary.invalid,
+        lat_text,
+        " -- stopped by Ctrl-C" if summary.interrupted else "",
+    )
+    if the_source.stats.skipped_bytes or the_source.stats.rejected:
+        notice(
+            "note",
+            f"{the_source.stats.skipped_bytes} bytes skipped and {the_source.stats.rejected} "
+            "records rejected while resynchronising",
+        )
+    for p, what in ((record, "angles CSV"), (ros2_bag, "rosbag2")):
+        if p is not None:
+            say("{} -> [bold]{}[/]", what, p)

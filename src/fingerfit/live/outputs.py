@@ -1,0 +1,373 @@
+"""Where streamed frames go: LSL outlets, ROS 2 ``JointState`` over DDS, rosbag2, angles CSV.
+
+* :class:`LslOutput` -- outlets ``PREFIX-angles`` (type ``JointAngles``, channels
+  ``<digit>.<joint>`` in degrees) and ``PREFIX-tips`` (type ``MoCap``, channels
+  ``<digit>.tip.x|y|z`` in millimetres), each with a last channel ``valid``; double64;
+  XDF channel metadata (label, unit, type); each sample stamped with its frame's arrival
+  on the LSL clock.
+* :class:`Ros2Output` -- ``sensor_msgs/msg/JointState`` (radians, names
+  ``<digit>_<joint>`` of the exported URDF) on the DDS topic ``rt/<topic>`` with the
+  type name ``sensor_msgs::msg::dds_::JointState_``, final (XCDR1) types, reliable
+  keep-last-10, domain ``ROS_DOMAIN_ID``; ``header.stamp`` = arrival on the system clock.
+* :class:`BagOutput` -- the same messages in a rosbag2 (rosbags), written all-or-nothing.
+* :class:`RecordOutput` -- the angles CSV ``fingerfit angles`` writes, all-or-nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FingerfitError, shown
+from ..transforms import FloatArray
+from . import require
+
+#: ROS 2 QoS depth of the publisher (a default ROS 2 publisher: reliable, keep last 10).
+QOS_DEPTH = 10
+_TOPIC_RE = re.compile(r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$")
+
+
+def dds_topic(topic: str) -> str:
+    """ROS 2 topic -> DDS topic name: ``rt/`` + the name without its leading ``/``.
+
+    Raises
+    ------
+    FingerfitError
+        ``field '--ros2'``: not a valid ROS 2 topic name (letters, digits, ``_``,
+        ``/`` separators; no token starting with a digit; no ``//``, no trailing ``/``).
+    """
+    if not _TOPIC_RE.match(topic):
+        raise FingerfitError(
+            f"'{shown(topic)}' is not a ROS 2 topic name (letters, digits, _ and / separators)",
+            field="--ros2",
+        )
+    return "rt/" + topic.lstrip("/")
+
+
+def ros_domain_id() -> int:
+    """The DDS domain: ``ROS_DOMAIN_ID`` (0-232), 0 when unset or empty.
+
+    Raises
+    ------
+    FingerfitError
+        ``field 'ROS_DOMAIN_ID'``: not a whole number in 0-232.
+    """
+    raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not raw:
+        return 0
+    if not raw.isdigit() or int(raw) > 232:
+        raise FingerfitError(
+            f"'{shown(raw)}' is not a domain id 0-232 (environment variable)",
+            field="ROS_DOMAIN_ID",
+        )
+    return int(raw)
+
+
+# -------------------------------------------------------------------------------- LSL
+
+
+def _channel_info(info, channels: list[tuple[str, str, str]]) -> None:
+    """XDF channel metadata: ``<channels><channel><label/><unit/><type/>``."""
+    chans = info.desc().append_child("channels")
+    for label, unit, kind in channels:
+        ch = chans.append_child("channel")
+        ch.append_child_value("label", label)
+        ch.append_child_value("unit", unit)
+        ch.append_child_value("type", kind)
+
+
+class LslOutput:
+    """Two LSL outlets: joint angles and fingertips.
+
+    Parameters
+    ----------
+    prefix : str
+        Stream names ``<prefix>-angles`` and ``<prefix>-tips``.
+    angle_labels, tip_labels : list of str
+        ``<digit>.<joint>`` and ``<digit>.tip.x|y|z`` (without ``valid``).
+    rate_hz : float
+        Nominal rate (0 for irregular).
+    tips_frame : {"tracker", "hand"}
+        Frame of the tips, stated in the stream description.
+    source_id : str
+        LSL source id stem (a consumer re-connects to the same source on restart).
+    """
+
+    def __init__(
+        self,
+        prefix: str,
+        angle_labels: list[str],
+        tip_labels: list[str],
+        rate_hz: float,
+        tips_frame: str = "tracker",
+        source_id: str = "fingerfit",
+    ) -> None:
+        pylsl = require("pylsl")
+        self.pylsl = pylsl
+        self.outlets = []
+        specs = [
+            (
+                f"{prefix}-angles",
+                "JointAngles",
+                [(lab, "degrees", "JointAngle") for lab in angle_labels],
+            ),
+            (
+                f"{prefix}-tips",
+                "MoCap",
+                [(lab, "millimeters", "Position" + lab[-1].upper()) for lab in tip_labels],
+            ),
+        ]
+        for name, kind, channels in specs:
+            channels = [*channels, ("valid", "boolean", "Valid")]
+            info = pylsl.StreamInfo(
+                name, kind, len(channels), rate_hz, pylsl.cf_double64, f"{source_id}-{name}"
+            )
+            _channel_info(info, channels)
+            info.desc().append_child_value("tips_frame", tips_frame)
+            info.desc().append_child_value("valid", "1 when every sensor of the frame was present")
+            self.outlets.append(pylsl.StreamOutlet(info, chunk_size=0, max_buffered=10))
+        # LSL clock = steady clock; arrival times are time.monotonic(): one offset.
+        self.offset = pylsl.local_clock() - time.monotonic()
+
+    def has_consumers(self) -> bool:
+        """Whether every outlet has at least one consumer."""
+        return all(o.have_consumers() for o in self.outlets)
+
+    def push(
+        self, angles: FloatArray, tips: FloatArray, valid: FloatArray, arrival: FloatArray
+    ) -> None:
+        """Push frames.
+
+        Parameters
+        ----------
+        angles : ndarray, shape (n, n_angles)
+            Degrees.
+        tips : ndarray, shape (n, n_tips)
+            Millimetres.
+        valid : ndarray, shape (n,)
+            1.0 or 0.0.
+        arrival : ndarray, shape (n,)
+            ``time.monotonic()`` seconds; pushed as LSL timestamps.
+        """
+        stamps = (arrival + self.offset).tolist()
+        for o, x in zip(self.outlets, (angles, tips), strict=True):
+            o.push_chunk(np.column_stack([x, valid]), stamps)
+
+    def close(self) -> None:
+        """Drop the outlets (consumers see the stream end)."""
+        self.outlets.clear()
+
+
+# ------------------------------------------------------------------------------ ROS 2
+
+
+def joint_state_types():
+    """The ROS 2 message types as cyclonedds IDL dataclasses (:mod:`.ros2types`).
+
+    Returns
+    -------
+    Time, Header, JointState : type
+        ``builtin_interfaces::msg::dds_::Time_``, ``std_msgs::msg::dds_::Header_``,
+        ``sensor_msgs::msg::dds_::JointState_`` -- the DDS names rmw_cyclonedds uses.
+    """
+    require("cyclonedds")
+    from . import ros2types
+
+    return ros2types.Time, ros2types.Header, ros2types.JointState
+
+
+def ros2_qos():
+    """Reliable, keep-last-10 (a default ROS 2 publisher's QoS)."""
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds.util import duration
+
+    return Qos(
+        Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
+        Policy.History.KeepLast(QOS_DEPTH),
+        Policy.Durability.Volatile,
+    )
+
+
+def stamp(seconds: float) -> tuple[int, int]:
+    """System-clock seconds -> ``(sec, nanosec)`` of a ``builtin_interfaces/Time``."""
+    ns = round(seconds * 1e9)
+    return ns // 1_000_000_000, ns % 1_000_000_000
+
+
+class Ros2Output:
+    """A ``sensor_msgs/msg/JointState`` publisher over DDS (no ROS installation needed).
+
+    Parameters
+    ----------
+    topic : str
+        ROS 2 topic (``/hand/joint_states``); DDS topic ``rt/hand/joint_states``.
+    names : list of str
+        Joint names (``<digit>_<joint>``, :func:`fingerfit.export.geometry.joint_names`).
+    frame_id : str
+        ``header.frame_id``.
+    """
+
+    def __init__(self, topic: str, names: list[str], frame_id: str = "hand") -> None:
+        dds_name = dds_topic(topic)
+        domain = ros_domain_id()
+        require("cyclonedds")
+        from cyclonedds.domain import DomainParticipant
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.topic import Topic
+
+        self.Time, self.Header, self.JointState = joint_state_types()
+        try:
+            self.participant = DomainParticipant(domain)
+        except Exception as exc:  # DDSException: bad CYCLONEDDS_URI, no network
+            raise FingerfitError(
+                f"cannot join DDS domain {domain}: {exc}", field="--ros2"
+            ) from None
+        qos = ros2_qos()
+        self.topic = Topic(self.participant, dds_name, self.JointState, qos=qos)
+        self.writer = DataWriter(self.participant, self.topic, qos=qos)
+        self.names = list(names)
+        self.frame_id = frame_id
+
+    def has_consumers(self) -> bool:
+        """Whether a subscriber is matched."""
+        return len(self.writer.get_matched_subscriptions()) > 0
+
+    def message(self, positions: FloatArray, wall: float):
+        """One ``JointState``: ``positions (n_joints,)`` rad, ``wall`` system-clock s."""
+        sec, nsec = stamp(wall)
+        return self.JointState(
+            self.Header(self.Time(sec, nsec), self.frame_id),
+            self.names,
+            positions.tolist(),
+            [],
+            [],
+        )
+
+    def push(self, positions: FloatArray, wall: FloatArray) -> None:
+        """Publish one message per frame: ``positions (n, n_joints)`` rad, ``wall (n,)`` s."""
+        for p, w in zip(positions, wall.tolist(), strict=True):
+            self.writer.write(self.message(p, w))
+
+    def close(self) -> None:
+        """Delete the participant (and with it the writer)."""
+        with contextlib.suppress(Exception):
+            del self.writer, self.topic
+        with contextlib.suppress(Exception):
+            del self.participant
+
+
+class BagOutput:
+    """The ``JointState`` messages in a rosbag2 folder (sqlite3), written all-or-nothing.
+
+    The folder appears when :meth:`close` succeeds; an error before removes the partial
+    bag. Message timestamps are the frames' arrival on the system clock.
+
+    Parameters
+    ----------
+    path : Path
+        Bag folder to create (must not exist, or be empty).
+    topic : str
+        ROS 2 topic of the connection (``/joint_states`` by default).
+    names : list of str
+    frame_id : str
+    """
+
+    def __init__(self, path: Path, topic: str, names: list[str], frame_id: str = "hand") -> None:
+        dds_topic(topic)  # the same name rules
+        require("rosbags")
+        from rosbags.rosbag2 import Writer
+        from rosbags.typesys import Stores, get_typestore
+
+        from ..io.atomic import staged_directory
+
+        self.store = get_typestore(Stores.ROS2_HUMBLE)
+        self._stage = staged_directory(path)
+        staging = self._stage.__enter__()
+        try:
+            staging.rmdir()  # rosbags creates the folder itself
+            self.writer = Writer(staging, version=8)
+            self.writer.open()
+            self.conn = self.writer.add_connection(
+                "/" + topic.lstrip("/"), "sensor_msgs/msg/JointState", typestore=self.store
+            )
+        except BaseException as exc:
+            self._stage.__exit__(type(exc), exc, exc.__traceback__)
+            raise
+        self.names = list(names)
+        self.frame_id = frame_id
+        t = self.store.types
+        self._msg = t["sensor_msgs/msg/JointState"]
+        self._header = t["std_msgs/msg/Header"]
+        self._time = t["builtin_interfaces/msg/Time"]
+
+    def push(self, positions: FloatArray, wall: FloatArray) -> None:
+        """Write one message per frame (``positions (n, n_joints)`` rad, ``wall (n,)`` s)."""
+        empty = np.zeros(0)
+        for p, w in zip(positions, wall.tolist(), strict=True):
+            sec, nsec = stamp(w)
+            msg = self._msg(
+                self._header(self._time(sec, nsec), self.frame_id),
+                self.names,
+                np.asarray(p, dtype=np.float64),
+                empty,
+                empty,
+            )
+            data = self.store.serialize_cdr(msg, "sensor_msgs/msg/JointState")
+            self.writer.write(self.conn, sec * 1_000_000_000 + nsec, data)
+
+    def close(self, ok: bool = True) -> None:
+        """Finish the bag and move it into place (``ok``) or remove it."""
+        try:
+            self.writer.close()
+        except BaseException as exc:
+            self._stage.__exit__(type(exc), exc, exc.__traceback__)
+            raise
+        if ok:
+            self._stage.__exit__(None, None, None)
+        else:
+            err = FingerfitError("bag discarded")
+            with contextlib.suppress(FingerfitError):
+                self._stage.__exit__(FingerfitError, err, None)
+
+
+class RecordOutput:
+    """The angles CSV of the streamed frames, byte for byte what ``fingerfit angles``
+    writes for the same frames; appears complete at :meth:`close` (or not at all).
+
+    Parameters
+    ----------
+    path : Path
+    """
+
+    def __init__(self, path: Path) -> None:
+        from ..io.atomic import atomic_write
+
+        self._ctx = atomic_write(path, newline="")
+        self._fh = self._ctx.__enter__()
+        self._header = True
+        self.rows = 0
+
+    def push(self, table) -> None:
+        """Append rows of :func:`fingerfit.kinematics.kinematics_table` (a DataFrame)."""
+        table.to_csv(self._fh, index=False, lineterminator="\n", header=self._header)
+        self._header = False
+        self.rows += len(table)
+
+    @property
+    def started(self) -> bool:
+        """Whether the header has been written."""
+        return not self._header
+
+    def close(self, ok: bool = True) -> None:
+        """Rename the finished file into place (``ok``) or delete it."""
+        if ok:
+            self._ctx.__exit__(None, None, None)
+        else:
+            err = FingerfitError("record discarded")
+            with contextlib.suppress(FingerfitError):
+                self._ctx.__exit__(FingerfitError, err, None)

@@ -1,0 +1,139 @@
+"""`fingerfit stream --source liberty:PORT` against a Liberty emulated on a pseudo-terminal.
+
+The emulator answers the set-up commands (output list, units, binary format) the way the
+device does, so a missing or wrong command gives wrong numbers here; it streams 240 Hz
+binary records and injects garbage (with a fake header in it), dropped bytes and an unplug.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fingerfit.io.liberty import liberty_binary_bytes, parse_liberty_binary, records_to_recording
+from fingerfit.kinematics import compute_kinematics, kinematics_table
+from fingerfit.live.liberty_serial import ITEMS, RECORD, parse_records
+from fingerfit.live.stream import model_sensors
+from fingerfit.model import load_model
+
+from ._live import fitted, short_recording
+from .bad_inputs._cli import refused, run
+from .liberty_emulator import Faults, LibertyEmulator
+
+pytest.importorskip("serial")
+
+N = 240  # one second at 240 Hz
+
+
+def _expected(emu: LibertyEmulator, model, n: int) -> pd.DataFrame:
+    """`fingerfit angles` of the frames the emulator sent, read back by the file reader."""
+    data = b"".join(
+        liberty_binary_bytes(emu.records(i, ITEMS, "cm"), family="LY") for i in range(n)
+    )
+    recs = parse_liberty_binary("emulated.bin", ITEMS, data=data)
+    rec = records_to_recording(
+        recs, "emulated.bin", units="cm", rate_hz=240.0, sensors=emu.stations
+    )
+    return kinematics_table(compute_kinematics(model, rec), units=model.session_units)
+
+
+def test_liberty_stream_resynchronises_and_ends_on_unplug(tmp_path) -> None:
+    _, model_path = fitted()
+    model = load_model(model_path)
+    stations = {i + 1: s for i, s in enumerate(model_sensors(model))}
+    rec = short_recording(N + 10)
+    faults = Faults(
+        garbage={30: b"\x00\xffLY\x01C\x00\x00\x20\x00junk", 60: b"\r\n\xfe" * 7},
+        drop={100: (2, 20), 150: (len(stations) - 1, RECORD.itemsize - 1), 200: (0, 0)},
+        unplug_after=N,
+    )
+    emu = LibertyEmulator(rec, stations, faults)
+    out = tmp_path / "live.csv"
+    try:
+        res = run("stream", model_path, "--source", f"liberty:{emu.port}", "--record", out, "-q")
+    finally:
+        emu.close()
+    line = refused(res, emu.port, "device disconnected", "kept")
+    assert "Traceback" not in res.output
+    # The set-up the docs list, in order, before any data.
+    assert emu.commands[:5] == [b"P", b"O*,2,7,9", b"U1", b"F1", b"C"]
+    frames = int(re.search(r"after (\d+) frames", line).group(1))
+    got = pd.read_csv(out)
+    assert frames == len(got) == N  # no frame lost: faults cost only the damaged records
+    want = _expected(emu, model, N)
+    assert list(got.columns) == list(want.columns)
+    np.testing.assert_allclose(got["time"], np.arange(N) / 240.0, rtol=0, atol=1e-12)
+    damaged = {100, 150, 200}
+    keep = [i for i in range(N) if i not in damaged]
+    cols = [c for c in want.columns if c != "time"]
+    np.testing.assert_allclose(
+        got.loc[keep, cols].to_numpy(), want.loc[keep, cols].to_numpy(), rtol=0, atol=1e-9
+    )
+    for i in damaged:  # the damaged record's sensor is missing in that frame only
+        assert got.loc[i, cols].isna().any()
+        assert np.isfinite(want.loc[i, cols].to_numpy(float)).all()
+
+
+def test_liberty_stream_stops_cleanly_after_duration(tmp_path) -> None:
+    _, model_path = fitted()
+    stations = {i + 1: s for i, s in enumerate(model_sensors(load_model(model_path)))}
+    emu = LibertyEmulator(short_recording(2 * N), stations)
+    try:
+        res = run(
+            "stream",
+            model_path,
+            "--source",
+            f"liberty:{emu.port}@115200",
+            "--duration",
+            "0.3",
+            "--record",
+            tmp_path / "a.csv",
+            "-q",
+        )
+        assert res.exit_code == 0, res.output
+        for _ in range(100):  # the stop command reaches the emulator's reader thread
+            if emu.commands[-1:] == [b"P"]:
+                break
+            import time
+
+            time.sleep(0.01)
+    finally:
+        emu.close()
+    assert emu.commands[-1] == b"P" and not emu.continuous
+    got = pd.read_csv(tmp_path / "a.csv")
+    assert 40 <= len(got) < 2 * N
+    assert np.isfinite(got.to_numpy()).all()
+
+
+def test_parser_resynchronises_after_every_kind_of_damage() -> None:
+    """Unit test of the framing: garbage, a lost byte anywhere in a record, a bad header."""
+    rng = np.random.default_rng(0)
+    stations = np.array([1, 2, 3])
+    recs = np.zeros(30, RECORD)
+    recs["magic"] = b"LY"
+    recs["station"] = np.tile(stations, 10)
+    recs["command"] = ord("C")
+    recs["size"] = RECORD.itemsize - 8
+    recs["position"] = rng.normal(0, 20, (30, 3))
+    q = rng.normal(size=(30, 4))
+    recs["quaternion"] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    recs["frame"] = 100 + np.repeat(np.arange(10), 3)
+    size = RECORD.itemsize
+    for off in range(size):  # drop byte `off` of record 7: only record 7 is lost
+        raw = bytearray(recs.tobytes())
+        del raw[7 * size + off]
+        raw[0:0] = b"garbage LY\x00"
+        got = parse_records(raw, stations)
+        assert got.consumed == len(raw)
+        assert got.station.size == 29, off
+        np.testing.assert_array_equal(got.frame, np.delete(recs["frame"], 7))
+        np.testing.assert_allclose(
+            got.position, np.delete(recs["position"], 7, axis=0).astype(float)
+        )
+    # An incomplete last record stays in the buffer for the next read.
+    raw = recs.tobytes()
+    got = parse_records(raw[: 5 * size + 10], stations)
+    assert got.station.size == 5 and got.consumed == 5 * size
