@@ -21,13 +21,15 @@ from ..errors import FingerfitError
 from ..io.atomic import write_files
 
 
-def require(module: str) -> ModuleType:
-    """Import an optional dependency of the ``robot`` extra.
+def require(module: str, *, extra: str = "robot", purpose: str = "robot export") -> ModuleType:
+    """Import an optional dependency of the ``robot`` extra (or of ``extra``).
 
     Parameters
     ----------
     module : str
         Module name (``yourdfpy``, ``mujoco``).
+    extra, purpose : str
+        The extra that installs it and what needs it, for the message.
 
     Returns
     -------
@@ -42,7 +44,7 @@ def require(module: str) -> ModuleType:
         return importlib.import_module(module)
     except ImportError:
         raise FingerfitError(
-            f"robot export needs the Python package '{module}': pip install fingerfit[robot]"
+            f"{purpose} needs the Python package '{module}': pip install fingerfit[{extra}]"
         ) from None
 
 

@@ -85,9 +85,9 @@ def _valid(recs: np.ndarray, stations: np.ndarray, last_frame: int | None) -> np
     ok &= np.isin(recs["command"], DATA_COMMANDS)
     ok &= recs["size"] == RECORD.itemsize - 8
     ok &= np.isin(recs["station"], stations)
-    pos = recs["position"].astype(float)
-    quat = recs["quaternion"].astype(float)
     with np.errstate(invalid="ignore", over="ignore"):
+        pos = recs["position"].astype(float)
+        quat = recs["quaternion"].astype(float)
         ok &= np.isfinite(pos).all(axis=1) & (np.abs(pos) < MAX_POSITION_CM).all(axis=1)
         ok &= np.isfinite(quat).all(axis=1)
         ok &= np.abs(np.linalg.norm(np.nan_to_num(quat), axis=1) - 1.0) < QUAT_NORM_TOLERANCE
