@@ -1,0 +1,222 @@
+"""`fingerfit stream --source replay:...` to LSL, ROS 2 (DDS), rosbag2 and the angles CSV.
+
+A consumer in this process (pylsl inlets, a cyclonedds reader) receives what a
+`fingerfit stream` subprocess sends and compares it with `fingerfit angles` on the same
+recording to 1e-9. Every network wait has a timeout.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fingerfit.export.geometry import joint_names
+from fingerfit.kinematics import compute_kinematics, kinematics_table
+from fingerfit.live.stream import block_values, channels_of, hold, model_sensors
+from fingerfit.model import load_model
+
+from ._live import fitted, short_recording, write_recording
+from .bad_inputs._cli import run
+
+pylsl = pytest.importorskip("pylsl")
+pytest.importorskip("cyclonedds")
+pytest.importorskip("rosbags")
+
+FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
+N = 240
+HOLES = ((50, "index.middle"), (51, "index.middle"), (120, "hand"))
+DEADLINE = 60.0
+
+
+def _angles(tmp_path: Path, csv: Path, model: Path) -> pd.DataFrame:
+    out = tmp_path / "angles.csv"
+    res = run("angles", model, csv, "-o", out, "-q")
+    assert res.exit_code == 0, res.output
+    return pd.read_csv(out)
+
+
+def _env(domain: int) -> dict[str, str]:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    env.pop("CYCLONEDDS_URI", None)
+    return env
+
+
+def _finish(proc: subprocess.Popen) -> tuple[int, str]:
+    try:
+        out, err = proc.communicate(timeout=DEADLINE)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+    return proc.returncode, out + err
+
+
+def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from fingerfit.live.ros2types import JointState
+
+    _, model_path = fitted()
+    model = load_model(model_path)
+    csv = write_recording(tmp_path / "rec.csv", N, HOLES)
+    want = _angles(tmp_path, csv, model_path)
+    prefix = f"fftest{os.getpid()}"
+    domain = 1 + os.getpid() % 200
+    topic = f"/fftest_{os.getpid()}/joint_states"
+    participant = DomainParticipant(domain)
+    qos = Qos(Policy.Reliability.Reliable(0), Policy.History.KeepAll)
+    reader = DataReader(participant, Topic(participant, "rt" + topic, JointState, qos=qos), qos=qos)
+    record, bag = tmp_path / "live.csv", tmp_path / "bag"
+    proc = subprocess.Popen(
+        [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@2", "--lsl",
+         "--lsl-name", prefix, "--ros2", topic, "--ros2-bag", str(bag), "--record",
+         str(record), "--wait", "--wait-timeout", "30", "-q"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(domain),
+    )  # fmt: skip
+    inlets, data, stamps, received = {}, {}, {}, {}
+    messages = []
+    try:
+        for kind in ("angles", "tips"):
+            found = pylsl.resolve_byprop("name", f"{prefix}-{kind}", timeout=20)
+            assert found, f"no LSL stream {prefix}-{kind}"
+            inlets[kind] = pylsl.StreamInlet(found[0], max_buflen=60, processing_flags=0)
+            inlets[kind].open_stream(timeout=10)
+            data[kind], stamps[kind], received[kind] = [], [], []
+        # A consumer that goes away mid-stream does not stop the stream.
+        leaver = pylsl.StreamInlet(pylsl.resolve_byprop("name", f"{prefix}-tips", timeout=20)[0])
+        leaver.open_stream(timeout=10)
+        t_end = time.monotonic() + DEADLINE
+        while time.monotonic() < t_end:
+            for kind, inlet in inlets.items():
+                x, ts = inlet.pull_chunk(timeout=0.0)
+                if ts:
+                    now = pylsl.local_clock()
+                    data[kind] += x
+                    stamps[kind] += ts
+                    received[kind] += [now] * len(ts)
+            messages += [m for m in reader.take(N=1000) if isinstance(m, JointState)]
+            if leaver is not None and len(data["tips"]) > 20:
+                leaver.close_stream()
+                leaver = None
+            if all(len(v) >= N for v in data.values()) and len(messages) >= N:
+                break
+            time.sleep(0.003)
+        infos = {k: inlet.info(timeout=5) for k, inlet in inlets.items()}
+    finally:
+        code, output = _finish(proc)
+    assert code == 0, output
+    assert f"{N} frames streamed" in output
+
+    # --- LSL: channels, metadata, values, validity, timestamps -----------------------
+    ch = channels_of(model, compute_kinematics(model, short_recording(2), ("user_axis",)))
+    for kind, labels, unit, ctype in (
+        ("angles", ch.angle_labels, "degrees", "JointAngles"),
+        ("tips", ch.tip_labels, "millimeters", "MoCap"),
+    ):
+        info = infos[kind]
+        assert info.type() == ctype and info.channel_format() == pylsl.cf_double64
+        root = ET.fromstring(info.as_xml())
+        chans = root.find("desc/channels").findall("channel")
+        assert [c.findtext("label") for c in chans] == [*labels, "valid"]
+        assert [c.findtext("unit") for c in chans][:-1] == [unit] * len(labels)
+        assert all(c.findtext("type") for c in chans)
+        x = np.asarray(data[kind])
+        assert x.shape == (N, len(labels) + 1)
+        held = want[labels].ffill().to_numpy()  # a missing sensor holds the last value
+        np.testing.assert_allclose(x[:, :-1], held, rtol=0, atol=1e-9)
+        valid = np.ones(N)
+        valid[[i for i, _ in HOLES]] = 0
+        np.testing.assert_array_equal(x[:, -1], valid)
+        ts, rx = np.asarray(stamps[kind]), np.asarray(received[kind])
+        assert np.all(np.diff(ts) > 0)
+        assert np.all(rx - ts > 0) and np.all(rx - ts < 5.0)  # arrival on the LSL clock
+        # Replayed at twice real time: arrival times follow the recording's clock / 2.
+        t_rec = want["time"].to_numpy()
+        np.testing.assert_allclose(np.diff(ts), np.diff(t_rec) / 2, atol=0.02)
+    assert ch.angle_labels == [c for c in want.columns if c.count(".") == 1 and c != "time"]
+
+    # --- ROS 2 over DDS: names, radians, stamps ----------------------------------------
+    assert len(messages) == N
+    names = joint_names(model)
+    assert all(list(m.name) == names for m in messages)
+    pos = np.array([m.position for m in messages])
+    expect = np.radians(want[[n.replace("_", ".", 1) for n in names]].ffill().to_numpy())
+    np.testing.assert_allclose(pos, expect, rtol=0, atol=1e-9)
+    stamp = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in messages])
+    assert np.all(np.diff(stamp) > 0) and abs(stamp[-1] - time.time()) < 30
+    assert {m.header.frame_id for m in messages} == {"hand"}
+
+    # --- rosbag2: the same messages -----------------------------------------------------
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader(bag) as r:
+        (conn,) = r.connections
+        assert conn.topic == topic and conn.msgtype == "sensor_msgs/msg/JointState"
+        msgs = [store.deserialize_cdr(raw, conn.msgtype) for _, _, raw in r.messages()]
+    assert len(msgs) == N
+    np.testing.assert_array_equal(np.array([m.position for m in msgs]), pos)
+
+    # --- the angles CSV: `fingerfit angles` for the same frames ---------------------------
+    got = pd.read_csv(record)
+    assert list(got.columns) == list(want.columns)
+    pd.testing.assert_frame_equal(got, want, check_exact=False, rtol=0, atol=1e-9)
+
+
+def test_ctrl_c_ends_with_exit_0_and_complete_files(tmp_path: Path) -> None:
+    _, model_path = fitted()
+    csv = write_recording(tmp_path / "rec.csv", 2400)
+    record = tmp_path / "live.csv"
+    proc = subprocess.Popen(
+        [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}", "--record",
+         str(record), "--lsl", "--lsl-name", f"ffint{os.getpid()}"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        found = pylsl.resolve_byprop("name", f"ffint{os.getpid()}-angles", timeout=20)
+        assert found
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+    finally:
+        code, output = _finish(proc)
+    assert code == 0, output
+    assert "stopped by Ctrl-C" in output and "Traceback" not in output
+    got = pd.read_csv(record)
+    n = int(output.split(" frames streamed")[0].split()[-1])
+    assert 0 < len(got) == n < 2400
+    assert not list(tmp_path.glob(".*"))  # no temporary file left
+
+
+def test_hold_and_tips_in_the_hand_frame() -> None:
+    _, model_path = fitted()
+    model = load_model(model_path)
+    rec = short_recording(30, ((3, "index.distal"), (4, "hand")))
+    kin = compute_kinematics(model, rec, ("user_axis",))
+    ch = channels_of(model, kin)
+    sensors = model_sensors(model)
+    tracker = block_values(kin, ch, rec, sensors, "tracker")
+    hand = block_values(kin, ch, rec, sensors, "hand")
+    h = rec.poses["hand"]
+    for k, d in enumerate(ch.digits):
+        tip = kin.motions["user_axis"][d].tip
+        local = np.einsum("nji,nj->ni", h.rotation, tip - h.position)  # R^T (tip - p)
+        np.testing.assert_allclose(hand.tips[:, 3 * k : 3 * k + 3], local, atol=1e-9)
+    np.testing.assert_array_equal(tracker.valid, np.r_[1, 1, 1, 0, 0, np.ones(25)])
+    table = kinematics_table(kin)
+    np.testing.assert_array_equal(tracker.angles, table[ch.angle_labels].to_numpy())
+    held = hold(tracker.angles, np.full(tracker.angles.shape[1], np.nan))
+    np.testing.assert_array_equal(held, table[ch.angle_labels].ffill().to_numpy())
+    # Before any value has been seen, nothing to hold: NaN stays.
+    first = hold(tracker.tips[3:5], np.full(tracker.tips.shape[1], np.nan))
+    assert np.isnan(first).all()
