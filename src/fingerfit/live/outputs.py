@@ -290,7 +290,10 @@ class BagOutput:
         staging = self._stage.__enter__()
         try:
             staging.rmdir()  # rosbags creates the folder itself
-            self.writer = Writer(staging, version=8)
+            try:
+                self.writer = Writer(staging, version=8)
+            except TypeError:  # rosbags < 0.10 has one bag version and no argument
+                self.writer = Writer(staging)
             self.writer.open()
             self.conn = self.writer.add_connection(
                 "/" + topic.lstrip("/"), "sensor_msgs/msg/JointState", typestore=self.store
