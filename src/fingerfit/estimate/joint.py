@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -43,7 +44,14 @@ from ..transforms import (
 from .axis import AxisFit, line_through_centres
 from .centre import CentreFit, centre_of_rotation
 from .cycles import extract_cycles
-from .plausibility import CONVENTION_RATIO, CONVENTIONS, PIVOT_MIN_MM, pivot_residuals
+from .plausibility import (
+    CONVENTION_RATIO,
+    CONVENTIONS,
+    MIRRORS,
+    PIVOT_MIN_MM,
+    joint_reach_problems,
+    pivot_residuals,
+)
 from .pooled import PooledHinge, pooled_hinge, sara_axis
 from .robust import RobustHinge, robust_hinge
 from .twoaxis import MIN_RANGE_DEG, TwoAxisFit, fit_two_axis
@@ -339,11 +347,18 @@ def _reference(rotation: FloatArray) -> int:
     return int(np.argmin(np.linalg.norm(rotation_vector(rotation @ mean.T), axis=1)))
 
 
-def _extreme(rotation: FloatArray) -> int:
-    """Index of a frame at one end of the motion: at the 99th percentile angle from the mean."""
-    ref = rotation[_reference(rotation)]
-    d = np.linalg.norm(rotation_vector(rotation @ ref.T), axis=1)
+def _extreme(rotation: FloatArray, ref: int | None = None) -> int:
+    """Index of a frame at one end of the motion: at the 99th percentile angle from the
+    mean (from frame ``ref``, :func:`_reference` unless given)."""
+    r0 = rotation[_reference(rotation) if ref is None else ref]
+    d = np.linalg.norm(rotation_vector(rotation @ r0.T), axis=1)
     return int(np.argmin(np.abs(d - np.percentile(d, 99))))
+
+
+def _rom(rotation: FloatArray, far: int) -> float:
+    """99th percentile angle (deg) from frame ``far`` to all the others."""
+    d = np.linalg.norm(rotation_vector(rotation @ rotation[far].T), axis=1)
+    return float(np.degrees(np.percentile(d, 99)))
 
 
 def range_of_motion_deg(rotation: FloatArray) -> float:
@@ -353,15 +368,48 @@ def range_of_motion_deg(rotation: FloatArray) -> float:
     percentile) to all the others: the diameter of the set of orientations, robust to a
     few glitches.
     """
-    far = rotation[_extreme(rotation)]
-    return float(
-        np.degrees(np.percentile(np.linalg.norm(rotation_vector(rotation @ far.T), axis=1), 99))
-    )
+    return _rom(rotation, _extreme(rotation))
 
 
-def _check_motion(m: _Motion) -> float:
+class _Work:
+    """What one :func:`fit_joint` call computes at most once and its steps share."""
+
+    def __init__(self, m: _Motion) -> None:
+        self.m = m
+
+    @cached_property
+    def ref(self) -> int:
+        """Reference frame (angles zero): nearest the mean orientation."""
+        return _reference(self.m.rotation)
+
+    @cached_property
+    def extreme(self) -> int:
+        """A frame at one end of the motion (:func:`_extreme`)."""
+        return _extreme(self.m.rotation, self.ref)
+
+    @cached_property
+    def rom(self) -> float:
+        """Range of motion (deg, :func:`range_of_motion_deg`)."""
+        return _rom(self.m.rotation, self.extreme)
+
+    @cached_property
+    def periods(self) -> list[np.ndarray]:
+        """Movement cycles (:func:`.cycles.extract_cycles`), angles measured from one end
+        of the motion; none without ``rate_hz``."""
+        m = self.m
+        if m.rate_hz is None:
+            return []
+        return extract_cycles(m.rotation, m.rotation[self.extreme], m.rate_hz).periods
+
+    @cached_property
+    def sara(self) -> HingeEstimate:
+        """SARA axis and SCoRE centre over every frame (:func:`estimate_hinge`)."""
+        return estimate_hinge(self.m.rotation, self.m.translation, "sara")
+
+
+def _check_motion(w: _Work) -> float:
     """Refuse too small a range of motion or pure translation; return the ROM (deg)."""
-    rom = range_of_motion_deg(m.rotation)
+    m, rom = w.m, w.rom
     if rom >= MIN_ROM_DEG:
         return rom
     move = np.percentile(
@@ -381,16 +429,19 @@ def _check_motion(m: _Motion) -> float:
     )
 
 
-def _check_convention(m: _Motion) -> dict[str, float]:
+def _check_convention(w: _Work) -> dict[str, float]:
     """Pivot residuals under each reading of the rotations; refuse a wrong one.
 
-    Refuses when another reading (:data:`CONVENTIONS`) gives a pivot residual below
-    ``CONVENTION_RATIO`` x the as-read one (as read above ``PIVOT_MIN_MM``), or when the
-    as-read residual exceeds :data:`MAX_PIVOT_MM`.
+    Refuses when another reading (:data:`CONVENTIONS`) or the positions with one axis
+    negated (:data:`.plausibility.MIRRORS`) give a pivot residual below
+    ``CONVENTION_RATIO`` x the as-read one (as read above ``PIVOT_MIN_MM``). Returns the
+    residuals of :data:`CONVENTIONS` (mm).
     """
-    res, _ = pivot_residuals(m.parent, m.child)
-    if not res:
+    m = w.m
+    every, _ = pivot_residuals(m.parent, m.child, mirrored=True)
+    if not every:
         return {}
+    res = {k: every[k] for k in CONVENTIONS}
     read = res["as read"]
     alt = min((k for k in CONVENTIONS if k != "as read"), key=res.__getitem__)
     if read > PIVOT_MIN_MM and res[alt] < CONVENTION_RATIO * read:
@@ -400,16 +451,33 @@ def _check_convention(m: _Motion) -> dict[str, float]:
             "w,x,y,z, rotations right-handed, sensor to tracker)",
             field="child",
         )
-    mirrored = _mirrored_residuals(m)
-    axis = min(mirrored, key=mirrored.__getitem__)
-    if read > PIVOT_MIN_MM and mirrored[axis] < CONVENTION_RATIO * read:
+    flip = min(MIRRORS, key=every.__getitem__)
+    if read > PIVOT_MIN_MM and every[flip] < CONVENTION_RATIO * read:
         raise FingerfitError(
-            f"the positions look mirrored ({axis} negated: a left-handed frame) relative to "
-            f"the rotations: pivot residual {mirrored[axis]:.1f} mm with {axis} negated, "
+            f"the positions look mirrored ({flip}: a left-handed frame) relative to "
+            f"the rotations: pivot residual {every[flip]:.1f} mm with {flip}, "
             f"{read:.1f} mm as given; positions and rotations must share one right-handed "
             "tracker frame",
             field="child",
         )
+    return res
+
+
+def _check_units(w: _Work) -> None:
+    """Refuse positions whose declared units put the joint implausibly near or far from
+    the segment origins (:func:`.plausibility.joint_reach_problems`; the SARA/SCoRE centre
+    over every frame, in both segments' frames)."""
+    h = w.sara.hinge
+    assert h is not None
+    reach = max(float(np.linalg.norm(h.centre_parent)), float(np.linalg.norm(h.centre_child)))
+    problems = joint_reach_problems(reach, w.m.units)
+    if problems:
+        raise problems[0].error()
+
+
+def _check_common_centre(conv: dict[str, float]) -> None:
+    """Refuse an as-read pivot residual above :data:`MAX_PIVOT_MM`."""
+    read = conv.get("as read", 0.0)
     if read > MAX_PIVOT_MM:
         raise FingerfitError(
             f"the segments do not share a fixed centre of rotation: pivot residual {read:.1f} "
@@ -417,26 +485,6 @@ def _check_convention(m: _Motion) -> dict[str, float]:
             "or sensor that slipped, position jumps, or no joint between these segments",
             field="child",
         )
-    return res
-
-
-def _mirrored_residuals(m: _Motion, max_frames: int = 400) -> dict[str, float]:
-    """Pivot residual (mm) with the positions' x, y or z negated (a left-handed frame).
-
-    Positions given in a mirrored (left-handed) frame disagree with right-handed
-    rotations; negating the mirrored axis makes them agree again.
-    """
-    idx = np.linspace(0, m.frames.size - 1, min(max_frames, m.frames.size)).astype(int)
-    out = {}
-    for i, name in enumerate("xyz"):
-        flip = np.ones(3)
-        flip[i] = -1.0
-        r, t = relative_pose(
-            m.parent.rotation[idx], m.parent.position[idx] * flip,
-            m.child.rotation[idx], m.child.position[idx] * flip,
-        )  # fmt: skip
-        out[name] = centre_of_rotation(r, t).rms_mm
-    return out
 
 
 # --------------------------------------------------------------------------- bootstrap
@@ -677,21 +725,12 @@ def _orient(axis: FloatArray) -> float:
     return 1.0 if axis[int(np.argmax(np.abs(axis)))] >= 0 else -1.0
 
 
-def _cycles(m: _Motion) -> list[np.ndarray]:
-    """Movement cycles (:func:`.cycles.extract_cycles`), angles measured from one end of
-    the motion (:func:`_extreme`); none without ``rate_hz``."""
-    if m.rate_hz is None:
-        return []
-    return extract_cycles(m.rotation, m.rotation[_extreme(m.rotation)], m.rate_hz).periods
-
-
-def _hinge(m: _Motion, method: str, rom: float, conv: dict[str, float]) -> JointFit:
+def _hinge(w: _Work, method: str, conv: dict[str, float]) -> JointFit:
     if method not in HINGE_METHODS:
         raise FingerfitError(
             f"unknown hinge method '{method}' (have: {', '.join(HINGE_METHODS)})", field="method"
         )
-    ref = _reference(m.rotation)
-    periods = _cycles(m)
+    m, ref, periods = w.m, w.ref, w.periods
     notes: list[str] = []
     if method == "tang2018":
         if len(periods) < 2:
@@ -713,7 +752,11 @@ def _hinge(m: _Motion, method: str, rom: float, conv: dict[str, float]) -> Joint
         cycles = periods if method == "robust" and len(periods) >= 3 else None
         if method == "robust" and cycles is None:
             notes.append("robust: no repeated cycles; frame rule only")
-        est = estimate_hinge(m.rotation, m.translation, method, cycles)
+        est = (
+            w.sara
+            if method == "sara"
+            else estimate_hinge(m.rotation, m.translation, method, cycles)
+        )
         h = est.hinge
         assert h is not None
         if est.robust is not None:
@@ -739,14 +782,14 @@ def _hinge(m: _Motion, method: str, rom: float, conv: dict[str, float]) -> Joint
     spread = axis_bootstrap_deg(m.rotation[used], a_p, weights)
     rms = float(np.sqrt(np.mean(resid**2)))
     return _result(
-        m, "hinge", method, u_p, u_c, a_p, a_c, None, None, angles, used, ref, rom, rms,
+        m, "hinge", method, u_p, u_c, a_p, a_c, None, None, angles, used, ref, w.rom, rms,
         cond, math.nan, spread, math.nan, len(periods), conv, notes,
     )  # fmt: skip
 
 
-def _ball(m: _Motion, rom: float, conv: dict[str, float]) -> JointFit:
-    ref = _reference(m.rotation)
-    cond = _conditioning(sara_axis(m.rotation)[2])
+def _ball(w: _Work, conv: dict[str, float]) -> JointFit:
+    m, ref = w.m, w.ref
+    cond = w.sara.conditioning
     if cond > MAX_BALL_CONDITIONING:
         raise FingerfitError(
             f"the motion turns about one axis only (rotation about it {cond:.0f} times the "
@@ -761,14 +804,13 @@ def _ball(m: _Motion, rom: float, conv: dict[str, float]) -> JointFit:
     spread = _centre_bootstrap_mm(m.rotation, m.translation, c.parent_point)
     return _result(
         m, "ball", "obrien", c.parent_point, c.child_point, None, None, None, None, angles,
-        used, ref, rom, c.rms_mm, cond, float(s[0] / s[-1]) if s[-1] > 0 else math.inf,
-        math.nan, spread, len(_cycles(m)), conv, [],
+        used, ref, w.rom, c.rms_mm, cond, float(s[0] / s[-1]) if s[-1] > 0 else math.inf,
+        math.nan, spread, len(w.periods), conv, [],
     )  # fmt: skip
 
 
-def _two_axis(m: _Motion, rom: float, conv: dict[str, float], *, strict: bool = True):
-    ref = _reference(m.rotation)
-    h = estimate_hinge(m.rotation, m.translation, "sara")
+def _two_axis(w: _Work, conv: dict[str, float], *, strict: bool = True) -> JointFit | None:
+    m, ref, h = w.m, w.ref, w.sara
     cond = h.conditioning
     n = m.rotation.shape[0]
     tf = estimate_two_axis(m.rotation, m.translation, m.rotation[ref], h)
@@ -800,8 +842,8 @@ def _two_axis(m: _Motion, rom: float, conv: dict[str, float], *, strict: bool = 
     angles = np.degrees(np.column_stack([theta, beta]))
     return _result(
         m, "two_axis", "twoaxis", tf.flexion_point, u_c, a, a_c, b, c_b, angles,
-        np.arange(n), ref, rom, float(np.sqrt(np.mean(resid**2))), cond, math.nan,
-        1.96 * tf.flexion_sd_deg, math.nan, len(_cycles(m)), conv,
+        np.arange(n), ref, w.rom, float(np.sqrt(np.mean(resid**2))), cond, math.nan,
+        1.96 * tf.flexion_sd_deg, math.nan, len(w.periods), conv,
         tf.stability_notes(),
     )  # fmt: skip
 
@@ -899,24 +941,28 @@ def fit_joint(
     """
     if kind not in KINDS:
         raise FingerfitError(f"unknown kind '{kind}' (have: {', '.join(KINDS)})", field="kind")
-    m = _motion(parent, child, units, rate_hz)
-    rom = _check_motion(m)
-    conv = _check_convention(m) if check_convention else {}
+    # Each step below is computed once and shared (_Work): the reference frame, the range
+    # of motion, the cycles and the SARA/SCoRE fit over every frame.
+    w = _Work(_motion(parent, child, units, rate_hz))
+    _check_motion(w)
+    conv = _check_convention(w) if check_convention else {}
+    _check_units(w)
+    _check_common_centre(conv)
     if kind == "hinge":
-        return _hinge(m, method, rom, conv)
+        return _hinge(w, method, conv)
     if kind == "ball":
-        return _ball(m, rom, conv)
+        return _ball(w, conv)
     if kind == "two_axis":
-        return _two_axis(m, rom, conv)
-    cond = _conditioning(sara_axis(m.rotation)[2])
-    fit = _two_axis(m, rom, conv, strict=False) if cond <= 1e6 else None
+        return _two_axis(w, conv)
+    cond = w.sara.conditioning
+    fit = _two_axis(w, conv, strict=False) if cond <= 1e6 else None
     if fit is not None:
         lo, hi = np.percentile(fit.angles_deg[:, 1], [5, 95])
         if hi - lo >= AUTO_MIN_SECOND_DEG or cond < MIN_HINGE_CONDITIONING:
             return fit
     if cond >= MIN_HINGE_CONDITIONING:
-        return _hinge(m, method, rom, conv)
-    return _ball(m, rom, conv)
+        return _hinge(w, method, conv)
+    return _ball(w, conv)
 
 
 def joint_centre(parent: object, child: object, **kwargs) -> JointFit:

@@ -15,7 +15,10 @@ data with what a hand can be and with itself:
   (O'Brien et al. 2000). The residual is also evaluated with the quaternions conjugated,
   in ``x,y,z,w`` order, and both, and an alternative that fits far better is named;
 * **a recording against a model** (``fingerfit angles``) -- the same pivot equation with
-  the model's centre, and the scale factor that would fit.
+  the model's centre, and the scale factor that would fit;
+* **any joint between two segments** (``fingerfit joint``) -- the distance from the joint
+  to the farther segment origin against :data:`JOINT_REACH_MM`, and the pivot residual with
+  one position axis negated (a mirrored frame, :data:`MIRRORS`).
 
 Every check returns :class:`Problem` records; :func:`enforce` raises the first as a
 :class:`PlausibilityError` (one line) unless ``force``, in which case each is warned about
@@ -34,11 +37,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..digits import DIGIT_NAMES, DIGITS
 from ..errors import FingerfitError
 from ..session import (
-    FINGERS,
     HAND_SENSOR,
-    SEGMENTS,
     UNITS_TO_MM,
     PoseSeries,
     Recording,
@@ -88,6 +90,13 @@ PIVOT_MIN_MM = 1.0
 RECORDING_RESIDUAL_MM = 10.0
 #: Relative tolerance when matching a scale factor to a unit ratio.
 SCALE_TOLERANCE = 0.2
+#: Any joint between two tracked segments (``fingerfit joint``): plausible distance (mm)
+#: from the joint centre to the *farther* of the two segment origins. Measured: 15 mm
+#: (index DIP of the simulated hand, sensors mid-phalanx), 23 and 46 mm (PIP, MP),
+#: 53-89 mm (hand-turned real Liberty logs), 152 mm (real upper-arm/forearm marker
+#: clusters), 250 mm (a real mechanical hinge). A tracked body's sensor or cluster cannot
+#: sit within 10 mm of the joint on both sides; 2 m is beyond any limb.
+JOINT_REACH_MM = (10.0, 2000.0)
 
 UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches"}
 
@@ -126,7 +135,7 @@ def segment_bound(digit: str, segment: str) -> Bound:
 
 def finger_length_bound(finger: str) -> Bound:
     """Plausible MP-centre-to-fingertip length (mm) of a finger: the hand-size check."""
-    f = sum(SEGMENT_FRACTION[finger][s] for s in SEGMENTS)
+    f = sum(SEGMENT_FRACTION[finger][s] for s in DIGITS[finger].segments)
     return Bound(
         MARGIN[0] * f * HAND_LENGTH_MM[0],
         MARGIN[1] * f * HAND_LENGTH_MM[1],
@@ -140,7 +149,9 @@ def neighbour_bound(finger: str, parent: str, child: str) -> Bound:
     Each sensor sits on its own segment, so the distance is at most the two segments'
     lengths plus the sensor heights, and at least a fraction of their mean length.
     """
-    kind = {HAND_SENSOR: "metacarpal"} | {sensor_name(finger, s): s for s in SEGMENTS}
+    kind = {HAND_SENSOR: "metacarpal"} | {
+        sensor_name(finger, s): s for s in DIGITS[finger].segments
+    }
     fa = SEGMENT_FRACTION[finger][kind[parent]]
     fb = SEGMENT_FRACTION[finger][kind[child]]
     return Bound(
@@ -254,7 +265,7 @@ def _median_distance(a: PoseSeries, b: PoseSeries, max_frames: int = 1000) -> fl
 
 
 def check_recording_units(
-    recording: Recording, units: str, fingers: Iterable[str] = FINGERS, path: Path | None = None
+    recording: Recording, units: str, fingers: Iterable[str] = DIGIT_NAMES, path: Path | None = None
 ) -> list[Problem]:
     """Median distances between neighbouring sensors of every finger against the bounds.
 
@@ -288,7 +299,7 @@ def check_recording_units(
 
 
 def _landmark_points(session: Session, fingers: Sequence[str]) -> dict[str, FloatArray] | None:
-    names = [f"{f}.{k}" for f in fingers for k in ("mp", "pip", "dip", "tip")]
+    names = [f"{f}.{k}" for f in fingers for k in DIGITS[f].landmarks]
     if any(n not in session.landmarks for n in names):
         return None  # the fit reports the missing landmark
     return {n: np.asarray(session.landmarks[n], float) for n in names}
@@ -305,8 +316,8 @@ def landmark_scale(session: Session, fingers: Sequence[str], reference: dict) ->
     lm = _landmark_points(session, fingers) or {}
     pairs = []
     for f in fingers:
-        ends = ("mp", "pip", "dip", "tip")
-        for i, seg in enumerate(SEGMENTS):
+        ends = DIGITS[f].landmarks
+        for i, seg in enumerate(DIGITS[f].segments):
             s = sensor_name(f, seg)
             a, b = f"{f}.{ends[i]}", f"{f}.{ends[i + 1]}"
             if s in reference and a in lm and b in lm:
@@ -337,10 +348,10 @@ def check_landmarks(
         return []
     path = None if session.path is None else session.path / "landmarks.csv"
     problems = []
-    ends = ("mp", "pip", "dip", "tip")
     far = []
     for f in fingers:
-        for i, seg in enumerate(SEGMENTS):
+        ends = DIGITS[f].landmarks
+        for i, seg in enumerate(DIGITS[f].segments):
             s = sensor_name(f, seg)
             if s not in reference:
                 continue
@@ -373,7 +384,8 @@ def check_landmarks(
         )
         return problems
     for f in fingers:
-        for i, seg in enumerate(SEGMENTS):
+        ends = DIGITS[f].landmarks
+        for i, seg in enumerate(DIGITS[f].segments):
             a, b = f"{f}.{ends[i]}", f"{f}.{ends[i + 1]}"
             d = float(np.linalg.norm(lm[b] - lm[a]))
             bound = segment_bound(f, seg)
@@ -428,7 +440,7 @@ def check_model(model: HandModel, session: Session | None = None) -> list[Proble
                     path=path,
                 )
             )
-        kinds = {HAND_SENSOR: "metacarpal"} | {sensor_name(f, s): s for s in SEGMENTS}
+        kinds = {HAND_SENSOR: "metacarpal"} | {sensor_name(f, s): s for s in DIGITS[f].segments}
         for j, jm in fm.joints.items():
             for sensor in (jm.parent, jm.child):
                 if sensor not in model.reference_poses:
@@ -456,6 +468,42 @@ def check_model(model: HandModel, session: Session | None = None) -> list[Proble
                         )
                     )
     return problems
+
+
+def joint_reach_problems(
+    reach_mm: float, units: str, path: Path | None = None, field: str | None = "units"
+) -> list[Problem]:
+    """Units of any joint between two segments: the farther segment origin's distance.
+
+    Parameters
+    ----------
+    reach_mm : float
+        Distance (mm, as converted from ``units``) from the joint centre to the farther of
+        the two segment frame origins (``max(|c_parent|, |c_child|)`` with the centre in
+        each segment's frame).
+    units : str
+        The units the positions were declared in (``UNITS_TO_MM`` key), for the cause.
+    path : Path, optional
+    field : str, optional
+        The field named in the message (the CLI: ``--units``).
+
+    Returns
+    -------
+    list of Problem
+        One problem when ``reach_mm`` lies outside :data:`JOINT_REACH_MM`, naming the unit
+        mistake that would bring it into range (:func:`unit_cause`).
+    """
+    b = Bound(*JOINT_REACH_MM, "segment origin to joint centre")
+    if not math.isfinite(reach_mm) or b.contains(reach_mm):
+        return []
+    return [
+        Problem(
+            f"the joint centre lies {fmt_mm(reach_mm)} mm from the farther segment origin "
+            f"(plausible {b.lo:g}-{b.hi:g} mm): {unit_cause(reach_mm, b, units)}",
+            path=path,
+            field=field,
+        )
+    ]
 
 
 # --------------------------------------------------------------------------- convention
@@ -514,8 +562,13 @@ class PivotCheck:
         return max(PIVOT_FLOOR_MM, PIVOT_NOISE_FACTOR * noise)
 
 
+#: Mirrored readings of the positions (a left-handed tracker frame): the position axis
+#: negated, by key of :func:`pivot_residuals`' result.
+MIRRORS: dict[str, int] = {"x negated": 0, "y negated": 1, "z negated": 2}
+
+
 def pivot_residuals(
-    parent: PoseSeries, child: PoseSeries, max_frames: int = 400
+    parent: PoseSeries, child: PoseSeries, max_frames: int = 400, *, mirrored: bool = False
 ) -> tuple[dict[str, float], int]:
     """RMS pivot residual (mm) of two sensors under each quaternion reading.
 
@@ -525,11 +578,15 @@ def pivot_residuals(
         The same frames of both sensors (mm, tracker coordinates).
     max_frames : int
         Evenly subsample longer recordings to this many frames (cost).
+    mirrored : bool
+        Also evaluate the as-read rotations with one position axis negated (keys of
+        :data:`MIRRORS`): positions in a left-handed frame agree with right-handed
+        rotations again once the mirrored axis is negated.
 
     Returns
     -------
     residual_mm : dict[str, float]
-        Per key of :data:`CONVENTIONS`.
+        Per key of :data:`CONVENTIONS` (and of :data:`MIRRORS` with ``mirrored``).
     frames : int
         Frames used (both sensors valid).
     """
@@ -538,10 +595,17 @@ def pivot_residuals(
         ok = ok[np.linspace(0, ok.size - 1, max_frames).astype(int)]
     if ok.size < 10:
         return {}, int(ok.size)
-    pa, ca = _alternatives(parent.rotation[ok]), _alternatives(child.rotation[ok])
+    pr, cr = parent.rotation[ok], child.rotation[ok]
+    pp, cp = parent.position[ok], child.position[ok]
+    pa, ca = _alternatives(pr), _alternatives(cr)
+    readings = [(k, pa[k], ca[k], np.ones(3)) for k in CONVENTIONS]
+    if mirrored:
+        readings += [
+            (k, pr, cr, np.where(np.arange(3) == i, -1.0, 1.0)) for k, i in MIRRORS.items()
+        ]
     out = {}
-    for k in CONVENTIONS:
-        r, t = relative_pose(pa[k], parent.position[ok], ca[k], child.position[ok])
+    for k, rp, rc, flip in readings:
+        r, t = relative_pose(rp, pp * flip, rc, cp * flip)
         out[k] = centre_of_rotation(r, t).rms_mm
     return out, int(ok.size)
 
@@ -789,7 +853,9 @@ def check_recording(
 __all__ = [
     "CONVENTIONS",
     "HAND_LENGTH_MM",
+    "JOINT_REACH_MM",
     "MARGIN",
+    "MIRRORS",
     "SEGMENT_FRACTION",
     "Bound",
     "PivotCheck",
@@ -806,6 +872,7 @@ __all__ = [
     "convention_problems",
     "enforce",
     "finger_length_bound",
+    "joint_reach_problems",
     "landmark_scale",
     "neighbour_bound",
     "pivot_residuals",
