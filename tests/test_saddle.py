@@ -223,3 +223,18 @@ def test_bad_inputs_are_one_line_errors() -> None:
         fit_saddle(*args, weights=np.zeros(c.rotation.shape[0]))
     with pytest.raises(FingerfitError, match="field 'rotation': 10 frames"):
         fit_saddle(c.rotation[:10], c.translation[:10], c.reference_rotation)
+
+
+def test_zero_weight_frames_do_not_count_and_one_cluster_gives_no_sd() -> None:
+    c = case(5, "flexion_first", 0.0)
+    rot, trans = c.rotation.copy(), c.translation.copy()
+    bad = slice(300, 500)
+    rot[bad] = axis_angle_matrix(unit(np.ones(3)), np.full(200, 0.5)) @ rot[bad]
+    trans[bad] += 20.0
+    w = np.ones(rot.shape[0])
+    w[bad] = 0.0
+    f = fit_saddle(rot, trans, c.reference_rotation, weights=w, groups=np.zeros(w.size))
+    assert _deg(f.flexion_axis, c.flexion_axis) < 1e-6
+    assert _deg(f.abduction_axis, c.abduction_axis) < 1e-6
+    assert abs(abs(f.offset_mm) - abs(c.offset_mm)) < 1e-6
+    assert f.clusters == 0 and np.isnan(f.offset_sd_mm) and np.isnan(f.flexion_sd_deg)

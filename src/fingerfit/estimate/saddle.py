@@ -82,8 +82,8 @@ MIN_PLANE_SPREAD_DEG = 0.5 * MIN_RANGE_DEG
 # ill-conditioned (their errors grow as 1 / sin of the angle between the axes); saddle
 # joints' axes are 40-90 deg apart (thumb CMC about 80 deg: Hollister 1992, MyoHand 81 deg).
 MIN_AXIS_ANGLE_DEG = 20.0
-GRID_STEP_DEG = 6.0  # coarse search step over the directions of the plane
-GRID_FRAMES = 300  # the coarse search uses at most this many frames (evenly strided)
+GRID_STEP_DEG = 9.0  # coarse search step over the directions of the plane
+GRID_FRAMES = 150  # the coarse search uses at most this many frames (evenly strided)
 MAX_FRAMES = 1500  # the direction fit uses at most this many frames (evenly strided)
 STARTS = 3  # refine this many of the coarse search's best local minima
 DEFAULT_BLOCKS = 10  # jackknife clusters without ``groups``: contiguous blocks of frames
@@ -128,7 +128,10 @@ class SaddleFit:
     offset_sd_mm : float
         Jackknife SD of ``offset_mm`` (mm).
     clusters : int
-        Number of clusters of the jackknife.
+        Number of clusters of the jackknife (the SDs are NaN with fewer than two). The
+        SDs show the errors that differ between clusters (noise, cycle-to-cycle
+        variation), not a bias every cluster shares (the tracker's smooth distortion
+        field, skin sliding that follows the angles alike in every cycle).
     """
 
     order: str
@@ -186,8 +189,7 @@ def _off_hinge_spread(q: FloatArray, w: FloatArray) -> tuple[FloatArray, float]:
     swing = np.cross(a_p, q @ a_c)
     swing -= np.average(swing, axis=0, weights=w)
     _, _, vt = np.linalg.svd(swing * np.sqrt(w)[:, None], full_matrices=False)
-    lo, hi = np.percentile(swing @ vt[0], [5, 95])
-    return a_p, float(np.degrees(hi - lo))
+    return a_p, _range_deg((swing @ vt[0])[w > 0])
 
 
 def _coarse_starts(q: FloatArray, w: FloatArray, plane: FloatArray) -> list[tuple]:
@@ -423,9 +425,10 @@ def fit_saddle(
     p = p * _sign(p, fg if flexion_first else ag, alpha)
     d = d * _sign(d, ag if flexion_first else fg, delta)
     sol = _solve(rotation, translation, reference_rotation, w, p, d, flexion_first)
+    used = w > 0
     ranges = {
-        "flexion": _range_deg(sol.flexion_angle),
-        "abduction": _range_deg(sol.abduction_angle),
+        "flexion": _range_deg(sol.flexion_angle[used]),
+        "abduction": _range_deg(sol.abduction_angle[used]),
     }
     low = min(ranges, key=lambda key: ranges[key])
     if ranges[low] < MIN_RANGE_DEG:
@@ -433,34 +436,10 @@ def fit_saddle(
     if fg is not None and ag is not None:
         _check_order(sol, order, fg, ag)
 
-    # Delete-one-cluster jackknife of the whole fit, from the full solution.
     labels = np.arange(n) * DEFAULT_BLOCKS // n if groups is None else groups
-    uniq, idx = np.unique(labels, return_inverse=True)
-    fl, ab, off = [], [], []
-    for c in range(uniq.size if uniq.size > 1 else 0):
-        keep = idx != c
-        kq, kw = q[keep], w[keep]
-        ks = max(1, -(-kq.shape[0] // MAX_FRAMES))
-        jp, jd, _ = _refine(kq[::ks], np.sqrt(kw[::ks]), p, d)
-        jp, jd = jp * np.sign(jp @ p), jd * np.sign(jd @ d)
-        js = _solve(
-            rotation[keep], translation[keep], reference_rotation, kw, jp, jd, flexion_first
-        )
-        fl.append(js.flexion_axis)
-        ab.append(js.abduction_axis)
-        off.append(js.offset_mm)
-    clusters = len(off)
-
-    def jack_sd(values: FloatArray) -> float:
-        if clusters < 2:
-            return float("nan")
-        v = np.asarray(values, dtype=float)
-        v = v.reshape(clusters, -1)
-        dev = v - v.mean(axis=0)
-        return float(np.sqrt((clusters - 1) / clusters * np.sum(dev * dev)))
-
-    fl_sd = jack_sd(np.asarray(fl) - sol.flexion_axis)
-    ab_sd = jack_sd(np.asarray(ab) - sol.abduction_axis)
+    fl_sd, ab_sd, off_sd, clusters = _jackknife(
+        rotation, translation, reference_rotation, w, labels, p, d, flexion_first
+    )
     return SaddleFit(
         order=order,
         flexion_axis=sol.flexion_axis,
@@ -475,11 +454,56 @@ def fit_saddle(
         rms_position_mm=sol.rms_position_mm,
         flexion_range_deg=ranges["flexion"],
         abduction_range_deg=ranges["abduction"],
-        flexion_sd_deg=float(np.degrees(fl_sd)),
-        abduction_sd_deg=float(np.degrees(ab_sd)),
-        offset_sd_mm=jack_sd(np.asarray(off)),
+        flexion_sd_deg=fl_sd,
+        abduction_sd_deg=ab_sd,
+        offset_sd_mm=off_sd,
         clusters=clusters,
     )
+
+
+def _jackknife(
+    rotation: FloatArray,
+    translation: FloatArray,
+    reference_rotation: FloatArray,
+    w: FloatArray,
+    labels: FloatArray,
+    p: FloatArray,
+    d: FloatArray,
+    flexion_first: bool,
+) -> tuple[float, float, float, int]:
+    """Delete-one-cluster jackknife SDs of the flexion and ab/adduction axis directions
+    (deg) and of the offset (mm), and the number of clusters (NaN SDs below two).
+
+    Without each cluster the directions are refitted from the full solution ``(p, d)``,
+    then the angles, points and offset; the SD is ``sqrt((G - 1) / G sum |x_g - mean|^2)``
+    (for an axis, of the 3-vector: the RMS angle off in both directions across it).
+    """
+    uniq, idx = np.unique(labels, return_inverse=True)
+    q = rotation @ reference_rotation.T
+    fl, ab, off = [], [], []
+    for c in range(uniq.size if uniq.size > 1 else 0):
+        keep = idx != c
+        kq, kw = q[keep], w[keep]
+        if not kw.sum() > 0:
+            continue
+        s = max(1, -(-kq.shape[0] // MAX_FRAMES))
+        jp, jd, _ = _refine(kq[::s], np.sqrt(kw[::s]), p, d)
+        jp, jd = jp * np.sign(jp @ p), jd * np.sign(jd @ d)
+        js = _solve(
+            rotation[keep], translation[keep], reference_rotation, kw, jp, jd, flexion_first
+        )
+        fl.append(js.flexion_axis)
+        ab.append(js.abduction_axis)
+        off.append([js.offset_mm])
+    g = len(off)
+    if g < 2:
+        return float("nan"), float("nan"), float("nan"), g
+
+    def sd(values: list) -> float:
+        dev = np.asarray(values) - np.mean(values, axis=0)
+        return float(np.sqrt((g - 1) / g * np.sum(dev * dev)))
+
+    return float(np.degrees(sd(fl))), float(np.degrees(sd(ab))), sd(off), g
 
 
 def _line_angle(u: FloatArray, v: FloatArray) -> float:
