@@ -68,6 +68,18 @@ def ros_domain_id() -> int:
     return int(raw)
 
 
+def _new_folders(path: Path) -> list[Path]:
+    """Folders above ``path`` that do not exist yet, deepest first."""
+    return [q for q in Path(path).absolute().parents if not q.exists()]
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders a discarded output created (deepest first, only if empty)."""
+    for q in folders:
+        with contextlib.suppress(OSError):
+            q.rmdir()
+
+
 # -------------------------------------------------------------------------------- LSL
 
 
@@ -286,6 +298,7 @@ class BagOutput:
         from ..io.atomic import staged_directory
 
         self.store = get_typestore(Stores.ROS2_HUMBLE)
+        self._created = _new_folders(path)
         self._stage = staged_directory(path)
         staging = self._stage.__enter__()
         try:
@@ -299,7 +312,9 @@ class BagOutput:
                 "/" + topic.lstrip("/"), "sensor_msgs/msg/JointState", typestore=self.store
             )
         except BaseException as exc:
-            self._stage.__exit__(type(exc), exc, exc.__traceback__)
+            with contextlib.suppress(FingerfitError):
+                self._stage.__exit__(type(exc), exc, exc.__traceback__)
+            _remove_empty(self._created)
             raise
         self.names = list(names)
         self.frame_id = frame_id
@@ -336,6 +351,7 @@ class BagOutput:
             err = FingerfitError("bag discarded")
             with contextlib.suppress(FingerfitError):
                 self._stage.__exit__(FingerfitError, err, None)
+            _remove_empty(self._created)
 
 
 class RecordOutput:
@@ -350,6 +366,7 @@ class RecordOutput:
     def __init__(self, path: Path) -> None:
         from ..io.atomic import atomic_write
 
+        self._created = _new_folders(path)
         self._ctx = atomic_write(path, newline="")
         self._fh = self._ctx.__enter__()
         self._header = True
@@ -374,3 +391,4 @@ class RecordOutput:
             err = FingerfitError("record discarded")
             with contextlib.suppress(FingerfitError):
                 self._ctx.__exit__(FingerfitError, err, None)
+            _remove_empty(self._created)
