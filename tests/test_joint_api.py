@@ -296,6 +296,34 @@ def test_refuses_malformed_input() -> None:
     refused("unknown hinge method", p, c, "hinge", method="magic")
 
 
+@pytest.mark.parametrize(
+    ("scale", "units", "look"),
+    [
+        (0.001, "mm", "like metres declared as millimetres"),  # metres given as mm
+        (1.0, "m", "millimetres or inches declared as metres"),  # mm given as metres
+        (1.0, "in", "millimetres declared as inches"),  # 41 mm -> 1 m: still plausible...
+    ],
+)
+def test_refuses_implausible_units(scale, units, look) -> None:
+    """The joint's distance from the farther segment origin (41 mm here) against
+    10-2000 mm in the declared units (plausibility.JOINT_REACH_MM)."""
+    p, c = motion("hinge")
+    args = (pos_quat(p, scale), pos_quat(c, scale))
+    if units == "in":  # 41 mm read as inches is 1.04 m: plausible, accepted (docs/joint.md)
+        f = hinge_axis(*args, units=units)
+        assert f.units == "in" and deg(f.axis_parent, A) < 0.2
+        return
+    m = refused("the joint centre lies .* from the farther segment origin", *args, units=units)
+    assert look in m or look.replace(" or inches", "") in m, m
+    assert "plausible 10-2000 mm" in m
+    # The check does not depend on the convention check or the kind.
+    for kind in ("hinge", "ball", "two_axis", "auto"):
+        refused("farther segment origin", *args, kind, units=units, check_convention=False)
+    # Declared rightly, the same data are accepted.
+    right = "m" if scale == 0.001 else "mm"
+    assert deg(hinge_axis(*args, units=right).axis_parent, A) < 0.2
+
+
 def test_swapped_order_undetectable_when_the_child_origin_is_on_the_axis() -> None:
     """Documented limit (docs/joint.md): sensors starting aligned with the tracker and
     turning about a tracker axis, with the child origin on the joint axis: the swapped
@@ -373,6 +401,19 @@ def test_real_liberty_problems_refused() -> None:
         ok = np.isfinite(p).all(axis=(1, 2)) & np.isfinite(c).all(axis=(1, 2))
         (pp, pq), (cp, cq) = pos_quat(p[ok]), pos_quat(c[ok])
         refused("x,y,z,w order", (pp, pq[:, [1, 2, 3, 0]]), (cp, cq[:, [1, 2, 3, 0]]), "hinge")
+
+
+@needs_liberty
+@pytest.mark.parametrize("name", LIBERTY_FILES)
+def test_real_liberty_in_wrong_units_refused(name) -> None:
+    """The centimetre logs declared as millimetres were answered before (issue 16), with a
+    residual ten times too small: now refused naming the units."""
+    p, c = liberty(name)
+    ok = np.isfinite(p).all(axis=(1, 2)) & np.isfinite(c).all(axis=(1, 2))
+    (pp, pq), (cp, cq) = pos_quat(p[ok], 0.1), pos_quat(c[ok], 0.1)  # the file's cm
+    assert hinge_axis((pp, pq), (cp, cq), units="cm").units == "cm"
+    m = refused("farther segment origin", (pp, pq), (cp, cq), "hinge", units="mm")
+    assert "centimetres" in m and "declared as millimetres" in m
 
 
 @pytest.mark.parametrize("method", ["tang2018", "pooled", "robust", "twoaxis", "rolling"])

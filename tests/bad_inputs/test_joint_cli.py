@@ -40,9 +40,10 @@ def test_joint_writes_json_and_table(files, tmp_path) -> None:
     out = tmp_path / "pip.json"
     res = run("joint", src, *LIB, "--parent", "2", "--child", "3", "--kind", "hinge", "-o", out)
     assert res.exit_code == 0, res.output
-    assert "hinge joint (sara), mm" in res.output and "pivot residual" in res.output
+    # Results in the file's units (--units in), the pivot residual also in mm.
+    assert "hinge joint (sara), in" in res.output and "pivot residual" in res.output
     doc = json.loads(out.read_text())
-    assert doc["kind"] == "hinge" and doc["parent"] == "2" and doc["units"] == "mm"
+    assert doc["kind"] == "hinge" and doc["parent"] == "2" and doc["units"] == "in"
     assert doc["quality"]["pivot_residual_mm"] < 2.0
     assert doc["quality"]["cycles"] >= 3
     assert doc["quality"]["frames"] > 1000
@@ -97,3 +98,20 @@ def test_joint_refuses_swapped_quaternion_order(files, tmp_path) -> None:
     )  # fmt: skip
     assert "x,y,z,w order" in line or "conjugated" in line
     assert listing(tmp_path) == before
+
+
+def test_joint_refuses_wrong_units(files, tmp_path) -> None:
+    """The Liberty file (inches) declared as millimetres: the PIP centre would lie 0.9 mm
+    from the farther sensor. Refused naming --units; nothing written."""
+    src = files / "in" / "grasp.txt"
+    out = tmp_path / "j.json"
+    before = listing(files, tmp_path)
+    lib = ("--from", "liberty", "--items", "2,7,9,1", "--rate", "240")
+    line = refused(
+        run("joint", src, *lib, "--units", "mm", "--parent", "2", "--child", "3", "-o", out),
+        "grasp.txt: field '--units': 2 -> 3: the joint centre lies",
+        "farther segment origin (plausible 10-2000 mm)",
+        "declared as millimetres",
+    )
+    assert "inches" in line
+    assert listing(files, tmp_path) == before

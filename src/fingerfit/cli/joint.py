@@ -45,11 +45,18 @@ def read_any(
     items: str | None,
     columns: str | None,
     clusters: str | None,
-) -> Recording:
+) -> tuple[Recording, str]:
     """Read ``source`` in ``fmt`` (positions mm, rotations sensor -> tracker).
 
     Sensors keep the file's names: pose CSV names, Liberty station numbers (``1``, ``2``,
     ...), wide-CSV sensor numbers, C3D cluster or ROTATION channel names.
+
+    Returns
+    -------
+    recording : Recording
+    declared : str
+        The units the file's positions were read in: ``units``, else the format's default
+        (pose CSV mm, Liberty inches) or the C3D file's ``POINT:UNITS``.
     """
     from ..session import UNITS_TO_MM
 
@@ -66,16 +73,19 @@ def read_any(
     if fmt is JointSource.pose_csv:
         from ..io.posecsv import read_pose_csv
 
-        return read_pose_csv(source, units=units or "mm", rate_hz=rate)
+        return read_pose_csv(source, units=units or "mm", rate_hz=rate), units or "mm"
     if fmt in (JointSource.liberty, JointSource.liberty_binary):
         from ..io.liberty import read_liberty_ascii, read_liberty_binary
 
         reader = read_liberty_ascii if fmt is JointSource.liberty else read_liberty_binary
-        return reader(source, items=items, units=units or "in", rate_hz=rate, check=False)
+        rec = reader(source, items=items, units=units or "in", rate_hz=rate, check=False)
+        return rec, units or "in"
     if fmt is JointSource.wide_csv:
         from ..io.widecsv import read_wide_csv
 
-        return read_wide_csv(source, units=units, layout=columns, rate_hz=rate, check=False)
+        rec = read_wide_csv(source, units=units, layout=columns, rate_hz=rate, check=False)
+        assert units is not None  # the reader refuses a wide CSV without units
+        return rec, units
     from ..io.c3d import parse_clusters, read_c3d_segments
 
     seg = read_c3d_segments(
@@ -84,7 +94,15 @@ def read_any(
         clusters=None if clusters is None else parse_clusters(clusters),
         check=False,
     )
-    return seg.recording
+    return seg.recording, units or _c3d_units(source)
+
+
+def _c3d_units(source: Path) -> str:
+    """``POINT:UNITS`` of a C3D file that :func:`~fingerfit.io.c3d.read_c3d_segments` read."""
+    from ..io.c3d import _ezc3d, _param
+
+    value = _param(_ezc3d().c3d(str(source)), "POINT", "UNITS", [""])
+    return str(value[0] if len(value) else "").strip()
 
 
 def _rate(rec: Recording) -> float | None:
@@ -143,7 +161,7 @@ def joint(
     ] = None,
     units: Annotated[
         str | None,
-        typer.Option(help="Position units in the file (mm, cm, m, in); defaults as for convert."),
+        typer.Option(help="Position units in the file (mm, cm, m, in); defaults as for convert. Results are in these units."),
     ] = None,
     rate: Annotated[float | None, typer.Option(min=0.001, help="Frame rate (Hz).")] = None,
     items: Annotated[str | None, typer.Option(help="liberty: output list, e.g. 2,7,9,1.")] = None,
@@ -158,6 +176,7 @@ def joint(
     """Find the joint (hinge, two-axis or ball) between two segments of one recording."""
     from ..estimate.joint import fit_joint
     from ..io.atomic import atomic_write, refuse_writing_inputs
+    from ..session import UNITS_TO_MM
     from ..transforms import transform_from_pr
 
     if not source.is_file():
@@ -167,7 +186,7 @@ def joint(
         if output.is_dir():
             raise FingerfitError("is a directory; give a file name", path=output)
     fmt = fmt or (JointSource.c3d if source.suffix.lower() == ".c3d" else JointSource.pose_csv)
-    rec = read_any(
+    rec, declared = read_any(
         source, fmt, units=units, rate=rate, items=items, columns=columns, clusters=clusters
     )
     for note in rec.notes:
@@ -188,18 +207,24 @@ def joint(
     if parent == child:
         raise FingerfitError("parent and child are the same segment", field="--child")
     p, c = rec.poses[parent], rec.poses[child]
+    # Fit in the file's own units: the result is in them, and the units check (the joint's
+    # distance from the segment origins) names the declared units when they are wrong.
+    scale = UNITS_TO_MM[declared]
     try:
         fit = fit_joint(
-            transform_from_pr(p.position, p.rotation),
-            transform_from_pr(c.position, c.rotation),
+            transform_from_pr(p.position / scale, p.rotation),
+            transform_from_pr(c.position / scale, c.rotation),
             kind.value,
-            units="mm",
+            units=declared,
             method=method,
             rate_hz=rate or _rate(rec),
             check_convention=convention_check,
         )
     except FingerfitError as exc:
-        raise FingerfitError(f"{parent} -> {child}: {exc.reason}", path=source) from None
+        units_field = "--units" if exc.field == "units" else None
+        raise FingerfitError(
+            f"{parent} -> {child}: {exc.reason}", path=source, field=units_field
+        ) from None
     if fit.quality.dropped_frames:
         notice("note", f"{fit.quality.dropped_frames} frame(s) without both poses dropped")
     for note in fit.quality.notes:

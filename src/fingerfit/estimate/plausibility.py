@@ -234,22 +234,24 @@ def _ratio_units(ratio: float) -> list[tuple[str, str]]:
     return out
 
 
-def unit_cause(value: float, bound: Bound, declared: str) -> str:
+def unit_cause(value: float, bound: Bound, declared: str, *, every: bool = False) -> str:
     """The likely cause of a length ``value`` (mm) outside ``bound`` when the data declare
-    ``declared`` units: the actual units that bring it nearest the middle of the range."""
-    best: tuple[float, str] | None = None
+    ``declared`` units: the actual units that bring it nearest the middle of the range
+    (``every``: all units that bring it into range, nearest the middle first -- for wide
+    bounds that cannot tell them apart)."""
+    fits: list[tuple[float, str]] = []
     mid = math.sqrt(bound.lo * bound.hi)
     for actual, mm in UNITS_TO_MM.items():
         if actual == declared or not value > 0:
             continue
         v = value * mm / UNITS_TO_MM[declared]
         if bound.contains(v):
-            score = abs(math.log(v / mid))
-            if best is None or score < best[0]:
-                best = (score, actual)
-    if best is None:
+            fits.append((abs(math.log(v / mid)), actual))
+    if not fits:
         return "no unit mistake explains it; check the sensor names and the data"
-    return f"coordinates look like {UNIT_NAMES[best[1]]} declared as {UNIT_NAMES[declared]}"
+    names = [UNIT_NAMES[u] for _, u in sorted(fits)]
+    look = " or ".join(names if every else names[:1])
+    return f"coordinates look like {look} declared as {UNIT_NAMES[declared]}"
 
 
 # --------------------------------------------------------------------------- units
@@ -499,7 +501,7 @@ def joint_reach_problems(
     return [
         Problem(
             f"the joint centre lies {fmt_mm(reach_mm)} mm from the farther segment origin "
-            f"(plausible {b.lo:g}-{b.hi:g} mm): {unit_cause(reach_mm, b, units)}",
+            f"(plausible {b.lo:g}-{b.hi:g} mm): {unit_cause(reach_mm, b, units, every=True)}",
             path=path,
             field=field,
         )
