@@ -144,6 +144,11 @@ def test_two_axis_recovered() -> None:
     assert f.angles_deg.shape == (1200, 2)
     assert 25 < np.ptp(f.angles_deg[:, 1]) < 35  # ab/adduction +/-15 deg
     assert f.quality.pivot_residual_mm < 1.5
+    # Quality notes speak of a generic joint and the blocks of frames it used, not of the
+    # finger pipeline's MP joint and grasp cycles.
+    notes = " ".join(f.quality.notes)
+    assert "two-axis joint conditioning" in notes and "20 contiguous blocks of frames" in notes
+    assert "MP" not in notes and "grasp" not in notes
     # Exact data: exact axes.
     fe = two_axis(*motion("two_axis", noise_mm=0.0, noise_deg=0.0))
     assert deg(fe.axis_child, R0.T @ A) < 1e-4 and deg(fe.second_axis_parent, B) < 1e-4

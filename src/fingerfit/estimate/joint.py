@@ -844,7 +844,7 @@ def _two_axis(w: _Work, conv: dict[str, float], *, strict: bool = True) -> Joint
         m, "two_axis", "twoaxis", tf.flexion_point, u_c, a, a_c, b, c_b, angles,
         np.arange(n), ref, w.rom, float(np.sqrt(np.mean(resid**2))), cond, math.nan,
         1.96 * tf.flexion_sd_deg, math.nan, len(w.periods), conv,
-        tf.stability_notes(),
+        tf.stability_notes("joint", f"{BOOTSTRAP_BLOCKS} contiguous blocks of frames"),
     )  # fmt: skip
 
 

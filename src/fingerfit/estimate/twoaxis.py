@@ -143,14 +143,18 @@ class TwoAxisFit:
     rest_spread_low_deg: float = float("nan")
     rest_cycles: int = 0
 
-    def stability_notes(self) -> list[str]:
-        """Quality-note sentences on how well the motion determines the two axes."""
+    def stability_notes(self, joint: str = "MP", groups: str = "the grasp cycles") -> list[str]:
+        """Quality-note sentences on how well the motion determines the two axes.
+
+        ``joint`` names the joint and ``groups`` the groups of frames whose spread gave the
+        SDs (the finger pipeline's defaults; :func:`.joint.fit_joint` passes its own).
+        """
         z = 1.96
         notes = [
-            f"two-axis MP conditioning: direction fit condition number "
+            f"two-axis {joint} conditioning: direction fit condition number "
             f"{self.data_condition:.0f}; flexion axis +/-{z * self.flexion_sd_deg:.2f} deg, "
             f"ab/adduction axis +/-{z * self.abduction_sd_deg:.2f} deg about it "
-            "(95 %, from the spread over the grasp cycles)"
+            f"(95 %, from the spread over {groups})"
         ]
         if self.tilt_data_share < 0.5:
             notes.append(
@@ -160,7 +164,7 @@ class TwoAxisFit:
             )
         if self.offset_data_share < 0.5:
             notes.append(
-                f"MP axes held intersecting (data weight {100 * self.offset_data_share:.0f} "
+                f"{joint} axes held intersecting (data weight {100 * self.offset_data_share:.0f} "
                 f"%): the motion does not determine the distance between them "
                 f"(+/-{self.offset_sd_mm:.1f} mm from the data alone)"
             )
