@@ -88,9 +88,16 @@ def implausible_rows(values: np.ndarray, scale_to_mm: float = 1.0) -> np.ndarray
     ndarray of int
         Indices of the offending rows, in order.
     """
-    v = np.asarray(values, dtype=float).reshape(len(values), -1)
+    v = np.asarray(values, dtype=float)
+    v = v.reshape(len(v), -1) if v.ndim != 2 else v
+    if v.shape[1] == 0:
+        return np.zeros(0, dtype=np.int64)
+    # Largest magnitude per row, NaN ignored, one column at a time (no (n, m) temporaries).
+    peak = np.abs(v[:, 0])
+    for j in range(1, v.shape[1]):
+        np.fmax(peak, np.abs(v[:, j]), out=peak)
     with np.errstate(over="ignore", invalid="ignore"):
-        return np.flatnonzero((np.abs(v * scale_to_mm) > MAX_COORDINATE_MM).any(axis=1))
+        return np.flatnonzero(peak * abs(scale_to_mm) > MAX_COORDINATE_MM)
 
 
 def implausible_message(value: float) -> str:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import io
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -132,6 +133,72 @@ def _to_float(
     return values
 
 
+@dataclass
+class _Rows:
+    """The decoded data rows of a pose CSV, in file order (row ``i`` is file line ``i + 2``).
+
+    ``time`` ``(n,)`` s; ``sensor`` ``(n,)`` int codes into ``names``; ``pose`` ``(n, 7)``
+    ``x, y, z`` (file units) and ``qw, qx, qy, qz``; NaN where a field is empty.
+    """
+
+    time: np.ndarray
+    sensor: np.ndarray
+    names: list[str]
+    pose: np.ndarray
+
+
+def _decode_fast(path: Path) -> _Rows:
+    """Batches through :func:`fingerfit.io.fastcsv.csv_batches` into preallocated rows.
+
+    Raises :class:`~fingerfit.io.fastcsv.NotPlain` for anything the reference decoder
+    must judge.
+    """
+    from .fastcsv import RowArrays, csv_batches, estimate_rows
+
+    rows: RowArrays | None = None
+    sensor = np.empty(0, dtype=np.int32)
+    names: list[str] = []
+    code_of: dict[str, int] = {}
+    for first, n_bytes, cols in csv_batches(path, HEADER, text=("sensor",)):
+        m = cols["time"].size
+        if rows is None:
+            capacity = estimate_rows(path, m, n_bytes)
+            rows = RowArrays(capacity, 8)
+            sensor = np.empty(max(capacity, 16), dtype=np.int32)
+        block = rows.reserve(m)
+        for j, c in enumerate(_NUMERIC):
+            block[:, j] = cols[c]
+        codes, values = cols["sensor"]
+        lut = np.array([code_of.setdefault(v, len(code_of)) for v in values], dtype=np.int32)
+        if sensor.size < rows.n:
+            grown = np.empty(rows.data.shape[0], dtype=np.int32)
+            grown[:first] = sensor[:first]
+            sensor = grown
+        sensor[first : first + m] = lut[codes] if lut.size else codes
+    names = list(code_of)
+    if rows is None:
+        return _Rows(np.zeros(0), np.zeros(0, np.int32), [], np.zeros((0, 7)))
+    data = rows.array()
+    return _Rows(data[:, 0], sensor[: rows.n], names, data[:, 1:])
+
+
+def _decode_exact(raw: bytes, path: Path) -> _Rows:
+    """The reference decoder: Python's exact float parser, every error with its line."""
+    check_field_counts(raw, path, len(HEADER))
+    df = pd.read_csv(
+        io.BytesIO(raw), dtype=str, skip_blank_lines=True, quoting=csv.QUOTE_NONE, encoding="utf-8"
+    )
+    lines = np.arange(df.shape[0]) + 2  # file line of each data row
+    under = b"_" in raw
+    values = {col: _to_float(df[col], col, lines, path, under) for col in _NUMERIC}
+    sensors = df["sensor"].to_numpy(dtype=object)
+    names, inverse = np.unique(
+        np.where(pd.isna(sensors), "", sensors).astype(str), return_inverse=True
+    )
+    pose = np.column_stack([values[c] for c in _NUMERIC[1:]])
+    return _Rows(values["time"], inverse.astype(np.int32), [str(n) for n in names], pose)
+
+
 def read_pose_csv(
     path: str | Path,
     *,
@@ -140,6 +207,11 @@ def read_pose_csv(
     scale_to_mm: float | None = None,
 ) -> Recording:
     """Read a canonical pose CSV into a :class:`Recording` (mm, tracker frame).
+
+    Read in batches of about 16 MB into preallocated arrays with Arrow's CSV parser
+    (correctly rounded floats); a file the fast path does not vouch for (any error, and
+    rare spellings such as ``nan`` or blank trailing lines) is read by the reference
+    decoder, which names the line of any error.
 
     Parameters
     ----------
@@ -166,66 +238,81 @@ def read_pose_csv(
         On any malformed content, naming the file and line.
     """
     from ..session import UNITS_TO_MM
+    from .fastcsv import NotPlain, read_header
 
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
-    first = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
+    first = read_header(path).split(b"\n", 1)[0].decode("utf-8", "replace").strip()
+    first = first.lstrip("\ufeff")
     if tuple(h.strip() for h in first.split(",")) != HEADER:
         raise FingerfitError(
             f"header must be exactly '{','.join(HEADER)}', found '{shown(first, 80)}'",
             path=path,
             line=1,
         )
-    check_field_counts(raw, path, len(HEADER))
+    try:
+        rows = _decode_fast(path)
+    except NotPlain:
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:
+            raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+        rows = _decode_exact(raw, path)
+        del raw
     if scale_to_mm is None:
         if units not in UNITS_TO_MM:
             raise FingerfitError(f"unknown units '{units}'", path=path, field="units")
         scale_to_mm = UNITS_TO_MM[units]
+    return _assemble(rows, path, scale_to_mm, rate_hz)
 
-    # Read text and convert with Python's exact float parser: round-trip exact (pandas'
-    # fast C parser is not) and every bad value can be named with its line.
-    df = pd.read_csv(
-        io.BytesIO(raw), dtype=str, skip_blank_lines=True, quoting=csv.QUOTE_NONE, encoding="utf-8"
-    )
+
+#: Rows converted to rotation matrices at a time (bounds the temporary memory).
+_BLOCK = 1 << 17
+
+
+def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None) -> Recording:
+    """Check the decoded rows and place them per sensor on the frame grid.
+
+    Every check and message of the format, in this order: no rows, time missing or going
+    backwards, unknown sensor names, implausible coordinates, conflicting duplicates,
+    quaternion norm, sampling grid.
+    """
+    time, code, pose = rows.time, rows.sensor, rows.pose
+    n_rows = time.size
     notes: list[str] = []
-    lines = np.arange(df.shape[0]) + 2  # file line of each data row
-    under = b"_" in raw
-    values = {col: _to_float(df[col], col, lines, path, under) for col in _NUMERIC}
-    time = values["time"]
-    sensors = df["sensor"].to_numpy(dtype=object)
-    if df.shape[0] == 0:
+    if n_rows == 0:
         raise FingerfitError("no data rows", path=path)
     bad = np.flatnonzero(~np.isfinite(time))
     if bad.size:
         raise FingerfitError(
-            "time is missing or not finite", path=path, line=int(lines[bad[0]]), field="time"
+            "time is missing or not finite", path=path, line=int(bad[0]) + 2, field="time"
         )
-    back = np.flatnonzero(np.diff(time) < 0)
+    back = np.flatnonzero(time[1:] < time[:-1])
     if back.size:
         i = int(back[0]) + 1
         raise FingerfitError(
             f"time goes backwards ({time[i]:.6f} s after {time[i - 1]:.6f} s)",
             path=path,
-            line=int(lines[i]),
+            line=i + 2,
             field="time",
         )
-    names, inverse = np.unique(
-        np.where(pd.isna(sensors), "", sensors).astype(str), return_inverse=True
-    )
-    for k, name in enumerate(names):
-        if not is_sensor_name(name):
-            i = int(np.flatnonzero(inverse == k)[0])
+    n_codes = len(rows.names)
+    # Rows grouped by sensor, in file order within each sensor (for the first row of
+    # each name and for duplicates).
+    order = np.argsort(code, kind="stable")
+    starts = np.searchsorted(code[order], np.arange(n_codes))
+    first_row = np.full(n_codes, n_rows, dtype=np.int64)
+    present = starts < n_rows
+    present[present] = code[order[starts[present]]] == np.flatnonzero(present)
+    first_row[present] = order[starts[present]]
+    for k in sorted(range(n_codes), key=lambda c: rows.names[c]):
+        if first_row[k] < n_rows and not is_sensor_name(rows.names[k]):
             raise FingerfitError(
-                f"unknown sensor name '{shown(name)}' (expected hand, stylus or <digit>.<segment>)",
+                f"unknown sensor name '{shown(rows.names[k])}' (expected hand, stylus or "
+                "<finger>.<segment>)",
                 path=path,
-                line=int(lines[i]),
+                line=int(first_row[k]) + 2,
                 field="sensor",
             )
-
-    pose = np.column_stack([values[c] for c in ("x", "y", "z", "qw", "qx", "qy", "qz")])
     big = implausible_rows(pose[:, :3], scale_to_mm)
     if big.size:
         i = int(big[0])
@@ -233,57 +320,76 @@ def read_pose_csv(
         raise FingerfitError(
             implausible_message(float(pose[i, j]) * scale_to_mm),
             path=path,
-            line=int(lines[i]),
+            line=i + 2,
             field="xyz"[j],
         )
+    # Frames: rows of equal time (time does not decrease, so they are consecutive).
+    new = np.empty(n_rows, dtype=bool)
+    new[0] = True
+    np.not_equal(time[1:], time[:-1], out=new[1:])
+    frame_of_row = np.cumsum(new, dtype=np.int64) - 1
     # Exact duplicates (same time, sensor and values) are dropped and counted;
     # conflicting duplicates are an error.
-    key = pd.DataFrame({"t": time, "s": inverse})
-    dup = key.duplicated(keep="first").to_numpy()
-    if dup.any():
-        firsts = key.drop_duplicates(keep="first").reset_index().set_index(["t", "s"])["index"]
-        orig = firsts.loc[list(zip(time[dup], inverse[dup], strict=True))].to_numpy()
-        same = np.all(
-            (pose[dup] == pose[orig]) | (np.isnan(pose[dup]) & np.isnan(pose[orig])), axis=1
-        )
+    same_key = code[order[1:]] == code[order[:-1]]
+    same_key &= frame_of_row[order[1:]] == frame_of_row[order[:-1]]
+    if same_key.any():
+        later, earlier = order[1:][same_key], order[:-1][same_key]
+        a, b = pose[later], pose[earlier]
+        same = np.all((a == b) | (np.isnan(a) & np.isnan(b)), axis=1)
         if not same.all():
-            i = int(np.flatnonzero(dup)[~same][0])
+            i = int(later[~same].min())
             raise FingerfitError(
-                f"second, different sample for sensor '{names[inverse[i]]}' at time {time[i]:.6f} s",
+                f"second, different sample for sensor '{rows.names[code[i]]}' at time "
+                f"{time[i]:.6f} s",
                 path=path,
-                line=int(lines[i]),
+                line=i + 2,
             )
-        notes.append(f"{int(dup.sum())} exact duplicate rows dropped")
-        keep = ~dup
-        time, inverse, pose, lines = time[keep], inverse[keep], pose[keep], lines[keep]
+        notes.append(f"{later.size} exact duplicate rows dropped")
+        keep = np.ones(n_rows, dtype=bool)
+        keep[later] = False
+        lines = np.flatnonzero(keep) + 2
+        time, code, pose = time[keep], code[keep], pose[keep]
+        new = new[keep]
+        new[0] = True
+        new[1:] = time[1:] != time[:-1]
+        frame_of_row = np.cumsum(new, dtype=np.int64) - 1
+        del keep
+    else:
+        lines = None
+    del order, same_key
+
+    def line_of(i: int) -> int:
+        return int(lines[i]) if lines is not None else i + 2
 
     complete = np.isfinite(pose).all(axis=1)
-    partial = ~complete & np.isfinite(pose).any(axis=1)
-    if partial.any():
-        notes.append(f"{int(partial.sum())} samples with empty fields treated as missing")
-    with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
-        norm = np.linalg.norm(pose[:, 3:], axis=1)
+    n_partial = int(np.count_nonzero(~complete & np.isfinite(pose).any(axis=1)))
+    if n_partial:
+        notes.append(f"{n_partial} samples with empty fields treated as missing")
+    q = pose[:, 3:]
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge component: norm inf, refused
+        norm = np.sqrt(np.einsum("ij,ij->i", q, q))
     bad = np.flatnonzero(complete & (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE))
     if bad.size:
         i = int(bad[0])
         raise FingerfitError(
-            f"quaternion (qw,qx,qy,qz) has norm {norm[i]:.6g}, not 1", path=path, line=int(lines[i])
+            f"quaternion (qw,qx,qy,qz) has norm {norm[i]:.6g}, not 1", path=path, line=line_of(i)
         )
+    del norm
 
-    frame_times, frame_of_row = np.unique(time, return_inverse=True)
+    row_of_frame = np.flatnonzero(new)
+    frame_times = time[row_of_frame]
     if rate_hz is not None and frame_times.size > 1:
         t0 = frame_times[0]
-        row_of_frame = np.unique(frame_of_row, return_index=True)[1]
-        check_grid_size((frame_times - t0) * rate_hz, lines[row_of_frame], path)
+        frame_lines = row_of_frame + 2 if lines is None else lines[row_of_frame]
+        check_grid_size((frame_times - t0) * rate_hz, frame_lines, path)
         idx = np.rint((frame_times - t0) * rate_hz).astype(np.int64)
         off = np.abs(frame_times - (t0 + idx / rate_hz))
         if np.any(off > 0.25 / rate_hz) or np.any(np.diff(idx) == 0):
             i = int(np.flatnonzero((off > 0.25 / rate_hz) | np.r_[False, np.diff(idx) == 0])[0])
-            row = int(row_of_frame[i])
             raise FingerfitError(
                 f"time {frame_times[i]:.6f} s is not on the {rate_hz:g} Hz sampling grid",
                 path=path,
-                line=int(lines[row]),
+                line=int(frame_lines[i]),
                 field="time",
             )
         n = int(idx[-1]) + 1
@@ -291,21 +397,41 @@ def read_pose_csv(
         full_time[idx] = frame_times
         if n > frame_times.size:
             notes.append(f"{n - frame_times.size} frames missing for every sensor (kept as NaN)")
-        frame_of_row = idx[frame_of_row]
+        np.take(idx, frame_of_row, out=frame_of_row)
         frame_times = full_time
     n = frame_times.size
+    del new, row_of_frame
+
+    # Per sensor in order of first appearance: positions (mm) and rotation matrices,
+    # converted a block of rows at a time.
+    appear = [int(k) for k in np.argsort(first_row, kind="stable") if first_row[k] < n_rows]
+    # np.empty, not np.full: each page is written once, then the frames without a
+    # sample are set to NaN.
+    pos = {k: np.empty((n, 3)) for k in appear}
+    rot = {k: np.empty((n, 3, 3)) for k in appear}
+    filled = {k: np.zeros(n, dtype=bool) for k in appear}
+    for lo in range(0, time.size, _BLOCK):
+        hi = min(lo + _BLOCK, time.size)
+        ok = complete[lo:hi]
+        c, f, p = code[lo:hi], frame_of_row[lo:hi], pose[lo:hi]
+        if not ok.all():
+            c, f, p = c[ok], f[ok], p[ok]
+        r = matrix_from_quat_wxyz(p[:, 3:])
+        xyz = p[:, :3] * scale_to_mm
+        for k in np.flatnonzero(np.bincount(c, minlength=len(rows.names))):
+            m = c == k
+            pos[int(k)][f[m]] = xyz[m]
+            rot[int(k)][f[m]] = r[m]
+            filled[int(k)][f[m]] = True
     poses: dict[str, PoseSeries] = {}
-    _, first = np.unique(inverse, return_index=True)
-    for k in np.argsort(first):  # sensors in order of first appearance
-        name = names[k]
-        rows = inverse == k
-        pos = np.full((n, 3), np.nan)
-        quat = np.full((n, 4), np.nan)
-        ok = rows & complete
-        pos[frame_of_row[ok]] = pose[ok, :3] * scale_to_mm
-        quat[frame_of_row[ok]] = pose[ok, 3:]
-        poses[str(name)] = PoseSeries(pos, matrix_from_quat_wxyz(quat))
-        missing = n - int(ok.sum())
+    for k in appear:
+        name = rows.names[k]
+        gap = ~filled.pop(k)
+        p_k, r_k = pos.pop(k), rot.pop(k)
+        p_k[gap] = np.nan
+        r_k[gap] = np.nan
+        poses[name] = PoseSeries(p_k, r_k)
+        missing = int(np.count_nonzero(gap))
         if missing:
             notes.append(f"sensor '{name}': {missing} of {n} frames missing")
     return Recording(path.name, frame_times, poses, notes)

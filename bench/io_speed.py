@@ -1,0 +1,271 @@
+"""Reader and writer throughput and peak memory (issue 15, item 2).
+
+Makes one simulated recording of ``--rows`` rows in each tracker format (pose CSV, wide
+CSV, Liberty ASCII, Liberty binary), then reads each in a fresh process and reports rows
+(or records) per second and the peak resident memory above the process's state just
+before the read, beside the bytes of the arrays the returned recording keeps. Writers
+(pose CSV, wide CSV, the angles CSV) are timed the same way. With ``--before SRC`` (the
+``src`` folder of another checkout, e.g. ``git worktree add /tmp/before <commit>``) every
+measurement is repeated with that code in the same run, for ratios.
+
+Run by ``bench/speed.py`` (``make bench``) or alone::
+
+    python bench/io_speed.py --rows 2000000 --before /tmp/before/src
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+#: Child process: import, read or write, report JSON on stdout.
+_CHILD = r"""
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+kind, path, out = sys.argv[2], sys.argv[3], sys.argv[4]
+
+def status(key):
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith(key):
+                return int(line.split()[1]) * 1024
+    return 0
+
+import numpy as np
+import fingerfit.io.posecsv as posecsv, fingerfit.io.widecsv as widecsv
+import fingerfit.io.liberty as liberty
+from fingerfit.session import UNITS_TO_MM
+
+def read(p):
+    if kind == "pose":
+        return posecsv.read_pose_csv(p, units="mm", rate_hz=240.0)
+    if kind == "wide":
+        return widecsv.read_wide_csv(p, units="mm", rate_hz=240.0, check=False)
+    if kind == "liberty-ascii":
+        return liberty.read_liberty_ascii(p, items="pos,quat,frame", rate_hz=240.0, check=False)
+    if kind == "liberty-binary":
+        return liberty.read_liberty_binary(p, items="pos,quat,frame", rate_hz=240.0, check=False)
+    raise SystemExit(kind)
+
+def write(rec, p):
+    if kind == "write-pose":
+        posecsv.write_pose_csv(p, rec)
+    elif kind == "write-wide":
+        widecsv.write_wide_csv(p, rec)
+    elif kind == "write-angles":
+        from fingerfit.estimate import FitOptions, fit_session
+        from fingerfit.kinematics import compute_kinematics, kinematics_table
+        from fingerfit.simulate import SimConfig, simulate_subject
+        model = fit_session(simulate_subject(SimConfig(fingers=("index",)), 0).session,
+                            FitOptions(method="tang2018"))
+        table = kinematics_table(compute_kinematics(model, rec))
+        base = status("VmRSS:")
+        t = time.perf_counter()
+        writer = getattr(__import__("fingerfit.io.fastcsv", fromlist=["x"]), "write_table", None) \
+            if out == "new" else None
+        if writer is not None:
+            writer(p, table)
+        else:
+            from fingerfit.io.atomic import atomic_write
+            with atomic_write(p, newline="") as fh:
+                table.to_csv(fh, index=False, lineterminator="\n")
+        return time.perf_counter() - t, base, table.shape[0]
+
+if kind.startswith("write"):
+    rec = posecsv.read_pose_csv(path, units="mm", rate_hz=240.0)
+    target = path + ".out"
+    if kind == "write-angles":
+        seconds, base, rows = write(rec, target)
+    else:
+        base = status("VmRSS:")
+        t = time.perf_counter()
+        write(rec, target)
+        seconds = time.perf_counter() - t
+        rows = (sum(int(p.valid.sum()) for p in rec.poses.values()) if kind == "write-pose"
+                else rec.n_frames)
+    import os
+    size = os.path.getsize(target)
+    os.unlink(target)
+    print(json.dumps({"seconds": seconds, "rows": rows, "bytes": size,
+                      "peak_above": status("VmHWM:") - base}))
+    raise SystemExit(0)
+
+# warm-up on a small file of the same kind (first-call imports and caches)
+read(out)
+base = status("VmRSS:")
+t = time.perf_counter()
+rec = read(path)
+seconds = time.perf_counter() - t
+kept = rec.time.nbytes + sum(p.position.nbytes + p.rotation.nbytes for p in rec.poses.values())
+print(json.dumps({"seconds": seconds, "peak_above": status("VmHWM:") - base, "kept": kept,
+                  "frames": rec.n_frames, "sensors": len(rec.poses)}))
+"""
+
+FORMATS = ("pose", "wide", "liberty-ascii", "liberty-binary")
+WRITERS = ("write-pose", "write-wide", "write-angles")
+
+
+def make_files(directory: Path, rows: int) -> dict[str, tuple[Path, Path, int]]:
+    """Simulated files of about ``rows`` rows per format, and a small one of each.
+
+    Returns
+    -------
+    dict
+        Format -> (big file, small file, rows or records in the big file).
+    """
+    import numpy as np
+
+    from fingerfit.io.liberty import write_liberty_ascii, write_liberty_binary
+    from fingerfit.io.posecsv import write_pose_csv
+    from fingerfit.io.widecsv import write_wide_csv
+    from fingerfit.session import PoseSeries, Recording
+    from fingerfit.simulate import SimConfig, simulate_subject
+    from fingerfit.simulate.trackerfiles import liberty_records
+
+    rec = simulate_subject(SimConfig(fingers=("index",)), 0).session.test[0]
+    n_sensors = len(rec.poses)
+
+    def tiled(n_frames: int) -> Recording:
+        reps = -(-n_frames // rec.n_frames)
+        poses = {
+            k: PoseSeries(
+                np.tile(v.position, (reps, 1))[:n_frames],
+                np.tile(v.rotation, (reps, 1, 1))[:n_frames],
+            )
+            for k, v in rec.poses.items()
+        }
+        return Recording("long", np.arange(n_frames) / 240.0, poses)
+
+    out: dict[str, tuple[Path, Path, int]] = {}
+    stations = {i + 1: name for i, name in enumerate(rec.poses)}
+    for size, tag in ((rows, "big"), (2000, "small")):
+        long = tiled(size // n_sensors)
+        write_pose_csv(directory / f"pose-{tag}.csv", long)
+        # wide CSV: one row per frame holding every sensor
+        write_wide_csv(directory / f"wide-{tag}.csv", tiled(size))
+        recs = liberty_records(long, stations, 240.0)
+        write_liberty_ascii(directory / f"liberty-{tag}.txt", recs)
+        write_liberty_binary(directory / f"liberty-{tag}.bin", recs)
+    n_frames = rows // n_sensors
+    for kind, name, count in (
+        ("pose", "pose-{}.csv", n_frames * n_sensors),
+        ("wide", "wide-{}.csv", rows),
+        ("liberty-ascii", "liberty-{}.txt", n_frames * n_sensors),
+        ("liberty-binary", "liberty-{}.bin", n_frames * n_sensors),
+    ):
+        out[kind] = (directory / name.format("big"), directory / name.format("small"), count)
+    return out
+
+
+def child(src: Path, kind: str, path: Path, extra: str) -> dict:
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    res = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(src), kind, str(path), extra],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=False,
+    )
+    if res.returncode != 0:
+        raise RuntimeError(f"{kind} with {src}: {res.stderr.strip().splitlines()[-1:]}")
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def run(rows: int, before: Path | None = None, repeat: int = 2) -> dict:
+    """Measure every reader and writer (best of ``repeat`` fresh processes)."""
+    src_now = Path(__file__).resolve().parents[1] / "src"
+    codes = {"now": src_now} | ({"before": before} if before is not None else {})
+    results: dict = {"rows": rows, "read": {}, "write": {}}
+    with tempfile.TemporaryDirectory(prefix="fingerfit-io-bench-") as tmp:
+        files = make_files(Path(tmp), rows)
+        for kind in FORMATS:
+            big, small, count = files[kind]
+            entry = {"rows": count, "file_bytes": big.stat().st_size}
+            for label, src in codes.items():
+                best = min(
+                    (child(src, kind, big, str(small)) for _ in range(repeat)),
+                    key=lambda r: r["seconds"],
+                )
+                entry[label] = best | {"rows_per_s": count / best["seconds"]}
+            results["read"][kind] = entry
+        big_pose = files["pose"][0]
+        for kind in WRITERS:
+            entry = {}
+            for label, src in codes.items():
+                best = min(
+                    (child(src, kind, big_pose, label) for _ in range(repeat)),
+                    key=lambda r: r["seconds"],
+                )
+                entry[label] = best | {"rows_per_s": best["rows"] / best["seconds"]}
+            results["write"][kind.removeprefix("write-")] = entry
+    return results
+
+
+def table(res: dict) -> str:
+    """The results as a Markdown table."""
+    has_before = any("before" in e for e in res["read"].values())
+    head = "| measurement | rows | now | peak above start / arrays kept |"
+    if has_before:
+        head += " before | before peak / kept | speed-up |"
+    lines = [head, "|---" * (head.count("|") - 1) + "|"]
+
+    def row(label: str, e: dict, unit: str) -> str:
+        now = e["now"]
+        n = e.get("rows", now.get("rows"))
+        kept = now.get("kept")
+        mem = (
+            f"{now['peak_above'] / 1e6:.0f} MB / {kept / 1e6:.0f} MB "
+            f"({now['peak_above'] / kept:.2f}x)"
+            if kept
+            else f"{now['peak_above'] / 1e6:.0f} MB"
+        )
+        s = f"| {label} | {n:,} | {now['rows_per_s'] / 1e6:.2f} M {unit}/s ({now['seconds']:.2f} s) | {mem} |"
+        if "before" in e:
+            b = e["before"]
+            bm = f"{b['peak_above'] / 1e6:.0f} MB" + (
+                f" ({b['peak_above'] / b['kept']:.2f}x)" if b.get("kept") else ""
+            )
+            s += (
+                f" {b['rows_per_s'] / 1e6:.2f} M {unit}/s ({b['seconds']:.2f} s) | {bm} | "
+                f"{b['seconds'] / now['seconds']:.1f}x |"
+            )
+        elif has_before:
+            s += " | | |"
+        return s
+
+    names = {
+        "pose": "read pose CSV",
+        "wide": "read wide CSV",
+        "liberty-ascii": "read Liberty ASCII",
+        "liberty-binary": "read Liberty binary",
+    }
+    for kind, e in res["read"].items():
+        lines.append(row(names[kind], e, "records" if kind == "liberty-binary" else "rows"))
+    for kind, e in res["write"].items():
+        lines.append(row(f"write {kind} CSV", e, "rows"))
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--rows", type=int, default=2_000_000)
+    ap.add_argument("--before", type=Path, default=None, help="src folder of older code")
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    t = time.perf_counter()
+    res = run(args.rows, args.before, args.repeat)
+    print(table(res))
+    print(f"({time.perf_counter() - t:.0f} s)")
+    if args.json:
+        args.json.write_text(json.dumps(res, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

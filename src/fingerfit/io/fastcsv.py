@@ -1,0 +1,282 @@
+"""Vectorised CSV reading in batches and CSV writing, both through Apache Arrow.
+
+Reading (:func:`csv_batches`): the file is read in blocks of whole lines into one reused
+buffer, and each block is parsed by ``pyarrow.csv`` into typed columns (floats are
+parsed correctly rounded, so the numbers are exactly those Python's ``float`` gives).
+The fast path vouches only for plain input: anything unusual -- a parse error, a field
+count that differs, a bare carriage return, a NaN or infinity spelled out in a numeric
+field, a control character in a text field -- raises :class:`NotPlain`, and the caller
+then reads the file with its exact, line-numbered reference parser, which gives the one
+error message (or accepts the file the way it always has). So every validation and
+message of the reference parser is kept, and valid files never pay for it.
+
+Writing (:func:`write_table`): columns go to ``pyarrow.csv`` in batches of rows; floats
+are written in their shortest round-trip form (read back bit for bit), NaN as an empty
+field, and the file appears complete or not at all (:func:`fingerfit.io.atomic.atomic_path`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FingerfitError
+
+#: Bytes of file parsed per batch.
+CHUNK_BYTES = 1 << 24
+#: Rows written per batch.
+WRITE_ROWS = 1 << 18
+
+
+class NotPlain(Exception):
+    """The fast path does not vouch for this input; use the reference parser."""
+
+
+def _arrow():
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    return pa, pacsv
+
+
+def read_header(path: Path) -> bytes:
+    """The first line of ``path`` (without its line end), or a one-line error."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.readline()
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+
+
+def csv_batches(
+    path: Path,
+    names: Sequence[str],
+    *,
+    text: Sequence[str] = (),
+    chunk_bytes: int = CHUNK_BYTES,
+) -> Iterator[tuple[int, int, dict]]:
+    """Parse a comma-separated file after its header line, in batches of rows.
+
+    Parameters
+    ----------
+    path : Path
+    names : sequence of str
+        Every column, in file order; each line must have exactly these fields.
+    text : sequence of str
+        Columns read as text (dictionary encoded); every other column is float64, an
+        empty field giving NaN.
+    chunk_bytes : int
+        Bytes of file per batch.
+
+    Yields
+    ------
+    first_row : int
+        0-based index (among data rows) of the batch's first row; its file line is
+        ``first_row + 2``.
+    n_bytes : int
+        Bytes of file in the batch.
+    columns : dict
+        Float columns as ``(m,)`` float64 arrays (NaN = empty); a text column as a
+        pair ``(codes (m,) int32, values list of str)``.
+
+    Raises
+    ------
+    NotPlain
+        The input is not plain (see the module notes); nothing about it is decided here.
+    FingerfitError
+        The file cannot be read.
+    """
+    pa, pacsv = _arrow()
+    types = {
+        n: (pa.dictionary(pa.int32(), pa.string()) if n in text else pa.float64()) for n in names
+    }
+    read_opts = pacsv.ReadOptions(column_names=list(names), block_size=1 << 20, use_threads=True)
+    parse_opts = pacsv.ParseOptions(quote_char=False, ignore_empty_lines=True)
+    convert_opts = pacsv.ConvertOptions(
+        column_types=types,
+        null_values=[""],
+        strings_can_be_null=False,
+        quoted_strings_can_be_null=False,
+    )
+    buf = bytearray(chunk_bytes)
+    view = memoryview(buf)
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    with fh:
+        fh.readline()  # the header, checked by the caller
+        carry = 0
+        first_row = 0
+        while True:
+            if carry == len(buf):  # a line longer than the buffer: a larger buffer
+                bigger = bytearray(2 * len(buf))
+                bigger[:carry] = buf
+                buf, view = bigger, memoryview(bigger)
+            n = fh.readinto(view[carry:])
+            end = carry + n
+            if n == 0:
+                cut = end
+            else:
+                cut = buf.rfind(b"\n", 0, end) + 1
+                if cut == 0:
+                    carry = end
+                    continue
+            if cut == 0:
+                break
+            if buf.find(b"\r", 0, cut) >= 0 and buf.count(b"\r", 0, cut) != buf.count(
+                b"\r\n", 0, cut
+            ):
+                raise NotPlain("carriage return inside a line")
+            try:
+                table = pacsv.read_csv(
+                    pa.py_buffer(view[:cut]),
+                    read_options=read_opts,
+                    parse_options=parse_opts,
+                    convert_options=convert_opts,
+                )
+            except (pa.ArrowException, ValueError) as exc:
+                raise NotPlain(str(exc)) from None
+            # Arrow skips empty lines; the reference parser must judge them.
+            lines = buf.count(b"\n", 0, cut) + (buf[cut - 1 : cut] != b"\n")
+            if table.num_rows != lines:
+                raise NotPlain("empty line")
+            cols: dict[str, np.ndarray] = {}
+            for name in names:
+                col = table.column(name)
+                if name in text:
+                    col = col.unify_dictionaries().combine_chunks()
+                    values = col.dictionary.to_pylist()
+                    if any(_has_control(v) for v in values):
+                        raise NotPlain("control character in a text field")
+                    cols[name] = (
+                        col.indices.to_numpy(zero_copy_only=False).astype(np.int32),
+                        values,
+                    )
+                else:
+                    v = col.to_numpy()
+                    if v.dtype != np.float64:
+                        v = v.astype(np.float64)
+                    if np.count_nonzero(~np.isfinite(v)) != col.null_count:
+                        raise NotPlain("NaN or infinity written out")
+                    cols[name] = v
+            yield first_row, cut, cols
+            first_row += table.num_rows
+            del table
+            rest = end - cut
+            buf[:rest] = buf[cut:end]
+            carry = rest
+            if n == 0:
+                break
+
+
+def _has_control(s: str) -> bool:
+    return any((ord(c) < 32 and c != "\t") or ord(c) == 127 for c in s)
+
+
+class RowArrays:
+    """Growable preallocated float64 storage of ``width`` values per row.
+
+    The capacity is a generous estimate; untouched capacity costs no memory (pages are
+    only committed when written).
+    """
+
+    def __init__(self, capacity: int, width: int) -> None:
+        self.data = np.empty((max(capacity, 16), width))
+        self.n = 0
+
+    def reserve(self, extra: int) -> np.ndarray:
+        """Room for ``extra`` more rows; returns the ``(extra, width)`` block to fill."""
+        need = self.n + extra
+        if need > self.data.shape[0]:
+            grown = np.empty((max(need, int(self.data.shape[0] * 1.5)), self.data.shape[1]))
+            grown[: self.n] = self.data[: self.n]
+            self.data = grown
+        block = self.data[self.n : need]
+        self.n = need
+        return block
+
+    def array(self) -> np.ndarray:
+        """The filled rows, ``(n, width)`` (a view)."""
+        return self.data[: self.n]
+
+
+def estimate_rows(path: Path, sample_rows: int, sample_bytes: int) -> int:
+    """An upper estimate of the data rows of ``path`` from a first batch's size."""
+    size = Path(path).stat().st_size
+    if sample_rows == 0 or sample_bytes == 0:
+        return 16
+    return int(size / (sample_bytes / sample_rows) * 1.25) + 1024
+
+
+def write_table(
+    path: str | Path,
+    table: object,
+    *,
+    progress: Callable[[int], None] | None = None,
+) -> Path:
+    """Write a table as CSV, atomically, floats in shortest round-trip form.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file; it appears complete or not at all.
+    table : pandas.DataFrame or mapping of str to ndarray
+        Columns in order: float (NaN is written as an empty field), integer, or text
+        (object or string arrays; values must not contain a comma, quote or line end).
+    progress : callable, optional
+        Called with the number of rows after each batch is written.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FingerfitError
+        When the file cannot be written, or a text value needs quoting.
+    """
+    from .atomic import atomic_path
+
+    pa, pacsv = _arrow()
+    path = Path(path)
+    columns: Mapping[str, np.ndarray]
+    if isinstance(table, Mapping):
+        columns = {str(k): np.asarray(v) for k, v in table.items()}
+    else:  # a DataFrame
+        columns = {str(k): table[k].to_numpy() for k in table.columns}
+    n = len(next(iter(columns.values()))) if columns else 0
+    text = {}
+    for name, v in columns.items():
+        if v.dtype.kind in "OUS":
+            values, codes = np.unique(v.astype(str), return_inverse=True)
+            text[name] = (codes.astype(np.int32), pa.array(values.tolist(), pa.string()))
+
+    def batch(lo: int, hi: int):
+        arrays = []
+        for name, v in columns.items():
+            if name in text:
+                codes, values = text[name]
+                arrays.append(pa.DictionaryArray.from_arrays(codes[lo:hi], values))
+            elif v.dtype.kind == "f":
+                arrays.append(pa.array(v[lo:hi], from_pandas=True))
+            else:
+                arrays.append(pa.array(v[lo:hi]))
+        return pa.RecordBatch.from_arrays(arrays, names=list(columns))
+
+    opts = pacsv.WriteOptions(quoting_style="none", quoting_header="none")
+    with atomic_path(path) as tmp:
+        try:
+            with open(tmp, "wb") as fh:
+                schema = batch(0, 0).schema
+                with pacsv.CSVWriter(fh, schema, write_options=opts) as writer:
+                    for lo in range(0, max(n, 1), WRITE_ROWS):
+                        hi = min(lo + WRITE_ROWS, n)
+                        writer.write_batch(batch(lo, hi))
+                        if progress is not None:
+                            progress(hi - lo)
+        except pa.ArrowInvalid as exc:
+            raise FingerfitError(f"cannot write as CSV: {exc}", path=path) from None
+    return path
