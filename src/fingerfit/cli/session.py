@@ -103,6 +103,6 @@ def session(
             if events:
                 shutil.copyfile(events, tmp / EVENTS_FILE)
             write_session_toml(s, tmp)
-            load_session(tmp)
+            load_session(tmp, parsed=s)  # the files read above are not parsed again
         bar.advance(task)
     say("session written to [bold]{}[/]", out_dir)

@@ -287,7 +287,7 @@ def read_events(path: str | Path) -> list[TargetEvent]:
     return events
 
 
-def load_session(directory: str | Path) -> Session:
+def load_session(directory: str | Path, *, parsed: Session | None = None) -> Session:
     """Load and validate a session directory.
 
     Parameters
@@ -296,6 +296,11 @@ def load_session(directory: str | Path) -> Session:
         Folder holding ``session.toml`` and the files it names. Every file must be a
         relative path inside this folder (symlinks included); nothing outside it is
         read.
+    parsed : Session, optional
+        The same session already read from byte-identical copies of its files (as
+        ``fingerfit session`` does before it writes the folder): its recordings (by file
+        name), landmarks and events are used instead of parsing those files again; the
+        folder's ``session.toml`` and the whole-session checks still run.
 
     Returns
     -------
@@ -392,15 +397,22 @@ def load_session(directory: str | Path) -> Session:
         events_file = file(_require(recs, "events", str, meta_path, "recordings."), "events")
     landmarks_file = session_file(directory, LANDMARKS_FILE, meta_path, LANDMARKS_FILE)
 
+    known = {r.name: r for r in parsed.recordings()} if parsed is not None else {}
+
     def load(f: Path) -> Recording:
+        if f.name in known:
+            return known[f.name]
         return read_pose_csv(f, units=units, rate_hz=rate)
 
     reference = load(ref_file)
     grasp = [load(f) for f in grasp_files]
     targets = [load(f) for f in target_files]
     test = [load(f) for f in test_files]
-    landmarks = read_landmarks(landmarks_file, units)
-    events = read_events(events_file) if events_file is not None else []
+    if parsed is not None:
+        landmarks, events = parsed.landmarks, parsed.events
+    else:
+        landmarks = read_landmarks(landmarks_file, units)
+        events = read_events(events_file) if events_file is not None else []
     session = Session(
         subject=subject,
         hand=hand,
