@@ -15,3 +15,7 @@ DEFAULT_METHOD = "twoaxis"
 VARIANTS = ("user_axis", "orthogonal")
 #: :data:`fingerfit.export.geometry.DEFAULT_MARGIN_DEG`.
 DEFAULT_MARGIN_DEG = 10.0
+#: :data:`fingerfit.retarget.METHODS`.
+RETARGET_METHODS = ("tip", "joint")
+#: :data:`fingerfit.retarget.maps.BUILTIN` (its keys).
+RETARGET_ROBOTS = ("shadow", "allegro")

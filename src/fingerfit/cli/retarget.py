@@ -1,0 +1,186 @@
+"""``fingerfit retarget``: drive a robot hand (Shadow, Allegro, any URDF/MJCF) from a recording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import FingerfitError
+from ._names import RETARGET_METHODS, RETARGET_ROBOTS
+from .app import Quiet, app, notice, progress, say, user_errors
+
+
+@app.command()
+@user_errors
+def retarget(
+    model_path: Annotated[
+        Path, typer.Argument(metavar="MODEL", help="Model JSON from `fingerfit fit`.")
+    ],
+    recording: Annotated[Path, typer.Argument(help="Pose CSV (canonical format).")],
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="Joint CSV (time, one column per robot joint, rad); "
+            "the same arrays are written to OUT.npz.",
+        ),
+    ],
+    robot: Annotated[
+        str,
+        typer.Option(
+            help=f"{' or '.join(RETARGET_ROBOTS)} (shipped maps), or a .urdf/.xml file "
+            "(needs --map)."
+        ),
+    ] = "shadow",
+    map_path: Annotated[
+        Path | None, typer.Option("--map", help="Robot map TOML (docs/retargeting.md).")
+    ] = None,
+    method: Annotated[
+        str,
+        typer.Option(
+            help=f"{' or '.join(RETARGET_METHODS)}. tip: fingertips (scaled, palm frame) + pinch + smoothness; "
+            "joint: angles copied through the map."
+        ),
+    ] = "tip",
+    orthogonal: Annotated[
+        bool,
+        typer.Option(
+            "--orthogonal",
+            help="Drive from the orthogonal model (axes perpendicular "
+            "to the bones) instead of the fitted axes.",
+        ),
+    ] = False,
+    units: Annotated[
+        str | None,
+        typer.Option(help="Units of the recording (default: the model's session units)."),
+    ] = None,
+    figure: Annotated[
+        str | None,
+        typer.Option(
+            help="Comma-separated frame numbers: draw the person and the robot side "
+            "by side at them into OUT.png."
+        ),
+    ] = None,
+    contact_mm: Annotated[
+        float,
+        typer.Option(
+            "--contact-mm",
+            help="Person's pad-point distance (mm) that counts as touching (pinch term).",
+        ),
+    ] = 0.0,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace existing output files.")
+    ] = False,
+    quiet: Quiet = False,
+) -> None:
+    """Retarget a recording of the person's hand onto a robot hand's joints (radians)."""
+    import warnings
+
+    import numpy as np
+
+    from ..estimate.plausibility import check_recording, enforce
+    from ..io import read_pose_csv
+    from ..io.atomic import check_target, refuse_writing_inputs, write_files
+    from ..model import load_model
+    from ..retarget import METHODS, resolve
+    from ..retarget import retarget as run
+    from ..session import UNITS_TO_MM
+
+    if method not in METHODS:
+        raise FingerfitError(f"must be one of {', '.join(METHODS)}", field="--method")
+    if not (np.isfinite(contact_mm) and contact_mm >= 0):
+        raise FingerfitError("must be a finite number >= 0", field="--contact-mm")
+    if output.suffix.lower() != ".csv":
+        raise FingerfitError("must end in .csv (OUT.npz is written beside it)", field="--output")
+    npz = output.with_suffix(".npz")
+    png = output.with_suffix(".png")
+    targets = [output, npz] + ([png] if figure is not None else [])
+    inputs = [model_path, recording] + ([map_path] if map_path is not None else [])
+    if robot.lower().endswith((".urdf", ".xml")):
+        inputs.append(Path(robot))
+    refuse_writing_inputs(targets, inputs)
+    for t in targets:
+        check_target(t, overwrite=overwrite)
+    model = load_model(model_path)
+    units = units or model.session_units
+    if units not in UNITS_TO_MM:
+        raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
+    frames: list[int] = []
+    if figure is not None:
+        items = [v.strip() for v in figure.split(",") if v.strip()]
+        if not items or not all(v.isdigit() for v in items):
+            raise FingerfitError(
+                "must be comma-separated frame numbers (0-based)", field="--figure"
+            )
+        frames = [int(v) for v in items]
+    robot_model, rmap = resolve(robot, map_path, model.hand)
+    rec = read_pose_csv(recording, units=units)
+    for note in rec.notes:
+        notice("note", note)
+    bad = [f for f in frames if f >= rec.n_frames]
+    if bad:
+        raise FingerfitError(
+            f"frame {bad[0]} is past the recording's {rec.n_frames} frames", field="--figure"
+        )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        enforce(check_recording(model, rec, units, recording), False)
+    for w in caught:
+        notice("warning", str(w.message))
+    variant = "orthogonal" if orthogonal else "user_axis"
+    with progress(quiet) as bar:
+        task = bar.add_task(f"retargeting ({method})", total=1)
+        res = run(model, rec, robot_model, rmap, method, variant, contact_mm=contact_mm)
+        bar.advance(task)
+    for note in res.notes:
+        notice("note", note)
+    if res.violations:  # projection makes this impossible; never write a violating file
+        raise FingerfitError(f"{res.violations} joint-limit violations", path=output)
+    files: dict[Path, str | bytes] = {
+        output: csv_text(res.time, res.joint_names, res.q),
+        npz: npz_bytes(res.time, res.joint_names, res.q),
+    }
+    if frames:
+        from ..retarget.figure import figure_png
+
+        files[png] = figure_png(model, rec, res, robot_model, rmap, frames, variant)
+    write_files(files, overwrite=overwrite)
+    err = np.linalg.norm(res.tips - res.targets, axis=2)
+    say(
+        "{} frames, {} robot joints ({}, {} method) -> {}; fingertip error in the palm frame "
+        "median {} mm, limit violations 0",
+        len(res.time),
+        len(res.joint_names),
+        rmap.name,
+        method,
+        ", ".join(str(p) for p in files),
+        f"{np.nanmedian(err):.2f}" if np.isfinite(err).any() else "n/a",
+    )
+
+
+def csv_text(time, names: tuple[str, ...], q) -> str:
+    """The joint CSV: ``time`` then one column per robot joint (rad), full precision."""
+    import numpy as np
+    import pandas as pd
+
+    table = pd.DataFrame(np.column_stack([time, q]), columns=["time", *names])
+    return table.to_csv(index=False, lineterminator="\n", float_format="%.17g")
+
+
+def npz_bytes(time, names: tuple[str, ...], q) -> bytes:
+    """``time (n,)`` s, ``q (n, nq)`` rad, ``joint_names (nq,)`` as an ``.npz`` file's bytes."""
+    import io
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.savez(
+        buf,
+        time=np.asarray(time, float),
+        q=np.asarray(q, float),
+        joint_names=np.array(names, dtype=str),
+    )
+    return buf.getvalue()
