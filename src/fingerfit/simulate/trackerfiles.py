@@ -36,11 +36,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..digits import DIGIT_NAMES, DIGITS
 from ..errors import FingerfitError
 from ..io.atomic import atomic_path, staged_directory
 from ..io.liberty import LibertyRecords, write_liberty_ascii, write_liberty_binary
 from ..io.sessiondir import EVENTS_FILE, LANDMARKS_FILE, write_events, write_landmarks
-from ..session import FINGERS, HAND_SENSOR, SEGMENTS, UNITS_TO_MM, Recording, sensor_name
+from ..session import HAND_SENSOR, UNITS_TO_MM, Recording, sensor_name
 from ..transforms import quat_wxyz_from_matrix
 from .study import SimulatedSubject, write_truth
 
@@ -63,11 +64,12 @@ LIBERTY_MAX_STATIONS = 16
 #: Sub-folders (of the subject folder) the printed commands write to.
 CONVERTED_DIR = "csv"
 SESSION_DIR = "session"
-_SEGMENT_LABEL = {"proximal": "PROX", "middle": "MID", "distal": "DIST"}
+_SEGMENT_LABEL = {"metacarpal": "MC", "proximal": "PROX", "middle": "MID", "distal": "DIST"}
 
 
 def sensor_order(sensors: Sequence[str]) -> list[str]:
-    """Sensors in station order: ``hand``, each finger's proximal/middle/distal, ``stylus``.
+    """Sensors in station order: ``hand``, the thumb's metacarpal/proximal/distal, each
+    finger's proximal/middle/distal, ``stylus``.
 
     Parameters
     ----------
@@ -77,9 +79,9 @@ def sensor_order(sensors: Sequence[str]) -> list[str]:
     Returns
     -------
     list of str
-        The same names, ordered by finger (:data:`~fingerfit.session.FINGERS`) and segment.
+        The same names, ordered by digit (:data:`~fingerfit.digits.DIGIT_NAMES`) and segment.
     """
-    canonical = [HAND_SENSOR] + [sensor_name(f, s) for f in FINGERS for s in SEGMENTS]
+    canonical = [HAND_SENSOR] + [sensor_name(d, s) for d in DIGIT_NAMES for s in DIGITS[d].segments]
     canonical.append("stylus")
     rank = {name: i for i, name in enumerate(canonical)}
     return sorted(sensors, key=lambda s: rank.get(s, len(rank)))
@@ -114,7 +116,7 @@ def station_map(sensors: Sequence[str]) -> dict[int, str]:
 
 def c3d_label(sensor: str) -> str:
     """C3D ROTATION channel label of a sensor: ``hand`` -> ``HAND``, ``index.proximal`` ->
-    ``INDEX_PROX``."""
+    ``INDEX_PROX``, ``thumb.metacarpal`` -> ``THUMB_MC``."""
     if "." in sensor:
         finger, segment = sensor.split(".", 1)
         return f"{finger.upper()}_{_SEGMENT_LABEL.get(segment, segment.upper())}"
