@@ -147,8 +147,8 @@ class LslOutput:
         self.offset = pylsl.local_clock() - time.monotonic()
 
     def has_consumers(self) -> bool:
-        """Whether every outlet has at least one consumer."""
-        return all(o.have_consumers() for o in self.outlets)
+        """Whether the angles or the tips outlet has a consumer (one may want only one)."""
+        return any(o.have_consumers() for o in self.outlets)
 
     def push(
         self, angles: FloatArray, tips: FloatArray, valid: FloatArray, arrival: FloatArray

@@ -1,0 +1,208 @@
+"""Streaming benchmark: per-frame compute and end-to-end latency of ``fingerfit stream``.
+
+Run with ``python bench/stream.py`` (``--seconds 10`` for a quick run, ``--json FILE`` to
+keep the figures). Two parts, in one run:
+
+1. **Per-frame compute** for each model (one finger; the four fingers; the whole hand
+   with the thumb when the simulator has it): one frame at a time through what the
+   stream does per block -- :func:`fingerfit.kinematics.compute_kinematics` (user-axis
+   variant) and the streamed values (:func:`fingerfit.live.stream.block_values`) --
+   p50 / p99 / max over 2000 frames.
+2. **End to end**: a ``fingerfit stream`` subprocess replays a 240 Hz recording in real
+   time (``--seconds`` long) to LSL and to ROS 2 over DDS; this process receives both
+   (a pylsl inlet and a cyclonedds reader, each in its own blocking thread) and measures,
+   per frame, receipt minus the frame's arrival at fingerfit (LSL: ``local_clock()``
+   minus the sample timestamp; DDS: ``time.time()`` minus ``header.stamp``), the frames
+   each consumer missed, and the stream process's CPU time over the streaming period
+   (``/proc/PID/stat``) as a share of one core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fingerfit.estimate import fit_session
+from fingerfit.io import write_pose_csv
+from fingerfit.kinematics import compute_kinematics
+from fingerfit.live.stream import block_values, channels_of, model_sensors
+from fingerfit.model import save_model
+from fingerfit.session import PoseSeries, Recording
+from fingerfit.simulate import SimConfig, simulate_subject
+
+FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
+HAND = ("thumb", "index", "middle", "ring", "little")
+
+
+def subject_for(fingers: tuple[str, ...]):
+    """A simulated subject with these digits, or None if the simulator lacks one."""
+    try:
+        return simulate_subject(SimConfig(fingers=fingers), 1)
+    except (KeyError, ValueError):
+        return None
+
+
+def per_frame_compute(model, rec: Recording, n: int = 2000) -> dict[str, float]:
+    """Microseconds per single-frame block: p50, p99, max."""
+    sensors = model_sensors(model)
+    ch = None
+    times = []
+    for i in range(n):
+        block = rec.slice(slice(i, i + 1))
+        t = time.perf_counter()
+        kin = compute_kinematics(model, block, ("user_axis",))
+        ch = ch or channels_of(model, kin)
+        block_values(kin, ch, block, sensors, "tracker")
+        times.append(time.perf_counter() - t)
+    us = 1e6 * np.array(times[50:])  # the first frames warm caches
+    return {
+        "p50_us": float(np.percentile(us, 50)),
+        "p99_us": float(np.percentile(us, 99)),
+        "max_us": float(us.max()),
+        "joints": len(ch.angles),
+        "digits": len(ch.digits),
+    }
+
+
+def long_recording(rec: Recording, seconds: float, rate: float = 240.0) -> Recording:
+    """``rec`` repeated to ``seconds`` at ``rate`` (time continues across repeats)."""
+    n = round(seconds * rate)
+    idx = np.arange(n) % rec.n_frames
+    poses = {k: PoseSeries(v.position[idx], v.rotation[idx]) for k, v in rec.poses.items()}
+    return Recording("bench.csv", np.arange(n) / rate, poses)
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (s)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def end_to_end(model_path: Path, csv: Path, n: int, tag: str) -> dict:
+    """Stream ``csv`` in real time to LSL and DDS; measure latency, losses and CPU."""
+    import pylsl
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
+
+    from fingerfit.live.ros2types import JointState
+
+    domain = 1 + os.getpid() % 200
+    topic = f"/bench_{tag}_{os.getpid()}"
+    participant = DomainParticipant(domain)
+    qos = Qos(Policy.Reliability.Reliable(0), Policy.History.KeepAll)
+    reader = DataReader(participant, Topic(participant, "rt" + topic, JointState, qos=qos), qos=qos)
+    name = f"bench{tag}{os.getpid()}"
+    proc = subprocess.Popen(
+        [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}", "--lsl",
+         "--lsl-name", name, "--ros2", topic, "--wait", "--wait-timeout", "60", "-q"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
+    )  # fmt: skip
+    lsl_lat: list[float] = []
+    dds_lat: list[float] = []
+    marks: dict[str, float] = {}
+    deadline = time.monotonic() + n / 240.0 + 90
+
+    def lsl_consumer() -> None:
+        found = pylsl.resolve_byprop("name", f"{name}-angles", timeout=30)
+        inlet = pylsl.StreamInlet(found[0], max_buflen=60, processing_flags=0)
+        inlet.open_stream(timeout=10)
+        while len(lsl_lat) < n and time.monotonic() < deadline:
+            _, ts = inlet.pull_sample(timeout=1.0)
+            if ts is None:
+                if proc.poll() is not None:
+                    return
+                continue
+            lsl_lat.append(pylsl.local_clock() - ts)
+            if len(lsl_lat) == 1:
+                marks["cpu0"], marks["t0"] = cpu_seconds(proc.pid), time.monotonic()
+            if len(lsl_lat) == n - 1:
+                marks["cpu1"], marks["t1"] = cpu_seconds(proc.pid), time.monotonic()
+
+    def dds_consumer() -> None:
+        while len(dds_lat) < n and time.monotonic() < deadline:
+            for m in reader.take_iter(timeout=duration(seconds=1)):
+                if isinstance(m, JointState):
+                    s = m.header.stamp
+                    dds_lat.append(time.time() - (s.sec + 1e-9 * s.nanosec))
+            if proc.poll() is not None and not reader.read(N=1):
+                return
+
+    threads = [threading.Thread(target=lsl_consumer), threading.Thread(target=dds_consumer)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=n / 240.0 + 120)
+    out, err = proc.communicate(timeout=60)
+    summary = [ln for ln in out.splitlines() if "frames streamed" in ln]
+    lsl_ms, dds_ms = 1e3 * np.array(lsl_lat), 1e3 * np.array(dds_lat)
+    cpu = (marks["cpu1"] - marks["cpu0"]) / (marks["t1"] - marks["t0"]) if "t1" in marks else None
+
+    def stats(x: np.ndarray) -> dict[str, float]:
+        if not x.size:
+            return {}
+        return {k: float(np.percentile(x, q)) for k, q in (("p50_ms", 50), ("p99_ms", 99))} | {
+            "max_ms": float(x.max())
+        }
+
+    return {
+        "frames_sent": n,
+        "lsl": stats(lsl_ms) | {"received": int(lsl_ms.size), "lost": n - int(lsl_ms.size)},
+        "dds": stats(dds_ms) | {"received": int(dds_ms.size), "lost": n - int(dds_ms.size)},
+        "cpu_share_of_one_core": cpu,
+        "stream_summary": summary[0] if summary else (out + err)[-500:],
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=60.0, help="replay length (s)")
+    ap.add_argument("--json", type=Path, help="write the figures here")
+    ap.add_argument("--models", default="index,hand4,hand5", help="which models to run")
+    args = ap.parse_args()
+    wanted = {
+        "index": ("index",),
+        "hand4": ("index", "middle", "ring", "little"),
+        "hand5": HAND,
+    }
+    results: dict = {
+        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
+        "seconds": args.seconds,
+        "models": {},
+    }
+    with tempfile.TemporaryDirectory() as tmp:
+        for key in args.models.split(","):
+            sim = subject_for(wanted[key])
+            if sim is None:
+                results["models"][key] = "not available (the simulator has no such digit yet)"
+                print(f"{key}: not available", flush=True)
+                continue
+            model = fit_session(sim.session)
+            model_path = save_model(model, Path(tmp) / f"{key}.json")
+            rec = sim.session.test[0]
+            compute = per_frame_compute(model, rec)
+            print(f"{key}: per-frame compute {compute}", flush=True)
+            long = long_recording(rec, args.seconds)
+            csv = write_pose_csv(Path(tmp) / f"{key}.csv", long)
+            e2e = end_to_end(model_path, csv, long.n_frames, key)
+            print(f"{key}: end to end {json.dumps(e2e)}", flush=True)
+            results["models"][key] = {"per_frame_compute": compute, "end_to_end": e2e}
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
