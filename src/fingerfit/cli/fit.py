@@ -131,10 +131,6 @@ def fit(
     say("model written to [bold]{}[/]", path)
 
 
-#: Rows of the angles CSV written per step of the progress bar.
-_CSV_CHUNK = 100_000
-
-
 @app.command()
 @user_errors
 def angles(
@@ -171,7 +167,8 @@ def angles(
     """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
     from ..estimate.plausibility import check_recording, enforce
     from ..io import read_pose_csv
-    from ..io.atomic import atomic_write, check_target, refuse_writing_inputs
+    from ..io.atomic import check_target, refuse_writing_inputs
+    from ..io.fastcsv import write_table
     from ..kinematics import compute_kinematics, kinematics_table
     from ..model import load_model
     from ..session import UNITS_TO_MM
@@ -200,12 +197,8 @@ def angles(
         kin = compute_kinematics(model, rec)
         table = kinematics_table(kin, units=units)
         bar.update(task, advance=n, description=f"writing {output.name}")
-        with atomic_write(output, newline="") as fh:
-            # In chunks of rows, for the progress bar; the same bytes as one to_csv call.
-            for start in range(0, max(n, 1), _CSV_CHUNK):
-                chunk = table.iloc[start : start + _CSV_CHUNK]
-                chunk.to_csv(fh, index=False, lineterminator="\n", header=start == 0)
-                bar.advance(task, len(chunk))
+        # Atomic, floats in shortest round-trip form, in batches of rows (progress bar).
+        write_table(output, table, progress=lambda rows: bar.advance(task, rows))
     if urdf_names is not None:
         from ..export.trajectory import write_trajectory
 

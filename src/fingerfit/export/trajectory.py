@@ -19,7 +19,6 @@ import pandas as pd
 from ..errors import FingerfitError
 from ..kinematics import Kinematics
 from ..model import HandModel
-from . import write_text
 from .geometry import joint_names
 
 
@@ -83,6 +82,6 @@ def write_trajectory(
     FingerfitError
         As :func:`trajectory_table`, or when ``path`` cannot be written.
     """
-    table = trajectory_table(kin, model, variant)
-    text = table.to_csv(index=False, lineterminator="\n")
-    return write_text({Path(path): text})[0]
+    from ..io.fastcsv import write_table
+
+    return write_table(Path(path), trajectory_table(kin, model, variant))

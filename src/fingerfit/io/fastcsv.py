@@ -224,8 +224,9 @@ def write_table(
     path : str or Path
         The file; it appears complete or not at all.
     table : pandas.DataFrame or mapping of str to ndarray
-        Columns in order: float (NaN is written as an empty field), integer, or text
-        (object or string arrays; values must not contain a comma, quote or line end).
+        Columns in order, each ``(n,)``: float (NaN is written as an empty field),
+        integer, or text (object or string arrays, or a pair ``(codes, values)`` of
+        int codes into a list of strings; text must not hold a comma, quote or line end).
     progress : callable, optional
         Called with the number of rows after each batch is written.
 
@@ -242,17 +243,22 @@ def write_table(
 
     pa, pacsv = _arrow()
     path = Path(path)
-    columns: Mapping[str, np.ndarray]
-    if isinstance(table, Mapping):
-        columns = {str(k): np.asarray(v) for k, v in table.items()}
-    else:  # a DataFrame
-        columns = {str(k): table[k].to_numpy() for k in table.columns}
-    n = len(next(iter(columns.values()))) if columns else 0
+    columns: dict[str, np.ndarray] = {}
     text = {}
-    for name, v in columns.items():
+    items = table.items() if isinstance(table, Mapping) else ((k, table[k]) for k in table.columns)
+    for key, v in items:
+        name = str(key)
+        if isinstance(v, tuple):  # (codes, values)
+            codes, values = v
+            text[name] = (np.asarray(codes, dtype=np.int32), pa.array(list(values), pa.string()))
+            columns[name] = text[name][0]
+            continue
+        v = v.to_numpy() if hasattr(v, "to_numpy") else np.asarray(v)
+        columns[name] = v
         if v.dtype.kind in "OUS":
             values, codes = np.unique(v.astype(str), return_inverse=True)
             text[name] = (codes.astype(np.int32), pa.array(values.tolist(), pa.string()))
+    n = len(next(iter(columns.values()))) if columns else 0
 
     def batch(lo: int, hi: int):
         arrays = []

@@ -19,7 +19,6 @@ import pandas as pd
 from ..errors import FingerfitError, shown
 from ..session import PoseSeries, Recording, is_sensor_name
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
-from .atomic import atomic_write
 from .hygiene import check_grid_size, implausible_message, implausible_rows
 
 HEADER = ("time", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz")
@@ -437,6 +436,30 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
     return Recording(path.name, frame_times, poses, notes)
 
 
+def _pose_columns(recording: Recording, mm_per_unit: float) -> dict[str, object]:
+    """Columns of the long table; ``sensor`` as ``(codes, names)``."""
+    names = recording.sensors
+    n = recording.n_frames
+    pos = np.empty((n, len(names), 3))
+    quat = np.empty((n, len(names), 4))
+    for j, s in enumerate(names):
+        pos[:, j] = recording.poses[s].position / mm_per_unit
+        quat[:, j] = quat_wxyz_from_matrix(recording.poses[s].rotation)
+    ok = np.isfinite(pos).all(axis=2) & np.isfinite(quat).all(axis=2)
+    frame, sensor = np.nonzero(ok)
+    cols: dict[str, object] = {
+        "time": recording.time[frame],
+        "sensor": (sensor.astype(np.int32), list(names)),
+    }
+    sel = pos[frame, sensor]
+    for j, c in enumerate(("x", "y", "z")):
+        cols[c] = sel[:, j]
+    sel = quat[frame, sensor]
+    for j, c in enumerate(("qw", "qx", "qy", "qz")):
+        cols[c] = sel[:, j]
+    return cols
+
+
 def pose_table(recording: Recording, *, mm_per_unit: float = 1.0) -> pd.DataFrame:
     """The recording as the canonical long table (one row per present sample).
 
@@ -451,20 +474,10 @@ def pose_table(recording: Recording, *, mm_per_unit: float = 1.0) -> pd.DataFram
     DataFrame
         Columns ``time,sensor,x,y,z,qw,qx,qy,qz``, ordered by frame then sensor.
     """
-    names = recording.sensors
-    pos = np.stack([recording.poses[s].position for s in names], axis=1) / mm_per_unit
-    quat = np.stack([quat_wxyz_from_matrix(recording.poses[s].rotation) for s in names], axis=1)
-    ok = np.isfinite(pos).all(axis=2) & np.isfinite(quat).all(axis=2)
-    frame, sensor = np.nonzero(ok)
-    data = {
-        "time": recording.time[frame],
-        "sensor": np.asarray(names, dtype=object)[sensor],
-    }
-    for j, c in enumerate(("x", "y", "z")):
-        data[c] = pos[frame, sensor, j]
-    for j, c in enumerate(("qw", "qx", "qy", "qz")):
-        data[c] = quat[frame, sensor, j]
-    return pd.DataFrame(data, columns=list(HEADER))
+    cols = _pose_columns(recording, mm_per_unit)
+    codes, names = cols["sensor"]
+    cols["sensor"] = np.asarray(names, dtype=object)[codes]
+    return pd.DataFrame(cols, columns=list(HEADER))
 
 
 def write_pose_csv(path: str | Path, recording: Recording, *, units: str = "mm") -> Path:
@@ -481,13 +494,11 @@ def write_pose_csv(path: str | Path, recording: Recording, *, units: str = "mm")
     Returns
     -------
     Path
-        The written file. Values are written with round-trip precision, so
-        :func:`read_pose_csv` gives back the same numbers.
+        The written file. Values are written in their shortest round-trip form
+        (:func:`fingerfit.io.fastcsv.write_table`), so :func:`read_pose_csv` gives back
+        the same numbers.
     """
     from ..session import UNITS_TO_MM
+    from .fastcsv import write_table
 
-    table = pose_table(recording, mm_per_unit=UNITS_TO_MM[units])
-    path = Path(path)
-    with atomic_write(path, newline="") as fh:
-        table.to_csv(fh, index=False, float_format=None, lineterminator="\n")
-    return path
+    return write_table(Path(path), _pose_columns(recording, UNITS_TO_MM[units]))

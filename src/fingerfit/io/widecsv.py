@@ -33,7 +33,6 @@ from scipy.spatial.transform import Rotation
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
-from .atomic import atomic_write
 from .hygiene import (
     check_increasing,
     check_recording,
@@ -481,7 +480,7 @@ def write_wide_csv(
     units: str = "mm",
     layout: WideLayout | None = None,
 ) -> Path:
-    """Write a recording as a wide CSV, atomically, with round-trip float formatting.
+    """Write a recording as a wide CSV, atomically, floats in shortest round-trip form.
 
     Parameters
     ----------
@@ -497,8 +496,6 @@ def write_wide_csv(
     -------
     Path
     """
-    path = Path(path)
-    table = wide_table(recording, units=units, layout=layout)
-    with atomic_write(path, newline="") as fh:
-        table.to_csv(fh, index=False, lineterminator="\n")
-    return path
+    from .fastcsv import write_table
+
+    return write_table(Path(path), wide_table(recording, units=units, layout=layout))
