@@ -80,6 +80,7 @@ def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
     import pandas as pd
 
     from ..io.atomic import atomic_write
+    from ..io.fastcsv import write_table
 
     frames = []
     for name, fit in fits.items():
@@ -93,9 +94,11 @@ def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
                 }
             )
         )
-    table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
-    with atomic_write(path, newline="") as fh:
-        table.to_csv(fh, index=False, lineterminator="\n")
+    if not frames:
+        with atomic_write(path, newline="") as fh:
+            pd.DataFrame().to_csv(fh, index=False, lineterminator="\n")
+        return
+    write_table(path, pd.concat(frames, ignore_index=True))
 
 
 @app.command()
