@@ -2,7 +2,9 @@
 
 ``q[robot] = sign * scale * angle + offset`` for every human joint the map names and the
 model has; every other joint keeps its held (neutral) value; then limits and couplings
-(:meth:`fingerfit.retarget.limits.Limits.project`). The baseline robot-hand labs use.
+(:meth:`fingerfit.retarget.limits.Limits.project` without sweeps: each coupling's driver
+is clipped to the range its driven joint can follow, then the driven joint to its band).
+The baseline robot-hand labs use.
 """
 
 from __future__ import annotations
@@ -59,4 +61,4 @@ def copy_angles(
                 np.maximum.accumulate(valid, out=valid)
                 col = np.where(bad & ~np.isfinite(col[valid]), hold[idx[link.robot]], col[valid])
             q[:, idx[link.robot]] = col
-    return limits.project(q), int(missing.sum())
+    return limits.project(q, sweeps=0), int(missing.sum())

@@ -1,0 +1,297 @@
+"""Retargeting onto robot hands: solver recovery, pinch, limits, couplings, joint map, maps, CLI."""
+
+from __future__ import annotations
+
+import textwrap
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("mujoco")
+pytest.importorskip("pinocchio")
+
+from fingerfit.errors import FingerfitError  # noqa: E402
+from fingerfit.retarget import resolve, retarget, setup  # noqa: E402
+from fingerfit.retarget.joint import copy_angles  # noqa: E402
+from fingerfit.retarget.limits import limits_of  # noqa: E402
+from fingerfit.retarget.maps import check_map, parse_map  # noqa: E402
+from fingerfit.retarget.palm import robot_palm  # noqa: E402
+from fingerfit.retarget.robots import load_robot  # noqa: E402
+from fingerfit.retarget.solve import MM, TipOptions, TipProblem, solve_tip  # noqa: E402
+
+from .conftest import subject  # noqa: E402
+
+FINGERS = ("index", "middle", "ring", "little")
+
+
+def _problem(name: str, hand: str = "right"):
+    robot, rmap = resolve(name, None, hand)
+    lim = limits_of(robot, rmap)
+    hold = lim.project(np.zeros(robot.nq))
+    palm = robot_palm(robot, rmap, hold)
+    frames = [d.tip for d in rmap.digits.values()]
+    held = set(robot.ancestors(rmap.palm)) | {robot.joint_names.index(j) for j in rmap.neutral}
+    free = np.array(sorted(set().union(*(set(robot.ancestors(f)) for f in frames)) - held))
+    return robot, rmap, lim, TipProblem(robot, palm, frames, free, hold, lim)
+
+
+def _trajectory(robot, lim, hold, free, n=150, seed=0):
+    """A smooth feasible joint trajectory from the neutral posture to a random one and back."""
+    rng = np.random.default_rng(seed)
+    goal = lim.project(rng.uniform(np.maximum(robot.lower, -1.6), np.minimum(robot.upper, 1.6)))
+    s = (0.5 - 0.5 * np.cos(2 * np.pi * np.linspace(0, 1, n)))[:, None]
+    q = hold + (goal - hold) * s
+    fixed = np.setdiff1d(np.arange(robot.nq), free)
+    q[:, fixed] = hold[fixed]
+    return lim.project(q)
+
+
+@pytest.mark.parametrize("name", ["allegro", "shadow"])
+def test_tip_method_recovers_the_robots_own_fingertips(name):
+    """Targets = the robot's own tips along a known joint trajectory: recovered < 0.5 mm."""
+    robot, _, lim, prob = _problem(name)
+    q_true = _trajectory(robot, lim, prob.hold, prob.free)
+    assert lim.violations(q_true) == 0
+    palm = prob.palm
+    tips = (robot.positions(q_true, prob.frames) - palm.origin) @ palm.rotation * MM
+    res = solve_tip(prob, tips)
+    got = (robot.positions(res.q, prob.frames) - palm.origin) @ palm.rotation * MM
+    err = np.linalg.norm(got - tips, axis=2)
+    assert err.max() < 0.5, err.max()
+    assert lim.violations(res.q) == 0
+    # held joints (wrist, none for Allegro) never move
+    fixed = np.setdiff1d(np.arange(robot.nq), prob.free)
+    np.testing.assert_array_equal(
+        res.q[:, fixed], np.broadcast_to(prob.hold[fixed], (len(res.q), fixed.size))
+    )
+
+
+def test_pinch_term_brings_two_robot_tip_points_together():
+    """Synthetic pinch: thumb and index tips driven by the pinch term alone (target vector 0,
+    weight ramping from 0 to 1); the other fingers hold their tip targets."""
+    robot, rmap, lim, prob = _problem("shadow")
+    frames = prob.frames
+    ith, iff = frames.index("robot0:S_thtip"), frames.index("robot0:S_fftip")
+    n = 60
+    tips = np.repeat(
+        ((robot.positions(prob.hold[None], frames) - prob.palm.origin) @ prob.palm.rotation * MM),
+        n,
+        axis=0,
+    )
+    w_tip = np.ones((n, len(frames)))
+    w_tip[:, [ith, iff]] = 0.0
+    weight = np.clip(np.linspace(-0.5, 1.5, n), 0, 1)[:, None]
+    res = solve_tip(prob, tips, w_tip, [(ith, iff)], np.zeros((n, 1, 3)), weight)
+    pts = robot.positions(res.q, ["robot0:S_thtip", "robot0:S_fftip"])
+    dist = np.linalg.norm(pts[:, 0] - pts[:, 1], axis=1) * MM
+    assert dist[0] > 100.0  # no pinch weight: the neutral posture, thumb far from the index
+    assert dist[-5:].max() < 3.0, dist[-5:]  # full pinch weight: the points meet
+    assert lim.violations(res.q) == 0
+
+
+def test_limits_and_couplings_hold_for_any_input():
+    robot, rmap, lim, _ = _problem("shadow")
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-3, 3, (2000, robot.nq))
+    p = lim.project(q)
+    assert lim.violations(p) == 0
+    assert lim.violations(q) > 0
+    # feasible configurations are left alone
+    np.testing.assert_allclose(lim.project(p), p, atol=1e-12)
+    # the J1/J0 band: 0.00705 J0 - 0.00805 J1 within +-0.001 for every finger
+    for f in ("FF", "MF", "RF", "LF"):
+        j0 = p[:, robot.joint_names.index(f"robot0:{f}J0")]
+        j1 = p[:, robot.joint_names.index(f"robot0:{f}J1")]
+        assert np.all(np.abs(0.00705 * j0 - 0.00805 * j1) <= 0.001 + 1e-12)
+
+
+ROBOT_XML = """
+<mujoco model="toy">
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="palm">
+      <body name="f1" pos="0 0.02 0.05">
+        <joint name="a_mp" type="hinge" axis="1 0 0" range="-0.5 1.5"/>
+        <geom type="capsule" fromto="0 0 0 0 0 0.04" size="0.008"/>
+        <body name="f2" pos="0 0 0.04">
+          <joint name="a_pip" type="hinge" axis="1 0 0" range="0 1.6"/>
+          <geom type="capsule" fromto="0 0 0 0 0 0.03" size="0.007"/>
+          <site name="a_tip" pos="0 0 0.03"/>
+        </body>
+      </body>
+      <body name="g1" pos="0 -0.02 0.05">
+        <joint name="b_mp" type="hinge" axis="1 0 0" range="0 1.5"/>
+        <geom type="capsule" fromto="0 0 0 0 0 0.04" size="0.008"/>
+        <site name="b_tip" pos="0 0 0.04"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+MAP = """
+[robot]
+name = "toy"
+file = "toy.xml"
+hand = "right"
+palm = "palm"
+distal = [0, 0, 1]
+dorsal = [0, 1, 0]
+
+[digits.index]
+tip = "a_tip"
+base = "a_mp"
+[digits.index.joints]
+mp = { robot = "a_mp", sign = -1, scale = 0.5, offset = 0.1 }
+pip = "a_pip"
+
+[digits.middle]
+tip = "b_tip"
+base = "b_mp"
+[digits.middle.joints]
+mp = "b_mp"
+
+[[coupling]]
+joints = ["a_pip", "a_mp"]
+coef = [1.0, -1.0]
+range = [0.0, 0.2]
+"""
+
+
+@pytest.fixture
+def toy(tmp_path):
+    (tmp_path / "toy.xml").write_text(ROBOT_XML)
+    (tmp_path / "toy.toml").write_text(MAP)
+    rmap = parse_map(tmp_path / "toy.toml")
+    robot = load_robot(rmap.robot_file)
+    check_map(rmap, robot)
+    return robot, rmap, tmp_path
+
+
+def test_joint_method_maps_sign_scale_offset_then_limits_and_coupling(toy):
+    robot, rmap, _ = toy
+    lim = limits_of(robot, rmap)
+    mp = np.array([0.0, -0.4, 1.0, 0.2, np.nan])
+    pip = np.array([0.0, 0.1, 0.3, 2.0, 0.5])
+    angles = {"index": {"mp": mp, "pip": pip}, "middle": {"mp": np.array([0.3, 0.3, 2.0, -1, 0.4])}}
+    q, held = copy_angles(angles, rmap, robot.joint_names, np.zeros(robot.nq), lim)
+    a_mp, a_pip, b_mp = (robot.joint_names.index(j) for j in ("a_mp", "a_pip", "b_mp"))
+    # a_mp = -0.5 mp + 0.1 -> 0.1, 0.3, -0.4, 0.0, (missing: previous 0.0); -0.4 is
+    # below the driver range the coupling allows (a_pip >= 0 needs a_mp >= -0.2)
+    np.testing.assert_allclose(q[:, a_mp], [0.1, 0.3, -0.2, 0.0, 0.0])
+    # a_pip within [a_mp, a_mp + 0.2] (coupling) and [0, 1.6]
+    np.testing.assert_allclose(q[:, a_pip], [0.1, 0.3, 0.0, 0.2, 0.2])
+    np.testing.assert_allclose(q[:, b_mp], [0.3, 0.3, 1.5, 0.0, 0.4])  # clipped to [0, 1.5]
+    assert held == 1
+    assert lim.violations(q) == 0
+
+
+@pytest.mark.parametrize(
+    ("edit", "field"),
+    [
+        (('tip = "a_tip"', 'tip = "nope"'), "digits.index.tip"),
+        (('mp = "b_mp"', 'mp = "b_xx"'), "digits.middle.joints.mp.robot"),
+        (('palm = "palm"', 'palm = "hand"'), "robot.palm"),
+        (('hand = "right"', 'hand = "up"'), "robot.hand"),
+        (("sign = -1", "sign = 2"), "digits.index.joints.mp.sign"),
+        (('pip = "a_pip"', 'pip = "a_pip"\nknee = "a_mp"'), "digits.index.joints.knee"),
+        (("range = [0.0, 0.2]", "range = [0.5, 0.2]"), "coupling[0].range"),
+        (('joints = ["a_pip", "a_mp"]', 'joints = ["a_pip", "zz"]'), "coupling[0].joints"),
+    ],
+)
+def test_bad_map_names_file_and_field(toy, edit, field):
+    robot, _, tmp = toy
+    path = tmp / "bad.toml"
+    path.write_text(MAP.replace(*edit))
+    with pytest.raises(FingerfitError) as exc:
+        check_map(parse_map(path), robot)
+    msg = str(exc.value)
+    assert "bad.toml" in msg and f"field '{field}'" in msg and "\n" not in msg
+
+
+def test_not_toml_is_one_line(tmp_path):
+    p = tmp_path / "m.toml"
+    p.write_text("[robot\nname=")
+    with pytest.raises(FingerfitError, match="m.toml.*not valid TOML"):
+        parse_map(p)
+
+
+@pytest.fixture(scope="module")
+def hand():
+    from fingerfit.estimate import fit_session
+
+    sub = subject("realistic", 2, FINGERS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = fit_session(sub.session)
+    return model, sub.session.grasp[0]
+
+
+def test_person_onto_allegro_tip_beats_joint_and_keeps_limits(hand):
+    model, rec = hand
+    robot, rmap = resolve("allegro", None, model.hand)
+    s = setup(model, robot, rmap)
+    assert s.digits == ["index", "middle", "ring"]  # Allegro has no little finger
+    assert set(s.scale) == set(s.digits) and all(1.0 < v < 1.6 for v in s.scale.values())
+    n = 1500
+    rec = rec.select(slice(0, n)) if hasattr(rec, "select") else rec
+    tip = retarget(model, rec, robot, rmap, "tip")
+    joint = retarget(model, rec, robot, rmap, "joint")
+    for r in (tip, joint):
+        assert r.violations == 0 and np.isfinite(r.q).all()
+        assert r.q.shape == (len(rec.time), robot.nq)
+    e_tip = np.linalg.norm(tip.tips - tip.targets, axis=2)
+    e_joint = np.linalg.norm(joint.tips - joint.targets, axis=2)
+    assert np.median(e_tip) < 1.0
+    assert np.median(e_tip) < 0.2 * np.median(e_joint)
+
+
+def test_left_hand_is_mirrored_onto_the_right_shadow(hand):
+    model, _ = hand
+    robot, rmap = resolve("shadow", None, model.hand)
+    s = setup(model, robot, rmap)
+    assert s.mirror == (model.hand == "left")
+    # after mirroring, the index base lies radially (+y) of the little finger's, like the robot's
+    tg = {d: s.robot_base[d] for d in s.digits}
+    m = -1.0 if s.mirror else 1.0
+    assert m * (s.person_base["index"][1] - s.person_base["little"][1]) > 0
+    assert tg["index"][1] > tg["little"][1]
+
+
+def test_cli_writes_csv_and_identical_npz(hand, tmp_path):
+    from typer.testing import CliRunner
+
+    from fingerfit.cli import app
+    from fingerfit.io.posecsv import write_pose_csv
+    from fingerfit.model import save_model
+
+    model, rec = hand
+    save_model(model, tmp_path / "model.json")
+    src = write_pose_csv(tmp_path / "grasp.csv", rec, units=model.session_units)
+    out = tmp_path / "o" / "q.csv"
+    out.parent.mkdir()
+    r = CliRunner().invoke(
+        app,
+        [
+            "retarget",
+            str(tmp_path / "model.json"),
+            str(src),
+            "--robot",
+            "allegro",
+            "--method",
+            "joint",
+            "-o",
+            str(out),
+            "-q",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    table = pd.read_csv(out)
+    robot, _ = resolve("allegro", None, model.hand)
+    assert list(table.columns) == ["time", *robot.joint_names]
+    z = np.load(out.with_suffix(".npz"))
+    assert list(z["joint_names"]) == list(robot.joint_names)
+    np.testing.assert_array_equal(z["q"], table[list(robot.joint_names)].to_numpy())
+    np.testing.assert_array_equal(z["time"], table["time"].to_numpy())
