@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import textwrap
 import warnings
 
 import numpy as np
@@ -12,16 +11,16 @@ import pytest
 pytest.importorskip("mujoco")
 pytest.importorskip("pinocchio")
 
-from fingerfit.errors import FingerfitError  # noqa: E402
-from fingerfit.retarget import resolve, retarget, setup  # noqa: E402
-from fingerfit.retarget.joint import copy_angles  # noqa: E402
-from fingerfit.retarget.limits import limits_of  # noqa: E402
-from fingerfit.retarget.maps import check_map, parse_map  # noqa: E402
-from fingerfit.retarget.palm import robot_palm  # noqa: E402
-from fingerfit.retarget.robots import load_robot  # noqa: E402
-from fingerfit.retarget.solve import MM, TipOptions, TipProblem, solve_tip  # noqa: E402
+from fingerfit.errors import FingerfitError
+from fingerfit.retarget import resolve, retarget, setup
+from fingerfit.retarget.joint import copy_angles
+from fingerfit.retarget.limits import limits_of
+from fingerfit.retarget.maps import check_map, parse_map
+from fingerfit.retarget.palm import robot_palm
+from fingerfit.retarget.robots import load_robot
+from fingerfit.retarget.solve import MM, TipProblem, solve_tip
 
-from .conftest import subject  # noqa: E402
+from .conftest import subject
 
 FINGERS = ("index", "middle", "ring", "little")
 
@@ -71,7 +70,7 @@ def test_tip_method_recovers_the_robots_own_fingertips(name):
 def test_pinch_term_brings_two_robot_tip_points_together():
     """Synthetic pinch: thumb and index tips driven by the pinch term alone (target vector 0,
     weight ramping from 0 to 1); the other fingers hold their tip targets."""
-    robot, rmap, lim, prob = _problem("shadow")
+    robot, _rmap, lim, prob = _problem("shadow")
     frames = prob.frames
     ith, iff = frames.index("robot0:S_thtip"), frames.index("robot0:S_fftip")
     n = 60
@@ -92,7 +91,7 @@ def test_pinch_term_brings_two_robot_tip_points_together():
 
 
 def test_limits_and_couplings_hold_for_any_input():
-    robot, rmap, lim, _ = _problem("shadow")
+    robot, _rmap, lim, _ = _problem("shadow")
     rng = np.random.default_rng(1)
     q = rng.uniform(-3, 3, (2000, robot.nq))
     p = lim.project(q)
@@ -214,7 +213,7 @@ def test_bad_map_names_file_and_field(toy, edit, field):
 def test_not_toml_is_one_line(tmp_path):
     p = tmp_path / "m.toml"
     p.write_text("[robot\nname=")
-    with pytest.raises(FingerfitError, match="m.toml.*not valid TOML"):
+    with pytest.raises(FingerfitError, match=r"m\.toml.*not valid TOML"):
         parse_map(p)
 
 
