@@ -30,9 +30,12 @@ from ..session import (
     sensor_name,
 )
 from ..transforms import FloatArray, apply_inverse_pose, quat_wxyz_from_matrix
+from . import contact as ct
 from . import motion as mo
+from . import wholehand as wh
 from .anatomy import FingerAnatomy, sample_finger, segment_motions
 from .sensors import SensorMount, TrackerErrors, mount, sensor_poses
+from .thumb import THUMB_KEYS, Pad, ThumbAnatomy
 
 TRUTH_FORMAT = "fingerfit.truth/1"
 TARGET_SPACING_MM = 20.0
@@ -52,6 +55,9 @@ class SimConfig:
     Attributes
     ----------
     fingers : tuple of str
+        Digits: any of ``thumb``, ``index``, ``middle``, ``ring``, ``little``. The thumb
+        adds its own recordings (:mod:`.wholehand`) and draws everything from its own
+        generator, so the fingers' truth does not depend on it.
     hand : {"left", "right"}
     rate_hz : float
     noise : float
@@ -67,7 +73,8 @@ class SimConfig:
     rolling : bool
         Centre of rotation migrating with flexion.
     abduction : bool
-        MP ab/adduction axis moving during grasp and free motion.
+        MP ab/adduction axis moving during grasp and free motion (the thumb's MCP
+        ab/adduction likewise; its CMC always has two axes).
     rom_scale : float
         Grasp range-of-motion scale.
     cycles : int
@@ -108,20 +115,31 @@ class SubjectTruth:
     Attributes
     ----------
     fingers : dict[str, FingerAnatomy]
-        True geometry at the reference posture.
+        True geometry at the reference posture (the four fingers only).
     mounts : dict[str, SensorMount]
-        True sensor poses at the reference posture (before artefact and noise).
+        True sensor poses at the reference posture (before artefact and noise), thumb
+        sensors included.
     frames : dict[str, dict]
-        Per recording: ``time`` ``(n,)``, ``angles[finger][key]`` ``(n,)`` rad,
-        ``tip[finger]`` ``(n, 3)`` mm, ``sensors[name]`` noise-free
-        ``(position (n, 3), rotation (n, 3, 3))``.
+        Per recording: ``time`` ``(n,)``, ``angles[digit][key]`` ``(n,)`` rad,
+        ``tip[digit]`` and ``pad[digit]`` (pulp centre) ``(n, 3)`` mm, ``sensors[name]``
+        noise-free ``(position (n, 3), rotation (n, 3, 3))``, ``motions[name]`` the
+        segment motions ``(R (n, 3, 3), t (n, 3))`` relative to the reference posture.
     config : SimConfig
+    thumb : ThumbAnatomy or None
+        The thumb's true geometry (None without a thumb).
+    pads : dict[str, Pad]
+        Every digit's pad (pulp centre, half-thickness, skin point).
+    contacts : list of dict
+        Every touch of the thumb (:func:`.wholehand.contact_truth`).
     """
 
     fingers: dict[str, FingerAnatomy]
     mounts: dict[str, SensorMount]
     frames: dict[str, dict] = field(default_factory=dict)
     config: SimConfig = field(default_factory=SimConfig)
+    thumb: ThumbAnatomy | None = None
+    pads: dict[str, Pad] = field(default_factory=dict)
+    contacts: list[dict] = field(default_factory=list)
 
 
 @dataclass
@@ -145,12 +163,27 @@ def _run(
     mounts: dict[str, SensorMount],
     tracker: TrackerErrors,
     rng: np.random.Generator,
+    ts: wh.ThumbSetup | None = None,
 ) -> tuple[Recording, dict]:
-    """Move the true hand through ``motion``; return the measured recording and its truth."""
+    """Move the true hand through ``motion``; return the measured recording and its truth.
+
+    The fingers' tracker noise comes from ``rng``, the thumb's from its own generator
+    (``ts``), after the fingers'.
+    """
     hand = (motion.hand_rotation, motion.hand_translation)
     poses: dict[str, PoseSeries] = {}
-    truth: dict = {"time": motion.time, "angles": motion.angles, "tip": {}, "sensors": {}}
-    mean_mp = np.mean([motion.angles[f]["mp"] for f in fingers], axis=0)
+    truth: dict = {
+        "time": motion.time,
+        "angles": motion.angles,
+        "tip": {},
+        "pad": {},
+        "sensors": {},
+        "motions": {},
+    }
+    if fingers:
+        mean_mp = np.mean([motion.angles[f]["mp"] for f in fingers], axis=0)
+    else:
+        mean_mp = motion.angles["thumb"]["mcp"]
     zero = np.zeros_like(motion.time)
     p, r = sensor_poses(mounts[HAND_SENSOR], hand, (mean_mp, zero))
     truth["sensors"][HAND_SENSOR] = (p, r)
@@ -160,13 +193,23 @@ def _run(
         seg = segment_motions(anat, ang, hand)
         tip_r, tip_t = seg["distal"]
         truth["tip"][f] = np.einsum("nij,j->ni", tip_r, anat.tip) + tip_t
+        if ts is not None and f in ts.pads:
+            truth["pad"][f] = np.einsum("nij,j->ni", tip_r, ts.pads[f].centre) + tip_t
         adjacent = {"proximal": ("mp", "pip"), "middle": ("pip", "dip"), "distal": ("dip", None)}
         for s in SEGMENTS:
             a, b = adjacent[s]
             sname = sensor_name(f, s)
             p, r = sensor_poses(mounts[sname], seg[s], (ang[a], zero if b is None else ang[b]))
             truth["sensors"][sname] = (p, r)
+            truth["motions"][sname] = seg[s]
             poses[sname] = PoseSeries(*tracker.apply(rng, p, r))
+    if ts is not None and ts.thumb is not None:
+        measured, th = wh.run_thumb(ts, motion.angles["thumb"], hand, tracker)
+        truth["tip"]["thumb"] = th["tip"]
+        truth["pad"]["thumb"] = th["pad"]
+        truth["sensors"].update(th["sensors"])
+        truth["motions"].update(th["motions"])
+        poses.update({k: PoseSeries(*v) for k, v in measured.items()})
     return Recording(name, motion.time.copy(), poses), truth
 
 
@@ -235,20 +278,29 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
     ----------
     config : SimConfig
     seed : int
-        Everything is deterministic given ``(config, seed)``.
+        Everything is deterministic given ``(config, seed)``. The fingers draw from
+        ``default_rng(seed)``, the thumb and every digit's pad from
+        :func:`.wholehand.thumb_generator` ``(seed)``: a finger's truth is the same with
+        or without the thumb.
     subject : str
         Subject identifier written to ``session.toml``.
 
     Returns
     -------
     SimulatedSubject
-        ``session`` (as if loaded from files, mm) and ``truth``.
+        ``session`` (as if loaded from files, mm) and ``truth``. With the thumb, the
+        thumb's calibration recordings follow ``grasp.csv`` under ``grasp`` and its
+        pad-to-pad touches are ``events`` (``finger`` = ``thumb``, ``target`` = the
+        finger touched).
     """
     rng = np.random.default_rng(seed)
     hand_rot, hand_origin = _hand_pose(rng)
     scale = rng.normal(1.0, 0.06)
+    with_thumb = "thumb" in config.fingers
     fingers: dict[str, FingerAnatomy] = {}
     for f in config.fingers:
+        if f == "thumb":
+            continue
         fingers[f] = sample_finger(
             rng,
             f,
@@ -287,34 +339,85 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
     # full grasp, varying between subjects.
     coupling = rng.normal(-0.07, 0.04, len(fingers)) if config.abduction else None
     flist = list(fingers)
-
-    truth = SubjectTruth(fingers, mounts, config=config)
-    ref, truth.frames["reference.csv"] = _run(
-        mo.static(flist, config.rate_hz, 1.5), "reference.csv", fingers, mounts, tracker, rng
+    ts = wh.setup(
+        seed,
+        with_thumb=with_thumb,
+        hand=config.hand,
+        fingers=fingers,
+        hand_rotation=hand_rot,
+        hand_origin=hand_origin,
+        hand_scale=scale,
+        tilt_scale=config.tilt_scale,
+        sta=config.sta,
     )
-    grasp_motion = mo.grasp(
-        rng,
-        flist,
-        config.rate_hz,
+    mounts.update(ts.mounts)
+    trng = ts.rng
+    digits = (["thumb"] if with_thumb else []) + flist
+
+    def run(m: mo.Motion, name: str, noise: np.random.Generator = rng) -> tuple[Recording, dict]:
+        return _run(m, name, fingers, mounts, tracker, noise, ts)
+
+    truth = SubjectTruth(fingers, mounts, config=config, thumb=ts.thumb, pads=ts.pads)
+    static = mo.static(flist, config.rate_hz, 1.5)
+    if with_thumb:
+        static.angles["thumb"] = wh.static_angles(static.time.size)
+    ref, truth.frames["reference.csv"] = run(static, "reference.csv")
+    grasp_kw = dict(
         cycles=config.cycles,
         rom_scale=config.rom_scale,
         abduction_coupling=coupling,
         abduction=config.abduction,
         pivot=hand_origin,
     )
-    grasp, truth.frames["grasp.csv"] = _run(
-        grasp_motion, "grasp.csv", fingers, mounts, tracker, rng
-    )
+    if flist:
+        grasp_motion = mo.grasp(rng, flist, config.rate_hz, **grasp_kw)
+        if with_thumb:
+            grasp_motion.angles["thumb"] = wh.grasp_angles(
+                ts, grasp_motion, flist, config.abduction
+            )
+    else:
+        # A thumb alone still grasps on the clock of a grasp cycle (from its own stream).
+        clock = mo.grasp(
+            trng, ["index"], config.rate_hz, **{**grasp_kw, "abduction_coupling": None}
+        )
+        clock.angles["thumb"] = wh.grasp_angles(ts, clock, ["index"], config.abduction)
+        del clock.angles["index"]
+        grasp_motion = clock
+    grasp, truth.frames["grasp.csv"] = run(grasp_motion, "grasp.csv")
+    calibration = [grasp]
+    events: list[TargetEvent] = []
+    if with_thumb:
+        for name, m, contacts in wh.protocols(
+            ts, fingers, config.rate_hz, abduction=config.abduction, pivot=hand_origin
+        ):
+            # Recordings only the thumb brings: every sensor's noise from its stream.
+            rec, truth.frames[name] = run(m, name, trng)
+            calibration.append(rec)
+            truth.contacts += wh.contact_truth(ts, fingers, name, contacts, truth.frames[name])
+            events += [
+                TargetEvent(name, "thumb", c.target, c.start, c.end)
+                for c in contacts
+                if c.pad_to_pad
+            ]
 
     landmarks: dict[str, FloatArray] = {}
     for f, anat in fingers.items():
         for k, v in anat.landmarks.items():
             landmarks[f"{f}.{k}"] = v + rng.normal(0, config.stylus_mm, 3)
+    if with_thumb:
+        # Thumb landmarks, then every digit's pad (the pulp's skin point), from the
+        # thumb's stream.
+        for k, v in ts.thumb.landmarks.items():
+            if k != "pad":
+                landmarks[f"thumb.{k}"] = v + trng.normal(0, config.stylus_mm, 3)
+        for d in digits:
+            landmarks[f"{d}.pad"] = ts.pads[d].surface + trng.normal(0, config.stylus_mm, 3)
     targets: list[Recording] = []
-    events: list[TargetEvent] = []
-    if config.targets:
+    if config.targets and flist:
         tm, tpos, holds = _target_motion(rng, fingers, config)
-        rec, truth.frames["targets.csv"] = _run(tm, "targets.csv", fingers, mounts, tracker, rng)
+        if with_thumb:
+            tm.angles["thumb"] = ct.thumb_hold(trng, tm.time)
+        rec, truth.frames["targets.csv"] = run(tm, "targets.csv")
         targets.append(rec)
         for j in range(N_TARGETS):
             label = f"t{round(j * TARGET_SPACING_MM):03d}"
@@ -333,16 +436,18 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
             abduction=config.abduction,
             pivot=hand_origin,
         )
-        rec, truth.frames["test.csv"] = _run(fm, "test.csv", fingers, mounts, tracker, rng)
+        if with_thumb:
+            fm.angles["thumb"] = ct.thumb_free(trng, fm.time, config.abduction)
+        rec, truth.frames["test.csv"] = run(fm, "test.csv")
         test.append(rec)
     session = Session(
         subject=subject,
         hand=config.hand,
         units="mm",
         rate_hz=config.rate_hz,
-        fingers=flist,
+        fingers=digits,
         reference=ref,
-        grasp=[grasp],
+        grasp=calibration,
         landmarks=landmarks,
         targets=targets,
         test=test,
@@ -379,6 +484,14 @@ def truth_document(sim: SimulatedSubject) -> dict:
             "tip": anat.tip.tolist(),
             "landmarks": {k: v.tolist() for k, v in anat.landmarks.items()},
         }
+        if f in truth.pads:
+            fingers[f].update(_pad_document(truth.pads[f]))
+    if truth.thumb is not None:
+        thumb = wh.thumb_document(
+            wh.ThumbSetup(np.random.default_rng(0), truth.thumb, truth.pads), ref_sensor
+        )
+        thumb.update(_pad_document(truth.thumb.pad))
+        fingers = {"thumb": thumb, **fingers}
     return {
         "format": TRUTH_FORMAT,
         "subject": sim.session.subject,
@@ -390,17 +503,47 @@ def truth_document(sim: SimulatedSubject) -> dict:
             for name, (p, r) in ref_sensor.items()
         },
         "fingers": fingers,
+        "contacts": truth.contacts,
     }
 
 
-def truth_table(frames: dict) -> pd.DataFrame:
-    """Per-frame truth of one recording: ``time``, ``<finger>.<angle>`` (deg), ``<finger>.tip.x|y|z`` (mm)."""
+def _pad_document(pad: Pad) -> dict:
+    return {
+        "pad": pad.surface.tolist(),
+        "pad_center": pad.centre.tolist(),
+        "pad_half_thickness_mm": pad.half_thickness,
+    }
+
+
+def truth_table(frames: dict, pads: dict[str, Pad] | None = None) -> pd.DataFrame:
+    """Per-frame truth of one recording (tracker coordinates, mm; angles deg).
+
+    Columns: ``time``; per digit ``<digit>.<angle>`` (``mp``, ``mp_abduction``, ``pip``,
+    ``dip``; the thumb's ``cmc``, ``cmc_abduction``, ``mcp``, ``mcp_abduction``, ``ip``)
+    and ``<digit>.tip.x|y|z``; with ``pads``, ``<digit>.pad.x|y|z`` (the pulp's skin
+    point, as the ``<digit>.pad`` landmark) and, with the thumb,
+    ``thumb.pad_distance.<finger>``: thumb to finger pulp centre (pads touch at the sum
+    of the half-thicknesses).
+    """
     cols: dict[str, FloatArray] = {"time": frames["time"]}
     for f, ang in frames["angles"].items():
-        for k in mo.ANGLE_KEYS:
+        for k in THUMB_KEYS if f == "thumb" else mo.ANGLE_KEYS:
             cols[f"{f}.{k}"] = np.degrees(ang[k])
         for i, c in enumerate("xyz"):
             cols[f"{f}.tip.{c}"] = frames["tip"][f][:, i]
+        if pads and f in pads and f in frames.get("pad", {}):
+            # Skin point = centre moved palmar by the half-thickness, carried by the
+            # distal segment: centre + R (surface - centre).
+            r = frames["motions"][f"{f}.distal"][0]
+            skin = frames["pad"][f] + r @ (pads[f].surface - pads[f].centre)
+            for i, c in enumerate("xyz"):
+                cols[f"{f}.pad.{c}"] = skin[:, i]
+    if "thumb" in frames["angles"] and pads:
+        for f in frames["angles"]:
+            if f != "thumb" and f in frames.get("pad", {}):
+                cols[f"thumb.pad_distance.{f}"] = np.linalg.norm(
+                    frames["pad"]["thumb"] - frames["pad"][f], axis=1
+                )
     return pd.DataFrame(cols)
 
 
@@ -420,7 +563,7 @@ def write_truth(sim: SimulatedSubject, directory: str | Path) -> None:
         json.dump(truth_document(sim), fh, indent=1)
     for name, frames in sim.truth.frames.items():
         with atomic_write(directory / "truth" / name, newline="") as fh:
-            truth_table(frames).to_csv(fh, index=False, lineterminator="\n")
+            truth_table(frames, sim.truth.pads).to_csv(fh, index=False, lineterminator="\n")
 
 
 def simulate_cohort(config: SimConfig, n_subjects: int, seed: int) -> list[SimulatedSubject]:

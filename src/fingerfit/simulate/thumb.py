@@ -110,12 +110,16 @@ class Pad:
         their centres are the sum of their half-thicknesses apart.
     depth, proximal : float
         The centre lies ``depth`` mm palmar and ``proximal`` mm proximal of the nail edge.
+    surface : ndarray, shape (3,)
+        The pulp's skin point below the centre (``half_thickness`` further palmar): the
+        point a stylus digitises as the ``<digit>.pad`` landmark and the model's pad point.
     """
 
     centre: FloatArray
     half_thickness: float
     depth: float
     proximal: float
+    surface: FloatArray
 
 
 def sample_pad(rng: np.random.Generator, digit: str, tip: FloatArray, frame: FloatArray) -> Pad:
@@ -123,7 +127,7 @@ def sample_pad(rng: np.random.Generator, digit: str, tip: FloatArray, frame: Flo
     p = PAD_PARAMS[digit]
     depth, half, prox = (max(rng.normal(*p[k]), 0.5) for k in ("depth", "half", "proximal"))
     centre = tip - depth * frame[:, 2] - prox * frame[:, 0]
-    return Pad(centre, float(half), float(depth), float(prox))
+    return Pad(centre, float(half), float(depth), float(prox), centre - half * frame[:, 2])
 
 
 @dataclass(frozen=True)
@@ -148,7 +152,8 @@ class ThumbAnatomy:
     pad : Pad
         Pulp centre and half-thickness.
     landmarks : dict[str, ndarray]
-        True dorsal joint points ``cmc``, ``mcp``, ``ip``, the ``tip`` and the ``pad``.
+        True dorsal joint points ``cmc``, ``mcp``, ``ip``, the ``tip`` and the ``pad``
+        (the pulp's skin point, :attr:`Pad.surface`).
     frame : ndarray, shape (3, 3)
         Columns x (distal), y, z (dorsal, nail side) of the thumb's anatomical frame.
     side : float
@@ -300,7 +305,7 @@ def sample_thumb(
     landmarks = {j: centre[i] + depth[i] * z for i, j in enumerate(THUMB_JOINTS)}
     landmarks["tip"] = tip
     pad = sample_pad(rng, "thumb", tip, frame)
-    landmarks["pad"] = pad.centre
+    landmarks["pad"] = pad.surface
 
     # Right-hand coordinates -> this hand (mirror y for a left hand) -> tracker.
     s = 1.0 if side == "right" else -1.0
@@ -315,7 +320,7 @@ def sample_thumb(
         return hand_rotation @ ((m @ v) * (1.0 if s > 0 else -1.0))
 
     frame_t = np.column_stack([hand_rotation @ (m @ x), ax(y), hand_rotation @ (m @ z)])
-    pad_t = Pad(pt(pad.centre), pad.half_thickness, pad.depth, pad.proximal)
+    pad_t = Pad(pt(pad.centre), pad.half_thickness, pad.depth, pad.proximal, pt(pad.surface))
     return ThumbAnatomy(
         "thumb",
         {k: pt(v) for k, v in point.items()},

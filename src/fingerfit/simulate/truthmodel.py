@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import HandModel, JointModel, JointQuality, assemble_digit
+from ..digits import DIGITS, second_axis
+from ..model import DigitModel, HandModel, JointModel, JointQuality, assemble_digit
 from ..session import HAND_SENSOR, JOINTS, joint_sensors, sensor_name
 from .study import SimulatedSubject
+from .thumb import ThumbAnatomy
 
 
 def truth_model(
@@ -30,7 +32,8 @@ def truth_model(
     angle_method : {"swing_twist", "projection"}
         Angle method recorded in the model.
     two_axis : bool
-        Include the true MP ab/adduction axis (when the subject has one).
+        Include the true MP ab/adduction axis (when the subject has one) and the thumb's
+        MCP ab/adduction axis (when it moves); the thumb's CMC always has both axes.
     migration : bool
         Include the true rolling-contact migration of the centres.
 
@@ -64,7 +67,11 @@ def truth_model(
         rolling = {}
         if migration and np.any(anat.rolling):
             rolling = {j: anat.rolling[i] for i, j in enumerate(JOINTS)}
-        fingers[f] = assemble_digit(f, joints, anat.tip, second_axes, rolling)
+        pad = truth.pads[f].surface if f in truth.pads else None
+        fingers[f] = assemble_digit(f, joints, anat.tip, second_axes, rolling, pad)
+    if truth.thumb is not None:
+        mcp_two = two_axis and truth.config.abduction
+        fingers = {"thumb": _thumb_model(truth.thumb, quality, mcp_two), **fingers}
     poses = {name: (m.position, m.rotation) for name, m in truth.mounts.items()}
     return HandModel(
         subject=sim.session.subject,
@@ -75,6 +82,24 @@ def truth_model(
         fingers=fingers,
         angle_method=angle_method,
     )
+
+
+def _thumb_model(thumb: ThumbAnatomy, quality: JointQuality, two_axis: bool) -> DigitModel:
+    """The thumb's true DigitModel: CMC two-axis always, MCP two-axis with ``two_axis``
+    and the subject's MCP ab/adduction moving; the pad is the pulp's skin point."""
+    sensors = DIGITS["thumb"].joint_sensors()
+    joints = {
+        j: (*sensors[j], thumb.axis_point[j], thumb.axis[j], quality)
+        for j in DIGITS["thumb"].joints
+    }
+    second = {}
+    for j in DIGITS["thumb"].second_axes:
+        if j == "cmc" or two_axis:
+            k = second_axis(j)
+            second[j] = JointModel(
+                k, *sensors[j], thumb.axis_point[k], thumb.axis[k], thumb.axis[k], quality
+            )
+    return assemble_digit("thumb", joints, thumb.tip, second, None, thumb.pad.surface)
 
 
 __all__ = ["truth_model"]

@@ -290,8 +290,6 @@ def thumb_document(ts: ThumbSetup, ref_sensor: dict[str, tuple[FloatArray, Float
         "joint_centers": dict(zip(THUMB_JOINTS, th.centre.tolist(), strict=True)),
         "frame": th.frame.tolist(),
         "tip": th.tip.tolist(),
-        "pad": th.pad.centre.tolist(),
-        "pad_half_thickness_mm": th.pad.half_thickness,
         "landmarks": {k: v.tolist() for k, v in th.landmarks.items()},
     }
 
