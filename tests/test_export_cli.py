@@ -120,22 +120,24 @@ def test_angles_urdf_names_replays_in_pinocchio(fitted: Path, tmp_path: Path) ->
 
 
 def test_trajectory_abduction_columns() -> None:
-    """Two-axis MP: the ab/adduction column comes first; 0 (NaN on gaps) if not computed."""
+    """Two-axis MP: the ab/adduction column comes first; kinematics without it are refused."""
     from tests.test_export import synthetic_model
 
     model = synthetic_model(2, abduction=True, fingers=("index",))
     n = 4
     mp = np.array([0.1, np.nan, 0.3, 0.4])
     base = {"mp": mp, "pip": np.full(n, 0.2), "dip": np.full(n, 0.3)}
+    with_ab = {**base, "mp_abduction": np.full(n, -0.05)}
     kin = Kinematics(
-        np.arange(n) / 100, {"user_axis": {"index": FingerMotion(base, np.zeros((n, 3)))}}
+        np.arange(n) / 100, {"user_axis": {"index": FingerMotion(with_ab, np.zeros((n, 3)))}}
     )
     t = trajectory_table(kin, model)
     assert list(t.columns) == ["time", "index_mp_abduction", "index_mp", "index_pip", "index_dip"]
-    assert np.array_equal(t["index_mp_abduction"], [0.0, np.nan, 0.0, 0.0], equal_nan=True)
-    with_ab = {**base, "mp_abduction": np.full(n, -0.05)}
-    kin = Kinematics(kin.time, {"user_axis": {"index": FingerMotion(with_ab, np.zeros((n, 3)))}})
-    assert np.array_equal(trajectory_table(kin, model)["index_mp_abduction"], np.full(n, -0.05))
+    assert np.array_equal(t["index_mp_abduction"], np.full(n, -0.05))
+    assert np.array_equal(t["index_mp"], mp, equal_nan=True)
+    kin = Kinematics(kin.time, {"user_axis": {"index": FingerMotion(base, np.zeros((n, 3)))}})
+    with pytest.raises(FingerfitError, match="no angle 'mp_abduction' of the index"):
+        trajectory_table(kin, model)
     with pytest.raises(FingerfitError, match="variant"):
         trajectory_table(kin, model, "orthogonal")
 

@@ -361,6 +361,37 @@ def assemble_digit(
     return DigitModel(name, out, tip, lengths, frames, seconds, pad)
 
 
+#: Where the pad point lies on the distal segment when no ``<digit>.pad`` landmark was
+#: digitised: this fraction of the distal segment's length proximal of the tip.
+PAD_FROM_TIP = 0.25
+
+
+def estimated_pad(digit: DigitModel, thickness: float) -> FloatArray:
+    """The pad point ``(3,)`` of a digit without a digitised ``<digit>.pad`` landmark (mm).
+
+    Parameters
+    ----------
+    digit : DigitModel
+        Its tip (nail edge, dorsal), distal segment frame and length at the reference
+        posture (tracker coordinates, mm).
+    thickness : float
+        The digit's thickness at its distal segment (mm), e.g. twice the height of the
+        last joint's dorsal landmark above that joint's centre.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        The tip moved palmar by ``thickness`` (along ``-z`` of the distal segment frame,
+        ``z`` being dorsal) and proximal by :data:`PAD_FROM_TIP` of the distal segment's
+        length: an approximation of the pulp's contact centre on the skin
+        (``docs/conventions.md``); a digitised pad landmark is better.
+    """
+    frame = digit.frames[digit.segments[-1]].rotation
+    x, z = frame[:, 0], frame[:, 2]
+    length = digit.segment_lengths[digit.segments[-1]]
+    return digit.tip - thickness * z - PAD_FROM_TIP * length * x
+
+
 # --------------------------------------------------------------------------- JSON
 
 

@@ -96,12 +96,12 @@ def fit(
     quiet: Quiet = False,
 ) -> None:
     """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
+    from ..digits import DIGIT_NAMES as FINGERS
     from ..estimate import FitOptions, fit_session
     from ..estimate.fit import METHODS
     from ..io import load_session
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..model import save_model
-    from ..session import FINGERS
 
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")

@@ -36,6 +36,7 @@ def session(
     Every file is read and checked first; the directory is written only if all are valid,
     and then loaded back and validated as a whole (sensors of every finger, landmarks).
     """
+    from ..digits import DIGIT_NAMES as FINGERS
     from ..io import load_session, read_pose_csv
     from ..io.atomic import staged_directory
     from ..io.sessiondir import (
@@ -45,7 +46,7 @@ def session(
         read_landmarks,
         write_session_toml,
     )
-    from ..session import FINGERS, UNITS_TO_MM, Session, check_subject_id
+    from ..session import UNITS_TO_MM, Session, check_subject_id
 
     if hand not in ("left", "right"):
         raise typer.BadParameter("must be left or right", param_hint="--hand")

@@ -34,17 +34,27 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..digits import DIGITS, FLEXION_FIRST
 from ..errors import FingerfitError
 from ..kinematics import twist_angle, two_axis_angles
-from ..model import ANGLE_METHODS, DigitModel, HandModel, JointModel, JointQuality, assemble_digit
-from ..session import HAND_SENSOR, JOINTS, Session, joint_sensors
+from ..model import (
+    ANGLE_METHODS,
+    DigitModel,
+    HandModel,
+    JointModel,
+    JointQuality,
+    assemble_digit,
+    estimated_pad,
+)
+from ..session import HAND_SENSOR, JOINTS, Session
 from ..transforms import FloatArray, angle_between_axes, relative_pose, rotation_vector
 from .axis import AxisFit, mean_null_axis, orient_flexion
 from .centre import CentreFit, centre_of_rotation
 from .cycles import extract_cycles
-from .joint import estimate_hinge, estimate_two_axis
+from .joint import HingeEstimate, estimate_hinge, estimate_two_axis
 from .migration import fit_axis_points
 from .plausibility import check_model, check_session, enforce
+from .saddle import SaddleFit, fit_saddle
 from .sagittal import intersect, sagittal_plane
 from .twoaxis import TwoAxisFit
 
@@ -117,10 +127,14 @@ class JointData:
     reference_offset : ndarray, shape (3,)
         Relative pose at the reference posture.
     joint : str
-        ``mp``, ``pip`` or ``dip`` (estimators may treat the MP differently).
+        The joint's name (``mp``, ``pip``, ``dip``; ``cmc``, ``mcp``, ``ip``).
     finger_direction : ndarray, shape (3,), optional
-        Unit direction of the stretched finger in the parent frame (least-squares
+        Unit direction of the stretched digit in the parent frame (least-squares
         line through the dorsal landmarks, proximal to distal).
+    second_axis : str, optional
+        For a joint that may have a second (ab/adduction) axis, its order
+        (``abduction_first`` or ``flexion_first``, :mod:`fingerfit.digits`); the
+        ``twoaxis`` and ``rolling`` estimators then test for it.
     """
 
     rotation: FloatArray
@@ -131,6 +145,26 @@ class JointData:
     reference_offset: FloatArray
     joint: str = ""
     finger_direction: FloatArray | None = None
+    second_axis: str | None = None
+
+    def reversed(self) -> JointData:
+        """The same joint seen from the child: parent-in-child poses (child frame, mm).
+
+        A joint ``Q = Rot(a, theta) Rot(b, beta)`` with ``a`` proximal becomes
+        ``Q' = Rot(b', -beta) Rot(a', -theta)`` with ``b' = R_ref^T b`` proximal, so an
+        estimator of the ab/adduction-first form fits a flexion-first joint this way.
+        """
+        rot = np.swapaxes(self.rotation, 1, 2)
+        ref = self.reference_rotation
+        fd = None if self.finger_direction is None else ref.T @ self.finger_direction
+        return replace(
+            self,
+            rotation=rot,
+            translation=-np.einsum("nij,nj->ni", rot, self.translation),
+            reference_rotation=ref.T,
+            reference_offset=-ref.T @ self.reference_offset,
+            finger_direction=fd,
+        )
 
 
 @dataclass(frozen=True)
@@ -144,8 +178,8 @@ class AxisEstimate:
         per-cycle centres to it.
     centres : list of CentreFit
         Per-cycle O'Brien centres (of the cycles used).
-    abduction : TwoAxisFit, optional
-        The MP ab/adduction axis when a two-axis joint was fitted and accepted.
+    abduction : TwoAxisFit or SaddleFit, optional
+        The second axis when a two-axis joint was fitted and accepted (parent frame).
     migration : ndarray, shape (3,), optional
         Centre migration (mm/rad, parent frame).
     pooled_conditioning : float, optional
@@ -158,7 +192,7 @@ class AxisEstimate:
 
     axis: AxisFit
     centres: list[CentreFit]
-    abduction: TwoAxisFit | None = None
+    abduction: TwoAxisFit | SaddleFit | None = None
     migration: FloatArray | None = None
     pooled_conditioning: float | None = None
     rejected_frames: int = 0
@@ -245,29 +279,28 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
     if rh.rejected_frames:
         notes.append(f"{rh.rejected_frames} outlier frame(s) rejected")
     abduction = None
-    if two_axis and data.joint == "mp":
-        tf = estimate_two_axis(
-            data.rotation, data.translation, data.reference_rotation, est, data.finger_direction
-        )
+    name = data.joint.upper() or "joint"
+    if two_axis and data.second_axis is not None:
+        tf = _second_axis(data, est)
         if tf.accepted:
             abduction = tf
             point, direction = tf.flexion_point, tf.flexion_axis
             notes.append(
-                f"two-axis MP: ab/adduction spans {tf.abduction_range_deg:.1f} deg; rotation "
+                f"two-axis {name}: ab/adduction spans {tf.abduction_range_deg:.1f} deg; rotation "
                 f"off the model {np.degrees(tf.rms_hinge_rad):.2f} -> "
                 f"{np.degrees(tf.rms_two_axis_rad):.2f} deg RMS"
             )
             notes.extend(tf.stability_notes())
         else:
             notes.append(
-                f"one-axis MP: a second axis would explain too little (ab/adduction span "
+                f"one-axis {name}: a second axis would explain too little (ab/adduction span "
                 f"{tf.abduction_range_deg:.1f} deg, rotation off the model "
                 f"{np.degrees(tf.rms_hinge_rad):.2f} -> {np.degrees(tf.rms_two_axis_rad):.2f} deg, "
                 f"ab/adduction at rest varying between cycles by >= "
                 f"{tf.rest_spread_low_deg:.2f} deg SD (95 %; need more than the two-axis RMS))"
             )
     mig = None
-    if migration:
+    if migration and not (abduction is not None and data.second_axis == FLEXION_FIRST):
         q = data.rotation[k] @ data.reference_rotation.T
         if abduction is not None:
             beta, theta = two_axis_angles(q, direction, abduction.abduction_axis)
@@ -298,6 +331,32 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
         rejected_frames=rh.rejected_frames,
         rejected_cycles=rh.rejected_cycles,
         notes=notes,
+    )
+
+
+def _second_axis(data: JointData, hinge: HingeEstimate) -> TwoAxisFit:
+    """The two-axis fit of a joint that may have a second axis, in its own order.
+
+    ``estimate_two_axis`` fits ``Q = Rot(b, beta) Rot(a, theta)`` with the ab/adduction
+    axis ``b`` proximal; a flexion-first joint is that form seen from the child
+    (:meth:`JointData.reversed`): fitted there and brought back to the parent frame.
+    """
+    if data.second_axis != FLEXION_FIRST:
+        return estimate_two_axis(
+            data.rotation, data.translation, data.reference_rotation, hinge, data.finger_direction
+        )
+    rev = data.reversed()
+    rh = estimate_hinge(rev.rotation, rev.translation, "robust", rev.periods)
+    tf = estimate_two_axis(
+        rev.rotation, rev.translation, rev.reference_rotation, rh, rev.finger_direction
+    )
+    ref, off = data.reference_rotation, data.reference_offset
+    return replace(
+        tf,
+        flexion_axis=ref @ tf.flexion_axis,
+        abduction_axis=ref @ tf.abduction_axis,
+        flexion_point=ref @ tf.flexion_point + off,
+        abduction_point=ref @ tf.abduction_point + off,
     )
 
 
@@ -423,19 +482,59 @@ def _quality(data: JointData, est: AxisEstimate, notes: list[str]) -> JointQuali
     )
 
 
+def _saddle(data: JointData) -> AxisEstimate:
+    """A joint that always has two axes (the thumb's CMC): :func:`.saddle.fit_saddle` over
+    every calibration frame, grouped by recording cycles where there are any."""
+    groups = None
+    if len(data.periods) >= 2:
+        groups = np.full(data.rotation.shape[0], -1)
+        for i, idx in enumerate(data.periods):
+            groups[idx] = i
+        if (groups < 0).any():  # frames outside the cycles form blocks of their own
+            rest = np.flatnonzero(groups < 0)
+            groups[rest] = len(data.periods) + rest * 4 // data.rotation.shape[0]
+    sf = fit_saddle(
+        data.rotation,
+        data.translation,
+        data.reference_rotation,
+        order=data.second_axis or FLEXION_FIRST,
+        groups=groups,
+    )
+    direction = sf.flexion_axis
+    axis = AxisFit(sf.flexion_point, direction, np.zeros(0), 0.0, False, 0.0)
+    notes = [
+        f"two-axis {data.joint.upper()}: flexion spans {sf.flexion_range_deg:.1f} deg, "
+        f"ab/adduction {sf.abduction_range_deg:.1f} deg; axes {sf.axis_angle_deg:.1f} deg "
+        f"apart, {sf.offset_mm:.1f} mm between them; rotation off the model "
+        f"{sf.rms_rotation_deg:.2f} deg RMS, position {sf.rms_position_mm:.2f} mm RMS"
+    ]
+    return AxisEstimate(axis, [], abduction=sf, notes=notes)
+
+
 def fit_finger(session: Session, finger: str, reference: dict, options: FitOptions) -> DigitModel:
-    """Fit one finger (see module docstring); tracker coordinates at the reference posture."""
+    """Fit one digit (see module docstring); tracker coordinates at the reference posture.
+
+    Every calibration (``grasp``) recording is used; a joint the recordings do not move
+    is refused (or, with ``force``, fitted with a warning). A joint that always has two
+    axes (the thumb's CMC) is fitted as a saddle joint (:mod:`.saddle`); a joint that may
+    have one (a finger's MP, the thumb's MCP) by the ``twoaxis``/``rolling`` test.
+    """
+    digit = DIGITS[finger]
     estimator = METHODS[options.method]
     fitted: dict[str, tuple[str, str, FloatArray, FloatArray, AxisEstimate, JointData, list[str]]]
     fitted = {}
-    landmarks = np.array([session.landmark(f"{finger}.{k}") for k in ("mp", "pip", "dip", "tip")])
+    landmarks = np.array([session.landmark(f"{finger}.{k}") for k in digit.landmarks])
     _, _, vt = np.linalg.svd(landmarks - landmarks.mean(axis=0))
     along = vt[0] if vt[0] @ (landmarks[-1] - landmarks[0]) > 0 else -vt[0]
-    for j, (parent, child) in joint_sensors(finger).items():
+    for j, (parent, child) in digit.joint_sensors().items():
         data = joint_data(session, parent, child, reference, j)
-        data = replace(data, finger_direction=reference[parent][1].T @ along)
-        notes = _check(finger, j, data, options)
-        est = estimator(data)
+        order = digit.order.get(j) if j in digit.second_axes else None
+        data = replace(data, finger_direction=reference[parent][1].T @ along, second_axis=order)
+        if j in digit.required_second:
+            est, notes = _saddle(data), []
+        else:
+            notes = _check(finger, j, data, options)
+            est = estimator(data)
         problems = _conditioning_problem(est, options)
         if est.axis.null_agreement_deg > options.max_null_disagreement_deg:
             problems.append(
@@ -446,11 +545,20 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
         if problems:
             _refuse_or_warn(finger, j, problems, options, hard=False)
             notes = [*notes, *problems]
-        moving = np.concatenate(data.periods)
-        rv = rotation_vector(data.rotation[moving] @ data.reference_rotation.T)
-        a_parent = orient_flexion(est.axis.direction, rv)
         pp, pr = reference[parent]
+        if j in digit.required_second:
+            a_parent = est.axis.direction  # signed below, from the next joint's flexion axis
+        else:
+            moving = np.concatenate(data.periods)
+            rv = rotation_vector(data.rotation[moving] @ data.reference_rotation.T)
+            a_parent = orient_flexion(est.axis.direction, rv)
         fitted[j] = (parent, child, pr @ est.axis.point + pp, pr @ a_parent, est, data, notes)
+    for j in digit.required_second:
+        # A saddle joint's flexion has no preferred sign in the data (circumduction goes
+        # both ways): its axis takes the sense of the next joint's flexion axis.
+        nxt = fitted[digit.joints[digit.joints.index(j) + 1]][3]
+        if fitted[j][3] @ nxt < 0:
+            fitted[j] = (*fitted[j][:3], -fitted[j][3], *fitted[j][4:])
 
     plane = sagittal_plane(landmarks, np.array([f[3] for f in fitted.values()]), finger)
     tip = session.landmark(f"{finger}.tip")
@@ -464,22 +572,28 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             sense = np.sign(a @ (reference[parent][1] @ est.axis.direction))
             migration[j] = sense * (reference[parent][1] @ est.migration)
     second_axes = {}
-    mp_est = fitted["mp"][4]
-    if mp_est.abduction is not None:
-        parent, child = fitted["mp"][0], fitted["mp"][1]
+    for j, (parent, child, _, a, est, _, _) in fitted.items():
+        if est.abduction is None:
+            continue
         pp, pr = reference[parent]
-        tf = mp_est.abduction
-        b = pr @ tf.abduction_axis
-        # Positive ab/adduction is radial deviation (docs/conventions.md): about b the
-        # finger direction turns towards the thumb, i.e. b . (x x a) > 0 for a right
-        # hand and < 0 for a left one (y = z x x points ulnarly on a left hand).
+        b = pr @ est.abduction.abduction_axis
+        # Positive ab/adduction turns the digit towards the side its flexion axis points
+        # to (docs/conventions.md): b . (x x a) > 0 for a right hand and < 0 for a left
+        # one, x the digit direction. For a finger that is radial deviation.
         side = 1.0 if session.hand == "right" else -1.0
-        if side * (b @ np.cross(plane.direction, joints["mp"][3])) < 0:
+        if side * (b @ np.cross(plane.direction, a)) < 0:
             b = -b
-        second_axes["mp"] = JointModel(
-            "mp_abduction", parent, child, pr @ tf.abduction_point + pp, b, b, joints["mp"][4]
-        )
-    return assemble_digit(finger, joints, tip, second_axes, migration)
+        second_axes[j] = JointModel(
+            f"{j}_abduction", parent, child, pr @ est.abduction.abduction_point + pp, b, b,
+            joints[j][4],
+        )  # fmt: skip
+    model = assemble_digit(finger, joints, tip, second_axes, migration)
+    pad = session.landmarks.get(f"{finger}.pad")
+    if pad is None:
+        last = digit.joints[-1]
+        depth = float(np.linalg.norm(session.landmark(f"{finger}.{last}") - joints[last][2]))
+        pad = estimated_pad(model, 2.0 * depth)
+    return replace(model, pad=pad)
 
 
 def fit_session(session: Session, options: FitOptions | None = None) -> HandModel:
