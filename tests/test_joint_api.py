@@ -301,6 +301,36 @@ def test_refuses_malformed_input() -> None:
     refused("unknown hinge method", p, c, "hinge", method="magic")
 
 
+def rest_then_swing(wobble_deg: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """One swing (0 -> 40 deg about ``A``, 120 frames) after 280 frames at rest; the
+    moving child wobbles off the axis (``wobble_deg`` about ``B``), as a hand-held one does."""
+    rng = np.random.default_rng(seed)
+    theta = np.concatenate([np.zeros(280), np.radians(40) * np.linspace(0, 1, 120)])
+    wobble = np.radians(wobble_deg) * np.sin(np.linspace(0, 6 * np.pi, 120))
+    r = axis_angle_matrix(B, np.concatenate([np.zeros(280), wobble])) @ axis_angle_matrix(
+        A, theta
+    ) @ R0  # fmt: skip
+    n = theta.size
+    turn = Rotation.from_rotvec(rng.normal(0, np.radians(0.05), (n, 3))).as_matrix()
+    parent = transform_from_pr(np.zeros((n, 3)), np.broadcast_to(np.eye(3), (n, 3, 3)))
+    child = transform_from_pr(C_P - r @ U_C + rng.normal(0, 0.05, (n, 3)), turn @ r)
+    return parent, child
+
+
+def test_robust_refuses_a_swing_whose_moving_frames_it_rejects() -> None:
+    """Issue 16: 'robust' on one hand-held swing was unstable (19.6 deg between the halves of
+    a real log). Its frame rule takes its robust SD from the frames at rest and rejects the
+    wobbling moving ones; the kept frames no longer span the motion. Refused in one line;
+    'sara' (no rejection) is fine, and so is 'robust' when the moving frames are clean."""
+    p, c = rest_then_swing(5.0)
+    m = refused(r"method 'robust' kept \d+ of 400 frames spanning only 7.9 deg of the 3",
+                p, c, "hinge", method="robust")  # fmt: skip
+    assert "(need >= 10 deg)" in m and "use method='sara'" in m
+    assert deg(hinge_axis(p, c).axis_parent, A) < 2.0
+    clean = hinge_axis(*rest_then_swing(0.0), method="robust")
+    assert deg(clean.axis_parent, A) < 0.1 and clean.frames.size == 400
+
+
 @pytest.mark.parametrize(
     ("scale", "units", "look"),
     [
@@ -406,6 +436,21 @@ def test_real_liberty_problems_refused() -> None:
         ok = np.isfinite(p).all(axis=(1, 2)) & np.isfinite(c).all(axis=(1, 2))
         (pp, pq), (cp, cq) = pos_quat(p[ok]), pos_quat(c[ok])
         refused("x,y,z,w order", (pp, pq[:, [1, 2, 3, 0]]), (cp, cq[:, [1, 2, 3, 0]]), "hinge")
+
+
+@needs_liberty
+def test_real_liberty_robust_on_half_a_swing() -> None:
+    """The second half of the x log: robust kept 0.3 of 29.8 deg and its axis moved 18 deg
+    from the whole log's; now refused. The other halves keep 48-91 deg and are accepted."""
+    p, c = liberty("rotate-90deg-x.csv")
+    ok = np.isfinite(p).all(axis=(1, 2)) & np.isfinite(c).all(axis=(1, 2))
+    p, c = p[ok], c[ok]
+    h = p.shape[0] // 2
+    refused("method 'robust' kept 244 of 391 frames spanning only 0.3 deg of the 29.8 deg",
+            p[h:], c[h:], "hinge", method="robust")  # fmt: skip
+    whole = hinge_axis(p, c).axis_parent
+    assert deg(hinge_axis(p[h:], c[h:]).axis_parent, whole) < 1.5  # sara
+    assert deg(hinge_axis(p[:h], c[:h], method="robust").axis_parent, whole) < 2.5
 
 
 @needs_liberty
