@@ -187,3 +187,161 @@ def test_touch_solver_puts_pulp_surfaces_together() -> None:
     assert 12.0 <= tips <= 18.0
     for k, (lo, hi) in ct.THUMB_LIMITS_DEG.items():
         assert lo - 1e-9 <= np.degrees(ta[k]) <= hi + 1e-9
+
+
+# ---------------------------------------------------------------- whole-hand sessions
+
+HAND = ("thumb", "index", "middle", "ring", "little")
+THUMB_PROTOCOLS = ("thumb_circumduction.csv", "thumb_opposition.csv", "pinch.csv")
+
+
+def _whole(kind: str):
+    from tests.conftest import subject
+
+    return subject(kind, 11 if kind == "exact" else 2, HAND)
+
+
+def test_exact_sensor_poses_follow_the_true_segment_motions() -> None:
+    sim = _whole("exact")
+    mounts = sim.truth.mounts
+    for rec in sim.session.recordings():
+        fr = sim.truth.frames[rec.name]
+        for s in ("thumb.metacarpal", "thumb.proximal", "thumb.distal"):
+            r, t = fr["motions"][s]
+            m = mounts[s]
+            pose = rec.poses[s]
+            assert np.max(np.abs(pose.position - (r @ m.position + t))) < 1e-9
+            assert np.max(np.abs(pose.rotation - r @ m.rotation)) < 1e-9
+
+
+def test_true_relative_rotations_give_the_true_angles() -> None:
+    sim = _whole("exact")
+    th = sim.truth.thumb
+    mounts = sim.truth.mounts
+    chain = {"cmc": ("hand", "thumb.metacarpal"), "mcp": ("thumb.metacarpal", "thumb.proximal")}
+    for name in ("grasp.csv", *THUMB_PROTOCOLS, "test.csv"):
+        rec = sim.session.recording(name)
+        ang = sim.truth.frames[name]["angles"]["thumb"]
+        for j, (p, c) in chain.items():
+            rel = np.transpose(rec.poses[p].rotation, (0, 2, 1)) @ rec.poses[c].rotation
+            q = mounts[p].rotation @ rel @ mounts[c].rotation.T  # tracker frame, reference
+            theta, beta = two_axis_angles(q, th.axis[f"{j}_abduction"], th.axis[j])
+            assert np.max(np.abs(theta - ang[j])) < 1e-9
+            assert np.max(np.abs(beta - ang[f"{j}_abduction"])) < 1e-9
+
+
+def test_truth_model_drives_the_thumb_exactly() -> None:
+    from fingerfit.kinematics import compute_kinematics
+    from fingerfit.simulate.truthmodel import truth_model
+
+    sim = _whole("exact")
+    model = truth_model(sim)
+    assert set(model.fingers["thumb"].second_axes) == {"cmc"}
+    for name in THUMB_PROTOCOLS:
+        kin = compute_kinematics(model, sim.session.recording(name))
+        fr = sim.truth.frames[name]
+        motion = kin.motions["user_axis"]["thumb"]
+        for k, v in motion.angles.items():
+            assert np.max(np.abs(np.degrees(v - fr["angles"]["thumb"][k]))) < 1e-6
+        assert np.max(np.linalg.norm(motion.tip - fr["tip"]["thumb"], axis=1)) < 1e-6
+
+
+def test_pinch_events_touch_pads_with_nail_edges_12_to_18_mm_apart() -> None:
+    for kind in ("exact", "realistic"):
+        sim = _whole(kind)
+        pads = sim.truth.pads
+        pinches = [e for e in sim.session.events if e.is_pinch]
+        # Opposition to each of the four fingers and three tip pinches.
+        assert len(pinches) == 7 and {e.target for e in pinches} == set(HAND[1:])
+        for ev in pinches:
+            fr = sim.truth.frames[ev.recording]
+            sel = (fr["time"] >= ev.start) & (fr["time"] <= ev.end)
+            assert sel.sum() > 100
+            gap = np.linalg.norm(fr["pad"]["thumb"][sel] - fr["pad"][ev.target][sel], axis=1)
+            want = pads["thumb"].half_thickness + pads[ev.target].half_thickness
+            assert np.max(np.abs(gap - want)) < 0.1
+            tips = np.linalg.norm(fr["tip"]["thumb"][sel] - fr["tip"][ev.target][sel], axis=1)
+            assert np.all((tips >= 12.0) & (tips <= 18.0))
+        # Key pinches stay out of events.csv but are in the truth: the thumb pulp on the
+        # index's side.
+        keys = [c for c in sim.truth.contacts if c["kind"] == "key_pinch"]
+        assert len(keys) == 3 and not any(c["in_events_csv"] for c in keys)
+        for c in keys:
+            assert (
+                c["distance_max_mm"] - c["gap_mm"] < 0.1
+                and c["gap_mm"] - c["distance_min_mm"] < 0.1
+            )
+
+
+def test_thumb_protocols_excite_both_cmc_axes() -> None:
+    sim = _whole("realistic")
+    for k in ("cmc", "cmc_abduction"):
+        values = np.concatenate(
+            [sim.truth.frames[n]["angles"]["thumb"][k] for n in THUMB_PROTOCOLS]
+        )
+        assert np.degrees(np.ptp(values)) >= 20.0
+        circ = sim.truth.frames["thumb_circumduction.csv"]["angles"]["thumb"][k]
+        assert np.degrees(np.ptp(circ)) >= 20.0
+    # Every digit moves in the opposition recording.
+    opp = sim.truth.frames["thumb_opposition.csv"]["angles"]
+    for d in HAND:
+        assert max(np.degrees(np.ptp(v)) for v in opp[d].values()) > 15.0
+
+
+def test_the_thumb_leaves_the_fingers_truth_unchanged() -> None:
+    from fingerfit.simulate import SimConfig, simulate_subject
+
+    with_thumb = simulate_subject(SimConfig(fingers=("thumb", "index"), targets=False), 5)
+    without = simulate_subject(SimConfig(fingers=("index",), targets=False), 5)
+    for name in ("reference.csv", "grasp.csv", "test.csv"):
+        a, b = with_thumb.truth.frames[name], without.truth.frames[name]
+        assert np.array_equal(a["tip"]["index"], b["tip"]["index"])
+        for s, pose in without.session.recording(name).poses.items():
+            assert np.array_equal(
+                with_thumb.session.recording(name).poses[s].position, pose.position
+            )
+    for k, v in without.session.landmarks.items():
+        assert np.array_equal(with_thumb.session.landmarks[k], v)
+    assert without.session.fingers == ["index"] and with_thumb.session.fingers == ["thumb", "index"]
+
+
+def test_written_whole_hand_session_and_truth(tmp_path) -> None:
+    import json
+
+    import pandas as pd
+
+    from fingerfit.io.sessiondir import load_session
+    from fingerfit.simulate import write_subject
+
+    sim = _whole("realistic")
+    write_subject(sim, tmp_path / "S01")
+    back = load_session(tmp_path / "S01")
+    assert back.fingers == list(HAND)
+    assert [r.name for r in back.grasp] == ["grasp.csv", *THUMB_PROTOCOLS]
+    pinch_rows = [(e.recording, e.finger, e.target) for e in back.events if e.is_pinch]
+    assert pinch_rows[0] == ("thumb_opposition.csv", "thumb", "index")
+    for lm in ("cmc", "mcp", "ip", "tip", "pad"):
+        assert f"thumb.{lm}" in back.landmarks
+    doc = json.loads((tmp_path / "S01" / "truth.json").read_text())
+    thumb = doc["fingers"]["thumb"]
+    assert set(thumb["joints"]) == {"cmc", "cmc_abduction", "mcp", "mcp_abduction", "ip"}
+    assert thumb["axis_order"]["cmc"] == ["cmc", "cmc_abduction"]
+    assert thumb["axis_offset_mm"]["cmc"] == pytest.approx(sim.truth.thumb.offset("cmc"))
+    assert np.allclose(thumb["pad"], sim.truth.pads["thumb"].surface)
+    table = pd.read_csv(tmp_path / "S01" / "truth" / "pinch.csv")
+    for col in (
+        "thumb.cmc",
+        "thumb.cmc_abduction",
+        "thumb.mcp_abduction",
+        "thumb.pad.z",
+        "thumb.pad_distance.index",
+    ):
+        assert col in table.columns
+    fr = sim.truth.frames["pinch.csv"]
+    assert np.allclose(
+        table["thumb.cmc_abduction"], np.degrees(fr["angles"]["thumb"]["cmc_abduction"])
+    )
+    # The skin pad point moves with the distal phalanx, the half-thickness from the centre.
+    skin = table[["thumb.pad.x", "thumb.pad.y", "thumb.pad.z"]].to_numpy()
+    d = np.linalg.norm(skin - fr["pad"]["thumb"], axis=1)
+    assert np.allclose(d, sim.truth.pads["thumb"].half_thickness)

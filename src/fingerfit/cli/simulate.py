@@ -59,7 +59,13 @@ def simulate(
     seed: Annotated[
         int, typer.Option(help="Random seed; the output is deterministic for a seed.")
     ] = 0,
-    fingers: Annotated[str, typer.Option(help="Comma-separated fingers.")] = "index",
+    fingers: Annotated[
+        str,
+        typer.Option(
+            help="Comma-separated digits: thumb, index, middle, ring, little (thumb adds "
+            "circumduction, opposition and pinch recordings)."
+        ),
+    ] = "index",
     hand: Annotated[str, typer.Option(help="left or right.")] = "left",
     noise: Annotated[
         float, typer.Option(min=0.0, help="Tracker error scale (1 = Liberty-like, 0 = none).")
@@ -103,13 +109,16 @@ def simulate(
     quiet: Quiet = False,
 ) -> None:
     """Simulate sessions (reference, grasp, targets, free-motion test) with truth.json."""
-    from ..session import FINGERS
+    from ..digits import DIGIT_NAMES
     from ..simulate import SimConfig, simulate_cohort, write_subject
     from ..simulate.trackerfiles import require_ezc3d, write_tracker_subject
 
     if hand not in ("left", "right"):
         raise typer.BadParameter("must be left or right", param_hint="--hand")
-    names = tuple(parse_list(fingers, FINGERS, "--fingers") or ())
+    names = tuple(parse_list(fingers, DIGIT_NAMES, "--fingers") or ())
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise FingerfitError(f"names {', '.join(twice)} twice", field="--fingers")
     kw = dict(fingers=names, hand=hand, rom_scale=rom, tilt_scale=tilt)
     if exact:
         config = SimConfig.exact(**kw)
