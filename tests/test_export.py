@@ -126,8 +126,15 @@ def fitted_model() -> HandModel:
     return fit_session(subject("realistic", 3, ("index", "middle", "ring", "little")).session)
 
 
+@functools.cache
+def whole_hand_model() -> HandModel:
+    """A fitted thumb (saddle CMC, two lines apart) and index on exact simulated data."""
+    return fit_session(subject("exact", 3, ("thumb", "index")).session)
+
+
 CASES = {
     "fitted": lambda: fitted_model(),
+    "whole_hand": lambda: whole_hand_model(),
     "tilt30": lambda: synthetic_model(1, 30.0),
     "tilt30_abduction": lambda: synthetic_model(2, 30.0, abduction=True, fingers=("index",)),
 }

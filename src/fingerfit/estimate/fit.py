@@ -482,9 +482,12 @@ def _quality(data: JointData, est: AxisEstimate, notes: list[str]) -> JointQuali
     )
 
 
-def _saddle(data: JointData) -> AxisEstimate:
+def _saddle(
+    data: JointData, flexion_guess: FloatArray | None, abduction_guess: FloatArray | None
+) -> AxisEstimate:
     """A joint that always has two axes (the thumb's CMC): :func:`.saddle.fit_saddle` over
-    every calibration frame, grouped by recording cycles where there are any."""
+    every calibration frame, grouped by recording cycles where there are any; the guesses
+    (parent frame) sign the axes and name the one a recording did not excite."""
     groups = None
     if len(data.periods) >= 2:
         groups = np.full(data.rotation.shape[0], -1)
@@ -498,6 +501,8 @@ def _saddle(data: JointData) -> AxisEstimate:
         data.translation,
         data.reference_rotation,
         order=data.second_axis or FLEXION_FIRST,
+        flexion_guess=flexion_guess,
+        abduction_guess=abduction_guess,
         groups=groups,
     )
     direction = sf.flexion_axis
@@ -526,12 +531,25 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
     landmarks = np.array([session.landmark(f"{finger}.{k}") for k in digit.landmarks])
     _, _, vt = np.linalg.svd(landmarks - landmarks.mean(axis=0))
     along = vt[0] if vt[0] @ (landmarks[-1] - landmarks[0]) > 0 else -vt[0]
-    for j, (parent, child) in digit.joint_sensors().items():
+    # Joints that always have two axes last: the next joint's flexion axis guides them.
+    for j, (parent, child) in sorted(
+        digit.joint_sensors().items(), key=lambda item: item[0] in digit.required_second
+    ):
         data = joint_data(session, parent, child, reference, j)
         order = digit.order.get(j) if j in digit.second_axes else None
         data = replace(data, finger_direction=reference[parent][1].T @ along, second_axis=order)
         if j in digit.required_second:
-            est, notes = _saddle(data), []
+            # Guesses: the next joint's flexion axis, and the digit direction x that axis
+            # (the sense positive ab/adduction turns about, below), in the parent frame.
+            nxt = fitted[digit.joints[digit.joints.index(j) + 1]][3]
+            side = 1.0 if session.hand == "right" else -1.0
+            guesses = np.stack([nxt, side * np.cross(along, nxt)]) @ reference[parent][1]
+            try:
+                est, notes = _saddle(data, guesses[0], guesses[1]), []
+            except FitError:
+                raise
+            except FingerfitError as exc:
+                raise FitError(f"{finger} {j}: {exc.reason}") from None
         else:
             notes = _check(finger, j, data, options)
             est = estimator(data)
@@ -547,18 +565,13 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             notes = [*notes, *problems]
         pp, pr = reference[parent]
         if j in digit.required_second:
-            a_parent = est.axis.direction  # signed below, from the next joint's flexion axis
+            a_parent = est.axis.direction  # signed by the guess: the next joint's flexion
         else:
             moving = np.concatenate(data.periods)
             rv = rotation_vector(data.rotation[moving] @ data.reference_rotation.T)
             a_parent = orient_flexion(est.axis.direction, rv)
         fitted[j] = (parent, child, pr @ est.axis.point + pp, pr @ a_parent, est, data, notes)
-    for j in digit.required_second:
-        # A saddle joint's flexion has no preferred sign in the data (circumduction goes
-        # both ways): its axis takes the sense of the next joint's flexion axis.
-        nxt = fitted[digit.joints[digit.joints.index(j) + 1]][3]
-        if fitted[j][3] @ nxt < 0:
-            fitted[j] = (*fitted[j][:3], -fitted[j][3], *fitted[j][4:])
+    fitted = {j: fitted[j] for j in digit.joints}  # proximal to distal again
 
     plane = sagittal_plane(landmarks, np.array([f[3] for f in fitted.values()]), finger)
     tip = session.landmark(f"{finger}.tip")
