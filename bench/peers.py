@@ -83,88 +83,165 @@ def biobuddy_score(
     return np.asarray(out[1], float)[:3]
 
 
-# --------------------------------------------------------------------------- real data table
+# --------------------------------------------------------------------------- real data tables
+
+NOISE_MM, NOISE_DEG = 0.5, 0.5
 
 
-def real_accuracy_table(data_dir: str = "../shared/data/polhemus-liberty", seed: int = 0) -> list:
-    """Hinge axis of sensor 2 about sensor 1 on the real Liberty logs: fingerfit vs biobuddy.
+def real_datasets(data_dir: str = "../shared/data/polhemus-liberty") -> list[dict]:
+    """Real two-segment recordings: parent and child poses (tracker frame, mm).
 
-    The axis is not known independently (hand-turned sensor), so each estimator's axis on
-    the clean data is its own reference; the table gives (1) the angle between estimators on
-    the clean data, (2) each estimator's axis change when Gaussian noise (0.5 mm per
-    coordinate, 0.5 deg per axis, per sensor and frame) is added, (3) the axis change
-    between the two halves of the recording and (4) the run time. Frames between the
-    hemisphere flips of ``rotate-90deg-x.csv`` are left out.
+    The three hand-turned Liberty logs of ``../shared/data`` (if present; frames between
+    the hemisphere flips of ``rotate-90deg-x.csv`` left out; no known axis) and the
+    mechanical hinge of ``tests/data/ancillao-hinge`` (GPL-3.0 excerpt), whose pin axis
+    was measured by markers on the pin (``truth``: unit axis and a point of it, parent
+    frame, mm).
     """
-    import time
     from pathlib import Path
 
-    from scipy.spatial.transform import Rotation
+    from tests.realdata import load_measured_hinge
 
-    from fingerfit.estimate import hinge_axis
     from fingerfit.io.hygiene import find_jumps
     from fingerfit.io.widecsv import read_wide_csv
-    from fingerfit.transforms import angle_between_axes, transform_from_pr
 
-    rows = []
-    rng = np.random.default_rng(seed)
+    out = []
     for name in ("rotate-90deg-x.csv", "rotate-90deg-y.csv", "rotate-90deg-z.csv"):
-        rec = read_wide_csv(
-            Path(data_dir) / name, units="cm", rate_hz=120.0,
-            sensors={1: "hand", 2: "index.proximal"},
-        )  # fmt: skip
-        p, c = rec.poses["hand"], rec.poses["index.proximal"]
+        path = Path(data_dir) / name
+        if not path.is_file():
+            continue
+        rec = read_wide_csv(path, units="cm", rate_hz=120.0)
+        p, c = rec.poses["1"], rec.poses["2"]
         ok = p.valid & c.valid
         flips = [j.frame for j in find_jumps(rec) if j.hemisphere]
         if flips:
             ok[flips[0] - 1 : flips[-1] + 1] = False
-        pp, pr, cp, cr = p.position[ok], p.rotation[ok], c.position[ok], c.rotation[ok]
-        n = pp.shape[0]
+        poses = (p.position[ok], p.rotation[ok], c.position[ok], c.rotation[ok])
+        out.append({"name": f"Liberty {name[-5]}", "poses": poses, "truth": None})
+    h = load_measured_hinge()
+    p, c = h.recording.poses["1"], h.recording.poses["2"]
+    out.append({
+        "name": "mechanical hinge",
+        "poses": (p.position, p.rotation, c.position, c.rotation),
+        "truth": (h.axis_parent, h.point_parent),
+    })  # fmt: skip
+    return out
 
-        def noisy(pos, rot):
-            turn = Rotation.from_rotvec(rng.normal(0, np.radians(0.5), (len(pos), 3))).as_matrix()
-            return pos + rng.normal(0, 0.5, pos.shape), turn @ rot
 
-        variants = {"clean": (pp, pr, cp, cr), "noisy": (*noisy(pp, pr), *noisy(cp, cr))}
-        axes: dict = {}
-        for tag, (a, b, cc, d) in variants.items():
-            for est in ("fingerfit sara", "fingerfit robust", "biobuddy SARA"):
-                t0 = time.perf_counter()
-                if est.startswith("fingerfit"):
-                    f = hinge_axis(
-                        transform_from_pr(a, b), transform_from_pr(cc, d),
-                        method=est.split()[1], check_convention=False,
-                    )  # fmt: skip
-                    axis = f.axis_parent
-                    h = n // 2
-                    halves = [
-                        hinge_axis(transform_from_pr(a[s], b[s]), transform_from_pr(cc[s], d[s]),
-                                   method=est.split()[1], check_convention=False).axis_parent
-                        for s in (slice(0, h), slice(h, n))
-                    ]  # fmt: skip
-                else:
-                    axis = biobuddy_sara(a, b, cc, d)[0]
-                    h = n // 2
-                    halves = [biobuddy_sara(a[s], b[s], cc[s], d[s])[0] for s in (slice(0, h), slice(h, n))]  # fmt: skip
-                dt = time.perf_counter() - t0
-                axes[(tag, est)] = (axis, halves, dt)
+def _noisy(poses: tuple, rng: np.random.Generator) -> tuple:
+    """The poses with Gaussian noise: NOISE_MM per coordinate, NOISE_DEG per axis."""
+    from scipy.spatial.transform import Rotation
+
+    out = []
+    for pos, rot in (poses[:2], poses[2:]):
+        turn = Rotation.from_rotvec(rng.normal(0, np.radians(NOISE_DEG), (len(pos), 3)))
+        out += [pos + rng.normal(0, NOISE_MM, pos.shape), turn.as_matrix() @ rot]
+    return tuple(out)
+
+
+def _fingerfit(poses: tuple, method: str):
+    from fingerfit.estimate import hinge_axis
+
+    a, b, c, d = poses
+    return hinge_axis(
+        transform_from_pr(a, b), transform_from_pr(c, d), method=method, check_convention=False
+    )
+
+
+def _axis(est: str, poses: tuple) -> tuple[FloatArray, FloatArray]:
+    """(unit axis, a point of it) in the parent frame (mm) by one estimator."""
+    if est == "biobuddy SARA":
+        return biobuddy_sara(*poses)
+    f = _fingerfit(poses, est.split()[1])
+    return f.axis_parent, f.centre_parent
+
+
+def real_accuracy_table(seed: int = 0) -> tuple[list, list]:
+    """Hinge axis and centre of the child about the parent on real recordings:
+    fingerfit vs biobuddy's SARA (axis) and SCoRE (centre).
+
+    Axis table, per recording and estimator: the angle to fingerfit ``sara`` on the clean
+    data, to the measured pin axis (mechanical hinge only), the axis change when noise
+    (``NOISE_MM`` per coordinate, ``NOISE_DEG`` per axis, per segment and frame) is added,
+    the angle between the axes of the two halves of the recording (``refused`` when the
+    estimator refuses a half), and the time of the three fits (whole, halves).
+
+    Centre table: on a hinge the SCoRE centre may be any point of the axis, so it is
+    compared by its distance to a line: fingerfit ``sara``'s fitted axis (clean and noisy
+    data, each against the same data's fitted axis) and the measured pin axis; fingerfit's
+    own point of the axis against the pin axis for comparison.
+    """
+    import time
+
+    from fingerfit.errors import FingerfitError
+    from fingerfit.transforms import angle_between_axes, distance_point_to_line
+
+    def deg(a, b) -> float:
+        return float(np.degrees(angle_between_axes(a, b)))
+
+    rng = np.random.default_rng(seed)
+    axis_rows, centre_rows = [], []
+    datasets = real_datasets()
+    for est in ("fingerfit sara", "fingerfit robust", "biobuddy SARA"):  # warm-up (imports)
+        _axis(est, datasets[-1]["poses"])
+    biobuddy_score(*datasets[-1]["poses"])
+    for ds in datasets:
+        clean = ds["poses"]
+        variants = {"clean": clean, "noisy": _noisy(clean, rng)}
+        n = clean[0].shape[0]
+        halves = [tuple(x[s] for x in clean) for s in (slice(0, n // 2), slice(n // 2, n))]
+        fits = {}
         for est in ("fingerfit sara", "fingerfit robust", "biobuddy SARA"):
-            clean, halves, dt = axes[("clean", est)]
-            noisy_axis = axes[("noisy", est)][0]
-            rows.append(
-                {
-                    "file": name,
-                    "estimator": est,
-                    "vs fingerfit sara, clean (deg)": float(np.degrees(angle_between_axes(clean, axes[("clean", "fingerfit sara")][0]))),
-                    "change with noise (deg)": float(np.degrees(angle_between_axes(clean, noisy_axis))),
-                    "halves (deg)": float(np.degrees(angle_between_axes(*halves))),
-                    "time incl. halves (ms)": 1000 * dt,
-                }
-            )  # fmt: skip
-    return rows
+            t0 = time.perf_counter()
+            res = {tag: _axis(est, v) for tag, v in variants.items()}
+            try:
+                hv = [_axis(est, h)[0] for h in halves]
+                halves_deg: float | str = deg(*hv)
+            except FingerfitError:
+                halves_deg = "refused"
+            dt = time.perf_counter() - t0
+            fits[est] = res
+            truth = ds["truth"]
+            axis_rows.append({
+                "recording": ds["name"],
+                "estimator": est,
+                "vs fingerfit sara (deg)": deg(res["clean"][0], fits["fingerfit sara"]["clean"][0]),
+                "vs measured axis (deg)": deg(res["clean"][0], truth[0]) if truth else None,
+                "change with noise (deg)": deg(res["clean"][0], res["noisy"][0]),
+                "halves (deg)": halves_deg,
+                "time incl. halves (ms)": 1000 * dt,
+            })  # fmt: skip
+        score, dt = {}, 0.0
+        for tag, v in variants.items():
+            t0 = time.perf_counter()
+            score[tag] = biobuddy_score(*v)
+            dt += time.perf_counter() - t0
+        ff = fits["fingerfit sara"]
+        truth = ds["truth"]
+        centre_rows.append({
+            "recording": ds["name"],
+            "SCoRE to fingerfit axis, clean (mm)": distance_point_to_line(score["clean"], ff["clean"][1], ff["clean"][0]),
+            "SCoRE to fingerfit axis, noisy (mm)": distance_point_to_line(score["noisy"], ff["noisy"][1], ff["noisy"][0]),
+            "SCoRE to measured axis (mm)": distance_point_to_line(score["clean"], truth[1], truth[0]) if truth else None,
+            "fingerfit to measured axis (mm)": distance_point_to_line(ff["clean"][1], truth[1], truth[0]) if truth else None,
+            "SCoRE time, clean + noisy (ms)": 1000 * dt,
+        })  # fmt: skip
+    return axis_rows, centre_rows
 
 
 if __name__ == "__main__":  # pragma: no cover - benchmark entry point
+    import sys
+    from pathlib import Path
+
     import pandas as pd
 
-    print(pd.DataFrame(real_accuracy_table()).to_string(index=False, float_format="%.2f"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    axis_rows, centre_rows = real_accuracy_table()
+
+    def cell(v: object) -> str:
+        return "-" if v is None else f"{v:.2f}" if isinstance(v, float) else str(v)
+
+    for rows in (axis_rows, centre_rows):
+        print(
+            pd.DataFrame([{k: cell(v) for k, v in r.items()} for r in rows]).to_string(index=False)
+        )
+        print()
