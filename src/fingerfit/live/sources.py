@@ -267,8 +267,8 @@ class LibertySource:
                 f"device disconnected (write failed: {exc})", path=self.port
             ) from None
 
-    def blocks(self) -> Iterator[Block]:
-        """Frames as their last station record arrives.
+    def blocks(self) -> Iterator[Block | None]:
+        """Frames as their last station record arrives (None after a poll without data).
 
         A frame is complete when every mapped station has reported; a frame whose
         records are not all there is handed over (with NaN for the missing sensors)
@@ -305,6 +305,7 @@ class LibertySource:
                         "another baud rate?)",
                         path=self.port,
                     )
+                yield None  # nothing this poll: the loop can check its duration
                 continue
             quiet_since = now
             buf += chunk
@@ -477,8 +478,8 @@ class LslSource:
         self._clock = pylsl.local_clock
         self._offset = pylsl.local_clock() - time.monotonic()
 
-    def blocks(self) -> Iterator[Block]:
-        """Samples as they are pulled; time = the sender's LSL timestamp, arrival =
+    def blocks(self) -> Iterator[Block | None]:
+        """Samples as they are pulled (None after a poll without data); time = the sender's LSL timestamp, arrival =
         the moment the pull returned.
 
         Raises
@@ -494,6 +495,7 @@ class LslSource:
             if not stamps:
                 if now - quiet_since > NO_DATA_SECONDS:
                     raise FingerfitError(f"no samples for {NO_DATA_SECONDS:g} s", path=self.name)
+                yield None  # nothing this poll: the loop can check its duration
                 continue
             quiet_since = now
             x = np.asarray(data, dtype=float) * self.scale

@@ -349,7 +349,8 @@ def run(
     Parameters
     ----------
     source
-        A :mod:`.sources` source (``blocks()``, ``close()``, ``live``).
+        A :mod:`.sources` source (``blocks()`` yielding blocks, or None after a poll
+        without data; ``close()``; ``live``).
     streamer : Streamer
     wait : float, optional
         Replay only: seconds to wait for a consumer on every network output before
@@ -357,7 +358,7 @@ def run(
     status : bool
         Show the status line (only on a terminal).
     duration : float, optional
-        Seconds to stream.
+        Seconds to stream, from the first frame's arrival.
 
     Returns
     -------
@@ -379,11 +380,12 @@ def run(
                 time.sleep(0.01)
         t0 = None
         for block in source.blocks():
-            if t0 is None:
-                t0 = float(block.arrival[0])
-            streamer.process(block)
+            if block is not None:
+                if t0 is None:
+                    t0 = float(block.arrival[0])
+                streamer.process(block)
             line.update(s)
-            if duration is not None and time.monotonic() - t0 >= duration:
+            if duration is not None and t0 is not None and time.monotonic() - t0 >= duration:
                 break
         if t0 is not None:
             s.seconds = time.monotonic() - t0
