@@ -55,6 +55,7 @@ def csv_batches(
     names: Sequence[str],
     *,
     text: Sequence[str] = (),
+    use: Sequence[str] | None = None,
     chunk_bytes: int = CHUNK_BYTES,
 ) -> Iterator[tuple[int, int, dict]]:
     """Parse a comma-separated file after its header line, in batches of rows.
@@ -67,6 +68,8 @@ def csv_batches(
     text : sequence of str
         Columns read as text (dictionary encoded); every other column is float64, an
         empty field giving NaN.
+    use : sequence of str, optional
+        The columns to convert and return (default all); the others are only counted.
     chunk_bytes : int
         Bytes of file per batch.
 
@@ -89,6 +92,7 @@ def csv_batches(
         The file cannot be read.
     """
     pa, pacsv = _arrow()
+    wanted = list(names) if use is None else list(use)
     types = {
         n: (pa.dictionary(pa.int32(), pa.string()) if n in text else pa.float64()) for n in names
     }
@@ -96,6 +100,7 @@ def csv_batches(
     parse_opts = pacsv.ParseOptions(quote_char=False, ignore_empty_lines=True)
     convert_opts = pacsv.ConvertOptions(
         column_types=types,
+        include_columns=wanted,
         null_values=[""],
         strings_can_be_null=False,
         quoted_strings_can_be_null=False,
@@ -144,7 +149,7 @@ def csv_batches(
             if table.num_rows != lines:
                 raise NotPlain("empty line")
             cols: dict[str, np.ndarray] = {}
-            for name in names:
+            for name in wanted:
                 col = table.column(name)
                 if name in text:
                     col = col.unify_dictionaries().combine_chunks()

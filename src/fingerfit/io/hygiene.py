@@ -89,13 +89,15 @@ def implausible_rows(values: np.ndarray, scale_to_mm: float = 1.0) -> np.ndarray
         Indices of the offending rows, in order.
     """
     v = np.asarray(values, dtype=float)
-    v = v.reshape(len(v), -1) if v.ndim != 2 else v
-    if v.shape[1] == 0:
+    if v.ndim == 1:
+        v = v[:, None]
+    columns = [(slice(None), *k) for k in np.ndindex(v.shape[1:])]
+    if not columns:
         return np.zeros(0, dtype=np.int64)
-    # Largest magnitude per row, NaN ignored, one column at a time (no (n, m) temporaries).
-    peak = np.abs(v[:, 0])
-    for j in range(1, v.shape[1]):
-        np.fmax(peak, np.abs(v[:, j]), out=peak)
+    # Largest magnitude per row, NaN ignored, one column at a time (no (n, ...) copies).
+    peak = np.abs(v[columns[0]])
+    for k in columns[1:]:
+        np.fmax(peak, np.abs(v[k]), out=peak)
     with np.errstate(over="ignore", invalid="ignore"):
         return np.flatnonzero(peak * abs(scale_to_mm) > MAX_COORDINATE_MM)
 

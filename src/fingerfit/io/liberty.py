@@ -87,6 +87,8 @@ MAX_STATION = 16
 MAX_EULER_DEG = 360.0
 QUAT_NORM_TOLERANCE = 1e-3
 _INT_ITEMS = ("timestamp", "frame")
+#: Records converted to rotation matrices at a time (bounds the temporary memory).
+_BLOCK = 1 << 17
 _MAGIC = (b"LY", b"PA")
 
 
@@ -533,13 +535,29 @@ def parse_liberty_binary(
         record_size=dt.itemsize,
         family=raw[:2].decode("ascii"),
     )
-    mat = out.matrix()
-    bad = ~np.isfinite(mat)
-    if bad.any():
-        i, j = (int(v[0]) for v in np.nonzero(bad))
+    first = _first_non_finite(out)
+    if first is not None:
+        i, j = first
         raise out.error(f"not a finite number in {_field_name(items_t, j)}", i, path)
     _check_records(out, path)
     return out
+
+
+def _first_non_finite(records: LibertyRecords) -> tuple[int, int] | None:
+    """(record, value column) of the first non-finite value in record order, or None.
+
+    Column by column (no ``(n, n_values)`` copy of all values).
+    """
+    best: tuple[int, int] | None = None
+    col = 0
+    for item in records.items:
+        v = records.values[item].reshape(records.n_records, -1)
+        for j in range(v.shape[1]):
+            bad = np.flatnonzero(~np.isfinite(v[:, j]))
+            if bad.size and (best is None or int(bad[0]) < best[0]):
+                best = (int(bad[0]), col + j)
+        col += v.shape[1]
+    return best
 
 
 def liberty_binary_bytes(records: LibertyRecords, *, family: str | None = None) -> bytes:
@@ -654,10 +672,9 @@ def records_to_recording(
     else:
         stations = [int(s) for s in present]
         names = [str(s) for s in stations]
-    lut = np.full(MAX_STATION + 1, -1)
+    lut = np.full(MAX_STATION + 1, -1, dtype=np.int16)
     lut[stations] = np.arange(len(stations))
     scol = lut[station]
-    values = records.matrix()
     items = records.items
 
     if "frame" in items:
@@ -665,25 +682,41 @@ def records_to_recording(
         records.check_increasing(
             fc, np.arange(station.size), path, what="frame count", strict=False
         )
-        key = fc.astype(np.int64) * (MAX_STATION + 1) + station
-        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
-        orig = first[inverse]
-        dup = orig != np.arange(station.size)
-        keep = ~dup
-        if dup.any():
-            same = np.all(values == values[orig], axis=1)
-            if not same.all():
-                i = int(np.flatnonzero(~same)[0])
-                raise records.error(
-                    f"second, different record for station {station[i]} in frame {fc[i]:.0f}",
-                    i,
-                    path,
+        new_frame = np.empty(station.size, dtype=bool)
+        new_frame[:1] = True
+        np.not_equal(fc[1:], fc[:-1], out=new_frame[1:])
+        if station.size < 2 or np.all(new_frame[1:] | (station[1:] > station[:-1])):
+            # stations ascending within every frame (the device's order): no repeats,
+            # frames in order, nothing to sort
+            rec_idx = np.arange(station.size)
+            frame_of = np.cumsum(new_frame) - 1
+            first_rec = np.flatnonzero(new_frame)
+            frame_ids = fc[first_rec]
+        else:
+            values = records.matrix()
+            key = fc.astype(np.int64) * (MAX_STATION + 1) + station
+            _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+            orig = first[inverse]
+            dup = orig != np.arange(station.size)
+            keep = ~dup
+            if dup.any():
+                same = np.all(values == values[orig], axis=1)
+                if not same.all():
+                    i = int(np.flatnonzero(~same)[0])
+                    raise records.error(
+                        f"second, different record for station {station[i]} in frame {fc[i]:.0f}",
+                        i,
+                        path,
+                    )
+                notes.append(
+                    f"{int(dup.sum())} exactly repeated records (same frame count) dropped"
                 )
-            notes.append(f"{int(dup.sum())} exactly repeated records (same frame count) dropped")
-        rec_idx = np.flatnonzero(keep)
-        fcs = fc[rec_idx]
-        frame_ids, frame_of = np.unique(fcs, return_inverse=True)
-        first_rec = rec_idx[np.unique(frame_of, return_index=True)[1]]
+            del values
+            rec_idx = np.flatnonzero(keep)
+            fcs = fc[rec_idx]
+            frame_ids, frame_of = np.unique(fcs, return_inverse=True)
+            first_rec = rec_idx[np.unique(frame_of, return_index=True)[1]]
+        del new_frame
         try:
             check_grid_size(
                 frame_ids - frame_ids[0], np.arange(frame_ids.size), path, "frame count"
@@ -715,10 +748,13 @@ def records_to_recording(
         new = np.concatenate([[True], station[1:] <= station[:-1]])
         cycle = np.cumsum(new) - 1
         n_cycles = int(cycle[-1]) + 1
+        values = records.matrix()
         width = values.shape[1]
         block = np.full((n_cycles, len(stations), width), np.nan)
         block[cycle, scol] = values
+        del values
         rep = repeated_rows(block.reshape(n_cycles, -1))
+        del block
         if rep.any() and not keep_repeats:
             notes.append(
                 f"{int(rep.sum())} exactly repeated frames ({int(np.isin(cycle, np.flatnonzero(rep)).sum())} "
@@ -768,7 +804,12 @@ def records_to_recording(
         frame_of_rec = frame_of
 
     sel = rec_idx
-    big = implausible_rows(records.values["position"][sel], scale)
+    every = sel.size == station.size  # no record dropped: use the arrays without a copy
+
+    def taken(item: str) -> np.ndarray:
+        return records.values[item] if every else records.values[item][sel]
+
+    big = implausible_rows(taken("position"), scale)
     if big.size:
         i = int(sel[big[0]])
         v = records.values["position"][i]
@@ -778,9 +819,8 @@ def records_to_recording(
             path,
             field="position",
         )
-    pos_all = records.values["position"][sel] * scale
     if "quaternion" in items:
-        q = records.values["quaternion"][sel]
+        q = taken("quaternion")
         with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
             norm = np.linalg.norm(q, axis=1)
         bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
@@ -791,11 +831,11 @@ def records_to_recording(
                 i,
                 path,
             )
-        rot_all = matrix_from_quat_wxyz(q)
+        del norm, q
         if "euler" in items:
             notes.append("orientation from the quaternion item (Euler angles not used)")
     else:
-        e = records.values["euler"][sel]
+        e = taken("euler")
         wild = np.flatnonzero((np.abs(e) > MAX_EULER_DEG).any(axis=1))
         if wild.size:
             i = int(sel[wild[0]])
@@ -807,18 +847,32 @@ def records_to_recording(
                 path,
                 field="euler",
             )
-        rot_all = Rotation.from_euler("ZYX", e, degrees=True).as_matrix()
+        del e
+    # Per station, a block of records at a time (bounded temporary memory).
     poses: dict[str, PoseSeries] = {}
-    scol_sel = scol[sel]
+    scol_sel = scol if every else scol[sel]
+    order = np.argsort(scol_sel, kind="stable")
+    bounds = np.searchsorted(scol_sel[order], np.arange(len(names) + 1))
     for k, name in enumerate(names):
-        m = scol_sel == k
         pos = np.full((n, 3), np.nan)
         rot = np.full((n, 3, 3), np.nan)
-        pos[frame_of_rec[m]] = pos_all[m]
-        rot[frame_of_rec[m]] = rot_all[m]
+        rows_k = order[bounds[k] : bounds[k + 1]]
+        for lo in range(0, rows_k.size, _BLOCK):
+            r = rows_k[lo : lo + _BLOCK]
+            at = frame_of_rec[r]
+            src = r if every else sel[r]
+            pos[at] = records.values["position"][src] * scale
+            if "quaternion" in items:
+                rot[at] = matrix_from_quat_wxyz(records.values["quaternion"][src])
+            else:
+                rot[at] = Rotation.from_euler(
+                    "ZYX", records.values["euler"][src], degrees=True
+                ).as_matrix()
         poses[name] = PoseSeries(pos, rot)
-    flagged = records.indicator[sel]
-    for ch in sorted(set(flagged.tolist()) - {""}):
+    del order
+    flagged = records.indicator if every else records.indicator[sel]
+    flagged = flagged[flagged != ""]
+    for ch in sorted(set(np.unique(flagged).tolist())):
         notes.append(
             f"{int((flagged == ch).sum())} records with indicator '{ch}' after the station number"
         )

@@ -33,6 +33,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from .fastcsv import NotPlain, read_header
 from .hygiene import (
     check_increasing,
     check_recording,
@@ -160,6 +161,134 @@ def _column(template: str, station: int) -> str:
     return template.replace("{n}", str(station))
 
 
+#: Frames converted to rotation matrices at a time (bounds the temporary memory).
+_BLOCK = 1 << 17
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+
+
+def _header_plan(
+    header: list[str], lay: WideLayout, sensors: Mapping[int, str] | None, path: Path
+) -> tuple[list[int], list[str], list[str]]:
+    """Stations, sensor names and the unused-columns note, from the header."""
+    stations = _stations(header, lay, path)
+    if not stations:
+        raise FingerfitError(
+            f"no column matches '{lay.columns['x']}' (wrong --columns?)", path=path, line=1
+        )
+    if lay.time is not None and lay.time not in header:
+        raise FingerfitError(
+            f"no time column '{lay.time}' (wrong --columns?)", path=path, line=1, field=lay.time
+        )
+    used: list[str] = [] if lay.time is None else [lay.time]
+    for s in stations:
+        for key in lay.keys:
+            c = _column(lay.columns[key], s)
+            if c not in header:
+                raise FingerfitError(
+                    f"column '{c}' missing for station {s}", path=path, line=1, field=c
+                )
+            used.append(c)
+    notes: list[str] = []
+    ignored = [h for h in header if h not in used]
+    if ignored:
+        notes.append(f"columns not used: {', '.join(ignored)}")
+    if sensors is not None:
+        extra = [s for s in stations if s not in sensors]
+        if extra:
+            mapped = ", ".join(f"{k}={v}" for k, v in sensors.items())
+            raise FingerfitError(
+                f"unknown station {extra[0]} (not in the map {mapped})",
+                path=path,
+                line=1,
+                field=_column(lay.columns["x"], extra[0]),
+            )
+        absent = [k for k in sensors if k not in stations]
+        if absent:
+            raise FingerfitError(
+                f"mapped station {absent[0]} ('{sensors[absent[0]]}') has no columns",
+                path=path,
+                line=1,
+            )
+        names = [sensors[s] for s in stations]
+    else:
+        names = [str(s) for s in stations]
+    return stations, names, notes
+
+
+def _decode_fast(
+    path: Path, header: list[str], keys: list[list[str]], time: str | None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Values ``(n_rows, n_stations, n_keys)`` and time ``(n_rows,)`` (or None) in batches
+    into preallocated arrays; :class:`~fingerfit.io.fastcsv.NotPlain` for anything else."""
+    from .fastcsv import RowArrays, csv_batches, estimate_rows
+
+    flat = [c for cols in keys for c in cols]
+    use = flat + ([time] if time is not None else [])
+    rows: RowArrays | None = None
+    for _, n_bytes, cols in csv_batches(path, header, use=use):
+        m = cols[use[0]].size
+        if rows is None:
+            rows = RowArrays(estimate_rows(path, m, n_bytes), len(use))
+        block = rows.reserve(m)
+        for j, c in enumerate(use):
+            block[:, j] = cols[c]
+    if rows is None or rows.n == 0:
+        raise FingerfitError("no data rows", path=path)
+    data = rows.array()
+    vals = data[:, : len(flat)].reshape(rows.n, len(keys), len(keys[0]))
+    return vals, (data[:, -1] if time is not None else None)
+
+
+def _decode_exact(
+    path: Path, header: list[str], keys: list[list[str]], lay: WideLayout, units: str
+):
+    """The reference decoder (every error with its line); the time column is converted
+    when the returned callable is called (after the coordinate check, as always)."""
+    raw = _read_bytes(path)
+    check_field_counts(raw, path, len(header))
+    df = pd.read_csv(
+        io.BytesIO(raw),
+        dtype=str,
+        keep_default_na=False,
+        skip_blank_lines=True,
+        quoting=csv.QUOTE_NONE,
+        encoding="utf-8",
+    )
+    del raw
+    df.columns = header
+    n_rows = df.shape[0]
+    if n_rows == 0:
+        raise FingerfitError("no data rows", path=path)
+    lines = np.arange(n_rows) + 2
+
+    def numeric(col: str) -> np.ndarray:
+        s = df[col].str.strip()
+        v = pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
+        bad = np.isnan(v) & (s != "").to_numpy() & (s.str.lower() != "nan").to_numpy()
+        bad |= np.isinf(v)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise FingerfitError(
+                f"not a finite number: '{shown(df[col].iat[i])}'",
+                path=path,
+                line=int(lines[i]),
+                field=col,
+            )
+        return v
+
+    vals = np.empty((n_rows, len(keys), len(keys[0])))
+    for j, cols in enumerate(keys):
+        for m, c in enumerate(cols):
+            vals[:, j, m] = numeric(c)
+    return vals, (lambda: numeric(lay.time)) if lay.time is not None else None
+
+
 def read_wide_csv(
     path: str | Path,
     *,
@@ -214,94 +343,25 @@ def read_wide_csv(
     if rate_hz is not None and not rate_hz > 0:
         raise FingerfitError("the rate must be positive (Hz)", path=path, field="rate")
     lay = parse_layout(layout) if not isinstance(layout, WideLayout) else layout
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
-    first = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
+    first = read_header(path).split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
     header = [h.strip() for h in first.split(",")]
     if len(set(header)) != len(header):
         dup = next(h for h in header if header.count(h) > 1)
         raise FingerfitError(f"column '{shown(dup)}' appears twice", path=path, line=1)
-    check_field_counts(raw, path, len(header))
-    stations = _stations(header, lay, path)
-    if not stations:
-        raise FingerfitError(
-            f"no column matches '{lay.columns['x']}' (wrong --columns?)", path=path, line=1
-        )
-    if lay.time is not None and lay.time not in header:
-        raise FingerfitError(
-            f"no time column '{lay.time}' (wrong --columns?)", path=path, line=1, field=lay.time
-        )
-    used: list[str] = [] if lay.time is None else [lay.time]
-    for s in stations:
-        for key in lay.keys:
-            c = _column(lay.columns[key], s)
-            if c not in header:
-                raise FingerfitError(
-                    f"column '{c}' missing for station {s}", path=path, line=1, field=c
-                )
-            used.append(c)
-    notes: list[str] = []
-    ignored = [h for h in header if h not in used]
-    if ignored:
-        notes.append(f"columns not used: {', '.join(ignored)}")
-    if sensors is not None:
-        extra = [s for s in stations if s not in sensors]
-        if extra:
-            mapped = ", ".join(f"{k}={v}" for k, v in sensors.items())
-            raise FingerfitError(
-                f"unknown station {extra[0]} (not in the map {mapped})",
-                path=path,
-                line=1,
-                field=_column(lay.columns["x"], extra[0]),
-            )
-        absent = [k for k in sensors if k not in stations]
-        if absent:
-            raise FingerfitError(
-                f"mapped station {absent[0]} ('{sensors[absent[0]]}') has no columns",
-                path=path,
-                line=1,
-            )
-        names = [sensors[s] for s in stations]
-    else:
-        names = [str(s) for s in stations]
-
-    df = pd.read_csv(
-        io.BytesIO(raw),
-        dtype=str,
-        keep_default_na=False,
-        skip_blank_lines=True,
-        quoting=csv.QUOTE_NONE,
-        encoding="utf-8",
-    )
-    df.columns = header
-    n_rows = df.shape[0]
-    if n_rows == 0:
-        raise FingerfitError("no data rows", path=path)
+    try:
+        stations, names, notes = _header_plan(header, lay, sensors, path)
+    except FingerfitError:
+        check_field_counts(_read_bytes(path), path, len(header))  # that error comes first
+        raise
+    keys = [[_column(lay.columns[key], s) for key in lay.keys] for s in stations]
+    try:
+        vals, tcol = _decode_fast(path, header, keys, lay.time)
+    except NotPlain:
+        vals, tcol = _decode_exact(path, header, keys, lay, units)
+    n_rows = vals.shape[0]
     lines = np.arange(n_rows) + 2
-
-    def numeric(col: str) -> np.ndarray:
-        s = df[col].str.strip()
-        v = pd.to_numeric(s, errors="coerce").to_numpy(dtype=float)
-        bad = np.isnan(v) & (s != "").to_numpy() & (s.str.lower() != "nan").to_numpy()
-        bad |= np.isinf(v)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise FingerfitError(
-                f"not a finite number: '{shown(df[col].iat[i])}'",
-                path=path,
-                line=int(lines[i]),
-                field=col,
-            )
-        return v
-
     k = len(lay.keys)
-    vals = np.empty((n_rows, len(stations), k))
-    for j, s in enumerate(stations):
-        for m, key in enumerate(lay.keys):
-            vals[:, j, m] = numeric(_column(lay.columns[key], s))
-    big = implausible_rows(vals[:, :, :3].reshape(n_rows, -1), UNITS_TO_MM[units])
+    big = implausible_rows(vals[:, :, :3], UNITS_TO_MM[units])
     if big.size:
         i = int(big[0])
         j, m = np.unravel_index(int(np.nanargmax(np.abs(vals[i, :, :3]))), (len(stations), 3))
@@ -311,9 +371,9 @@ def read_wide_csv(
             line=int(lines[i]),
             field=_column(lay.columns[_POS[m]], stations[j]),
         )
-    tcol = None
-    if lay.time is not None:
-        tcol = numeric(lay.time)
+    if callable(tcol):  # the reference decoder converts the time column only now
+        tcol = tcol()
+    if tcol is not None:
         check_increasing(tcol, lines, path, what="time", strict=False)
         # check_increasing names the column 'time'; the message says which line.
     notes.insert(0, f"{n_rows} rows of {len(stations)} stations read")
@@ -325,14 +385,17 @@ def read_wide_csv(
             f"{int(rep.sum())} exactly repeated rows dropped (a logger polling faster "
             "than the tracker)"
         )
-    keep = np.flatnonzero(~rep)
-    v = vals[keep]
-    t_rows = None if tcol is None else tcol[keep]
-    row_lines = lines[keep]
-    n_kept = keep.size
-    prev = np.concatenate([np.full((1, len(stations), k), np.nan), v[:-1]])
-    same = (v == prev).all(axis=2)  # a held (repeated) value; missing is never "held"
-    same[0] = False
+    if rep.any():
+        keep = np.flatnonzero(~rep)
+        v = vals[keep]
+        t_rows = None if tcol is None else tcol[keep]
+        row_lines = lines[keep]
+    else:  # no copy
+        v, t_rows, row_lines = vals, tcol, lines
+    del vals
+    n_kept = v.shape[0]
+    same = np.zeros((n_kept, len(stations)), dtype=bool)  # a held (repeated) value
+    same[1:] = (v[1:] == v[:-1]).all(axis=2)  # missing (NaN) is never "held"
     partial = same.any(axis=1) & ~same.all(axis=1)
     if len(stations) > 1 and partial.mean() > 0.5:
         rows_u, st_u = np.nonzero(~same)
@@ -405,27 +468,29 @@ def read_wide_csv(
     if partial_s.any():
         notes.append(f"{int(partial_s.sum())} samples with empty fields treated as missing")
     for j, name in enumerate(names):
-        ok = complete[:, j]
+        rows = np.flatnonzero(complete[:, j])
         pos = np.full((n, 3), np.nan)
         rot = np.full((n, 3, 3), np.nan)
-        fv = frame_vals[ok, j]
-        pos[grid_idx[ok]] = fv[:, :3] * scale
-        if lay.orientation == _QUAT:
-            with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
-                norm = np.linalg.norm(fv[:, 3:], axis=1)
-            bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
-            if bad.size:
-                i = int(np.flatnonzero(ok)[bad[0]])
-                raise FingerfitError(
-                    f"quaternion of station {stations[j]} has norm {norm[bad[0]]:.6g}, not 1 "
-                    "(wrong --columns?)",
-                    path=path,
-                    line=int(f_lines[i]),
-                    field=_column(lay.columns["qw"], stations[j]),
-                )
-            rot[grid_idx[ok]] = matrix_from_quat_wxyz(fv[:, 3:])
-        else:
-            rot[grid_idx[ok]] = Rotation.from_euler("ZYX", fv[:, 3:], degrees=True).as_matrix()
+        for lo in range(0, rows.size, _BLOCK):  # blocks bound the temporary memory
+            r = rows[lo : lo + _BLOCK]
+            fv = frame_vals[r, j]
+            at = grid_idx[r]
+            pos[at] = fv[:, :3] * scale
+            if lay.orientation == _QUAT:
+                with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
+                    norm = np.linalg.norm(fv[:, 3:], axis=1)
+                bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
+                if bad.size:
+                    raise FingerfitError(
+                        f"quaternion of station {stations[j]} has norm {norm[bad[0]]:.6g}, "
+                        "not 1 (wrong --columns?)",
+                        path=path,
+                        line=int(f_lines[r[bad[0]]]),
+                        field=_column(lay.columns["qw"], stations[j]),
+                    )
+                rot[at] = matrix_from_quat_wxyz(fv[:, 3:])
+            else:
+                rot[at] = Rotation.from_euler("ZYX", fv[:, 3:], degrees=True).as_matrix()
         poses[name] = PoseSeries(pos, rot)
     rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes)
     rec.notes.extend(sensor_missing_notes(rec))
