@@ -181,6 +181,7 @@ def main() -> None:
     results: dict = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
         "seconds": args.seconds,
+        "load_average_at_start": os.getloadavg(),
         "models": {},
     }
     with tempfile.TemporaryDirectory() as tmp:
@@ -200,6 +201,7 @@ def main() -> None:
             e2e = end_to_end(model_path, csv, long.n_frames, key)
             print(f"{key}: end to end {json.dumps(e2e)}", flush=True)
             results["models"][key] = {"per_frame_compute": compute, "end_to_end": e2e}
+    results["load_average_at_end"] = os.getloadavg()
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
 
