@@ -242,3 +242,53 @@ def make_target_bars(targets: pd.DataFrame) -> Figure:
     ax.legend(frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     ax.set_title("Fig. 12 - target reaching: mean (SD) over touches", loc="left", fontsize=10)
     return fig
+
+
+def make_pinch(pinches: pd.DataFrame) -> Figure:
+    """Pinches: (a) tip-distance error against truth (or, without truth, the tip distance)
+    and (b) pad gap, mean (SD) over events per kind of pinch and source.
+
+    ``pinches`` has the columns of :data:`fingerfit.evaluate.pinch.PINCH_COLUMNS` (mm).
+    """
+    groups = sorted({f"{k} {a}-{b}" for k, a, b in pinches[["kind", "finger", "target"]].values})
+    label = pinches["kind"] + " " + pinches["finger"] + "-" + pinches["target"]
+    truth = bool(np.isfinite(pinches["tip_distance_error_mm"]).any())
+    first = "tip_distance_error_mm" if truth else "tip_distance_mm"
+    width_in = max(10.0, 1.8 * len(groups) + 4)
+    fig, axes = plt.subplots(1, 2, figsize=(width_in, 4.2), layout="constrained")
+    panels = (
+        (
+            axes[0],
+            first,
+            "(a) tip-point distance, model - true" if truth else "(a) tip-point distance",
+            "|tip distance error| (mm)" if truth else "thumb tip to finger tip (mm)",
+        ),
+        (axes[1], "pad_gap_mm", "(b) pad-to-pad gap (pads touch: 0)", "pad-to-pad gap (mm)"),
+    )
+    for ax, col, title, ylabel in panels:
+        for k, src in enumerate(("reference", "user_axis", "orthogonal")):
+            g = pinches[pinches["source"] == src]
+            lab = label[g.index]
+            means = [g.loc[lab == x, col].mean() for x in groups]
+            sds = [g.loc[lab == x, col].std(ddof=1) for x in groups]
+            ax.bar(
+                np.arange(len(groups)) + (k - 1) * 0.27,
+                means,
+                0.25,
+                yerr=np.asarray(sds, dtype=float),
+                capsize=2,
+                color=COLORS[src],
+                alpha=0.8,
+                label=LABELS[src],
+            )
+        if col == "pad_gap_mm" and np.isfinite(pinches["true_pad_gap_mm"]).any():
+            true = [pinches.loc[label == x, "true_pad_gap_mm"].mean() for x in groups]
+            ax.plot(np.arange(len(groups)), true, "k_", ms=30, mew=2, label="true pad gap")
+        _tick_labels(ax, groups, width_in / 2 - 1.5)
+        ax.set_xlabel("pinch (kind, digits)")
+        ax.set_ylabel(ylabel)
+        ax.set_title(title, loc="left", fontsize=10)
+    handles, names = axes[1].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncols=4, frameon=False, fontsize=9)
+    fig.suptitle("Pinches: mean (SD) over pinch events", fontsize=10)
+    return fig

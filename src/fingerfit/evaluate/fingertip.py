@@ -27,9 +27,29 @@ from ..transforms import FloatArray, apply_pose
 SOURCES = ("reference", *VARIANTS)
 
 
+def _distal_sensor(model: HandModel, digit: str) -> str:
+    """The sensor on a digit's distal segment (child of its last flexion joint)."""
+    return list(model.fingers[digit].joints.values())[-1].child
+
+
+def sensor_carried(
+    model: HandModel, digit: str, recording: Recording, point: FloatArray
+) -> FloatArray:
+    """A point ``(3,)`` (mm, tracker frame at the reference posture) carried by the digit's
+    distal sensor through a recording, ``(n_frames, 3)`` mm (tracker frame)."""
+    distal = _distal_sensor(model, digit)
+    p0, r0 = model.reference_poses[distal]
+    pose = recording.pose(distal)
+    return apply_pose(pose.rotation, pose.position, r0.T @ (np.asarray(point) - p0))
+
+
 def reference_tip(model: HandModel, finger: str, recording: Recording) -> FloatArray:
-    """Fingertip from the distal sensor and the stylus tip vector, ``(n_frames, 3)`` mm."""
-    distal = model.fingers[finger].joints["dip"].child
+    """Tip from the distal sensor and the stylus tip vector, ``(n_frames, 3)`` mm.
+
+    Any digit: the distal sensor is the child of the digit's last flexion joint
+    (``dip`` of a finger, ``ip`` of the thumb).
+    """
+    distal = _distal_sensor(model, finger)
     p0, r0 = model.reference_poses[distal]
     local = r0.T @ (model.fingers[finger].tip - p0)
     pose = recording.pose(distal)
@@ -75,7 +95,11 @@ def evaluate_grasp(
     tips = {"reference": reference_tip(model, finger, recording)}
     tips |= {v: kin.motions[v][finger].tip for v in VARIANTS}
     angles = kin.motions["user_axis"][finger].angles
-    total = angles["mp"] + angles["pip"] + angles["dip"]  # flexion only, not ab/adduction
+    # Flexion only, not ab/adduction: mp + pip + dip (the thumb: cmc + mcp + ip).
+    first, *rest = model.fingers[finger].joints
+    total = angles[first]
+    for j in rest:
+        total = total + angles[j]
     frames = max_flexion_frames(total, rate_hz)
     errors = pd.DataFrame({"cycle": np.arange(1, frames.size + 1)})
     for v in VARIANTS:
@@ -83,8 +107,45 @@ def evaluate_grasp(
     return GraspEvaluation(recording.time, tips, frames, errors, kin)
 
 
+def skipped_events(model: HandModel, session: Session) -> list[dict]:
+    """The touch events (targets and pinches) that cannot be evaluated, with the reason.
+
+    An event cannot be evaluated when the model lacks its digit (or, for a pinch, the
+    digit touched). Every other event is evaluated: a target touch by
+    :func:`evaluate_targets`, a pinch by :func:`fingerfit.evaluate.pinch.evaluate_pinches`.
+
+    Returns
+    -------
+    list of dict
+        ``recording``, ``finger``, ``target``, ``start``, ``end`` (s) and ``reason``.
+    """
+    out = []
+    for ev in session.events:
+        missing = [d for d in (ev.finger, ev.target if ev.is_pinch else None) if d]
+        missing = [d for d in missing if d not in model.fingers]
+        if missing:
+            kind = "pinch" if ev.is_pinch else "target touch"
+            out.append(
+                {
+                    "recording": ev.recording,
+                    "finger": ev.finger,
+                    "target": ev.target,
+                    "start": float(ev.start),
+                    "end": float(ev.end),
+                    "reason": f"{kind} {ev.finger} -> {ev.target} in {ev.recording} at "
+                    f"{ev.start:g}-{ev.end:g} s not evaluated: the model has no digit "
+                    f"'{missing[0]}'",
+                }
+            )
+    return out
+
+
 def evaluate_targets(model: HandModel, session: Session) -> pd.DataFrame:
     """Target-reaching errors (Figs. 11-12).
+
+    Pinch events (``target`` a digit) are not target touches: see
+    :func:`fingerfit.evaluate.pinch.evaluate_pinches`. Touches by a digit the model
+    lacks are not evaluated; :func:`skipped_events` lists them with the reason.
 
     Returns
     -------
@@ -96,8 +157,8 @@ def evaluate_targets(model: HandModel, session: Session) -> pd.DataFrame:
     rows = []
     cache: dict[tuple[str, str], dict[str, FloatArray]] = {}
     for ev in session.events:
-        if ev.finger not in model.fingers:
-            continue
+        if ev.is_pinch or ev.finger not in model.fingers:
+            continue  # a pinch: evaluate_pinches; a missing digit: skipped_events
         rec = session.recording(ev.recording)
         key = (ev.recording, ev.finger)
         if key not in cache:

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 
-from ..digits import DIGITS
+from ..digits import DIGITS, FINGERS
 from ..estimate.fit import ANGLE_SUMMARY, METHOD_SUMMARY
 from ..io.atomic import atomic_write
 
@@ -52,7 +52,7 @@ function rot(q) {  // view rotation of a vector (mm): screen right, depth, scree
   return [x, cp * y0 - sp * q[2], sp * y0 + cp * q[2]];
 }
 function proj(p) { const r = rot(p); return [cv.width / 2 + off[0] + zoom * r[0], cv.height / 2 + off[1] - zoom * r[2]]; }
-function points() { return data[sel.value].fingers.flatMap(f => [...f.centres, f.tip, ...f.landmarks]); }
+function points() { return data[sel.value].fingers.flatMap(f => [...f.centres, f.tip, ...(f.pad ? [f.pad] : []), ...f.landmarks]); }
 function fit() {  // frame the hand: every centre, tip and landmark fills ~80 % of the canvas
   const r = points().map(rot);
   const lo = [0, 2].map(k => Math.min(...r.map(p => p[k]))), hi = [0, 2].map(k => Math.max(...r.map(p => p[k])));
@@ -97,6 +97,7 @@ function draw() {
     for (const [c, ax] of f.second_axes)
       line(c.map((v, k) => v - 12 * ax[k]), c.map((v, k) => v + 12 * ax[k]), '#9467bd', 2);
     for (const l of f.landmarks) dot(l, '#2ca02c', 2.5);
+    if (f.pad) { line(f.tip, f.pad, '#e377c2', 1); dot(f.pad, '#e377c2', 3.5); }
     dot(f.tip, '#ff7f0e', 4);
     const t = proj(f.tip); ctx.font = '13px sans-serif'; ctx.textAlign = 'left';
     ctx.textBaseline = 'middle'; text(f.name, t[0] + 8, t[1], '#333');
@@ -212,16 +213,19 @@ def _list(items: list[str]) -> str:
 
 
 def _viewer_data(result: StudyResult) -> dict:
-    """Per subject: the fingers in one frame, the proximal-phalanx frame of its first finger.
+    """Per subject: the digits in one frame, the proximal-phalanx frame of its first finger.
 
-    Origin at that finger's MP centre (mm), x along its proximal phalanx; every finger of
-    the subject is drawn in this frame so several fingers keep their places on the hand.
+    Origin at that finger's MP centre (mm), x along its proximal phalanx (a thumb alone:
+    its metacarpal frame, origin at its CMC centre); every digit of the subject is drawn
+    in this frame so several digits keep their places on the hand. Each digit carries its
+    flexion axes (user and orthogonal), second axes, tip, pad point and landmarks.
     """
     out = {}
     for s in result.subjects:
-        first, fm0 = next(iter(s.model.fingers.items()))
-        origin = fm0.joints["mp"].center
-        rot = fm0.frames["proximal"].rotation  # columns x, y, z (tracker)
+        first = next((f for f in s.model.fingers if f in FINGERS), next(iter(s.model.fingers)))
+        fm0 = s.model.fingers[first]
+        origin = next(iter(fm0.joints.values())).center
+        rot = fm0.frames[fm0.segments[0]].rotation  # columns x, y, z (tracker)
 
         def loc(p, origin=origin, rot=rot):
             return ((np.asarray(p) - origin) @ rot).round(3).tolist()
@@ -234,6 +238,7 @@ def _viewer_data(result: StudyResult) -> dict:
                     "name": f,
                     "centres": [loc(j.center) for j in joints],
                     "tip": loc(fm.tip),
+                    "pad": None if fm.pad is None else loc(fm.pad),
                     "axes": [(j.axis @ rot).round(4).tolist() for j in joints],
                     "orthogonal": [(j.orthogonal_axis @ rot).round(4).tolist() for j in joints],
                     "landmarks": [loc(s.session.landmark(f"{f}.{k}")) for k in DIGITS[f].landmarks],
@@ -243,9 +248,13 @@ def _viewer_data(result: StudyResult) -> dict:
                     ],
                 }
             )
+        seg, joint = fm0.segments[0], next(iter(fm0.joints)).upper()
         out[s.subject] = {
             "frame": f"{s.subject}: {first} proximal-phalanx frame, origin at the {first} MP "
-            "centre, x along the phalanx (mm)",
+            "centre, x along the phalanx (mm)"
+            if first in FINGERS
+            else f"{s.subject}: {first} {seg} frame, origin at the {first} {joint} centre, "
+            f"x along the {seg} (mm)",
             "fingers": fingers,
         }
     return out
@@ -440,6 +449,10 @@ def write_report(result: StudyResult, path: Path) -> Path:
         ]
     if "truth" in sm:
         parts += _truth(result)
+    if "thumb" in sm:
+        parts += _thumb(result)
+    if "thumb" in sm or "pinch" in sm:
+        parts += _whole_hand(result)
     models = tables["models"]
     parts += [
         "<h2>Fitted models</h2>",
@@ -458,11 +471,13 @@ def write_report(result: StudyResult, path: Path) -> Path:
         _list([f"{_statistic_name(d['statistic'])}: {d['reason']}" for d in sm["skipped"]])
         if sm["skipped"]
         else "<p>None: every statistic had enough data.</p>",
-        "<h2>3D view of the fitted fingers</h2>",
+        "<h2 id=view3d>3D view of the fitted hand</h2>",
         "<p class=note>Drag to rotate, wheel to zoom. Grey: bones; black: joint centres; blue: "
-        "fitted (user) axes; red: orthogonal axes; purple: MP ab/adduction axis (two-axis "
-        "models); green: stylus landmarks; orange: fingertip. Frame: the proximal-phalanx frame "
-        "of the subject's first finger, origin at its MP centre, x along the phalanx (axes in "
+        "fitted (user) flexion axes; red: orthogonal axes; purple: second (ab/adduction) axes "
+        "(finger MP, thumb CMC and MCP); green: stylus landmarks; orange: tip (nail-edge "
+        "point); pink: pad point (pulp), joined to the tip. Frame: the proximal-phalanx frame "
+        "of the subject's first finger, origin at its MP centre, x along the phalanx (a thumb "
+        "alone: its metacarpal frame, origin at the CMC centre; axes in "
         "the triad bottom left); the bar bottom right is 10 mm at the current zoom. "
         "Double-click to re-frame.</p>",
         "<p>subject <select id=subject></select></p><canvas id=view width=900 height=560></canvas>",
@@ -546,3 +561,192 @@ def _truth(result: StudyResult) -> list[str]:
     if "truth" in fig:
         parts.append(_img(fig["truth"], "true fingertip error"))
     return [*parts, _table(axes_t), _table(tips_t)]
+
+
+_MODEL_NAMES = {"reference": "distal sensor", "user_axis": "user-axis model"}
+
+
+def _model_name(v: str) -> str:
+    return _MODEL_NAMES.get(v, v.replace("_", "-") + " model")
+
+
+def _thumb(result: StudyResult) -> list[str]:
+    """The thumb's section: tip at maximal flexion, tip and axes against truth, CMC/MCP
+    geometry (the offset and angle between the two axes of each two-axis joint)."""
+    sm, fig, tables = result.summary, result.figures, result.tables
+    th = sm["thumb"]
+    parts = [
+        "<h2 id=thumb>Thumb</h2>",
+        "<p>The thumb's CMC turns about two axes (flexion-extension proximal, in the "
+        "trapezium; ab/adduction distal, in the base of the metacarpal) that neither "
+        "intersect nor stand perpendicular; the MCP has a second axis where the evidence "
+        "supports one; the IP is a hinge. The orthogonal model makes each flexion axis "
+        "perpendicular to its bone and each second axis perpendicular to the bone and the "
+        "orthogonal flexion axis (the robot convention). Subjects with a thumb: "
+        f"{html.escape(', '.join(th['subjects']))}.</p>",
+    ]
+    rows = []
+    if "max_flexion" in th:
+        h = th["max_flexion"]
+        rows.append(("grasp: maximal flexion (vs distal sensor)", h))
+    for rec, h in th.get("truth_tip", {}).items():
+        rows.append((f"{rec}: against ground truth (mean per subject)", h))
+    if rows:
+        parts.append(
+            _table(
+                pd.DataFrame(
+                    [
+                        {
+                            "thumb tip error": name,
+                            "n": str(h["user_axis"]["n"]),
+                            "user-axis model, mean (SD) mm": _ms(h["user_axis"]),
+                            "orthogonal model, mean (SD) mm": _ms(h["orthogonal"]),
+                            "mean reduction": _pct(h["reduction_percent"]),
+                            "paired t-test": _ttest(h["paired_t_test"]),
+                        }
+                        for name, h in rows
+                    ]
+                )
+            )
+        )
+    if "thumb" in fig:
+        parts.append(_img(fig["thumb"], "thumb tip error against truth"))
+    if th.get("truth_axes"):
+        parts += [
+            "<p>Every thumb axis against the true one (parent sensor frame):</p>",
+            _table(
+                pd.DataFrame(
+                    [
+                        {
+                            "axis": j.upper().replace("_ABDUCTION", " ab/adduction"),
+                            "subjects (n)": str(v["n"]),
+                            "axis error, mean (deg)": _fmt(v["axis_error_deg"]["mean"]),
+                            "axis error, max (deg)": _fmt(v["axis_error_deg"]["max"]),
+                            "centre to true axis, mean (mm)": _fmt(v["centre_to_axis_mm"]["mean"]),
+                            "centre to true axis, max (mm)": _fmt(v["centre_to_axis_mm"]["max"]),
+                        }
+                        for j, v in th["truth_axes"].items()
+                    ]
+                )
+            ),
+        ]
+    geo = tables.get("thumb_geometry")
+    if geo is not None and not geo.empty:
+        parts += [
+            "<p>Two-axis joints: the shortest distance between the two axis lines and the "
+            "angle between them, per subject (true: the simulator's, where known).</p>",
+            _table(
+                pd.DataFrame(
+                    {
+                        "subject": geo["subject"],
+                        "joint": geo["joint"].str.upper(),
+                        "axis offset (mm)": geo["axis_offset_mm"].map(_fmt),
+                        "true axis offset (mm)": geo["true_axis_offset_mm"].map(_fmt),
+                        "angle between axes (deg)": geo["axes_angle_deg"].map(_fmt),
+                        "true angle between axes (deg)": geo["true_axes_angle_deg"].map(_fmt),
+                    }
+                )
+            ),
+        ]
+    return parts
+
+
+def _whole_hand(result: StudyResult) -> list[str]:
+    """The whole hand: every digit's tip and every joint angle against truth, and pinches."""
+    sm, fig, tables = result.summary, result.figures, result.tables
+    parts = [
+        "<h2 id=wholehand>Whole hand</h2>",
+        "<p class=note>The 3D view of the whole hand (every digit, its second axes and pad "
+        "points) is <a href='#view3d'>below</a>.</p>",
+    ]
+    tt = tables.get("truth_fingertip")
+    if tt is not None and not tt.empty:
+        g = tt.groupby(["finger", "recording", "variant"], sort=False)["mean_mm"].mean()
+        w = g.unstack("variant").reset_index()
+        if set(("user_axis", "orthogonal")) <= set(w.columns):
+            parts += [
+                "<p>Tip error of every digit against ground truth (mean over subjects of each "
+                "recording's mean):</p>",
+                _table(
+                    pd.DataFrame(
+                        {
+                            "digit": w["finger"],
+                            "recording": w["recording"],
+                            "user-axis model (mm)": w["user_axis"].map(_fmt),
+                            "orthogonal model (mm)": w["orthogonal"].map(_fmt),
+                        }
+                    )
+                ),
+            ]
+    ang = tables.get("truth_angles")
+    if ang is not None and not ang.empty:
+        g = ang.groupby(["finger", "joint", "variant"], sort=False)["mean_abs_deg"].mean()
+        w = g.unstack("variant").reset_index()
+        parts += [
+            "<p>Every joint angle against the true angle (mean |error| over all recordings "
+            "with ground truth and subjects):</p>",
+            _table(
+                pd.DataFrame(
+                    {
+                        "digit": w["finger"],
+                        "angle": w["joint"].str.upper().str.replace("_ABDUCTION", " ab/adduction"),
+                        "user-axis model (deg)": w.get("user_axis", pd.Series(dtype=float)).map(
+                            _fmt
+                        ),
+                        "orthogonal model (deg)": w.get("orthogonal", pd.Series(dtype=float)).map(
+                            _fmt
+                        ),
+                    }
+                )
+            ),
+        ]
+    if "pinch" in sm:
+        pn, pin = sm["pinch"], tables["pinch"]
+        parts += [
+            "<h3 id=pinch>Pinches</h3>",
+            "<p>During each pinch event (<code>events.csv</code> rows whose target is a digit) "
+            "the distance between the two digits' tip points (nail edges, 12-18 mm apart when "
+            "the pads touch) and the gap between their pad points (pulp skin points; pads that "
+            "touch have gap 0). Tip-distance error: mean over the event's frames of |model "
+            "distance - true distance| (simulated sessions only). Distal sensor: each digit's "
+            "distal sensor carrying the model's tip and pad points.</p>",
+        ]
+        if "pinch" in fig:
+            parts.append(_img(fig["pinch"], "pinch tip distance and pad gap"))
+        parts.append(
+            _table(
+                pd.DataFrame(
+                    [
+                        {
+                            "source": _model_name(src),
+                            "events (n)": str(v["pad_gap"]["n"] or v["tip_distance_error"]["n"]),
+                            "tip-distance error, mean (SD) mm": _ms(v["tip_distance_error"]),
+                            "pad gap, mean (SD) mm": _ms(v["pad_gap"]),
+                            "true pad gap, mean (SD) mm": _ms(v["true_pad_gap"]),
+                        }
+                        for src, v in pn["per_source"].items()
+                    ]
+                )
+            )
+        )
+        per = pin.groupby(["kind", "finger", "target", "source"], sort=False)[
+            ["tip_distance_mm", "true_tip_distance_mm", "tip_distance_error_mm", "pad_gap_mm"]
+        ].mean()
+        per = per.reset_index()
+        parts += [
+            _table(
+                pd.DataFrame(
+                    {
+                        "pinch": per["kind"] + " " + per["finger"] + "-" + per["target"],
+                        "source": per["source"].map(_model_name),
+                        "tip distance (mm)": per["tip_distance_mm"].map(_fmt),
+                        "true tip distance (mm)": per["true_tip_distance_mm"].map(_fmt),
+                        "tip-distance error (mm)": per["tip_distance_error_mm"].map(_fmt),
+                        "pad gap (mm)": per["pad_gap_mm"].map(_fmt),
+                    }
+                )
+            ),
+            f"<p>Tip-distance error, user-axis vs orthogonal model: "
+            f"{html.escape(_ttest(pn['paired_t_test']))}.</p>",
+        ]
+    return parts

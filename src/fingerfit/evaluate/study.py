@@ -23,6 +23,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from .. import __version__
+from ..digits import FINGERS, THUMB_JOINTS
 from ..errors import FingerfitError
 from ..estimate import FitOptions, fit_session
 from ..io import load_session
@@ -32,7 +33,8 @@ from ..model import VARIANTS, HandModel, save_model
 from ..session import HAND_SENSOR, JOINTS, PoseSeries, Recording, Session, check_subject_id
 from ..transforms import angle_between_axes, apply_inverse_pose
 from . import figures
-from .fingertip import GraspEvaluation, evaluate_grasp, evaluate_targets
+from .fingertip import GraspEvaluation, evaluate_grasp, evaluate_targets, skipped_events
+from .pinch import PINCH_COLUMNS, evaluate_pinches
 from .stats import (
     Skipped,
     independent_ttest_or_skip,
@@ -50,6 +52,23 @@ PAPER = {
 }
 
 _TRUTH_TIP_COLUMNS = ["subject", "finger", "recording", "variant", "mean_mm", "p95_mm"]
+_TRUTH_ANGLE_COLUMNS = [
+    "subject",
+    "finger",
+    "recording",
+    "joint",
+    "variant",
+    "mean_abs_deg",
+    "p95_abs_deg",
+]
+_THUMB_GEOMETRY_COLUMNS = [
+    "subject",
+    "joint",
+    "axis_offset_mm",
+    "true_axis_offset_mm",
+    "axes_angle_deg",
+    "true_axes_angle_deg",
+]
 
 
 @dataclass
@@ -67,6 +86,9 @@ class SubjectResult:
     truth_axes: pd.DataFrame | None = None
     truth_tips: pd.DataFrame | None = None
     warnings: tuple[str, ...] = ()
+    pinches: pd.DataFrame | None = None  # evaluate_pinches, with ``subject``
+    skipped_events: tuple[dict, ...] = ()  # fingertip.skipped_events
+    truth_angles: pd.DataFrame | None = None  # _TRUTH_ANGLE_COLUMNS
 
     def compact(self) -> SubjectResult:
         """The same result without the per-frame arrays (what a study keeps per subject).
@@ -164,6 +186,7 @@ def _subject(session: Session, options: FitOptions) -> SubjectResult:
                 )
             )
     targets = evaluate_targets(model, session).assign(subject=session.subject)
+    pinches = evaluate_pinches(model, session, truth).assign(subject=session.subject)
     res = SubjectResult(
         session.subject,
         session,
@@ -174,6 +197,8 @@ def _subject(session: Session, options: FitOptions) -> SubjectResult:
         _concat(dist, _DIST_COLUMNS),
         truth,
         warnings=warned,
+        pinches=pinches,
+        skipped_events=tuple(skipped_events(model, session)),
     )
     if truth is not None:
         fingers = [f for f in model.fingers if f in truth.document.get("fingers", {})]
@@ -181,13 +206,16 @@ def _subject(session: Session, options: FitOptions) -> SubjectResult:
             [axis_errors(model, truth, f).assign(subject=session.subject) for f in fingers],
             ["subject", "finger", "joint", "axis_error_deg", "centre_to_axis_mm"],
         )
-        rows = []
+        rows, angle_rows = [], []
         for rec in session.recordings()[1:]:
             if rec.name not in truth.tips:
                 continue
             kin = compute_kinematics(model, rec, fingers=fingers)
             for f in fingers:
                 for v in VARIANTS:
+                    angle_rows += _angle_errors(
+                        session.subject, f, rec.name, v, kin.motions[v][f].angles, truth
+                    )
                     e = np.linalg.norm(kin.motions[v][f].tip - truth.tips[rec.name][f], axis=1)
                     e = e[np.isfinite(e)]
                     if not e.size:
@@ -203,7 +231,67 @@ def _subject(session: Session, options: FitOptions) -> SubjectResult:
                         )
                     )
         res.truth_tips = pd.DataFrame(rows, columns=_TRUTH_TIP_COLUMNS)
+        res.truth_angles = pd.DataFrame(angle_rows, columns=_TRUTH_ANGLE_COLUMNS)
     return res
+
+
+def _angle_errors(
+    subject: str, digit: str, recording: str, variant: str, angles: dict, truth: Truth
+) -> list[tuple]:
+    """Rows of ``_TRUTH_ANGLE_COLUMNS``: each model angle (rad, ``(n,)``) against the true
+    angle of the same name over a recording, mean and 95th percentile of ``|error|`` (deg)."""
+    true = truth.angles.get(recording, {}).get(digit, {})
+    rows = []
+    for name, a in angles.items():
+        if name not in true or true[name].shape != a.shape:
+            continue
+        e = np.degrees(np.abs(a - true[name]))
+        e = e[np.isfinite(e)]
+        if e.size:
+            rows.append(
+                (
+                    subject,
+                    digit,
+                    recording,
+                    name,
+                    variant,
+                    float(e.mean()),
+                    float(np.percentile(e, 95)),
+                )
+            )
+    return rows
+
+
+def _skew_offset(c1, a1, c2, a2) -> float:
+    """Shortest distance between two lines (mm): points ``c`` ``(3,)``, directions ``a``."""
+    n = np.cross(a1, a2)
+    norm = np.linalg.norm(n)
+    if norm < 1e-12:  # parallel lines
+        d = c2 - c1
+        return float(np.linalg.norm(d - (d @ a1) / (a1 @ a1) * a1))
+    return float(abs((c2 - c1) @ n) / norm)
+
+
+def thumb_geometry(subject: SubjectResult) -> pd.DataFrame:
+    """Per two-axis thumb joint: the offset between its two axis lines (mm) and the angle
+    between them (deg), fitted and (with ground truth) true; ``_THUMB_GEOMETRY_COLUMNS``."""
+    fm = subject.model.fingers.get("thumb")
+    rows = []
+    if fm is not None:
+        doc = {} if subject.truth is None else subject.truth.document["fingers"].get("thumb", {})
+        for j, second in fm.second_axes.items():
+            first = fm.joints[j]
+            rows.append(
+                (
+                    subject.subject,
+                    j,
+                    _skew_offset(first.center, first.axis, second.center, second.axis),
+                    float(doc.get("axis_offset_mm", {}).get(j, np.nan)),
+                    float(np.degrees(angle_between_axes(first.axis, second.axis))),
+                    float(doc.get("axes_angle_deg", {}).get(j, np.nan)),
+                )
+            )
+    return pd.DataFrame(rows, columns=_THUMB_GEOMETRY_COLUMNS)
 
 
 def _stat(result) -> dict:
@@ -248,6 +336,7 @@ def _skips(node, where: str = "") -> list[dict]:
 _FLEX_COLUMNS = ["subject", "finger", "cycle", "user_axis", "orthogonal"]
 _TARGET_COLUMNS = ["subject", "finger", "target", "source", "error_mm", "dx", "dy", "dz"]
 _DIST_COLUMNS = ["subject", "finger", "joint", "cycle", "distance_mm"]
+_PINCH_COLUMNS = ["subject", *PINCH_COLUMNS]
 
 
 def _concat(frames: list[pd.DataFrame], columns: list[str]) -> pd.DataFrame:
@@ -282,10 +371,12 @@ def summarize_study(
         under ``"skipped"``.
     tables : dict of str to DataFrame
     """
-    flex = _concat([s.max_flexion for s in subjects], _FLEX_COLUMNS)
+    flex_all = _concat([s.max_flexion for s in subjects], _FLEX_COLUMNS)
+    # The paper's figures (headline, Fig. 10) are the four fingers'; the thumb's own section.
+    flex = flex_all[flex_all["finger"].isin(FINGERS)]
     dist = _concat([s.distances for s in subjects], _DIST_COLUMNS)
     targets = _concat([s.targets for s in subjects], _TARGET_COLUMNS)
-    tables = {"max_flexion": flex, "axis_quality": dist, "targets": targets}
+    tables = {"max_flexion": flex_all, "axis_quality": dist, "targets": targets}
     summary: dict = {
         "format": "fingerfit.study/1",
         "fingerfit_version": __version__,
@@ -310,7 +401,7 @@ def summarize_study(
     }
     # Axis quality (Fig. 8) and the paper's t-tests between joints.
     aq = {}
-    for j in [j for j in JOINTS if (dist["joint"] == j).any()]:
+    for j in [j for j in (*JOINTS, *THUMB_JOINTS) if (dist["joint"] == j).any()]:
         sm = summarize(dist.loc[dist["joint"] == j, "distance_mm"])
         aq[j] = {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
     tests = {}
@@ -394,9 +485,10 @@ def summarize_study(
             },
             "fingertip_mm": {
                 f"{r}/{v}": {"mean": _num(g["mean_mm"].mean()), "p95": _num(g["p95_mm"].mean())}
-                for (r, v), g in tt.groupby(["recording", "variant"])
+                for (r, v), g in tt[tt["finger"].isin(FINGERS)].groupby(["recording", "variant"])
             },
         }
+        _whole_hand_truth(subjects, summary, tables, tt)
     # Model geometry per subject: how far the fitted axes are from perpendicular.
     rows = []
     for s in subjects:
@@ -411,7 +503,7 @@ def summarize_study(
                         *jm.center,
                         *jm.axis,
                         float(tilt),
-                        fm.segment_lengths[{"mp": "proximal", "pip": "middle", "dip": "distal"}[j]],
+                        fm.segment_lengths[fm.segments[list(fm.joints).index(j)]],
                     )
                 )
     tables["models"] = pd.DataFrame(
@@ -430,10 +522,146 @@ def summarize_study(
             "segment_length_mm",
         ],
     )
+    _thumb_and_pinch(subjects, summary, tables, flex_all)
     summary["skipped"] = _skips(
-        {k: summary[k] for k in ("axis_quality", "max_flexion", "targets") if k in summary}
+        {
+            k: summary[k]
+            for k in ("axis_quality", "max_flexion", "targets", "thumb", "pinch")
+            if k in summary
+        }
     )
+    summary["skipped"] += [
+        {
+            "statistic": f"events.{s.subject}.{e['recording']}.{e['finger']}->{e['target']}",
+            "reason": e["reason"],
+        }
+        for s in subjects
+        for e in s.skipped_events
+    ]
     return summary, tables
+
+
+def _mean_sd(x: pd.Series) -> dict:
+    sm = summarize(x)
+    return {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
+
+
+def _whole_hand_truth(
+    subjects: list[SubjectResult], summary: dict, tables: dict, tt: pd.DataFrame
+) -> None:
+    """Every digit's tip and every joint angle against truth: ``summary["truth"]`` keys
+    ``tip_mm_per_digit`` (digit -> ``recording/variant`` -> mean, p95 mm) and
+    ``angle_error_deg`` (digit -> angle -> variant -> mean |error| deg), table
+    ``truth_angles``."""
+    ang = _concat(
+        [s.truth_angles for s in subjects if s.truth_angles is not None], _TRUTH_ANGLE_COLUMNS
+    )
+    tables["truth_angles"] = ang
+    summary["truth"]["tip_mm_per_digit"] = {
+        f: {
+            f"{r}/{v}": {"mean": _num(g["mean_mm"].mean()), "p95": _num(g["p95_mm"].mean())}
+            for (r, v), g in gf.groupby(["recording", "variant"])
+        }
+        for f, gf in tt.groupby("finger", sort=False)
+    }
+    summary["truth"]["angle_error_deg"] = {
+        f: {
+            j: {
+                v: {"mean": _num(g["mean_abs_deg"].mean()), "p95": _num(g["p95_abs_deg"].mean())}
+                for v, g in gj.groupby("variant")
+            }
+            for j, gj in gf.groupby("joint", sort=False)
+        }
+        for f, gf in ang.groupby("finger", sort=False)
+    }
+
+
+def _thumb_and_pinch(
+    subjects: list[SubjectResult], summary: dict, tables: dict, flex_all: pd.DataFrame
+) -> None:
+    """``summary["thumb"]`` (the thumb's fingertip at maximal flexion, axes and tip against
+    truth, CMC/MCP geometry) and ``summary["pinch"]`` (tip distances and pad gaps during
+    pinch events), with their tables, for studies with a thumb or pinch events."""
+    with_thumb = [s for s in subjects if "thumb" in s.model.fingers]
+    if with_thumb:
+        th: dict = {"subjects": [s.subject for s in with_thumb]}
+        tf = flex_all[flex_all["finger"] == "thumb"]
+        if not tf.empty:
+            mf = _headline(tf)
+            mf["paired_t_test"] = _stat(paired_ttest_or_skip(tf["user_axis"], tf["orthogonal"]))
+            th["max_flexion"] = mf
+        geo = _concat([thumb_geometry(s) for s in with_thumb], _THUMB_GEOMETRY_COLUMNS)
+        tables["thumb_geometry"] = geo
+        th["geometry"] = {
+            j: {
+                "axis_offset_mm": _num(g["axis_offset_mm"].mean()),
+                "true_axis_offset_mm": _num(g["true_axis_offset_mm"].mean()),
+                "axes_angle_deg": _num(g["axes_angle_deg"].mean()),
+                "true_axes_angle_deg": _num(g["true_axes_angle_deg"].mean()),
+                "n": len(g),
+            }
+            for j, g in geo.groupby("joint", sort=False)
+        }
+        if "truth_axes" in tables:
+            ta = tables["truth_axes"]
+            ta = ta[ta["finger"] == "thumb"]
+            th["truth_axes"] = {
+                j: {
+                    "axis_error_deg": {
+                        "mean": _num(g["axis_error_deg"].mean()),
+                        "max": _num(g["axis_error_deg"].max()),
+                    },
+                    "centre_to_axis_mm": {
+                        "mean": _num(g["centre_to_axis_mm"].mean()),
+                        "max": _num(g["centre_to_axis_mm"].max()),
+                    },
+                    "n": len(g),
+                }
+                for j, g in ta.groupby("joint", sort=False)
+            }
+            tt = tables["truth_fingertip"]
+            tt = tt[tt["finger"] == "thumb"]
+            tips = {}
+            for r, g in tt.groupby("recording", sort=False):
+                w = g.pivot_table(index="subject", columns="variant", values="mean_mm")
+                if not set(VARIANTS) <= set(w.columns):
+                    continue
+                h = _headline(w)
+                h["orthogonal_ratio"] = _num(w["user_axis"].mean() / w["orthogonal"].mean())
+                h["paired_t_test"] = _stat(paired_ttest_or_skip(w["user_axis"], w["orthogonal"]))
+                tips[r] = h
+            th["truth_tip"] = tips
+        summary["thumb"] = th
+    pin = _concat([s.pinches for s in subjects if s.pinches is not None], _PINCH_COLUMNS)
+    if pin.empty:
+        return
+    tables["pinch"] = pin
+    pn: dict = {"subjects": sorted(pin["subject"].unique()), "per_source": {}, "per_kind": {}}
+    for src, g in pin.groupby("source", sort=False):
+        pn["per_source"][src] = {
+            "tip_distance_error": _mean_sd(g["tip_distance_error_mm"]),
+            "tip_distance_bias": _mean_sd(g["tip_distance_bias_mm"]),
+            "pad_gap": _mean_sd(g["pad_gap_mm"]),
+            "true_pad_gap": _mean_sd(g["true_pad_gap_mm"]),
+        }
+    for (kind, tgt), g in pin.groupby(["kind", "target"], sort=False):
+        pn["per_kind"][f"{kind}/{tgt}"] = {
+            src: {
+                "tip_distance_error": _mean_sd(gs["tip_distance_error_mm"]),
+                "pad_gap": _mean_sd(gs["pad_gap_mm"]),
+            }
+            for src, gs in g.groupby("source", sort=False)
+        }
+    wide = pin.pivot_table(
+        index=["subject", "recording", "target", "start"],
+        columns="source",
+        values="tip_distance_error_mm",
+    )
+    if set(VARIANTS) <= set(wide.columns):
+        pn["paired_t_test"] = _stat(paired_ttest_or_skip(wide["user_axis"], wide["orthogonal"]))
+    else:
+        pn["paired_t_test"] = {"skipped": "no pinch with ground truth (true tip distances)"}
+    summary["pinch"] = pn
 
 
 def _one_line(exc: BaseException) -> str:
@@ -802,10 +1030,11 @@ def figure_builders(
     for s in subjects:
         if s.grasp:  # a compact result's Fig. 9 was drawn by its study task
             out[f"fig09_{s.subject}"] = _trajectory_figure(s)
+    fingers_flex = tables["max_flexion"][tables["max_flexion"]["finger"].isin(FINGERS)]
     out["fig10"] = (
         "fig10_max_flexion.png",
         lambda: figures.make_paired_boxes(
-            tables["max_flexion"],
+            fingers_flex,
             "subject",
             "Fig. 10 - fingertip error at maximal flexion (vs distal-sensor reference)",
             "fingertip error at maximal flexion (mm)",
@@ -821,9 +1050,10 @@ def figure_builders(
             "fig12_target_errors.png",
             lambda: figures.make_target_bars(tables["targets"]),
         )
-    if "truth_fingertip" in tables and not tables["truth_fingertip"].empty:
+    tips = tables.get("truth_fingertip")
+    if tips is not None and tips["finger"].isin(FINGERS).any():
         wide = (
-            tables["truth_fingertip"]
+            tips[tips["finger"].isin(FINGERS)]
             .pivot_table(index=["subject", "recording"], columns="variant", values="mean_mm")
             .reset_index()
         )
@@ -837,6 +1067,24 @@ def figure_builders(
                 xlabel="recording",
             ),
         )
+    if tips is not None and (tips["finger"] == "thumb").any():
+        thumb = (
+            tips[tips["finger"] == "thumb"]
+            .pivot_table(index=["subject", "recording"], columns="variant", values="mean_mm")
+            .reset_index()
+        )
+        out["thumb"] = (
+            "thumb_tip.png",
+            lambda: figures.make_paired_boxes(
+                thumb,
+                "recording",
+                "Thumb tip error against ground truth (simulation)",
+                "mean thumb tip error per recording (mm)",
+                xlabel="recording",
+            ),
+        )
+    if "pinch" in tables and not tables["pinch"].empty:
+        out["pinch"] = ("pinch.png", lambda: figures.make_pinch(tables["pinch"]))
     return out
 
 

@@ -6,7 +6,7 @@ Real sessions have none; the study then reports only what the paper could measur
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -19,10 +19,26 @@ from ..transforms import FloatArray, angle_between_axes, distance_point_to_line
 
 @dataclass(frozen=True)
 class Truth:
-    """True joint geometry (parent sensor frames) and true fingertips per recording (mm)."""
+    """True joint geometry (parent sensor frames) and true trajectories per recording.
+
+    Attributes
+    ----------
+    document : dict
+        ``truth.json``.
+    tips : dict[str, dict[str, ndarray]]
+        Recording -> digit -> true tip ``(n, 3)`` mm, tracker frame.
+    pads : dict[str, dict[str, ndarray]]
+        Recording -> digit -> true pad point (the pulp's skin point) ``(n, 3)`` mm,
+        for the digits whose truth has pads.
+    angles : dict[str, dict[str, dict[str, ndarray]]]
+        Recording -> digit -> angle name (``mp``, ``mp_abduction``, ..., the thumb's
+        ``cmc``, ``cmc_abduction``, ...) -> true angle ``(n,)`` rad.
+    """
 
     document: dict
     tips: dict[str, dict[str, FloatArray]]  # recording -> finger -> (n, 3)
+    pads: dict[str, dict[str, FloatArray]] = field(default_factory=dict)
+    angles: dict[str, dict[str, dict[str, FloatArray]]] = field(default_factory=dict)
 
     def joint(self, finger: str, joint: str) -> tuple[FloatArray, FloatArray]:
         """True centre (mm) and axis in the parent sensor frame at the reference posture."""
@@ -48,6 +64,8 @@ def load_truth(session_dir: Path | None) -> Truth | None:
     if not isinstance(doc, dict) or not isinstance(doc.get("fingers"), dict):
         raise FingerfitError("must be an object with 'fingers'", path=path, field="fingers")
     tips: dict[str, dict[str, FloatArray]] = {}
+    pads: dict[str, dict[str, FloatArray]] = {}
+    angles: dict[str, dict[str, dict[str, FloatArray]]] = {}
     for f in sorted((session_dir / "truth").glob("*.csv")):
         try:
             table = pd.read_csv(f)
@@ -61,13 +79,36 @@ def load_truth(session_dir: Path | None) -> Truth | None:
             finger: table[[f"{finger}.tip.{c}" for c in "xyz"]].to_numpy(dtype=float)
             for finger in doc["fingers"]
         }
-    return Truth(doc, tips)
+        pads[f.name] = {
+            finger: table[[f"{finger}.pad.{c}" for c in "xyz"]].to_numpy(dtype=float)
+            for finger in doc["fingers"]
+            if f"{finger}.pad.x" in table.columns
+        }
+        angles[f.name] = {
+            finger: {
+                c.split(".", 1)[1]: np.radians(table[c].to_numpy(dtype=float))
+                for c in table.columns
+                if c.startswith(f"{finger}.") and c.count(".") == 1 and "distance" not in c
+            }
+            for finger in doc["fingers"]
+        }
+    return Truth(doc, tips, pads, angles)
 
 
 def axis_errors(model: HandModel, truth: Truth, finger: str) -> pd.DataFrame:
-    """Per joint: angle to the true axis (deg) and distance of the fitted centre to the true axis (mm)."""
+    """Per axis: angle to the true axis (deg) and distance of the fitted centre to the true axis (mm).
+
+    Every axis of the digit, proximal first (the thumb's ``cmc``, ``cmc_abduction``,
+    ``mcp``, ``mcp_abduction`` where fitted, ``ip``), whose truth is stored under the
+    digit's ``joints`` in ``truth.json``; a finger's ``mp_abduction`` line is stored
+    elsewhere there and is not scored (the fingers' rows are ``mp``, ``pip``, ``dip``).
+    Both in the joint's parent sensor frame.
+    """
     rows = []
-    for joint in model.fingers[finger].joints:
+    fm = model.fingers[finger]
+    known = truth.document["fingers"][finger]["joints"]
+    names = [a.name for j in fm.joints for a in fm.axes(j)]
+    for joint in [n for n in names if n in known]:
         c, a = model.in_parent(finger, joint)
         ct, at = truth.joint(finger, joint)
         rows.append(
