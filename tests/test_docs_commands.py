@@ -81,6 +81,7 @@ def _sandbox_template(root: Path) -> Path:
     assert res.exit_code == 0, res.output
     if SHARED.is_dir():
         (root / "shared").symlink_to(SHARED)
+    shutil.copytree(ROOT / "tests" / "data", t / "tests" / "data")  # real data kept in-repo
     return t
 
 

@@ -931,7 +931,9 @@ def fit_joint(
         ``hinge`` when the rotation is about one axis (``s5/s6 >=``
         :data:`MIN_HINGE_CONDITIONING`), else ``ball``.
     units : {"mm", "cm", "m", "in"}
-        Length unit of the positions; every result is in the same unit.
+        Length unit of the positions; every result is in the same unit. Checked: the
+        joint centre must lie 10 mm to 2 m from the farther segment origin
+        (:data:`.plausibility.JOINT_REACH_MM`).
     method : {"sara", "robust", "tang2018"}
         Hinge estimator: SARA axis and SCoRE centre over all frames, the same after the
         outlier rules (cycles used when found), or the line through per-cycle centres
@@ -951,8 +953,10 @@ def fit_joint(
     FingerfitError
         One line naming the cause: malformed input, fewer than ten valid frames, too
         small a range of motion, pure translation, a wrong quaternion order or handedness,
+        implausible units (a :class:`.plausibility.PlausibilityError`, field ``units``),
         no common centre of rotation, a motion the requested kind cannot describe (not a
-        hinge; one axis only for ``two_axis`` or ``ball``), ``tang2018`` without cycles.
+        hinge; one axis only for ``two_axis`` or ``ball``), ``tang2018`` without cycles,
+        ``robust`` keeping frames that span less than :data:`MIN_ROM_DEG`.
     """
     if kind not in KINDS:
         raise FingerfitError(f"unknown kind '{kind}' (have: {', '.join(KINDS)})", field="kind")
