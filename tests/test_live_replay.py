@@ -220,3 +220,41 @@ def test_hold_and_tips_in_the_hand_frame() -> None:
     # Before any value has been seen, nothing to hold: NaN stays.
     first = hold(tracker.tips[3:5], np.full(tracker.tips.shape[1], np.nan))
     assert np.isnan(first).all()
+
+
+def _stderr_on_a_terminal(args: list[str]) -> str:
+    """Run ``fingerfit ARGS`` with stderr on a pseudo-terminal; return what it showed."""
+    import pty
+    import select
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(
+        [FINGERFIT, *args], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=slave
+    )
+    os.close(slave)
+    data = b""
+    t_end = time.monotonic() + DEADLINE
+    while time.monotonic() < t_end:
+        ready, _, _ = select.select([master], [], [], 0.2)
+        if ready:
+            try:
+                chunk = os.read(master, 4096)
+            except OSError:  # the child closed the terminal
+                break
+            if not chunk:
+                break
+            data += chunk
+        elif proc.poll() is not None:
+            break
+    os.close(master)
+    proc.communicate(timeout=DEADLINE)
+    return data.decode(errors="replace")
+
+
+def test_status_line_on_a_terminal_unless_quiet(tmp_path: Path) -> None:
+    _, model_path = fitted()
+    csv = write_recording(tmp_path / "rec.csv", 480)
+    args = ["stream", str(model_path), "--source", f"replay:{csv}", "--duration", "1.2"]
+    shown = _stderr_on_a_terminal(args)
+    assert "frames/s" in shown and "latency" in shown and "lost 0" in shown
+    assert "frames/s" not in _stderr_on_a_terminal([*args, "--quiet"])

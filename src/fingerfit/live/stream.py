@@ -185,11 +185,13 @@ class Summary:
         Frames the source lost (device frame-count gaps).
     invalid : int
         Frames with a missing sensor (values held).
-    latency : ndarray
-        Per frame, arrival to the moment every output had it (s).
-    compute : ndarray
-        Per block, seconds in kinematics (the block sizes in ``sizes``).
-    sizes : ndarray
+    latency : list of ndarray
+        Per block, per frame: arrival to the moment every network output had it (s);
+        :meth:`latency_ms` joins them.
+    compute, sizes : list
+        Seconds in kinematics per block, and the block sizes (frames).
+    window : list of ndarray
+        Latencies since the status line last read them.
     seconds : float
         Wall time from the first frame's arrival to the end.
     interrupted : bool
@@ -204,6 +206,21 @@ class Summary:
     sizes: list = field(default_factory=list)
     seconds: float = 0.0
     interrupted: bool = False
+    window: list = field(default_factory=list)
+
+    def add(self, latency: FloatArray, compute: float, size: int) -> None:
+        """Record one block; lists are merged into one array now and then (a long
+        stream keeps 8 bytes per frame, not a Python object)."""
+        self.latency.append(latency)
+        self.window.append(latency)
+        self.compute.append(compute)
+        self.sizes.append(size)
+        if len(self.window) > 4096:  # no status line reads it
+            del self.window[:-64]
+        if len(self.latency) >= 4096:
+            self.latency = [np.concatenate(self.latency)]
+            self.compute = [np.concatenate([np.atleast_1d(c) for c in self.compute])]
+            self.sizes = [np.concatenate([np.atleast_1d(c) for c in self.sizes])]
 
     def latency_ms(self) -> FloatArray:
         return 1e3 * (np.concatenate(self.latency) if self.latency else np.zeros(0))
@@ -260,8 +277,7 @@ class Streamer:
         """Compute and send one block; update the summary."""
         t = time.perf_counter()
         kin = compute_kinematics(self.model, block.recording, self.variants)
-        self.summary.compute.append(time.perf_counter() - t)
-        self.summary.sizes.append(block.recording.n_frames)
+        compute = time.perf_counter() - t
         if self.channels is None:
             self.channels = channels_of(self.model, kin)
         v = block_values(kin, self.channels, block.recording, self.sensors, self.tips_frame)
@@ -284,7 +300,7 @@ class Streamer:
         if self.record is not None:  # after the network outputs: not on the latency path
             self.record.push(kinematics_table(kin, units=self.record_units))
         s = self.summary
-        s.latency.append(done - block.arrival)
+        s.add(done - block.arrival, compute, block.recording.n_frames)
         s.frames += block.recording.n_frames
         s.lost += block.lost
         s.invalid += int((v.valid == 0).sum())
@@ -312,7 +328,6 @@ class StatusLine:
         self.enabled = enabled and sys.stderr.isatty()
         self._t = time.monotonic()
         self._frames = 0
-        self._lat = 0
 
     def update(self, s: Summary, force: bool = False) -> None:
         if not self.enabled:
@@ -321,14 +336,14 @@ class StatusLine:
         if now - self._t < STATUS_PERIOD and not force:
             return
         rate = (s.frames - self._frames) / max(now - self._t, 1e-9)
-        recent = s.latency[self._lat :]
-        lat = 1e3 * np.concatenate(recent) if recent else np.zeros(1)
+        lat = 1e3 * np.concatenate(s.window) if s.window else np.zeros(1)
+        s.window.clear()
         sys.stderr.write(
             f"\r{rate:6.1f} frames/s  latency {np.median(lat):5.2f} ms (max {lat.max():5.2f})"
             f"  lost {s.lost}  held {s.invalid}  sent {s.frames}\x1b[K"
         )
         sys.stderr.flush()
-        self._t, self._frames, self._lat = now, s.frames, len(s.latency)
+        self._t, self._frames = now, s.frames
 
     def clear(self) -> None:
         if self.enabled:
@@ -398,6 +413,7 @@ def run(
         ok = False
         raise
     finally:
+        line.update(s, force=True)  # the final figures, at least once
         line.clear()
         source.close()
         streamer.close(ok)
