@@ -38,12 +38,16 @@ its point nearest the other line; the signed offset is ``(c_abd - c_flex) . n`` 
 **Uncertainty.** Delete-one-cluster jackknife over ``groups`` (default
 ``DEFAULT_BLOCKS`` contiguous blocks of frames): the whole fit (directions from the full
 solution, angles, points) is repeated without each cluster; a systematic error repeated
-within a cluster counts once.
+within a cluster counts once, one shared by every cluster (the tracker's distortion field,
+skin sliding that follows the angles) is not seen.
 
-**Refusals** (:class:`fingerfit.errors.FingerfitError`, one line naming the axis): a motion
-whose rotations span one direction only (a hinge, or both axes turning in a fixed ratio)
-cannot tell two axes apart, and an axis whose fitted angle spans less than
-``MIN_RANGE_DEG`` is not determined (see the constants).
+**Refusals** (:class:`fingerfit.errors.FingerfitError`, one line): a motion that leaves
+less than ``MIN_OFF_HINGE_DEG`` off its best hinge (a hinge, or both axes turning in a
+fixed ratio) cannot tell two axes apart; an axis whose fitted angle spans less than
+``MIN_RANGE_DEG`` is not determined (see the constants); with both guesses, a fit whose
+proximal axis is the other one than ``order`` says is refused. The missing axis is named
+only when the guesses tell which it is: when one axis hardly turns, the data cannot say
+which of the two is proximal, so ``order`` alone would name it at random.
 """
 
 from __future__ import annotations
@@ -70,17 +74,17 @@ ORDERS: tuple[str, ...] = ("flexion_first", "abduction_first")
 # times the Polhemus Liberty's orientation error (0.15 deg RMS, the simulator's distortion
 # field), and the lines' offset is seen through rotations of 10 deg = 0.17 rad, i.e. a
 # 5 mm offset moves the child by about 0.9 mm, seven times the tracker's 0.12 mm noise.
-# Below it the fitted axes follow the tracker's errors; thumb circumduction and opposition
-# span 40-80 deg (flexion) and 30-50 deg (ab/adduction).
+# Below it the fitted axes follow the tracker's errors; the active CMC range in vivo is about
+# 76 deg (flexion) and 43 deg (ab/adduction; Chang & Pollard 2008).
 MIN_RANGE_DEG = 10.0
 # Before any fit, the rotation off the best hinge axis must span at least this much (5th-95th
 # percentile, deg): a second axis turned by MIN_RANGE_DEG at 60-90 deg from the first leaves
 # 8.7-10 deg, so half of MIN_RANGE_DEG refuses only motions that MIN_RANGE_DEG would refuse
 # after the fit, and keeps the fit away from a hinge's data.
-MIN_PLANE_SPREAD_DEG = 0.5 * MIN_RANGE_DEG
+MIN_OFF_HINGE_DEG = 0.5 * MIN_RANGE_DEG
 # The search keeps the two axes at least this far apart: below it the two-axis angles are
 # ill-conditioned (their errors grow as 1 / sin of the angle between the axes); saddle
-# joints' axes are 40-90 deg apart (thumb CMC about 80 deg: Hollister 1992, MyoHand 81 deg).
+# joints' axes are far from parallel (MyoHand's thumb CMC axes are 81 deg apart).
 MIN_AXIS_ANGLE_DEG = 20.0
 GRID_STEP_DEG = 9.0  # coarse search step over the directions of the plane
 GRID_FRAMES = 150  # the coarse search uses at most this many frames (evenly strided)
@@ -402,7 +406,7 @@ def fit_saddle(
     q = rotation @ reference_rotation.T
 
     hinge, spread = _off_hinge_spread(q, w)
-    if spread < MIN_PLANE_SPREAD_DEG:
+    if spread < MIN_OFF_HINGE_DEG:
         _refuse_one_axis(hinge, spread, fg, ag)
     plane = _plane(q, w)
 
@@ -515,7 +519,7 @@ def _refuse_one_axis(
 ) -> None:
     """Raise the refusal of a motion whose rotations span one direction; it names the
     missing axis when the guesses tell which (the excited direction is nearer the other)."""
-    need = f"need {MIN_PLANE_SPREAD_DEG:.0f} deg"
+    need = f"need {MIN_OFF_HINGE_DEG:.0f} deg"
     if fg is not None and ag is not None:
         missing = "abduction" if _line_angle(excited, fg) <= _line_angle(excited, ag) else "flexion"
         raise FingerfitError(
