@@ -174,10 +174,8 @@ def stream(
     streamer = None
     try:
         lsl_out = ros_out = bag_out = rec_out = None
+        ch = channels_of(model, compute_kinematics(model, empty_recording(sensors), ("user_axis",)))
         if lsl:
-            ch = channels_of(
-                model, compute_kinematics(model, empty_recording(sensors), ("user_axis",))
-            )
             lsl_out = LslOutput(lsl_name, ch.angle_labels, ch.tip_labels, nominal, tips_frame)
         if ros2 is not None:
             ros_out = Ros2Output(ros2, names)
@@ -193,6 +191,7 @@ def stream(
             record=rec_out,
             record_units=units,
             tips_frame=tips_frame,
+            channels=ch,
         )
     except BaseException:
         the_source.close()

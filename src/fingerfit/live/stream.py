@@ -240,6 +240,8 @@ class Streamer:
         Units of the fingertips in the angles CSV (as ``fingerfit angles``).
     tips_frame : {"tracker", "hand"}
         Frame of the LSL fingertips.
+    channels : Channels, optional
+        The streamed names (default: from the model); the LSL outlets must use the same.
     """
 
     def __init__(
@@ -252,6 +254,7 @@ class Streamer:
         record: RecordOutput | None = None,
         record_units: str = "mm",
         tips_frame: str = "tracker",
+        channels: Channels | None = None,
     ) -> None:
         if tips_frame not in ("tracker", "hand"):
             raise FingerfitError("must be tracker or hand", field="--tips-frame")
@@ -261,7 +264,11 @@ class Streamer:
         self.tips_frame = tips_frame
         self.sensors = model_sensors(model)
         self.variants = ("user_axis", "orthogonal") if record is not None else ("user_axis",)
-        self.channels: Channels | None = None
+        # Names from a probe of no frames; values are then taken by name from every
+        # block, so the channel order is fixed for the whole stream.
+        self.channels = channels or channels_of(
+            model, compute_kinematics(model, empty_recording(self.sensors), ("user_axis",))
+        )
         self.wall_offset = time.time() - time.monotonic()
         self.summary = Summary()
         self._last: dict[str, FloatArray] = {}
@@ -278,8 +285,6 @@ class Streamer:
         t = time.perf_counter()
         kin = compute_kinematics(self.model, block.recording, self.variants)
         compute = time.perf_counter() - t
-        if self.channels is None:
-            self.channels = channels_of(self.model, kin)
         v = block_values(kin, self.channels, block.recording, self.sensors, self.tips_frame)
         held = {}
         for key in ("angles", "tips", "joints"):
