@@ -91,20 +91,31 @@ def csv_batches(
     FingerfitError
         The file cannot be read.
     """
-    pa, pacsv = _arrow()
-    wanted = list(names) if use is None else list(use)
-    types = {
-        n: (pa.dictionary(pa.int32(), pa.string()) if n in text else pa.float64()) for n in names
-    }
-    read_opts = pacsv.ReadOptions(column_names=list(names), block_size=1 << 20, use_threads=True)
-    parse_opts = pacsv.ParseOptions(quote_char=False, ignore_empty_lines=True)
-    convert_opts = pacsv.ConvertOptions(
-        column_types=types,
-        include_columns=wanted,
-        null_values=[""],
-        strings_can_be_null=False,
-        quoted_strings_can_be_null=False,
-    )
+    parse = block_parser(names, text=text, use=use)
+    first_row = 0
+    for buf, cut in line_blocks(path, skip_header=True, chunk_bytes=chunk_bytes):
+        if buf.find(b"\r", 0, cut) >= 0 and buf.count(b"\r", 0, cut) != buf.count(b"\r\n", 0, cut):
+            raise NotPlain("carriage return inside a line")
+        n_rows, cols = parse(memoryview(buf)[:cut])
+        # Arrow skips empty lines; the reference parser must judge them.
+        if n_rows != buf.count(b"\n", 0, cut) + (buf[cut - 1 : cut] != b"\n"):
+            raise NotPlain("empty line")
+        yield first_row, cut, cols
+        first_row += n_rows
+
+
+def line_blocks(
+    path: Path, *, skip_header: bool = False, chunk_bytes: int = CHUNK_BYTES
+) -> Iterator[tuple[bytearray, int]]:
+    """The file in blocks of whole lines (the last may lack its line end), read into one
+    reused buffer: yields ``(buffer, n)``, the block being ``buffer[:n]``, valid only
+    until the next block is requested.
+
+    Raises
+    ------
+    FingerfitError
+        The file cannot be read.
+    """
     buf = bytearray(chunk_bytes)
     view = memoryview(buf)
     try:
@@ -112,9 +123,9 @@ def csv_batches(
     except OSError as exc:
         raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
     with fh:
-        fh.readline()  # the header, checked by the caller
+        if skip_header:
+            fh.readline()
         carry = 0
-        first_row = 0
         while True:
             if carry == len(buf):  # a line longer than the buffer: a larger buffer
                 bigger = bytearray(2 * len(buf))
@@ -122,59 +133,80 @@ def csv_batches(
                 buf, view = bigger, memoryview(bigger)
             n = fh.readinto(view[carry:])
             end = carry + n
-            if n == 0:
-                cut = end
-            else:
-                cut = buf.rfind(b"\n", 0, end) + 1
-                if cut == 0:
-                    carry = end
-                    continue
+            cut = end if n == 0 else buf.rfind(b"\n", 0, end) + 1
             if cut == 0:
-                break
-            if buf.find(b"\r", 0, cut) >= 0 and buf.count(b"\r", 0, cut) != buf.count(
-                b"\r\n", 0, cut
-            ):
-                raise NotPlain("carriage return inside a line")
-            try:
-                table = pacsv.read_csv(
-                    pa.py_buffer(view[:cut]),
-                    read_options=read_opts,
-                    parse_options=parse_opts,
-                    convert_options=convert_opts,
-                )
-            except (pa.ArrowException, ValueError) as exc:
-                raise NotPlain(str(exc)) from None
-            # Arrow skips empty lines; the reference parser must judge them.
-            lines = buf.count(b"\n", 0, cut) + (buf[cut - 1 : cut] != b"\n")
-            if table.num_rows != lines:
-                raise NotPlain("empty line")
-            cols: dict[str, np.ndarray] = {}
-            for name in wanted:
-                col = table.column(name)
-                if name in text:
-                    col = col.unify_dictionaries().combine_chunks()
-                    values = col.dictionary.to_pylist()
-                    if any(_has_control(v) for v in values):
-                        raise NotPlain("control character in a text field")
-                    cols[name] = (
-                        col.indices.to_numpy(zero_copy_only=False).astype(np.int32),
-                        values,
-                    )
-                else:
-                    v = col.to_numpy()
-                    if v.dtype != np.float64:
-                        v = v.astype(np.float64)
-                    if np.count_nonzero(~np.isfinite(v)) != col.null_count:
-                        raise NotPlain("NaN or infinity written out")
-                    cols[name] = v
-            yield first_row, cut, cols
-            first_row += table.num_rows
-            del table
+                if n == 0:
+                    return
+                carry = end
+                continue
+            yield buf, cut
             rest = end - cut
             buf[:rest] = buf[cut:end]
             carry = rest
             if n == 0:
-                break
+                return
+
+
+def block_parser(
+    names: Sequence[str],
+    *,
+    text: Sequence[str] = (),
+    use: Sequence[str] | None = None,
+    delimiter: str = ",",
+) -> Callable[[object], tuple[int, dict]]:
+    """A function parsing one block of lines (bytes-like) into ``(n_rows, columns)``.
+
+    Columns as in :func:`csv_batches`; empty lines are skipped; raises :class:`NotPlain`
+    for a parse error, a NaN or infinity written out in a float column, or a control
+    character in a text column.
+    """
+    pa, pacsv = _arrow()
+    wanted = list(names) if use is None else list(use)
+    types = {
+        n: (pa.dictionary(pa.int32(), pa.string()) if n in text else pa.float64()) for n in names
+    }
+    read_opts = pacsv.ReadOptions(column_names=list(names), block_size=1 << 20, use_threads=True)
+    parse_opts = pacsv.ParseOptions(delimiter=delimiter, quote_char=False, ignore_empty_lines=True)
+    convert_opts = pacsv.ConvertOptions(
+        column_types=types,
+        include_columns=wanted,
+        null_values=[""],
+        strings_can_be_null=False,
+        quoted_strings_can_be_null=False,
+    )
+
+    def parse(block: object) -> tuple[int, dict]:
+        try:
+            table = pacsv.read_csv(
+                pa.py_buffer(block),
+                read_options=read_opts,
+                parse_options=parse_opts,
+                convert_options=convert_opts,
+            )
+        except (pa.ArrowException, ValueError) as exc:
+            raise NotPlain(str(exc)) from None
+        cols: dict[str, object] = {}
+        for name in wanted:
+            col = table.column(name)
+            if name in text:
+                col = col.unify_dictionaries().combine_chunks()
+                values = col.dictionary.to_pylist()
+                if any(_has_control(v) for v in values):
+                    raise NotPlain("control character in a text field")
+                cols[name] = (
+                    col.indices.to_numpy(zero_copy_only=False).astype(np.int32),
+                    values,
+                )
+            else:
+                v = col.to_numpy()
+                if v.dtype != np.float64:
+                    v = v.astype(np.float64)
+                if np.count_nonzero(~np.isfinite(v)) != col.null_count:
+                    raise NotPlain("NaN or infinity written out")
+                cols[name] = v
+        return table.num_rows, cols
+
+    return parse
 
 
 def _has_control(s: str) -> bool:

@@ -259,6 +259,16 @@ def parse_liberty_ascii(
         fields (truncated or garbled record), a non-numeric value, a bad station.
     """
     items_t = parse_items(items)
+    if data is None:
+        from .fastcsv import NotPlain
+
+        try:
+            recs = _parse_ascii_fast(Path(path), items_t)
+        except NotPlain:
+            pass
+        else:
+            _check_records(recs, path)
+            return recs
     raw = _read_bytes(path) if data is None else data
     b = np.frombuffer(raw, dtype=np.uint8)
     ws = (b == 9) | (b == 10) | (b == 13)
@@ -339,6 +349,128 @@ def parse_liberty_ascii(
     recs = LibertyRecords(items_t, station, _split_values(nums, items_t), indicator, lines)
     _check_records(recs, path)
     return recs
+
+
+#: Bytes of an ASCII stream converted per batch (the conversion's temporaries are a few
+#: times this).
+_ASCII_CHUNK = 1 << 22
+_STATION_TOKEN = re.compile(r"(\d{1,2})([^\d\s]?)")
+
+
+def _ascii_to_csv(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One block of whitespace-separated lines as comma-separated lines.
+
+    Parameters
+    ----------
+    b : ndarray of uint8, shape (n_bytes,)
+        Whole lines of printable ASCII (checked by the caller).
+
+    Returns
+    -------
+    csv : ndarray of uint8
+        Tokens joined by single commas, one line per input line (blank lines empty).
+    record_lines : ndarray of int
+        0-based line (within the block) of each non-blank line, in order.
+    """
+    n = b.size
+    cls = _BYTE_CLASS[b]  # 0 token, 1 space (blank, tab, CR), 2 newline
+    tok = cls == 0
+    kept = cls != 1
+    starts = tok.copy()
+    starts[1:] &= ~tok[:-1]
+    del tok
+    # token starts and newlines in order: a token right after a newline (or first of
+    # the block) begins its line, any other token gets a comma before it
+    events = np.flatnonzero(starts | (cls == 2))
+    del starts, cls
+    is_nl = b[events] == 10
+    after_nl = np.concatenate([[True], is_nl[:-1]])
+    comma = events[~is_nl & ~after_nl]
+    heads = events[~is_nl & after_nl]
+    nl_at = events[is_nl]
+    del events, is_nl, after_nl
+    w = kept.view(np.uint8).astype(np.int32)
+    w[comma] += 1
+    end = np.cumsum(w)
+    del w
+    out = np.empty(int(end[-1]) if n else 0, dtype=np.uint8)
+    k = np.flatnonzero(kept)
+    del kept
+    out[end[k] - 1] = b[k]
+    out[end[comma] - 2] = 44
+    if heads.size == nl_at.size + (1 if n and b[-1] != 10 else 0):
+        return out, np.arange(heads.size)  # no blank line
+    return out, np.searchsorted(nl_at, heads)
+
+
+_BYTE_CLASS = np.zeros(256, dtype=np.uint8)
+_BYTE_CLASS[[9, 13, 32]] = 1
+_BYTE_CLASS[10] = 2
+
+
+def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
+    """Whole ASCII streams of plain records, in batches into preallocated arrays.
+
+    Raises :class:`~fingerfit.io.fastcsv.NotPlain` for anything :func:`parse_liberty_ascii`
+    must judge line by line: a byte that is not printable ASCII, a field count that
+    differs, a token that is not a number or station, or no records at all.
+    """
+    from .fastcsv import NotPlain, RowArrays, block_parser, estimate_rows, line_blocks
+
+    width = sum(ITEM_SIZE[i] for i in items)
+    names = [f"c{j}" for j in range(width + 1)]
+    parse = block_parser(names, text=("c0",))
+    rows: RowArrays | None = None
+    station = np.empty(0, dtype=np.int64)
+    indicator = np.empty(0, dtype="<U1")
+    where = np.empty(0, dtype=np.int64)
+    line0 = 0
+    glued = re.compile(rb"(\.\d+)(?=[+-])")
+    for buf, cut in line_blocks(path, chunk_bytes=_ASCII_CHUNK):
+        b = np.frombuffer(buf, dtype=np.uint8, count=cut)
+        if np.any(((b < 32) & (b != 9) & (b != 10) & (b != 13)) | (b > 126)):
+            raise NotPlain("not printable ASCII")
+        sign = (b[1:] == 43) | (b[1:] == 45)
+        if np.any(sign & (b[:-1] >= 48) & (b[:-1] <= 57)):  # numbers glued by a sign
+            b = np.frombuffer(glued.sub(rb"\1 ", bytes(b)), dtype=np.uint8)
+        text, rec_line = _ascii_to_csv(b)
+        n_lines = int(np.count_nonzero(b == 10)) + (1 if b.size and b[-1] != 10 else 0)
+        del b
+        n, cols = parse(memoryview(text))
+        if n != rec_line.size:
+            raise NotPlain("field count")
+        if rows is None:
+            cap = estimate_rows(path, n, cut)
+            rows = RowArrays(cap, width)
+            station = np.empty(cap, dtype=np.int64)
+            indicator = np.empty(cap, dtype="<U1")
+            where = np.empty(cap, dtype=np.int64)
+        at = rows.n
+        block = rows.reserve(n)
+        for j in range(width):
+            block[:, j] = cols[f"c{j + 1}"]
+        if station.size < rows.n:
+            station = np.resize(station, rows.data.shape[0])
+            indicator = np.resize(indicator, rows.data.shape[0])
+            where = np.resize(where, rows.data.shape[0])
+        codes, tokens = cols["c0"]
+        parsed = [_STATION_TOKEN.fullmatch(t) for t in tokens]
+        if any(m is None for m in parsed):
+            raise NotPlain("station token")
+        station[at : at + n] = np.array([int(m.group(1)) for m in parsed], dtype=np.int64)[codes]
+        indicator[at : at + n] = np.array([m.group(2) for m in parsed], dtype="<U1")[codes]
+        where[at : at + n] = line0 + rec_line + 1
+        line0 += n_lines
+    if rows is None or rows.n == 0:
+        raise NotPlain("no records")
+    n = rows.n
+    nums = rows.array()
+    values, k = {}, 0
+    for item in items:  # views into one array (no copy)
+        size = ITEM_SIZE[item]
+        values[item] = nums[:, k] if size == 1 else nums[:, k : k + size]
+        k += size
+    return LibertyRecords(items, station[:n], values, indicator[:n], where[:n])
 
 
 def _field_name(items: Sequence[str], column: int) -> str:
