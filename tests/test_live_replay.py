@@ -20,6 +20,7 @@ import pandas as pd
 import pytest
 
 from fingerfit.export.geometry import joint_names
+from fingerfit.export.trajectory import trajectory_table
 from fingerfit.kinematics import compute_kinematics, kinematics_table
 from fingerfit.live.stream import block_values, channels_of, hold, model_sensors
 from fingerfit.model import load_model
@@ -215,6 +216,8 @@ def test_hold_and_tips_in_the_hand_frame() -> None:
     np.testing.assert_array_equal(tracker.valid, np.r_[1, 1, 1, 0, 0, np.ones(25)])
     table = kinematics_table(kin)
     np.testing.assert_array_equal(tracker.angles, table[ch.angle_labels].to_numpy())
+    traj = trajectory_table(kin, model)  # what `angles --urdf-names` writes (rad)
+    np.testing.assert_array_equal(tracker.joints, traj[ch.joint_names].to_numpy())
     held = hold(tracker.angles, np.full(tracker.angles.shape[1], np.nan))
     np.testing.assert_array_equal(held, table[ch.angle_labels].ffill().to_numpy())
     # Before any value has been seen, nothing to hold: NaN stays.

@@ -145,7 +145,12 @@ def block_values(
     for k, name in enumerate(channels.joint_names):
         d, kind = name.split("_", 1)
         a = motions[d].angles
-        joints[:, k] = a[kind] if kind in a else np.where(np.isfinite(a["mp"]), 0.0, np.nan)
+        if kind in a:
+            joints[:, k] = a[kind]
+        else:  # an ab/adduction not computed: 0 where the joint's flexion exists
+            base = kind.removesuffix("_abduction")
+            flexion = a[base] if base in a else next(iter(a.values()))
+            joints[:, k] = np.where(np.isfinite(flexion), 0.0, np.nan)
     valid = np.ones(n, dtype=bool)
     for s in sensors:
         valid &= recording.poses[s].valid
