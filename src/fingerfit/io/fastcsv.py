@@ -56,7 +56,7 @@ def csv_batches(
     *,
     text: Sequence[str] = (),
     use: Sequence[str] | None = None,
-    chunk_bytes: int = CHUNK_BYTES,
+    chunk_bytes: int | None = None,
 ) -> Iterator[tuple[int, int, dict]]:
     """Parse a comma-separated file after its header line, in batches of rows.
 
@@ -70,8 +70,8 @@ def csv_batches(
         empty field giving NaN.
     use : sequence of str, optional
         The columns to convert and return (default all); the others are only counted.
-    chunk_bytes : int
-        Bytes of file per batch.
+    chunk_bytes : int, optional
+        Bytes of file per batch (default :data:`CHUNK_BYTES`).
 
     Yields
     ------
@@ -93,9 +93,12 @@ def csv_batches(
     """
     parse = block_parser(names, text=text, use=use)
     first_row = 0
-    for buf, cut in line_blocks(path, skip_header=True, chunk_bytes=chunk_bytes):
+    chunk = CHUNK_BYTES if chunk_bytes is None else chunk_bytes
+    for buf, cut in line_blocks(path, skip_header=True, chunk_bytes=chunk):
         if buf.find(b"\r", 0, cut) >= 0 and buf.count(b"\r", 0, cut) != buf.count(b"\r\n", 0, cut):
             raise NotPlain("carriage return inside a line")
+        if buf.startswith(b"\xef\xbb\xbf"):  # Arrow would skip a byte-order mark here
+            raise NotPlain("byte-order mark")
         n_rows, cols = parse(memoryview(buf)[:cut])
         # Arrow skips empty lines; the reference parser must judge them.
         if n_rows != buf.count(b"\n", 0, cut) + (buf[cut - 1 : cut] != b"\n"):
