@@ -1,4 +1,4 @@
-"""Speed benchmark: fit time per finger and angles + fingertip throughput.
+"""Speed benchmark: fit time per finger, angles + fingertip throughput, readers and writers.
 
 Run with ``make bench`` (``python bench/speed.py --json bench/speed.json``).
 Single-threaded BLAS so "per core" figures mean one core. Throughput is
@@ -76,6 +76,15 @@ def main() -> None:
         help="a kinematics.py to time beside the current one in the same run "
         "(e.g. from `git worktree add /tmp/kbefore <commit>`)",
     )
+    ap.add_argument(
+        "--io-rows", type=int, default=2_000_000, help="rows per reader/writer file; 0: skip"
+    )
+    ap.add_argument(
+        "--io-before",
+        type=Path,
+        default=None,
+        help="the src folder of older code, to time its readers and writers in the same run",
+    )
     args = ap.parse_args()
 
     sim = simulate_subject(SimConfig(), 0)
@@ -140,6 +149,11 @@ def main() -> None:
 {fit_rows}
 | NumPy copy of the input ({n:,} frames, {a["input_bytes"] / 1e6:.0f} MB) | {a["copy_frames_per_s"] / 1e6:.1f} M frames/s |
 {chr(10).join(angle_rows)}""")
+    if args.io_rows:
+        import io_speed  # bench/io_speed.py, beside this file
+
+        results["io"] = io_speed.run(args.io_rows, args.io_before)
+        print(io_speed.table(results["io"]))
     if args.study_subjects:
         import study_speed  # bench/study_speed.py, beside this file
 

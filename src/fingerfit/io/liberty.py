@@ -373,39 +373,35 @@ def _ascii_to_csv(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         0-based line (within the block) of each non-blank line, in order.
     """
     n = b.size
-    cls = _BYTE_CLASS[b]  # 0 token, 1 space (blank, tab, CR), 2 newline
-    tok = cls == 0
-    kept = cls != 1
-    starts = tok.copy()
-    starts[1:] &= ~tok[:-1]
-    del tok
+    nl = b == 10
+    tok = ~((b == 32) | (b == 9) | (b == 13) | nl)
     # token starts and newlines in order: a token right after a newline (or first of
     # the block) begins its line, any other token gets a comma before it
-    events = np.flatnonzero(starts | (cls == 2))
-    del starts, cls
-    is_nl = b[events] == 10
+    edge = np.empty(n, dtype=bool)
+    edge[:1] = tok[:1]
+    np.greater(tok[1:], tok[:-1], out=edge[1:])  # token starts
+    events = np.flatnonzero(edge | nl)
+    np.less(tok[1:], tok[:-1], out=edge[1:])  # token ends (exclusive)
+    edge[:1] = False
+    ends = np.flatnonzero(edge)
+    if n and tok[-1]:
+        ends = np.append(ends, n)
+    del edge
+    is_nl = nl[events]
     after_nl = np.concatenate([[True], is_nl[:-1]])
-    comma = events[~is_nl & ~after_nl]
-    heads = events[~is_nl & after_nl]
+    starts = events[~is_nl]
+    first = after_nl[~is_nl]
     nl_at = events[is_nl]
-    del events, is_nl, after_nl
-    w = kept.view(np.uint8).astype(np.int32)
-    w[comma] += 1
-    end = np.cumsum(w)
-    del w
-    out = np.empty(int(end[-1]) if n else 0, dtype=np.uint8)
-    k = np.flatnonzero(kept)
-    del kept
-    out[end[k] - 1] = b[k]
-    out[end[comma] - 2] = 44
+    # bytes kept before each token: the tokens before it and the newlines before it
+    length = ends - starts
+    kept_before = np.cumsum(length) - length
+    kept_before += np.cumsum(is_nl)[~is_nl]
+    del events, is_nl, after_nl, length
+    out = np.insert(b[tok | nl], kept_before[~first], 44)
+    heads = starts[first]
     if heads.size == nl_at.size + (1 if n and b[-1] != 10 else 0):
         return out, np.arange(heads.size)  # no blank line
     return out, np.searchsorted(nl_at, heads)
-
-
-_BYTE_CLASS = np.zeros(256, dtype=np.uint8)
-_BYTE_CLASS[[9, 13, 32]] = 1
-_BYTE_CLASS[10] = 2
 
 
 def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
