@@ -129,6 +129,7 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     ):
         info = infos[kind]
         assert info.type() == ctype and info.channel_format() == pylsl.cf_double64
+        assert info.nominal_srate() == pytest.approx(480.0, rel=1e-6)  # 240 Hz at @2
         root = ET.fromstring(info.as_xml())
         chans = root.find("desc/channels").findall("channel")
         assert [c.findtext("label") for c in chans] == [*labels, "valid"]

@@ -153,9 +153,9 @@ def stream(
         for w in caught:
             notice("warning", str(w.message))
         the_source = src.ReplaySource(rec, speed)
-        nominal = float(
-            rate or (1.0 / max(float(rec.time[1] - rec.time[0]), 1e-9) if rec.n_frames > 1 else 0.0)
-        )
+        step = float(np.nanmedian(np.diff(rec.time))) if rec.n_frames > 1 else 0.0
+        native = rate or (1.0 / step if step > 0 else 0.0)
+        nominal = float(speed * native)  # the LSL nominal rate: frames per second as sent
     elif kind == "liberty":
         port, baud = src.parse_liberty(source)
         mapping = (
