@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from .app import Quiet, app, notice, say, user_errors
+from .app import app, notice, say, user_errors
 
 
 @app.command()
@@ -21,8 +21,8 @@ def stream(
         str,
         typer.Option(
             "--source",
-            help="replay:FILE[@SPEED] (a pose CSV, SPEED times real time), "
-            "liberty:PORT[@BAUD] (a Polhemus Liberty) or lsl:NAME (an LSL MoCap stream).",
+            help="replay:FILE\\[@SPEED] (a pose CSV, SPEED times real time), "
+            "liberty:PORT\\[@BAUD] (a Polhemus Liberty) or lsl:NAME (an LSL MoCap stream).",
         ),
     ],
     lsl: Annotated[
@@ -92,7 +92,14 @@ def stream(
             "sensors), with a warning.",
         ),
     ] = False,
-    quiet: Quiet = False,
+    quiet: Annotated[
+        bool,
+        typer.Option(
+            "--quiet",
+            "-q",
+            help="No status line (there is none either when stderr is not a terminal).",
+        ),
+    ] = False,
 ) -> None:
     """Stream joint angles and fingertips of a live or replayed hand (Ctrl-C to stop).
 
