@@ -141,3 +141,44 @@ def test_report_precision_and_names(mixed) -> None:
         assert f"<th>{raw}" not in body
     assert "t000 … t120" in body  # target names explained
     assert "3D view" in body and "10 mm" in html and "triad" in html
+
+
+@pytest.fixture(scope="module")
+def whole(tmp_path_factory):
+    """One realistic thumb + index subject (truth, targets, pinches)."""
+    root = tmp_path_factory.mktemp("whole")
+    w01 = write_subject(subject("realistic", 2, ("thumb", "index")), root / "W01")
+    toml = w01 / "session.toml"
+    toml.write_text(toml.read_text().replace('subject = "S01"', 'subject = "W01"'))
+    return run_study([w01], root / "out", FitOptions())
+
+
+def test_whole_hand_figures_have_no_overlapping_labels(whole) -> None:
+    subjects = [_subject(load_session(s.session.path), FitOptions()) for s in whole.subjects]
+    keys = _check_figures(subjects, whole.tables)
+    assert {"thumb", "pinch", "fig10", "truth"} <= keys
+
+
+def test_whole_hand_report_has_thumb_pinch_and_3d_view(whole) -> None:
+    import json
+
+    html = whole.report.read_text()
+    for anchor in ("id=thumb", "id=wholehand", "id=pinch", "id=view3d"):
+        assert anchor in html, anchor
+    body = re.sub(r"<script.*?</script>", "", html, flags=re.S)
+    body = re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "", body)
+    for text in ("CMC ab/adduction", "tip-distance error", "pad gap", "thumb tip error"):
+        assert text in body, text
+    for c in re.findall(r"<td class=num>([^<]*)</td>", body):
+        assert re.fullmatch(r"-?\d+(\.\d)?( \(\d+\.\d\))?|—( \(—\))?|\d+\.\d \(—\)|-?\d+ %", c), c
+    for raw in ("user_axis", "tip_distance_error_mm", "pad_gap_mm", "axis_offset_mm"):
+        assert f"<th>{raw}" not in body
+    data = json.loads(re.search(r"id='model-data'>(.*?)</script>", html, flags=re.S).group(1))
+    digits = {f["name"]: f for f in data["W01"]["fingers"]}
+    assert set(digits) == {"thumb", "index"}
+    thumb = digits["thumb"]
+    assert len(thumb["centres"]) == 3 and len(thumb["second_axes"]) >= 1  # CMC ab/adduction
+    assert thumb["pad"] is not None and digits["index"]["pad"] is not None
+    assert "index proximal-phalanx frame" in data["W01"]["frame"]
+    assert "f.pad" in html  # the viewer draws the pads
+    assert {"thumb", "pinch"} <= set(whole.summary)

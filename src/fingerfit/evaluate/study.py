@@ -1012,6 +1012,12 @@ def _trajectory_figure(s: SubjectResult) -> tuple[str, Callable[[], Figure]]:
     )
 
 
+def _short_recording(names: pd.Series) -> pd.Series:
+    """Recording names short enough to stand side by side under a figure's axis:
+    ``thumb_circumduction.csv`` -> ``circumduction``."""
+    return names.str.removesuffix(".csv").str.removeprefix("thumb_")
+
+
 def figure_builders(
     subjects: list[SubjectResult], tables: dict[str, pd.DataFrame]
 ) -> dict[str, tuple[str, Callable[[], Figure]]]:
@@ -1057,6 +1063,8 @@ def figure_builders(
             .pivot_table(index=["subject", "recording"], columns="variant", values="mean_mm")
             .reset_index()
         )
+        if (tips["finger"] == "thumb").any():  # the thumb's recordings too: short names
+            wide["recording"] = _short_recording(wide["recording"])
         out["truth"] = (
             "truth_fingertip.png",
             lambda: figures.make_paired_boxes(
@@ -1073,6 +1081,7 @@ def figure_builders(
             .pivot_table(index=["subject", "recording"], columns="variant", values="mean_mm")
             .reset_index()
         )
+        thumb["recording"] = _short_recording(thumb["recording"])
         out["thumb"] = (
             "thumb_tip.png",
             lambda: figures.make_paired_boxes(
