@@ -43,7 +43,7 @@ from .stats import (
     summarize,
     two_way_anova_or_skip,
 )
-from .truth import Truth, axis_errors, load_truth
+from .truth import Truth, axis_errors, check_truth_frames, load_truth
 
 PAPER = {
     "max_flexion": {"user_axis": (2.7, 1.3), "orthogonal": (5.4, 3.4), "reduction_percent": 50},
@@ -166,6 +166,8 @@ def _fit(session: Session, options: FitOptions) -> tuple[HandModel, tuple[str, .
 
 def _subject(session: Session, options: FitOptions) -> SubjectResult:
     truth = load_truth(session.path)  # a broken truth file fails before the fit
+    if truth is not None:
+        check_truth_frames(truth, session)
     model, warned = _fit(session, options)
     grasp, flex, dist = {}, [], []
     for f, fm in model.fingers.items():

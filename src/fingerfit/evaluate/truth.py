@@ -14,6 +14,7 @@ import pandas as pd
 
 from ..errors import FingerfitError
 from ..model import HandModel
+from ..session import Session
 from ..transforms import FloatArray, angle_between_axes, distance_point_to_line
 
 
@@ -120,3 +121,27 @@ def axis_errors(model: HandModel, truth: Truth, finger: str) -> pd.DataFrame:
             )
         )
     return pd.DataFrame(rows, columns=["finger", "joint", "axis_error_deg", "centre_to_axis_mm"])
+
+
+def check_truth_frames(truth: Truth, session: Session) -> None:
+    """Refuse a truth file whose rows do not match its recording's frames.
+
+    Every ``truth/<recording>.csv`` of a recording the session has must hold one row per
+    frame (the truth is compared frame by frame).
+
+    Raises
+    ------
+    FingerfitError
+        Naming the truth file, its row count and the recording's frame count.
+    """
+    frames = {rec.name: rec.n_frames for rec in session.recordings()}
+    for name, tips in truth.tips.items():
+        if name not in frames or not tips:
+            continue
+        rows = next(iter(tips.values())).shape[0]
+        if rows != frames[name]:
+            raise FingerfitError(
+                f"has {rows} rows but the recording '{name}' has {frames[name]} frames "
+                "(a truth file must hold one row per frame)",
+                path=None if session.path is None else Path(session.path) / "truth" / name,
+            )
