@@ -32,7 +32,7 @@ def _run(args, terminal: bool, monkeypatch):
 @pytest.mark.parametrize(
     "command, shown",
     [
-        (["fit", "{s}", "-o", "{t}/m.json", "--method", "tang2018"], "fitting 1 finger(s)"),
+        (["fit", "{s}", "-o", "{t}/m.json", "--method", "tang2018"], "fitting 1 digit(s)"),
         (["simulate", "{t}/sim", "--subjects", "2", "--exact"], "simulating"),
     ],
 )

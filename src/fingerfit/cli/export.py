@@ -98,7 +98,7 @@ def _export(
     _write_text(files, overwrite=overwrite)  # all files or none
     hand = robot_hand(model, variant, margin_deg)
     out.print(
-        f"{len(hand.fingers)} finger(s), {len(hand.joints)} joints ({variant} axes, limits = "
+        f"{len(hand.fingers)} digit(s), {len(hand.joints)} joints ({variant} axes, limits = "
         f"observed range of motion ± {margin_deg:g}°; metres, radians) -> "
         + ", ".join(str(p) for p in files),
         markup=False,

@@ -17,8 +17,8 @@ from .app import Quiet, app, notice, out, parse_list, progress, say, user_errors
 
 #: One line per column of the fit table (``docs/methods.md`` explains each figure).
 TABLE_LEGEND = {
-    "finger": "finger name",
-    "joint": "mp, pip, dip (flexion joints, proximal to distal)",
+    "digit": "digit name",
+    "joint": "mp, pip, dip; the thumb's cmc, mcp, ip (flexion joints, proximal to distal)",
     "cycles": "grasp cycles (movement periods) the joint was fitted from",
     "ROM° mean (min–max)": "range of motion per cycle, degrees: mean over cycles (smallest–largest)",
     "c→axis mm": "mean distance of the per-cycle centres of rotation to the fitted axis (paper Fig. 8)",
@@ -26,6 +26,9 @@ TABLE_LEGEND = {
     "rotation about the axis over rotation off it (large = one clear hinge axis)",
     "vs cycles°": "angle between the fitted axis and the cycles' own rotation axis (SVD null vectors)",
     "bone mm": "segment length from this joint's centre to the next joint's centre (dip: to the tip)",
+    "two axes": "the joint's second (ab/adduction) axis, when fitted: its angle to the flexion "
+    "axis and its line's distance from the flexion axis's line (a two-axis joint's rows of "
+    "'c→axis' and 's5/s6' are '–': it has no per-cycle centres)",
 }
 
 
@@ -36,34 +39,40 @@ def quality_table(model: HandModel) -> Table:
     """
     import numpy as np
 
+    two = sorted({f"{j.upper()}" for fm in model.fingers.values() for j in fm.second_axes})
     t = Table(
         title=f"{escape(model.subject)}: method {escape(model.method)}"
-        + (
-            ", two-axis MP"
-            if any(f.second_axes.get("mp") is not None for f in model.fingers.values())
-            else ""
-        ),
+        + (f", two-axis {', '.join(two)}" if two else ""),
         title_justify="left",
         caption="\n".join(
-            f"{k}: {v}" for k, v in TABLE_LEGEND.items() if k not in ("finger", "joint")
+            f"{k}: {v}" for k, v in TABLE_LEGEND.items() if k not in ("digit", "joint")
         ),
         caption_justify="left",
     )
     for c in TABLE_LEGEND:
-        t.add_column(c, justify="left" if c in ("finger", "joint") else "right")
+        t.add_column(c, justify="left" if c in ("digit", "joint") else "right")
     for f, fm in model.fingers.items():
         for (j, jm), length in zip(fm.joints.items(), fm.segment_lengths.values(), strict=True):
             q = jm.quality
             rom = np.array(q.rom_deg)
+            ab = fm.second_axes.get(j)
+            if ab is None:
+                two_axes = "–"
+            else:
+                n = np.cross(jm.axis, ab.axis)
+                gap = abs((ab.center - jm.center) @ n) / np.linalg.norm(n)
+                angle = np.degrees(np.arccos(np.clip(abs(jm.axis @ ab.axis), 0.0, 1.0)))
+                two_axes = f"{angle:.0f}°, {gap:.1f} mm"
             t.add_row(
                 f,
                 j,
                 str(q.cycles),
                 f"{rom.mean():.0f} ({rom.min():.0f}–{rom.max():.0f})" if rom.size else "–",
-                f"{np.mean(q.centre_distance_mm):.2f}",
-                f"{np.median(q.conditioning):.0f}",
+                f"{np.mean(q.centre_distance_mm):.2f}" if q.centre_distance_mm else "–",
+                f"{np.median(q.conditioning):.0f}" if q.conditioning else "–",
                 f"{q.null_agreement_deg:.1f}",
                 f"{length:.1f}",
+                two_axes,
             )
     return t
 
@@ -83,7 +92,10 @@ def fit(
         ),
     ] = DEFAULT_METHOD,
     fingers: Annotated[
-        str | None, typer.Option(help="Comma-separated fingers (default: all).")
+        str | None,
+        typer.Option(
+            help="Comma-separated digits: thumb, index, middle, ring, little (default: all)."
+        ),
     ] = None,
     force: Annotated[
         bool,
@@ -115,7 +127,7 @@ def fit(
         for note in (n for r in s.recordings() for n in r.notes):
             notice("note", note)
         n_fingers = len(names or s.fingers)
-        bar.update(task, advance=1, description=f"fitting {n_fingers} finger(s) ({method})")
+        bar.update(task, advance=1, description=f"fitting {n_fingers} digit(s) ({method})")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             model = fit_session(
