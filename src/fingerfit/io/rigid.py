@@ -97,7 +97,12 @@ def fit_cluster(markers: np.ndarray, shape: np.ndarray, *, min_markers: int = 3)
     sc = (w @ s) / safe
     ds = s[None, :, :] - sc[:, None, :]
     dx = xz - xc[:, None, :]
-    h = np.einsum("nm,nmi,nmj->nij", w, ds, dx)
+    with np.errstate(over="ignore", invalid="ignore"):
+        h = np.einsum("nm,nmi,nmj->nij", w, ds, dx)
+    # Garbled coordinates (huge values overflowing the products, a shape with NaN) make
+    # the cross-covariance non-finite: those frames are not fitted (NaN), never an error.
+    finite = np.isfinite(h).all(axis=(1, 2)) & np.isfinite(ds).all(axis=(1, 2))
+    h = np.where(finite[:, None, None], h, np.eye(3))
     u, sv, vt = np.linalg.svd(h)
     d = np.sign(np.linalg.det(np.matmul(vt.transpose(0, 2, 1), u.transpose(0, 2, 1))))
     d[d == 0] = 1.0
@@ -106,8 +111,10 @@ def fit_cluster(markers: np.ndarray, shape: np.ndarray, *, min_markers: int = 3)
     rot = np.matmul(vt.transpose(0, 2, 1) * fix[:, None, :], u.transpose(0, 2, 1))
     trans = xc - np.einsum("nij,nj->ni", rot, sc)
     ok = (count >= max(min_markers, 3)) & (sv[:, 1] > _COLLINEAR * np.maximum(sv[:, 0], 1e-300))
+    ok &= finite
     fitted = np.einsum("nij,mj->nmi", rot, s) + trans[:, None, :]
-    err = np.where(vis, np.sum((fitted - xz) ** 2, axis=2), 0.0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        err = np.where(vis, np.sum((fitted - xz) ** 2, axis=2), 0.0)
     resid = np.sqrt(err.sum(axis=1) / safe[:, 0])
     rot[~ok] = np.nan
     trans[~ok] = np.nan
