@@ -43,7 +43,11 @@ import pandas as pd
 
 from fingerfit import __version__
 from fingerfit.evaluate import run_study
-from fingerfit.simulate import SimConfig, simulate_cohort, write_subject
+from fingerfit.evaluate.pinch import evaluate_pinches
+from fingerfit.evaluate.truth import load_truth
+from fingerfit.kinematics import compute_kinematics
+from fingerfit.simulate import SimConfig, SimulatedSubject, simulate_cohort, write_subject
+from fingerfit.simulate.truthmodel import truth_model
 
 SEED = 2026
 AXES = ("cmc", "cmc_abduction", "mcp", "mcp_abduction", "ip")
@@ -117,6 +121,28 @@ def figures(tables: dict[str, pd.DataFrame]) -> dict:
     return {"axes": axes, "tips": tips, "pinch": pinch, "geometry": geometry, "targets": targets}
 
 
+def floor(sims: list[SimulatedSubject]) -> dict:
+    """The true model (true axes, centres, migration and sensor mountings; swing-twist
+    angles) driven by the same noisy sensors: the thumb tip error on ``test.csv`` and the
+    tip-pinch distance error no estimator can beat on these data."""
+    tips, pinch = [], []
+    for sim in sims:
+        model = truth_model(sim)
+        truth = load_truth(sim.session.path)
+        kin = compute_kinematics(model, sim.session.recording("test.csv"), fingers=["thumb"])
+        e = np.linalg.norm(
+            kin.motions["user_axis"]["thumb"].tip - truth.tips["test.csv"]["thumb"], axis=1
+        )
+        tips.append(float(np.nanmean(e)))
+        p = evaluate_pinches(model, sim.session, truth)
+        p = p[(p["kind"] == "tip_pinch") & (p["source"] == "user_axis")]
+        pinch += list(p["tip_distance_error_mm"])
+    return {
+        "thumb_tip_test_mm": _ms(pd.Series(tips)),
+        "tip_pinch_distance_error_mm": _ms(pd.Series(pinch)),
+    }
+
+
 def _f(d: dict | None, k: str = "mean") -> str:
     v = None if d is None else d.get(k)
     return "–" if v is None else f"{v:.2f}"
@@ -166,6 +192,14 @@ def markdown(res: dict, meta: dict) -> str:
             f"| {j} | {_f(v['axis_offset_mm'])} ({_f(v['true_axis_offset_mm'])}) "
             f"| {_f(v['axes_angle_deg'])} ({_f(v['true_axes_angle_deg'])}) |"
         )
+    fl = res["floor"]
+    lines += [
+        "",
+        f"True model driven by the same sensors (floor): thumb tip on test.csv "
+        f"{_f(fl['thumb_tip_test_mm'])} ({_f(fl['thumb_tip_test_mm'], 'sd')}) mm; "
+        f"tip-pinch distance error {_f(fl['tip_pinch_distance_error_mm'])} "
+        f"({_f(fl['tip_pinch_distance_error_mm'], 'sd')}) mm.",
+    ]
     lines += ["", "| target | met |", "|---|---|"]
     lines += [f"| {k} | {'yes' if ok else 'no'} |" for k, ok in res["targets"].items()]
     return "\n".join(lines)
@@ -182,12 +216,11 @@ def main() -> None:
     config = SimConfig(fingers=("thumb", "index"))
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
-        sessions = [
-            write_subject(sim, root / sim.session.subject)
-            for sim in simulate_cohort(config, args.subjects, SEED)
-        ]
+        sims = simulate_cohort(config, args.subjects, SEED)
+        sessions = [write_subject(sim, root / sim.session.subject) for sim in sims]
         study = run_study(sessions, root / "study", jobs=args.jobs, overwrite=True)
         res = figures(study.tables)
+        res["floor"] = floor(sims)
     meta = {
         "date": datetime.date.today().isoformat(),
         "subjects": args.subjects,
