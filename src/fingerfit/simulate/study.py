@@ -487,9 +487,7 @@ def truth_document(sim: SimulatedSubject) -> dict:
         if f in truth.pads:
             fingers[f].update(_pad_document(truth.pads[f]))
     if truth.thumb is not None:
-        thumb = wh.thumb_document(
-            wh.ThumbSetup(np.random.default_rng(0), truth.thumb, truth.pads), ref_sensor
-        )
+        thumb = wh.thumb_document(truth.thumb, ref_sensor)
         thumb.update(_pad_document(truth.thumb.pad))
         fingers = {"thumb": thumb, **fingers}
     return {
@@ -578,7 +576,21 @@ def simulate_cohort(config: SimConfig, n_subjects: int, seed: int) -> list[Simul
 def relative_truth_in_parent(
     sim: SimulatedSubject, finger: str, joint: str
 ) -> tuple[FloatArray, FloatArray]:
-    """True joint centre ``(3,)`` mm and axis ``(3,)`` in the parent sensor frame at reference."""
+    """True joint centre ``(3,)`` mm and axis ``(3,)`` in the parent sensor frame at reference.
+
+    For the thumb, ``joint`` is any of ``cmc``, ``cmc_abduction``, ``mcp``,
+    ``mcp_abduction``, ``ip``; the centre of a second axis is the point of its line
+    nearest the flexion axis.
+    """
+    if finger == "thumb":
+        th = sim.truth.thumb
+        if th is None:
+            raise ValueError("the simulated subject has no thumb")
+        flexion = joint.removesuffix("_abduction")
+        parent = {"cmc": HAND_SENSOR, "mcp": "thumb.metacarpal", "ip": "thumb.proximal"}[flexion]
+        m = sim.truth.mounts[parent]
+        c = apply_inverse_pose(m.rotation[None], m.position[None], th.axis_point[joint][None])[0]
+        return c, m.rotation.T @ th.axis[joint]
     i = JOINTS.index(joint)
     parent = HAND_SENSOR if i == 0 else sensor_name(finger, SEGMENTS[i - 1])
     m = sim.truth.mounts[parent]

@@ -259,11 +259,9 @@ def contact_truth(
     return out
 
 
-def thumb_document(ts: ThumbSetup, ref_sensor: dict[str, tuple[FloatArray, FloatArray]]) -> dict:
+def thumb_document(th: ThumbAnatomy, ref_sensor: dict[str, tuple[FloatArray, FloatArray]]) -> dict:
     """The thumb's entry of ``truth.json`` (tracker coordinates at the reference posture,
-    and each axis in its parent sensor frame)."""
-    th = ts.thumb
-    assert th is not None
+    and each axis in its parent sensor frame ``*_in_parent``)."""
     parents = {
         "cmc": "hand",
         "cmc_abduction": "hand",
