@@ -193,3 +193,18 @@ def test_study_summary_has_thumb_pinch_and_skipped_events(exact) -> None:
     n_index = int((tables["max_flexion"]["finger"] == "index").sum())
     assert summary["max_flexion"]["user_axis"]["n"] == n_index
     assert summary["thumb"]["max_flexion"]["user_axis"]["n"] > 0
+
+
+def test_thumb_only_study(tmp_path) -> None:
+    """A session of the thumb alone: no Fig. 10 (the fingers'), the thumb's own section."""
+    from fingerfit.evaluate import run_study
+
+    path = write_subject(subject("exact", 5, ("thumb",)), tmp_path / "T05")
+    res = run_study([path], tmp_path / "out", FitOptions())
+    assert set(res.figures) == {"fig08", "fig09_S01", "thumb"}
+    sm = res.summary
+    assert sm["max_flexion"]["user_axis"]["n"] == 0
+    assert sm["thumb"]["max_flexion"]["user_axis"]["n"] > 0
+    assert sm["thumb"]["truth_tip"]["test.csv"]["user_axis"]["mean_mm"] < 1e-6
+    html = res.report.read_text()
+    assert "No finger in this study" in html and "id=thumb" in html

@@ -391,7 +391,10 @@ def write_report(result: StudyResult, path: Path) -> Path:
         "<h2>Grasp: fingertip trajectories (Fig. 9)</h2>",
         *[_img(p, f"Fig. 9 {k[6:]}") for k, p in fig.items() if k.startswith("fig09")],
         "<h2>Grasp: error at maximal flexion (Fig. 10)</h2>",
-        _img(fig["fig10"], "Fig. 10 maximal flexion"),
+        _img(fig["fig10"], "Fig. 10 maximal flexion")
+        if "fig10" in fig
+        else "<p class=note>No finger in this study: Fig. 10 is the fingers'; the thumb's "
+        "tip at maximal flexion is in the <a href='#thumb'>Thumb</a> section.</p>",
     ]
     mf = sm["max_flexion"]
     per = pd.DataFrame(

@@ -1039,16 +1039,17 @@ def figure_builders(
         if s.grasp:  # a compact result's Fig. 9 was drawn by its study task
             out[f"fig09_{s.subject}"] = _trajectory_figure(s)
     fingers_flex = tables["max_flexion"][tables["max_flexion"]["finger"].isin(FINGERS)]
-    out["fig10"] = (
-        "fig10_max_flexion.png",
-        lambda: figures.make_paired_boxes(
-            fingers_flex,
-            "subject",
-            "Fig. 10 - fingertip error at maximal flexion (vs distal-sensor reference)",
-            "fingertip error at maximal flexion (mm)",
-            xlabel="subject",
-        ),
-    )
+    if not fingers_flex.empty:  # a thumb-only study has no Fig. 10 (the fingers')
+        out["fig10"] = (
+            "fig10_max_flexion.png",
+            lambda: figures.make_paired_boxes(
+                fingers_flex,
+                "subject",
+                "Fig. 10 - fingertip error at maximal flexion (vs distal-sensor reference)",
+                "fingertip error at maximal flexion (mm)",
+                xlabel="subject",
+            ),
+        )
     if not tables["targets"].empty:
         out["fig11"] = (
             "fig11_target_offsets.png",
