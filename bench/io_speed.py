@@ -68,7 +68,7 @@ def write(rec, p):
         base = status("VmRSS:")
         t = time.perf_counter()
         writer = getattr(__import__("fingerfit.io.fastcsv", fromlist=["x"]), "write_table", None) \
-            if out == "new" else None
+            if out == "now" else None
         if writer is not None:
             writer(p, table)
         else:

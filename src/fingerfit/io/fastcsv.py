@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import FingerfitError
 
 #: Bytes of file parsed per batch.
-CHUNK_BYTES = 1 << 24
+CHUNK_BYTES = 1 << 22
 #: Rows written per batch.
 WRITE_ROWS = 1 << 18
 
@@ -178,6 +178,10 @@ def block_parser(
         quoted_strings_can_be_null=False,
     )
 
+    # The C library's allocator: memory of a parsed batch goes back to the system
+    # when it is freed (Arrow's default pool keeps it for reuse, raising the peak).
+    pool = pa.system_memory_pool()
+
     def parse(block: object) -> tuple[int, dict]:
         try:
             table = pacsv.read_csv(
@@ -185,6 +189,7 @@ def block_parser(
                 read_options=read_opts,
                 parse_options=parse_opts,
                 convert_options=convert_opts,
+                memory_pool=pool,
             )
         except (pa.ArrowException, ValueError) as exc:
             raise NotPlain(str(exc)) from None

@@ -807,17 +807,16 @@ def records_to_recording(
 
     if "frame" in items:
         fc = records.values["frame"]
-        records.check_increasing(
-            fc, np.arange(station.size), path, what="frame count", strict=False
-        )
+        records.check_increasing(fc, range(station.size), path, what="frame count", strict=False)
         new_frame = np.empty(station.size, dtype=bool)
         new_frame[:1] = True
         np.not_equal(fc[1:], fc[:-1], out=new_frame[1:])
         if station.size < 2 or np.all(new_frame[1:] | (station[1:] > station[:-1])):
             # stations ascending within every frame (the device's order): no repeats,
             # frames in order, nothing to sort
-            rec_idx = np.arange(station.size)
-            frame_of = np.cumsum(new_frame) - 1
+            rec_idx = range(station.size)  # indexable like an array, no memory
+            frame_of = np.cumsum(new_frame, dtype=np.int64)
+            frame_of -= 1
             first_rec = np.flatnonzero(new_frame)
             frame_ids = fc[first_rec]
         else:
@@ -871,7 +870,7 @@ def records_to_recording(
                 field="rate",
             )
         notes += frames_missing_note(n - frame_ids.size)
-        frame_of_rec = grid_idx[frame_of]
+        frame_of_rec = np.take(grid_idx, frame_of, out=frame_of)  # in place
     else:
         new = np.concatenate([[True], station[1:] <= station[:-1]])
         cycle = np.cumsum(new) - 1
@@ -932,7 +931,7 @@ def records_to_recording(
         frame_of_rec = frame_of
 
     sel = rec_idx
-    every = sel.size == station.size  # no record dropped: use the arrays without a copy
+    every = len(sel) == station.size  # no record dropped: use the arrays without a copy
 
     def taken(item: str) -> np.ndarray:
         return records.values[item] if every else records.values[item][sel]

@@ -207,7 +207,7 @@ def read_pose_csv(
 ) -> Recording:
     """Read a canonical pose CSV into a :class:`Recording` (mm, tracker frame).
 
-    Read in batches of about 16 MB into preallocated arrays with Arrow's CSV parser
+    Read in batches of about 4 MB into preallocated arrays with Arrow's CSV parser
     (correctly rounded floats); a file the fast path does not vouch for (any error, and
     rare spellings such as ``nan`` or blank trailing lines) is read by the reference
     decoder, which names the line of any error.
