@@ -345,3 +345,28 @@ def test_written_whole_hand_session_and_truth(tmp_path) -> None:
     skin = table[["thumb.pad.x", "thumb.pad.y", "thumb.pad.z"]].to_numpy()
     d = np.linalg.norm(skin - fr["pad"]["thumb"], axis=1)
     assert np.allclose(d, sim.truth.pads["thumb"].half_thickness)
+
+
+def test_whole_hand_fits_a_liberty_and_names_thumb_channels() -> None:
+    from fingerfit.session import sensor_name
+    from fingerfit.simulate.trackerfiles import c3d_label, station_map
+
+    sensors = ["hand"] + [
+        sensor_name(d, s)
+        for d in reversed(HAND)
+        for s in (
+            ("metacarpal", "proximal", "distal")
+            if d == "thumb"
+            else ("proximal", "middle", "distal")
+        )
+    ]
+    stations = station_map(sensors)
+    assert len(stations) == 16
+    assert [stations[i] for i in (1, 2, 3, 4, 5)] == [
+        "hand",
+        "thumb.metacarpal",
+        "thumb.proximal",
+        "thumb.distal",
+        "index.proximal",
+    ]
+    assert c3d_label("thumb.metacarpal") == "THUMB_MC" and c3d_label("thumb.distal") == "THUMB_DIST"
