@@ -266,7 +266,12 @@ class Ros2Output:
             self.writer.write(self.message(p, w))
 
     def close(self) -> None:
-        """Delete the participant (and with it the writer)."""
+        """Let matched readers acknowledge the last messages (up to 1 s), then delete the
+        participant (and with it the writer)."""
+        from cyclonedds.util import duration
+
+        with contextlib.suppress(Exception):
+            self.writer.wait_for_acks(duration(seconds=1))
         with contextlib.suppress(Exception):
             del self.writer, self.topic
         with contextlib.suppress(Exception):
