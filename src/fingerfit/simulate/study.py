@@ -5,6 +5,9 @@ tracker errors, runs the paper's protocol (reference, grasp, target reaching,
 free-motion test) and returns the measured :class:`~fingerfit.session.Session`
 together with the :class:`SubjectTruth`. :func:`write_subject` saves both:
 the session directory plus ``truth.json`` and ``truth/<recording>.csv``.
+With ``thumb`` among the digits, :mod:`.wholehand` adds the thumb to every recording
+and its own calibration recordings (circumduction, opposition, pinches), from the
+thumb's own random stream.
 """
 
 from __future__ import annotations
