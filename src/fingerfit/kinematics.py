@@ -63,8 +63,8 @@ class FingerMotion:
     tip : ndarray, shape (n_frames, 3)
         Tip (nail-edge point) in tracker coordinates (mm).
     pad : ndarray, shape (n_frames, 3) or None
-        Pad point (pulp centre) in tracker coordinates (mm); ``None`` for a model
-        without pads.
+        Pad point (on the pulp's skin, ``docs/conventions.md``) in tracker coordinates
+        (mm); ``None`` for a model without pads.
     """
 
     angles: dict[str, FloatArray]

@@ -154,7 +154,8 @@ class DigitModel:
         the thumb's CMC and MCP about the flexion axis proximally, all about fixed
         reference-posture lines.
     pad : ndarray, shape (3,), optional
-        Pad point (pulp centre), carried by the distal segment; ``None`` in models
+        Pad point: the centre of the pulp's contact area on the palmar skin
+        (``docs/conventions.md``, "Pads"), carried by the distal segment; ``None`` in models
         written before pads existed.
     """
 
