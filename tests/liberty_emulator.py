@@ -14,9 +14,12 @@ tested against.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import pty
 import select
+import struct
+import termios
 import threading
 import time
 import tty
@@ -212,7 +215,8 @@ class LibertyEmulator:
             i = self.sent_frames
             f = self.faults
             end = self.recording.n_frames if f.unplug_after is None else f.unplug_after
-            if i >= end:  # the recording is over: the cable is pulled
+            if i >= end:  # the recording is over: the cable is pulled once all is read
+                self._wait_drained()
                 self.unplug()
                 return
             with self._lock:
@@ -224,6 +228,16 @@ class LibertyEmulator:
             if not self._write(data):
                 return
             self.sent_frames = i + 1
+
+    def _wait_drained(self, timeout: float = 5.0) -> None:
+        """Wait until the port has read every byte sent (closing the master would drop
+        them, which makes the number of frames delivered depend on timing)."""
+        t_end = time.monotonic() + timeout
+        while time.monotonic() < t_end and not self._stop.is_set():
+            waiting = fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0")
+            if struct.unpack("i", waiting)[0] == 0:
+                return
+            time.sleep(0.005)
 
     def unplug(self) -> None:
         """Close the master side: the port's next read fails, as on a pulled cable."""
