@@ -163,15 +163,16 @@ def demo(
     ] = 1,
     quiet: Quiet = False,
 ) -> None:
-    """Simulate the paper's cohort (index finger, left hand, Liberty-like), fit, and run the study.
+    """Simulate a cohort (the whole hand, left, Liberty-like), fit, and run the study.
 
     Writes ``OUT/sessions/<subject>`` and ``OUT/study``; all of it appears at once
     when everything succeeded.
     """
+    from ..digits import DIGIT_NAMES
     from ..io.atomic import staged_directory
     from ..simulate import SimConfig, simulate_cohort, write_subject
 
-    config = SimConfig(fingers=("index",), hand="left")
+    config = SimConfig(fingers=DIGIT_NAMES, hand="left")
     with staged_directory(out_dir, overwrite=overwrite) as tmp:
         with progress(quiet) as bar:
             task = bar.add_task(f"simulating {subjects} subjects", total=subjects)
