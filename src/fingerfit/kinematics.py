@@ -28,7 +28,7 @@ reference pose.
 
 Both run over whole recordings with NumPy; no per-frame Python loop. For a
 ``swing_twist`` model ``compute_kinematics`` computes the same numbers block by block
-in cache (``_swing_twist_kinematics``; ``docs/performance.md``).
+in cache (:class:`KinematicsPlan`, which a live stream prepares once; ``docs/performance.md``).
 Angles rad, lengths mm, tracker coordinates (``docs/conventions.md``).
 """
 
@@ -439,7 +439,7 @@ def compute_kinematics(
     """
     fingers = fingers or list(model.fingers)
     if model.angle_method == "swing_twist" and recording.n_frames > 0:
-        return _swing_twist_kinematics(model, recording, tuple(variants), fingers)
+        return KinematicsPlan(model, tuple(variants), fingers).run(recording)
     hand = recording.pose(HAND_SENSOR)
     motions: dict[str, dict[str, FingerMotion]] = {v: {} for v in variants}
     for f in fingers:
@@ -527,123 +527,183 @@ def _full_angle(y: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, F
     return np.arctan2(y, x), cos, sin
 
 
-def _swing_twist_kinematics(
-    model: HandModel, recording: Recording, variants: tuple[str, ...], fingers: list[str]
-) -> Kinematics:
-    """:func:`compute_kinematics` for a ``swing_twist`` model, block by block."""
-    n = recording.n_frames
-    hand = recording.pose(HAND_SENSOR)
-    p0, r0 = model.reference_poses[HAND_SENSOR]
-    plans = {}
-    sensors = {HAND_SENSOR}
-    angles: dict[str, dict[str, dict[str, FloatArray]]] = {v: {} for v in variants}
-    points: dict[str, dict[str, dict[str, FloatArray]]] = {v: {} for v in variants}
-    for f in fingers:
-        fm = model.fingers[f]
-        joints = []
-        for j, jm in fm.joints.items():
-            pr, cr = model.reference_poses[jm.parent][1], model.reference_poses[jm.child][1]
-            ref = pr.T @ cr
-            axes = fm.axes(j)
-            mats = []
-            for v in variants:
-                if len(axes) == 2:
-                    b = model.in_parent(f, axes[0].name, v)[1]
-                    a = model.in_parent(f, axes[1].name, v)[1]
-                    ap = a - (a @ b) * b
-                    kb = skew(b)
-                    xs, ys = (np.eye(3), skew(a).T), (np.eye(3), kb, kb @ kb)
-                    mats += [np.outer(a, np.cross(b, ap)), np.outer(a, ap)]
-                    mats += [x @ y for x in xs for y in ys]
-                else:
-                    mats += [np.eye(3), skew(model.in_parent(f, j, v)[1]).T]
-            recording.pose(jm.parent), recording.pose(jm.child)  # a clear error if absent
-            sensors |= {jm.parent, jm.child}
-            joints.append(([x.name for x in axes], jm.parent, jm.child, _weights(ref, mats)))
-        plans[f] = joints
-        wanted = {"tip": fm.tip} | ({} if fm.pad is None else {"pad": fm.pad})
-        for v in variants:
-            angles[v][f] = {k: np.empty(n) for k in fm.angle_names()}
-            points[v][f] = {k: np.empty((n, 3)) for k in wanted}
-    for s in range(0, n, BLOCK_FRAMES):
-        e = min(n, s + BLOCK_FRAMES)
-        rows = {k: _rows(recording.poses[k].rotation[s:e]) for k in sensors}
-        h = rows[HAND_SENSOR]
-        hp = hand.position[s:e].T
-        for f in fingers:
-            fm = model.fingers[f]
-            cs: dict[str, dict[str, tuple[FloatArray, FloatArray, FloatArray]]] = {
-                v: {} for v in variants
-            }
-            for names, parent, child, w in plans[f]:
-                t = w @ _product_rows(rows[parent], rows[child])
-                step = 8 if len(names) == 2 else 2
-                for iv, v in enumerate(variants):
-                    tv = t[iv * step : (iv + 1) * step]
-                    if len(names) == 2:
-                        beta, cb, sb = _full_angle(tv[0], tv[1])
-                        c1 = 1.0 - cb
-                        tr_i = tv[2] - sb * tv[3] + c1 * tv[4]
-                        tr_k = tv[5] - sb * tv[6] + c1 * tv[7]
-                        cs[v][names[0]] = (beta, cb, sb)
-                        cs[v][names[1]] = _half_angle(tr_k, 1.0 + tr_i)
-                    else:
-                        cs[v][names[0]] = _half_angle(tv[1], 1.0 + tv[0])
-            for v in variants:
-                for k, (ang, _, _) in cs[v].items():
-                    angles[v][f][k][s:e] = ang
-                steps = [jm for j in reversed(list(fm.joints)) for jm in reversed(fm.axes(j))]
-                for name, out in points[v][f].items():
-                    point = fm.tip if name == "tip" else fm.pad
-                    y = basis = centre = None
-                    for jm in steps:
-                        ang, cos, sin = cs[v][jm.name]
-                        c = jm.center[:, None]
-                        if jm.migration is not None:
-                            c = c + np.multiply.outer(jm.migration, ang)
-                        y, basis, centre = _turn(
-                            y, basis, centre, c, jm.axis_for(v), cos, sin, point
-                        )
-                    # The point at the reference posture, in the hand sensor's frame, carried.
-                    local = (r0.T @ basis.T) @ y + r0.T @ (centre - p0[:, None])
-                    block = out[s:e]
-                    for i in range(3):
-                        o = block[:, i]
-                        o[:] = h[3 * i] * local[0]
-                        o += h[3 * i + 1] * local[1]
-                        o += h[3 * i + 2] * local[2]
-                        o += hp[i]
-    motions = {
-        v: {
-            f: FingerMotion(angles[v][f], points[v][f]["tip"], points[v][f].get("pad"))
-            for f in fingers
-        }
-        for v in variants
-    }
-    return Kinematics(recording.time, motions)
+@dataclass(frozen=True)
+class _Step:
+    """One turn of a point chain (:func:`_chain`), with everything that depends on the model
+    alone computed once: ``basis`` (rows ``e1, e2, a`` of the axis), ``carry`` (this basis
+    times the previous one's transpose), ``offset`` (``basis @ (c_prev - c)`` when neither
+    centre migrates)."""
+
+    name: str
+    centre: FloatArray  # (3, 1)
+    migration: FloatArray | None
+    basis: FloatArray
+    carry: FloatArray | None
+    offset: FloatArray | None
 
 
-def _turn(
-    y: FloatArray | None,
-    basis: FloatArray | None,
-    centre: FloatArray | None,
-    c: FloatArray,
-    axis: FloatArray,
-    cos: FloatArray,
-    sin: FloatArray,
-    point: FloatArray,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """One step of :func:`~fingerfit.transforms.rotate_about_lines` with ``cos``/``sin`` given.
+class KinematicsPlan:
+    """:func:`compute_kinematics` of a ``swing_twist`` model, prepared once for many calls.
 
-    ``y (3, m)``: coordinates in the previous line's ``basis`` about its ``centre (3, 1|m)``
-    (``None`` before the first step, which starts from ``point (3,)``). Returns the new ones.
+    Everything that depends on the model alone (trace weights of every joint, the chain's
+    axis bases and their products, the hand sensor's reference pose) is computed here;
+    :meth:`run` then does only per-frame work, block by block in cache. A live stream
+    builds one plan and runs it on each block of arriving frames; ``compute_kinematics``
+    builds one per call. Both give the same numbers.
+
+    Parameters
+    ----------
+    model : HandModel
+        A ``swing_twist`` model.
+    variants : tuple of str
+        ``user_axis`` and/or ``orthogonal``.
+    fingers : list of str, optional
+        Digits (default: every digit of the model).
     """
-    b = orthonormal_basis(axis)
-    x = b @ (point[:, None] - c) if y is None else (b @ basis.T) @ y + b @ (centre - c)
-    out = np.empty((3, cos.shape[0]))
-    np.multiply(x[0], cos, out=out[0])
-    out[0] -= x[1] * sin
-    np.multiply(x[0], sin, out=out[1])
-    out[1] += x[1] * cos
-    out[2] = x[2]
-    return out, b, c
+
+    def __init__(
+        self,
+        model: HandModel,
+        variants: tuple[str, ...] = VARIANTS,
+        fingers: list[str] | None = None,
+    ) -> None:
+        if model.angle_method != "swing_twist":
+            raise ValueError(f"a plan needs a swing_twist model, not {model.angle_method!r}")
+        self.model, self.variants = model, tuple(variants)
+        self.fingers = list(fingers or model.fingers)
+        p0, r0 = model.reference_poses[HAND_SENSOR]
+        self.sensors = {HAND_SENSOR}
+        self.joints: dict[str, list[tuple[list[str], str, str, FloatArray]]] = {}
+        self.chains: dict[str, dict[str, dict[str, tuple]]] = {v: {} for v in self.variants}
+        for f in self.fingers:
+            fm = model.fingers[f]
+            joints = []
+            for j, jm in fm.joints.items():
+                pr, cr = model.reference_poses[jm.parent][1], model.reference_poses[jm.child][1]
+                axes = fm.axes(j)
+                mats = []
+                for v in self.variants:
+                    if len(axes) == 2:
+                        b = model.in_parent(f, axes[0].name, v)[1]
+                        a = model.in_parent(f, axes[1].name, v)[1]
+                        ap = a - (a @ b) * b
+                        kb = skew(b)
+                        xs, ys = (np.eye(3), skew(a).T), (np.eye(3), kb, kb @ kb)
+                        mats += [np.outer(a, np.cross(b, ap)), np.outer(a, ap)]
+                        mats += [x @ y for x in xs for y in ys]
+                    else:
+                        mats += [np.eye(3), skew(model.in_parent(f, j, v)[1]).T]
+                self.sensors |= {jm.parent, jm.child}
+                joints.append(
+                    ([x.name for x in axes], jm.parent, jm.child, _weights(pr.T @ cr, mats))
+                )
+            self.joints[f] = joints
+            axes_out = [jm for j in reversed(list(fm.joints)) for jm in reversed(fm.axes(j))]
+            for v in self.variants:
+                steps, prev = [], None
+                for jm in axes_out:
+                    basis = orthonormal_basis(jm.axis_for(v))
+                    c = jm.center[:, None]
+                    carry = offset = None
+                    if prev is not None:
+                        carry = basis @ prev.basis.T
+                        if prev.migration is None and jm.migration is None:
+                            offset = basis @ (prev.centre - c)
+                    prev = _Step(jm.name, c, jm.migration, basis, carry, offset)
+                    steps.append(prev)
+                last = steps[-1]
+                # The point at the reference posture, then in the hand sensor's frame.
+                to_hand = (r0.T @ last.basis.T, r0.T)
+                points = {"tip": fm.tip} | ({} if fm.pad is None else {"pad": fm.pad})
+                self.chains[v][f] = {"steps": steps, "to_hand": to_hand, "points": points}
+        self.p0 = p0
+
+    def run(self, recording: Recording) -> Kinematics:
+        """Angles and tips (and pads) of every frame of ``recording`` (see
+        :func:`compute_kinematics`)."""
+        model, variants = self.model, self.variants
+        n = recording.n_frames
+        hand = recording.pose(HAND_SENSOR)
+        for s in self.sensors:
+            recording.pose(s)  # a clear error if absent
+        angles = {v: {f: {} for f in self.fingers} for v in variants}
+        points = {v: {f: {} for f in self.fingers} for v in variants}
+        for v in variants:
+            for f in self.fingers:
+                angles[v][f] = {k: np.empty(n) for k in model.fingers[f].angle_names()}
+                points[v][f] = {k: np.empty((n, 3)) for k in self.chains[v][f]["points"]}
+        for s in range(0, n, BLOCK_FRAMES):
+            e = min(n, s + BLOCK_FRAMES)
+            rows = {k: _rows(recording.poses[k].rotation[s:e]) for k in self.sensors}
+            h = rows[HAND_SENSOR]
+            hp = hand.position[s:e].T
+            for f in self.fingers:
+                cs: dict[str, dict[str, tuple[FloatArray, FloatArray, FloatArray]]] = {
+                    v: {} for v in variants
+                }
+                for names, parent, child, w in self.joints[f]:
+                    t = w @ _product_rows(rows[parent], rows[child])
+                    step = 8 if len(names) == 2 else 2
+                    for iv, v in enumerate(variants):
+                        tv = t[iv * step : (iv + 1) * step]
+                        if len(names) == 2:
+                            beta, cb, sb = _full_angle(tv[0], tv[1])
+                            c1 = 1.0 - cb
+                            tr_i = tv[2] - sb * tv[3] + c1 * tv[4]
+                            tr_k = tv[5] - sb * tv[6] + c1 * tv[7]
+                            cs[v][names[0]] = (beta, cb, sb)
+                            cs[v][names[1]] = _half_angle(tr_k, 1.0 + tr_i)
+                        else:
+                            cs[v][names[0]] = _half_angle(tv[1], 1.0 + tv[0])
+                for v in variants:
+                    for k, (ang, _, _) in cs[v].items():
+                        angles[v][f][k][s:e] = ang
+                    chain = self.chains[v][f]
+                    rot, r0t = chain["to_hand"]
+                    for name, point in chain["points"].items():
+                        y, centre = _chain(chain["steps"], cs[v], point)
+                        local = rot @ y + r0t @ (centre - self.p0[:, None])
+                        block = points[v][f][name][s:e]
+                        for i in range(3):
+                            o = block[:, i]
+                            o[:] = h[3 * i] * local[0]
+                            o += h[3 * i + 1] * local[1]
+                            o += h[3 * i + 2] * local[2]
+                            o += hp[i]
+        motions = {
+            v: {
+                f: FingerMotion(angles[v][f], points[v][f]["tip"], points[v][f].get("pad"))
+                for f in self.fingers
+            }
+            for v in variants
+        }
+        return Kinematics(recording.time, motions)
+
+
+def _chain(
+    steps: list[_Step], cs: dict[str, tuple[FloatArray, FloatArray, FloatArray]], point: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """A point ``(3,)`` turned through ``steps`` with each angle's cosine and sine given.
+
+    Returns ``y (3, m)``, the coordinates in the last step's basis about its centre, and
+    that centre ``(3, 1|m)``: :func:`~fingerfit.transforms.rotate_about_lines` (which
+    see) with the model's constants taken from the plan.
+    """
+    y = centre = None
+    for st in steps:
+        ang, cos, sin = cs[st.name]
+        c = st.centre if st.migration is None else st.centre + np.multiply.outer(st.migration, ang)
+        if y is None:
+            x = st.basis @ (point[:, None] - c)
+        elif st.offset is not None:
+            x = st.carry @ y + st.offset
+        else:
+            x = st.carry @ y + st.basis @ (centre - c)
+        out = np.empty((3, cos.shape[0]))
+        np.multiply(x[0], cos, out=out[0])
+        out[0] -= x[1] * sin
+        np.multiply(x[0], sin, out=out[1])
+        out[1] += x[1] * cos
+        out[2] = x[2]
+        y, centre = out, c
+    return y, centre

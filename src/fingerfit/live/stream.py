@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import FingerfitError
-from ..kinematics import Kinematics, compute_kinematics, kinematics_table
+from ..kinematics import Kinematics, KinematicsPlan, compute_kinematics, kinematics_table
 from ..model import HandModel
 from ..session import HAND_SENSOR, PoseSeries, Recording
 from ..transforms import FloatArray
@@ -274,6 +274,11 @@ class Streamer:
         self.channels = channels or channels_of(
             model, compute_kinematics(model, empty_recording(self.sensors), ("user_axis",))
         )
+        # The model's constants are prepared once (swing-twist models; the paper's
+        # projection angles go through compute_kinematics on every block).
+        self.plan = (
+            KinematicsPlan(model, self.variants) if model.angle_method == "swing_twist" else None
+        )
         self.wall_offset = time.time() - time.monotonic()
         self.summary = Summary()
         self._last: dict[str, FloatArray] = {}
@@ -288,7 +293,11 @@ class Streamer:
     def process(self, block: Block) -> None:
         """Compute and send one block; update the summary."""
         t = time.perf_counter()
-        kin = compute_kinematics(self.model, block.recording, self.variants)
+        rec = block.recording
+        if self.plan is not None and rec.n_frames:
+            kin = self.plan.run(rec)
+        else:
+            kin = compute_kinematics(self.model, rec, self.variants)
         compute = time.perf_counter() - t
         v = block_values(kin, self.channels, block.recording, self.sensors, self.tips_frame)
         held = {}
