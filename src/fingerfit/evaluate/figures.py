@@ -250,12 +250,13 @@ def make_pinch(pinches: pd.DataFrame) -> Figure:
 
     ``pinches`` has the columns of :data:`fingerfit.evaluate.pinch.PINCH_COLUMNS` (mm).
     """
-    groups = sorted({f"{k} {a}-{b}" for k, a, b in pinches[["kind", "finger", "target"]].values})
-    label = pinches["kind"] + " " + pinches["finger"] + "-" + pinches["target"]
+    # Two-line labels (kind, digits), 1.4 in per group: side by side without rotation.
+    groups = sorted({f"{k}\n{a}-{b}" for k, a, b in pinches[["kind", "finger", "target"]].values})
+    label = pinches["kind"] + "\n" + pinches["finger"] + "-" + pinches["target"]
     truth = bool(np.isfinite(pinches["tip_distance_error_mm"]).any())
     first = "tip_distance_error_mm" if truth else "tip_distance_mm"
-    width_in = max(10.0, 1.8 * len(groups) + 4)
-    fig, axes = plt.subplots(1, 2, figsize=(width_in, 4.2), layout="constrained")
+    width_in = max(8.0, 1.4 * len(groups) + 3)
+    fig, axes = plt.subplots(2, 1, figsize=(width_in, 7.5), layout="constrained")
     panels = (
         (
             axes[0],
@@ -284,7 +285,7 @@ def make_pinch(pinches: pd.DataFrame) -> Figure:
         if col == "pad_gap_mm" and np.isfinite(pinches["true_pad_gap_mm"]).any():
             true = [pinches.loc[label == x, "true_pad_gap_mm"].mean() for x in groups]
             ax.plot(np.arange(len(groups)), true, "k_", ms=30, mew=2, label="true pad gap")
-        _tick_labels(ax, groups, width_in / 2 - 1.5)
+        ax.set_xticks(range(len(groups)), groups, fontsize=8)
         ax.set_xlabel("pinch (kind, digits)")
         ax.set_ylabel(ylabel)
         ax.set_title(title, loc="left", fontsize=10)
