@@ -157,6 +157,11 @@ def test_whole_hand_figures_have_no_overlapping_labels(whole) -> None:
     subjects = [_subject(load_session(s.session.path), FitOptions()) for s in whole.subjects]
     keys = _check_figures(subjects, whole.tables)
     assert {"thumb", "pinch", "fig10", "truth"} <= keys
+    fig = figure_builders(subjects, whole.tables)["fig08"][1]()
+    try:  # Fig. 8 gains a panel of the thumb's joints
+        assert len(fig.axes) == 3 and "thumb" in fig.axes[2].get_title(loc="left")
+    finally:
+        plt.close(fig)
 
 
 def test_whole_hand_report_has_thumb_pinch_and_3d_view(whole) -> None:

@@ -60,13 +60,30 @@ def _tick_labels(ax, labels: list[str], axis_len_in: float) -> None:
 def make_axis_quality(distances: pd.DataFrame) -> Figure:
     """Fig. 8: distance of each cycle's centre of rotation to the fitted axis, per subject.
 
-    ``distances`` has columns ``subject``, ``finger``, ``joint``, ``distance_mm``.
+    ``distances`` has columns ``subject``, ``finger``, ``joint``, ``distance_mm``. With
+    the thumb's joints (``cmc``, ``mcp``, ``ip``) a third panel shows them.
     """
     subjects = list(pd.unique(distances["subject"]))  # study order
     width_in = max(10.0, 1.0 * len(subjects) + 3)
-    fig, axes = plt.subplots(1, 2, figsize=(width_in, 4.0), layout="constrained")
+    thumb = bool(distances["joint"].isin(("cmc", "mcp", "ip")).any())
+    if thumb:
+        width_in = max(13.0, 1.5 * len(subjects) + 4)
+    fig, axes = plt.subplots(
+        1, 3 if thumb else 2, figsize=(width_in, 4.0), layout="constrained", squeeze=False
+    )
+    axes = axes[0]
     panels = ((axes[0], ("dip", "pip"), "(a) DIP and PIP"), (axes[1], ("mp",), "(b) MP"))
-    colors = {"dip": "#d62728", "pip": "#2ca02c", "mp": "#1f77b4"}
+    if thumb:  # the joints with per-cycle centres (a saddle CMC has none)
+        tj = tuple(j for j in ("cmc", "mcp", "ip") if (distances["joint"] == j).any())
+        panels += ((axes[2], tj, f"(c) thumb {', '.join(j.upper() for j in tj)}"),)
+    colors = {
+        "dip": "#d62728",
+        "pip": "#2ca02c",
+        "mp": "#1f77b4",
+        "cmc": "#9467bd",
+        "mcp": "#8c564b",
+        "ip": "#e377c2",
+    }
     for ax, joints, title in panels:
         width = 0.8 / len(joints)
         for k, j in enumerate(joints):
@@ -80,7 +97,7 @@ def make_axis_quality(distances: pd.DataFrame) -> Figure:
                 b.set_facecolor(colors[j])
                 b.set_alpha(0.6)
             ax.plot([], [], "s", color=colors[j], label=j.upper())
-        _tick_labels(ax, subjects, width_in / 2 - 1)
+        _tick_labels(ax, subjects, width_in / len(panels) - 1)
         ax.set_xlabel("subject")
         ax.set_title(title, loc="left", fontsize=10)
         ax.set_ylabel("cycle centre to fitted axis (mm)")
