@@ -492,8 +492,16 @@ def _rows(rotation: FloatArray) -> FloatArray:
     return np.ascontiguousarray(rotation.reshape(-1, 9).T)
 
 
+#: Blocks of at most this many frames (a live stream's) take one einsum per product
+#: instead of 27 ufunc calls, whose fixed cost dominates there.
+SMALL_BLOCK = 64
+
+
 def _product_rows(a: FloatArray, b: FloatArray) -> FloatArray:
     """``A^T B`` for ``(9, m)`` rows of ``A`` and ``B``: ``(9, m)``."""
+    m = a.shape[1]
+    if m <= SMALL_BLOCK:
+        return np.einsum("lim,lkm->ikm", a.reshape(3, 3, m), b.reshape(3, 3, m)).reshape(9, m)
     g = np.empty_like(a)
     for i in range(3):
         for k in range(3):
@@ -512,18 +520,18 @@ def _weights(reference: FloatArray, mats: list[FloatArray]) -> FloatArray:
 def _half_angle(y: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``theta = 2 atan2(y, x)`` with its cosine and sine (1 and 0 where ``x = y = 0``)."""
     r2 = x * x + y * y
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos = np.where(r2 == 0.0, 1.0, (x * x - y * y) / r2)
-        sin = np.where(r2 == 0.0, 0.0, 2.0 * x * y / r2)
+    ok = r2 != 0.0
+    cos = np.divide(x * x - y * y, r2, out=np.ones_like(r2), where=ok)
+    sin = np.divide(2.0 * x * y, r2, out=np.zeros_like(r2), where=ok)
     return 2.0 * np.arctan2(y, x), cos, sin
 
 
 def _full_angle(y: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``beta = atan2(y, x)`` with its cosine and sine (1 and 0 where ``x = y = 0``)."""
     h = np.hypot(x, y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos = np.where(h == 0.0, 1.0, x / h)
-        sin = np.where(h == 0.0, 0.0, y / h)
+    ok = h != 0.0
+    cos = np.divide(x, h, out=np.ones_like(h), where=ok)
+    sin = np.divide(y, h, out=np.zeros_like(h), where=ok)
     return np.arctan2(y, x), cos, sin
 
 
