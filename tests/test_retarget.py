@@ -18,7 +18,7 @@ from fingerfit.retarget.limits import limits_of
 from fingerfit.retarget.maps import check_map, parse_map
 from fingerfit.retarget.palm import robot_palm
 from fingerfit.retarget.robots import load_robot
-from fingerfit.retarget.solve import MM, TipProblem, solve_tip
+from fingerfit.retarget.solve import MM, TipOptions, TipProblem, solve_tip
 
 from .conftest import subject
 
@@ -36,8 +36,9 @@ def _problem(name: str, hand: str = "right"):
     return robot, rmap, lim, TipProblem(robot, palm, frames, free, hold, lim)
 
 
-def _trajectory(robot, lim, hold, free, n=150, seed=0):
-    """A smooth feasible joint trajectory from the neutral posture to a random one and back."""
+def _trajectory(robot, lim, hold, free, n=720, seed=0):
+    """A smooth feasible joint trajectory from the neutral posture to a random one and back
+    (``n`` frames at 240 Hz: 3 s, joints up to ~2 rad/s, like a grasp)."""
     rng = np.random.default_rng(seed)
     goal = lim.project(rng.uniform(np.maximum(robot.lower, -1.6), np.minimum(robot.upper, 1.6)))
     s = (0.5 - 0.5 * np.cos(2 * np.pi * np.linspace(0, 1, n)))[:, None]
@@ -49,22 +50,28 @@ def _trajectory(robot, lim, hold, free, n=150, seed=0):
 
 @pytest.mark.parametrize("name", ["allegro", "shadow"])
 def test_tip_method_recovers_the_robots_own_fingertips(name):
-    """Targets = the robot's own tips along a known joint trajectory: recovered < 0.5 mm."""
+    """Targets = the robot's own tips along a known joint trajectory: recovered < 0.5 mm
+    (with the lag-removing polish; the default smoothness lags < 1 mm at ~2 rad/s)."""
     robot, _, lim, prob = _problem(name)
     q_true = _trajectory(robot, lim, prob.hold, prob.free)
     assert lim.violations(q_true) == 0
     palm = prob.palm
     tips = (robot.positions(q_true, prob.frames) - palm.origin) @ palm.rotation * MM
-    res = solve_tip(prob, tips)
-    got = (robot.positions(res.q, prob.frames) - palm.origin) @ palm.rotation * MM
-    err = np.linalg.norm(got - tips, axis=2)
-    assert err.max() < 0.5, err.max()
-    assert lim.violations(res.q) == 0
-    # held joints (wrist, none for Allegro) never move
     fixed = np.setdiff1d(np.arange(robot.nq), prob.free)
-    np.testing.assert_array_equal(
-        res.q[:, fixed], np.broadcast_to(prob.hold[fixed], (len(res.q), fixed.size))
-    )
+    for options, worst, median in (
+        (TipOptions(polish_smooth=1.0), 0.5, 0.05),
+        (TipOptions(), 1.0, 0.1),
+    ):
+        res = solve_tip(prob, tips, options=options)
+        got = (robot.positions(res.q, prob.frames) - palm.origin) @ palm.rotation * MM
+        err = np.linalg.norm(got - tips, axis=2)
+        assert err.max() < worst, (options, err.max())
+        assert np.median(err) < median, (options, np.median(err))
+        assert lim.violations(res.q) == 0
+        # held joints (the wrist; none on Allegro) never move
+        np.testing.assert_array_equal(
+            res.q[:, fixed], np.broadcast_to(prob.hold[fixed], (len(res.q), fixed.size))
+        )
 
 
 def test_pinch_term_brings_two_robot_tip_points_together():
