@@ -7,7 +7,9 @@ Simulated subjects (four fingers, ``fingerfit.simulate``), model fitted by
 (URDF, Pinocchio). Per robot and source: fingertip error in the robot palm frame against
 the scaled targets of the fitted (user-axis) model (median / p95, mm), joint-limit and
 coupling violations, jerk (RMS third difference of the joint trajectory, rad/s^3),
-per-frame solve time (p50 / p99, ms). dex-retargeting is not run: see docs/retargeting.md.
+per-frame solve time (p50 / p99, ms). Then whole-hand subjects (thumb, pad points) on
+``pinch.csv``: the robot pad points' distance during the person's touches (person's pad
+points closer than ``CONTACT_MM``), per thumb-finger pair the map names. dex-retargeting is not run: see docs/retargeting.md.
 """
 
 from __future__ import annotations
@@ -23,7 +25,15 @@ from pathlib import Path
 import numpy as np
 
 from fingerfit.estimate import fit_session
-from fingerfit.retarget import resolve, retarget
+from fingerfit.kinematics import compute_kinematics
+from fingerfit.retarget import (
+    CONTACT_MM,
+    person_points,
+    pinch_terms,
+    resolve,
+    retarget,
+    setup,
+)
 from fingerfit.session import PoseSeries, Recording
 from fingerfit.simulate import SimConfig, simulate_subject
 
@@ -93,6 +103,57 @@ def main() -> None:
                     f"| {robot_name} | {method} | {variant} | {r['tip_err_median_mm']:.2f} | "
                     f"{r['tip_err_p95_mm']:.1f} | {r['violations']} | {r['jerk_rad_s3']:.0f} | "
                     f"{r['solve_p50_ms']:.3f} | {r['solve_p99_ms']:.2f} |",
+                    flush=True,
+                )
+    # Whole hand (thumb + four fingers, pad points): the pinch recording.
+    print(
+        "| robot | method | source | pinch distance median mm | p95 mm | touch frames | "
+        "tip error median mm | violations | jerk rad/s^3 | solve p50 ms | p99 ms |"
+    )
+    pinch_rows = []
+    for seed in range(a.subjects):
+        sub = simulate_subject(SimConfig(fingers=("thumb", *FINGERS)), seed)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = fit_session(sub.session)
+        rec = sub.session.recording("pinch.csv")
+        dt = float(np.median(np.diff(rec.time)))
+        for robot_name in ("shadow", "allegro"):
+            robot, rmap = resolve(robot_name, None, model.hand)
+            s = setup(model, robot, rmap)
+            kin = compute_kinematics(model, rec)
+            pads = person_points(s, model, kin, rec, "user_axis", "pad")
+            pairs, _, _, dist = pinch_terms(s, pads)
+            touch = dist < CONTACT_MM  # the person's pads touch (pair, frame)
+            ref = None
+            for method, variant in SOURCES:
+                res = retarget(model, rec, robot, rmap, method, variant, kin=kin)
+                ref = res.targets if ref is None else ref
+                pa = robot.positions(res.q, [rmap.digits[x].pad for x, _ in pairs])
+                pb = robot.positions(res.q, [rmap.digits[y].pad for _, y in pairs])
+                rd = np.linalg.norm(pa - pb, axis=2) * 1000.0
+                err = np.linalg.norm(res.tips - ref, axis=2)
+                r = {
+                    "subject": seed,
+                    "robot": robot_name,
+                    "method": method,
+                    "source": variant,
+                    "touch_frames": int(touch.sum()),
+                    "pinch_median_mm": float(np.median(rd[touch])),
+                    "pinch_p95_mm": float(np.percentile(rd[touch], 95)),
+                    "tip_err_median_mm": float(np.nanmedian(err)),
+                    "violations": res.violations,
+                    "jerk_rad_s3": jerk(res.q, dt),
+                    "solve_p50_ms": float(np.median(res.seconds) * 1e3),
+                    "solve_p99_ms": float(np.percentile(res.seconds, 99) * 1e3),
+                }
+                pinch_rows.append(r)
+                print(
+                    f"| {robot_name} | {method} | {variant} | {r['pinch_median_mm']:.1f} | "
+                    f"{r['pinch_p95_mm']:.1f} | {r['touch_frames']} | "
+                    f"{r['tip_err_median_mm']:.2f} | {r['violations']} | "
+                    f"{r['jerk_rad_s3']:.0f} | {r['solve_p50_ms']:.3f} | "
+                    f"{r['solve_p99_ms']:.2f} |",
                     flush=True,
                 )
     a.out.write_text(

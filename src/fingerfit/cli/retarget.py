@@ -70,7 +70,7 @@ def retarget(
             "--contact-mm",
             help="Person's pad-point distance (mm) that counts as touching (pinch term).",
         ),
-    ] = 0.0,
+    ] = 8.0,
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace existing output files.")
     ] = False,

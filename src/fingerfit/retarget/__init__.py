@@ -41,6 +41,9 @@ from .solve import MM, TipOptions, TipProblem, solve_tip
 METHODS = ("tip", "joint")
 #: Person's pad distance (mm) below which the pinch term starts to weigh.
 PINCH_FAR_MM = 30.0
+#: Person's pad-point distance counted as touching (mm): pulp-centre pad points of touching
+#: pads lie 3.5-8 mm apart in the simulated whole-hand pinches (docs/retargeting.md).
+CONTACT_MM = 8.0
 
 
 @dataclass
@@ -234,7 +237,7 @@ class Retargeting:
 
 
 def pinch_terms(
-    s: Setup, pads: dict[str, FloatArray], contact_mm: float = 0.0
+    s: Setup, pads: dict[str, FloatArray], contact_mm: float = CONTACT_MM
 ) -> tuple[list[tuple[str, str]], FloatArray, FloatArray, FloatArray]:
     """Pinch pairs, target vectors, weights and the person's pad distances.
 
@@ -243,7 +246,7 @@ def pinch_terms(
     pads : dict[str, ndarray (n, 3)]
         Digit -> pad point in the person's palm frame (mm).
     contact_mm : float
-        The person's pad-point distance that counts as touching (0 for points on the skin).
+        The person's pad-point distance that counts as touching (:data:`CONTACT_MM`).
 
     Returns
     -------
@@ -295,7 +298,7 @@ def retarget(
     method: str = "tip",
     variant: str = "user_axis",
     options: TipOptions | None = None,
-    contact_mm: float = 0.0,
+    contact_mm: float = CONTACT_MM,
     kin: Kinematics | None = None,
 ) -> Retargeting:
     """Retarget a recording of the person's hand onto a robot hand.
@@ -370,6 +373,7 @@ def retarget(
 
 
 __all__ = [
+    "CONTACT_MM",
     "METHODS",
     "Retargeting",
     "Setup",

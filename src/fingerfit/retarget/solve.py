@@ -75,7 +75,7 @@ class TipOptions:
 
     smooth: float = 20.0
     damping: float = 1e-3
-    pinch: float = 4.0
+    pinch: float = 10.0
     prior: float = 5.0
     coupling: float = 100.0
     iterations: int = 12
