@@ -301,3 +301,42 @@ def test_cli_writes_csv_and_identical_npz(hand, tmp_path):
     assert list(z["joint_names"]) == list(robot.joint_names)
     np.testing.assert_array_equal(z["q"], table[list(robot.joint_names)].to_numpy())
     np.testing.assert_array_equal(z["time"], table["time"].to_numpy())
+
+
+def test_whole_hand_pinch_brings_the_shadow_pads_together():
+    """Simulated whole hand (thumb, pad points), pinch recording: while the person's thumb
+    and index pads touch, the tip method's Shadow pad points are < 3 mm apart (the joint
+    method's are centimetres apart)."""
+    from fingerfit.estimate import fit_session
+    from fingerfit.kinematics import compute_kinematics
+    from fingerfit.retarget import CONTACT_MM, person_points, pinch_terms
+    from fingerfit.session import PoseSeries, Recording
+
+    sub = subject("realistic", 2, ("thumb", *FINGERS))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = fit_session(sub.session)
+    full = sub.session.recording("pinch.csv")
+    robot, rmap = resolve("shadow", None, model.hand)
+    s = setup(model, robot, rmap)
+    kin = compute_kinematics(model, full, variants=("user_axis",))
+    pads = person_points(s, model, kin, full, "user_axis", "pad")
+    pairs, _, _, dist = pinch_terms(s, pads)
+    assert pairs[0] == ("thumb", "index")
+    first = int(np.argmax(dist[:, 0] < CONTACT_MM))
+    cut = slice(max(first - 240, 0), first + 360)  # the approach and the first touch
+    rec = Recording(
+        full.name,
+        full.time[cut],
+        {k: PoseSeries(v.position[cut], v.rotation[cut]) for k, v in full.poses.items()},
+    )
+    touch = dist[cut, 0] < CONTACT_MM
+    assert touch.sum() > 20
+    gaps = {}
+    for method in ("tip", "joint"):
+        res = retarget(model, rec, robot, rmap, method)
+        assert res.violations == 0
+        p = robot.positions(res.q, [rmap.digits["thumb"].pad, rmap.digits["index"].pad])
+        gaps[method] = np.linalg.norm(p[:, 0] - p[:, 1], axis=1)[touch] * MM
+    assert np.median(gaps["tip"]) < 3.0, np.median(gaps["tip"])
+    assert np.median(gaps["joint"]) > 20.0
