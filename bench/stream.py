@@ -5,8 +5,10 @@ keep the figures). Two parts, in one run:
 
 1. **Per-frame compute** for each model (one finger; the four fingers; the whole hand
    with the thumb when the simulator has it): one frame at a time through what the
-   stream does per block -- :func:`fingerfit.kinematics.compute_kinematics` (user-axis
-   variant) and the streamed values (:func:`fingerfit.live.stream.block_values`) --
+   stream does per block -- :meth:`fingerfit.kinematics.KinematicsPlan.run` of a plan
+   built once (user-axis variant), side by side with a fresh
+   :func:`fingerfit.kinematics.compute_kinematics` per frame, and the streamed values
+   (:func:`fingerfit.live.stream.block_values`) --
    p50 / p99 / max over 2000 frames.
 2. **End to end**: a ``fingerfit stream`` subprocess replays a 240 Hz recording in real
    time (``--seconds`` long) to LSL and to ROS 2 over DDS; this process receives both
@@ -34,7 +36,7 @@ import numpy as np
 
 from fingerfit.estimate import fit_session
 from fingerfit.io import write_pose_csv
-from fingerfit.kinematics import compute_kinematics
+from fingerfit.kinematics import KinematicsPlan, compute_kinematics
 from fingerfit.live.stream import block_values, channels_of, model_sensors
 from fingerfit.model import save_model
 from fingerfit.session import PoseSeries, Recording
@@ -53,22 +55,31 @@ def subject_for(fingers: tuple[str, ...]):
 
 
 def per_frame_compute(model, rec: Recording, n: int = 2000) -> dict[str, float]:
-    """Microseconds per single-frame block: p50, p99, max."""
+    """Microseconds per single-frame block, p50, p99, max: the stream's plan (built once)
+    and, interleaved frame by frame, a fresh ``compute_kinematics`` call (``call_*``)."""
     sensors = model_sensors(model)
+    plan = KinematicsPlan(model, ("user_axis",))
     ch = None
-    times = []
+    times, calls = [], []
     for i in range(n):
         block = rec.slice(slice(i, i + 1))
         t = time.perf_counter()
-        kin = compute_kinematics(model, block, ("user_axis",))
+        kin = plan.run(block)
         ch = ch or channels_of(model, kin)
         block_values(kin, ch, block, sensors, "tracker")
         times.append(time.perf_counter() - t)
-    us = 1e6 * np.array(times[50:])  # the first frames warm caches
+        t = time.perf_counter()
+        block_values(
+            compute_kinematics(model, block, ("user_axis",)), ch, block, sensors, "tracker"
+        )
+        calls.append(time.perf_counter() - t)
+    us, cus = 1e6 * np.array(times[50:]), 1e6 * np.array(calls[50:])  # first frames warm up
     return {
         "p50_us": float(np.percentile(us, 50)),
         "p99_us": float(np.percentile(us, 99)),
         "max_us": float(us.max()),
+        "call_p50_us": float(np.percentile(cus, 50)),
+        "call_p99_us": float(np.percentile(cus, 99)),
         "joints": len(ch.angles),
         "digits": len(ch.digits),
     }
