@@ -26,13 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..digits import THUMB_JOINTS
 from ..transforms import FloatArray, axis_angle_matrix, unit
 from .anatomy import BUCHHOLZ, INDEX_LENGTHS, compose, joint_transform
 
 #: The thumb's angles (rad), in the order of the truth tables.
 THUMB_KEYS = ("cmc", "cmc_abduction", "mcp", "mcp_abduction", "ip")
-THUMB_SEGMENTS = ("metacarpal", "proximal", "distal")
-THUMB_JOINTS = ("cmc", "mcp", "ip")
 
 # Buchholz et al. 1992: thumb link lengths as fractions of hand length: metacarpal
 # (CMC-MCP), proximal phalanx (MCP-IP), distal phalanx (IP-tip).

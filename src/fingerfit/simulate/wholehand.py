@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..digits import THUMB_JOINTS, THUMB_SEGMENTS
 from ..transforms import FloatArray
 from . import contact as ct
 from . import motion as mo
@@ -25,9 +26,7 @@ from .anatomy import FingerAnatomy
 from .sensors import SensorMount, TrackerErrors, mount, sensor_poses
 from .thumb import (
     NOMINAL_HAND_LENGTH,
-    THUMB_JOINTS,
     THUMB_KEYS,
-    THUMB_SEGMENTS,
     Pad,
     ThumbAnatomy,
     moved,
