@@ -78,7 +78,7 @@ class TipOptions:
     pinch: float = 10.0
     prior: float = 5.0
     coupling: float = 100.0
-    iterations: int = 12
+    iterations: int = 6
     restart_mm: float = 10.0
     polish_smooth: float = 20.0
     polish_iterations: int = 3
