@@ -340,3 +340,31 @@ def test_whole_hand_pinch_brings_the_shadow_pads_together():
         gaps[method] = np.linalg.norm(p[:, 0] - p[:, 1], axis=1)[touch] * MM
     assert np.median(gaps["tip"]) < 3.0, np.median(gaps["tip"])
     assert np.median(gaps["joint"]) > 20.0
+
+
+def test_cli_signature_names_mirror_the_real_ones():
+    from fingerfit.cli import _names
+    from fingerfit.retarget import CONTACT_MM, METHODS
+    from fingerfit.retarget.maps import BUILTIN
+
+    assert _names.RETARGET_METHODS == METHODS
+    assert _names.RETARGET_ROBOTS == tuple(BUILTIN)
+    import inspect
+
+    from fingerfit.cli.retarget import retarget as command
+
+    assert inspect.signature(command).parameters["contact_mm"].default == CONTACT_MM
+
+
+def test_shipped_maps_are_package_data():
+    """The maps ship inside the package (pyproject package-data) and name real robot frames."""
+    from importlib import resources
+
+    maps = resources.files("fingerfit.retarget") / "maps"
+    names = sorted(p.name for p in maps.iterdir() if p.name.endswith(".toml"))
+    assert names == ["allegro_left.toml", "allegro_right.toml", "shadow.toml"]
+    import tomllib
+    from pathlib import Path
+
+    pyproject = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    assert "maps/*.toml" in pyproject["tool"]["setuptools"]["package-data"]["fingerfit.retarget"]
