@@ -145,10 +145,25 @@ class LslOutput:
             self.outlets.append(pylsl.StreamOutlet(info, chunk_size=0, max_buffered=10))
         # LSL clock = steady clock; arrival times are time.monotonic(): one offset.
         self.offset = pylsl.local_clock() - time.monotonic()
+        self._first_consumer: float | None = None  # when one outlet first had a consumer
+
+    #: Once one outlet has a consumer, how long (s) the other may take to get one too
+    #: (a consumer may want only one of the two; one that opens both opens them in turn).
+    SECOND_CONSUMER_GRACE_S = 1.0
 
     def has_consumers(self) -> bool:
-        """Whether the angles or the tips outlet has a consumer (one may want only one)."""
-        return any(o.have_consumers() for o in self.outlets)
+        """Whether both outlets have a consumer, or one has had one for
+        :attr:`SECOND_CONSUMER_GRACE_S` (a consumer may want only the angles or the tips)."""
+        have = [o.have_consumers() for o in self.outlets]
+        if all(have):
+            return True
+        if not any(have):
+            self._first_consumer = None
+            return False
+        now = time.monotonic()
+        if self._first_consumer is None:
+            self._first_consumer = now
+        return now - self._first_consumer >= self.SECOND_CONSUMER_GRACE_S
 
     def push(
         self, angles: FloatArray, tips: FloatArray, valid: FloatArray, arrival: FloatArray
