@@ -10,9 +10,9 @@ import pytest
 pytest.importorskip("mujoco")
 pytest.importorskip("pinocchio")
 
-from ..conftest import subject  # noqa: E402
-from ..test_retarget import MAP, ROBOT_XML  # noqa: E402
-from ._cli import listing, refused, run  # noqa: E402
+from ..conftest import subject
+from ..test_retarget import MAP, ROBOT_XML
+from ._cli import listing, refused, run
 
 
 @pytest.fixture(scope="module")
