@@ -1,0 +1,366 @@
+"""The retargeting pipeline: a person's recording -> robot joint angles per frame.
+
+:func:`resolve` finds the robot and its map, :func:`setup` prepares the palm frames,
+scales and limits of one model on one robot, :func:`retarget` runs the ``tip`` or
+``joint`` method over a recording (``docs/retargeting.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FingerfitError, shown
+from ..kinematics import Kinematics, compute_kinematics
+from ..model import HandModel
+from ..session import Recording
+from ..transforms import FloatArray
+from .joint import copy_angles
+from .limits import Limits, limits_of
+from .maps import BUILTIN, RobotMap, builtin_map, check_map, parse_map
+from .palm import (
+    Frame,
+    digit_base,
+    in_palm,
+    person_chain_length,
+    person_palm,
+    robot_digit,
+    robot_palm,
+)
+from .robots import Robot, load_robot
+from .solve import MM, TipOptions, TipProblem, solve_tip
+
+METHODS = ("tip", "joint")
+#: Person's pad distance (mm) below which the pinch term starts to weigh.
+PINCH_FAR_MM = 30.0
+#: Person's pad-point distance counted as touching (mm): pulp-centre pad points of touching
+#: pads lie 3.5-8 mm apart in the simulated whole-hand pinches (docs/retargeting.md).
+CONTACT_MM = 8.0
+
+
+@dataclass
+class Setup:
+    """A robot, its map and everything fixed about retargeting one model onto it.
+
+    Attributes
+    ----------
+    robot : Robot
+    rmap : RobotMap
+    limits : Limits
+    hold : ndarray, shape (nq,)
+        Neutral configuration (rad), within limits and couplings.
+    digits : list of str
+        Digits both the model and the map have (the retargeted ones).
+    free : ndarray of int
+        Joints the ``tip`` method solves for.
+    palm, robot_palm : Frame
+        Person's (tracker, mm) and robot's (robot world, m) palm frames.
+    scale : dict[str, float]
+        Per-digit robot/person chain length.
+    person_base, robot_base : dict[str, ndarray (3,)]
+        Digit base in the person's palm frame (mm) and the robot's (mm).
+    mirror : bool
+        The person's hand is the other side than the robot's (palm-frame y flipped).
+    """
+
+    robot: Robot
+    rmap: RobotMap
+    limits: Limits
+    hold: FloatArray
+    digits: list[str]
+    free: np.ndarray
+    palm: Frame
+    robot_palm: Frame
+    scale: dict[str, float]
+    person_base: dict[str, FloatArray]
+    robot_base: dict[str, FloatArray]
+    mirror: bool
+    notes: list[str] = field(default_factory=list)
+
+
+def resolve(robot: str | Path, map_path: str | Path | None, hand: str) -> tuple[Robot, RobotMap]:
+    """Robot and map from ``--robot`` (a built-in name or a .urdf/.xml file) and ``--map``.
+
+    Raises
+    ------
+    FingerfitError
+        Unknown robot name, a robot file without a map, a bad map, a missing package.
+    """
+    name = str(robot)
+    if map_path is not None:
+        rmap = parse_map(map_path)
+    elif name in BUILTIN:
+        rmap = builtin_map(name, hand)
+    elif name.lower().endswith((".urdf", ".xml")):
+        raise FingerfitError(
+            "a robot file needs a map: give --map MAP.toml (docs/retargeting.md)", field="--map"
+        )
+    else:
+        raise FingerfitError(
+            f"unknown robot '{shown(name)}': one of {', '.join(BUILTIN)} or a .urdf/.xml file",
+            field="--robot",
+        )
+    if name.lower().endswith((".urdf", ".xml")):
+        file = Path(name)
+    elif rmap.robot_file is not None:
+        file = rmap.robot_file
+    elif name in BUILTIN:
+        file = builtin_map(name, hand).robot_file  # type: ignore[assignment]
+    else:
+        raise FingerfitError("the map names no robot file ([robot] file)", path=rmap.path)
+    r = load_robot(file)
+    check_map(rmap, r)
+    return r, rmap
+
+
+def setup(model: HandModel, robot: Robot, rmap: RobotMap) -> Setup:
+    """Fix frames, anchors, scales, held joints and limits for one model on one robot.
+
+    Raises
+    ------
+    FingerfitError
+        The model and the map share no digit, or the map's couplings are infeasible.
+    """
+    limits = limits_of(robot, rmap)
+    digits = [d for d in rmap.digits if d in model.fingers]
+    if not digits:
+        raise FingerfitError(
+            f"the model's digits ({', '.join(model.fingers)}) are none of the map's "
+            f"({', '.join(rmap.digits)})",
+            path=rmap.path,
+            field="digits",
+        )
+    idx = {n: i for i, n in enumerate(robot.joint_names)}
+    hold = np.zeros(robot.nq)
+    for j, v in rmap.neutral.items():
+        hold[idx[j]] = v
+    hold = limits.project(np.clip(hold, robot.lower, robot.upper))
+    palm_joints = set(robot.ancestors(rmap.palm))
+    chains = {d: set(robot.ancestors(rmap.digits[d].tip)) - palm_joints for d in rmap.digits}
+    held = {idx[j] for j in rmap.neutral}
+    free = np.array(sorted(set().union(*(chains[d] for d in digits)) - held), dtype=int)
+    rpalm = robot_palm(robot, rmap, hold)
+    palm = person_palm(model)
+    scale, pbase, rbase = {}, {}, {}
+    for d in digits:
+        base, length = robot_digit(robot, rmap, rpalm, hold, d)
+        person = person_chain_length(model, d)
+        given = rmap.digits[d].scale
+        scale[d] = given if given is not None else length * MM / person
+        pbase[d] = (digit_base(model, d) - palm.origin) @ palm.rotation
+        rbase[d] = base * MM
+    notes = []
+    absent = [d for d in rmap.digits if d not in model.fingers]
+    if absent:
+        notes.append(f"digits the model lacks hold the neutral posture: {', '.join(absent)}")
+    unused = [d for d in model.fingers if d not in rmap.digits]
+    if unused:
+        notes.append(f"the robot has no {', '.join(unused)}: not retargeted")
+    mirror = model.hand in ("right", "left") and model.hand != rmap.hand
+    if mirror:
+        notes.append(f"{model.hand} hand mirrored onto the {rmap.hand} robot hand")
+    return Setup(
+        robot, rmap, limits, hold, digits, free, palm, rpalm, scale, pbase, rbase, mirror, notes
+    )
+
+
+def targets(s: Setup, points: FloatArray, digits: list[str]) -> FloatArray:
+    """Person's points in their palm frame -> robot targets (robot palm frame, mm).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, k, 3)
+        Person's palm frame (mm), one column per digit of ``digits``.
+
+    Returns
+    -------
+    ndarray, shape (n, k, 3)
+        ``B_robot + s M (P - B_person)`` (``docs/retargeting.md``).
+    """
+    m = np.array([1.0, -1.0 if s.mirror else 1.0, 1.0])
+    base_p = np.array([s.person_base[d] for d in digits])
+    base_r = np.array([s.robot_base[d] for d in digits])
+    k = np.array([s.scale[d] for d in digits])[:, None]
+    return base_r + k * (points - base_p) * m
+
+
+def robot_points(s: Setup, q: FloatArray, frames: list[str]) -> FloatArray:
+    """Robot frame positions ``(n, k, 3)`` in the robot palm frame (mm) for ``q (n, nq)``."""
+    p = s.robot.positions(q, frames)
+    return (p - s.robot_palm.origin) @ s.robot_palm.rotation * MM
+
+
+@dataclass(frozen=True)
+class Retargeting:
+    """A robot joint trajectory.
+
+    Attributes
+    ----------
+    time : ndarray, shape (n,)
+        Seconds.
+    joint_names : tuple of str
+        Every robot joint (``nq``), coupled and held ones included.
+    q : ndarray, shape (n, nq)
+        rad (m for slide joints).
+    method : {"tip", "joint"}
+    digits : list of str
+    targets : ndarray, shape (n, k, 3)
+        Scaled fingertip targets of ``digits`` (robot palm frame, mm).
+    tips : ndarray, shape (n, k, 3)
+        Robot tips reached (robot palm frame, mm).
+    seconds : ndarray, shape (n,)
+        Per-frame solve time (``tip``; the vectorised ``joint`` copy: total / n).
+    violations : int
+        Limit and coupling violations of ``q`` (0).
+    notes : list of str
+        Mirroring, digits held or dropped, frames with missing data.
+    """
+
+    time: FloatArray
+    joint_names: tuple[str, ...]
+    q: FloatArray
+    method: str
+    digits: list[str]
+    targets: FloatArray
+    tips: FloatArray
+    seconds: FloatArray
+    violations: int
+    notes: list[str]
+
+
+def pinch_terms(
+    s: Setup, pads: dict[str, FloatArray], contact_mm: float = CONTACT_MM
+) -> tuple[list[tuple[str, str]], FloatArray, FloatArray, FloatArray]:
+    """Pinch pairs, target vectors, weights and the person's pad distances.
+
+    Parameters
+    ----------
+    pads : dict[str, ndarray (n, 3)]
+        Digit -> pad point in the person's palm frame (mm).
+    contact_mm : float
+        The person's pad-point distance that counts as touching (:data:`CONTACT_MM`).
+
+    Returns
+    -------
+    pairs : list of (str, str)
+    vectors : ndarray, shape (n, p, 3)
+        Target of robot ``pad_a - pad_b`` (robot palm frame, mm): the person's vector,
+        mirrored, scaled by the pair's mean scale, shortened by ``contact_mm``.
+    weights : ndarray, shape (n, p)
+        0 beyond :data:`PINCH_FAR_MM`, rising linearly to 1 at ``contact_mm``.
+    distance : ndarray, shape (n, p)
+        Person's pad distance (mm).
+    """
+    pairs = [(a, b) for a, b in s.rmap.pinch if a in pads and b in pads]
+    n = len(next(iter(pads.values()))) if pads else 0
+    m = np.array([1.0, -1.0 if s.mirror else 1.0, 1.0])
+    vec = np.zeros((n, len(pairs), 3))
+    w = np.zeros((n, len(pairs)))
+    dist = np.zeros((n, len(pairs)))
+    for i, (a, b) in enumerate(pairs):
+        v = (pads[a] - pads[b]) * m
+        d = np.linalg.norm(v, axis=1)
+        k = 0.5 * (s.scale[a] + s.scale[b])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            shrink = np.where(d > 0, np.maximum(d - contact_mm, 0.0) / d, 0.0)
+        vec[:, i] = k * v * shrink[:, None]
+        w[:, i] = np.clip((PINCH_FAR_MM - d) / (PINCH_FAR_MM - contact_mm), 0.0, 1.0)
+        dist[:, i] = d
+    return pairs, vec, np.nan_to_num(w), dist
+
+
+def person_points(
+    s: Setup, model: HandModel, kin: Kinematics, recording: Recording, variant: str, attr: str
+) -> dict[str, FloatArray]:
+    """Digit -> ``(n, 3)`` person's ``tip`` or ``pad`` trajectory in their palm frame (mm)."""
+    out = {}
+    for d in s.digits:
+        motion = kin.motions[variant][d]
+        pts = getattr(motion, attr, None)
+        if pts is not None:
+            out[d] = in_palm(model, s.palm, recording, np.asarray(pts)[:, None, :])[:, 0]
+    return out
+
+
+def retarget(
+    model: HandModel,
+    recording: Recording,
+    robot: Robot,
+    rmap: RobotMap,
+    method: str = "tip",
+    variant: str = "user_axis",
+    options: TipOptions | None = None,
+    contact_mm: float = CONTACT_MM,
+    kin: Kinematics | None = None,
+) -> Retargeting:
+    """Retarget a recording of the person's hand onto a robot hand.
+
+    Parameters
+    ----------
+    model : HandModel
+    recording : Recording
+        With the hand sensor and every sensor of the retargeted digits.
+    robot, rmap : Robot, RobotMap
+        From :func:`resolve`.
+    method : {"tip", "joint"}
+    variant : {"user_axis", "orthogonal"}
+        The model variant whose kinematics drive the robot.
+    options : TipOptions, optional
+    contact_mm : float
+        See :func:`pinch_terms`.
+    kin : Kinematics, optional
+        Precomputed :func:`fingerfit.kinematics.compute_kinematics` of ``recording``.
+
+    Returns
+    -------
+    Retargeting
+    """
+    import time
+
+    if method not in METHODS:
+        raise FingerfitError(f"must be one of {', '.join(METHODS)}", field="--method")
+    s = setup(model, robot, rmap)
+    kin = kin or compute_kinematics(model, recording, variants=(variant,), fingers=s.digits)
+    tips = person_points(s, model, kin, recording, variant, "tip")
+    tgt = targets(s, np.stack([tips[d] for d in s.digits], axis=1), s.digits)
+    notes = list(s.notes)
+    frames = [rmap.digits[d].tip for d in s.digits]
+    start = time.perf_counter()
+    angles = {d: kin.motions[variant][d].angles for d in s.digits}
+    q_joint, held = copy_angles(angles, rmap, robot.joint_names, s.hold, s.limits)
+    if method == "joint":
+        q = q_joint
+        seconds = np.full(len(q), (time.perf_counter() - start) / max(len(q), 1))
+        if held:
+            notes.append(f"{held} frame(s) with a missing angle kept the previous value")
+    else:
+        pads = person_points(s, model, kin, recording, variant, "pad")
+        pairs, vec, w, _ = pinch_terms(s, pads, contact_mm) if pads else ([], None, None, None)
+        if not pads and rmap.pinch:
+            notes.append("the model has no pad points: pinch term off")
+        pad_frames = [rmap.digits[d].pad for pair in pairs for d in pair]
+        all_frames = frames + [f for f in dict.fromkeys(pad_frames) if f not in frames]
+        pidx = [
+            (all_frames.index(rmap.digits[a].pad), all_frames.index(rmap.digits[b].pad))
+            for a, b in pairs
+        ]
+        problem = TipProblem(robot, s.robot_palm, all_frames, s.free, s.hold, s.limits)
+        missing = int(np.sum(~np.isfinite(tgt).all(axis=(1, 2))))
+        if missing:
+            notes.append(f"{missing} frame(s) with a missing sensor: those digits kept their pose")
+        res = solve_tip(problem, tgt, None, pidx, vec, w, options, prior=q_joint)
+        q, seconds = res.q, res.seconds
+    return Retargeting(
+        time=np.asarray(recording.time, dtype=float),
+        joint_names=robot.joint_names,
+        q=q,
+        method=method,
+        digits=s.digits,
+        targets=tgt,
+        tips=robot_points(s, q, frames),
+        seconds=seconds,
+        violations=s.limits.violations(q),
+        notes=notes,
+    )
