@@ -82,7 +82,7 @@ def test_c3d_without_ezc3d(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> N
     monkeypatch.setitem(sys.modules, "ezc3d", None)  # import ezc3d -> ImportError
     line = refused(
         run("simulate", "out", *SIM, "--format", "c3d", cwd=tmp_path),
-        "needs the optional package ezc3d: pip install 'fingerfit[c3d]'",
+        "writing C3D files needs the Python package 'ezc3d': pip install fingerfit[c3d]",
     )
     assert "--format" in line
     assert list(tmp_path.iterdir()) == []

@@ -13,39 +13,9 @@ they are imported only when a file is written. See ``docs/export.md``.
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
-from types import ModuleType
 
-from ..errors import FingerfitError
 from ..io.atomic import write_files
-
-
-def require(module: str, *, extra: str = "robot", purpose: str = "robot export") -> ModuleType:
-    """Import an optional dependency of the ``robot`` extra (or of ``extra``).
-
-    Parameters
-    ----------
-    module : str
-        Module name (``yourdfpy``, ``mujoco``).
-    extra, purpose : str
-        The extra that installs it and what needs it, for the message.
-
-    Returns
-    -------
-    module
-
-    Raises
-    ------
-    FingerfitError
-        If it is not installed, saying ``pip install fingerfit[robot]``.
-    """
-    try:
-        return importlib.import_module(module)
-    except ImportError:
-        raise FingerfitError(
-            f"{purpose} needs the Python package '{module}': pip install fingerfit[{extra}]"
-        ) from None
 
 
 def write_text(files: dict[Path, str], *, overwrite: bool = True) -> list[Path]:

@@ -27,8 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..extras import require
 from ..model import HandModel
-from . import require, write_text
+from . import write_text
 from .geometry import DEFAULT_MARGIN_DEG, HAND_LINK, RobotHand, robot_hand
 
 FINGER_RGBA = (0.87, 0.72, 0.62, 1.0)
@@ -142,7 +143,7 @@ def mjcf_string(
         Unknown variant or bad model (see :func:`~fingerfit.export.geometry.robot_hand`),
         or mujoco missing (``pip install fingerfit[robot]``).
     """
-    mujoco = require("mujoco")
+    mujoco = require("mujoco", "robot", "robot export")
     hand = robot_hand(model, variant, margin_deg)
     spec = _build_spec(hand, mujoco)
     spec.compile()

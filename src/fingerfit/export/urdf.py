@@ -18,9 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..extras import require
 from ..model import HandModel
 from ..transforms import orthonormal_basis
-from . import require, write_text
+from . import write_text
 from .geometry import (
     DEFAULT_MARGIN_DEG,
     EFFORT_NM,
@@ -88,7 +89,7 @@ def urdf_string(
         Unknown variant or bad model (see :func:`~fingerfit.export.geometry.robot_hand`),
         or yourdfpy missing (``pip install fingerfit[robot]``).
     """
-    ydf = require("yourdfpy")
+    ydf = require("yourdfpy", "robot", "robot export")
     from lxml import etree
 
     hand = robot_hand(model, variant, margin_deg)

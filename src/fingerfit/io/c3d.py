@@ -44,13 +44,9 @@ _CLUSTER_RE = re.compile(r"^(.*?[^\d])(\d+)$")
 
 
 def _ezc3d():
-    try:
-        import ezc3d
-    except ImportError:  # pragma: no cover - depends on the environment
-        raise FingerfitError(
-            "reading C3D files needs the optional package ezc3d: pip install 'fingerfit[c3d]'"
-        ) from None
-    return ezc3d
+    from ..extras import require
+
+    return require("ezc3d", "c3d", "reading C3D files")
 
 
 @dataclass

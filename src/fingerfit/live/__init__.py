@@ -19,24 +19,7 @@ from types import ModuleType
 
 
 def require(module: str) -> ModuleType:
-    """Import an optional dependency of the ``live`` extra.
+    """Import an optional dependency of the ``live`` extra (:func:`fingerfit.extras.require`)."""
+    from ..extras import require as require_extra
 
-    :func:`fingerfit.export.require` with the extra ``live``.
-
-    Parameters
-    ----------
-    module : str
-        Module name (``pylsl``, ``cyclonedds``, ``rosbags``, ``serial``).
-
-    Returns
-    -------
-    module
-
-    Raises
-    ------
-    FingerfitError
-        If it is not installed, saying ``pip install fingerfit[live]``.
-    """
-    from ..export import require as require_extra
-
-    return require_extra(module, extra="live", purpose="streaming")
+    return require_extra(module, "live", "streaming")

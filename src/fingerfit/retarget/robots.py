@@ -25,15 +25,10 @@ EXTRA = "retarget"
 
 
 def require(module: str) -> Any:
-    """Import an optional dependency of the ``retarget`` extra (one-line error if missing)."""
-    from ..export import require as _require
+    """Import an optional dependency of the ``retarget`` extra (:func:`fingerfit.extras.require`)."""
+    from ..extras import require as require_extra
 
-    try:
-        return _require(module)
-    except FingerfitError:
-        raise FingerfitError(
-            f"robot retargeting needs the Python package '{module}': pip install fingerfit[{EXTRA}]"
-        ) from None
+    return require_extra(module, EXTRA, "robot retargeting")
 
 
 @dataclass

@@ -184,14 +184,9 @@ def liberty_records(
 
 def require_ezc3d():
     """The ``ezc3d`` module, or a one-line error saying how to install it."""
-    try:
-        import ezc3d
-    except ImportError:
-        raise FingerfitError(
-            "writing C3D files needs the optional package ezc3d: pip install 'fingerfit[c3d]'",
-            field="--format",
-        ) from None
-    return ezc3d
+    from ..extras import require
+
+    return require("ezc3d", "c3d", "writing C3D files", field="--format")
 
 
 def write_c3d_recording(
