@@ -39,10 +39,15 @@ def save(fig: Figure, path: Path) -> Path:
     return path
 
 
-def save_to(fig: Figure, fh: BinaryIO) -> None:
-    """Write a PNG to an open binary file (or ``io.BytesIO``) and close the figure."""
+def save_to(fig: Figure, fh: BinaryIO, *, tight: bool = True) -> None:
+    """Write a PNG to an open binary file (or ``io.BytesIO``) and close the figure.
+
+    ``tight=False`` keeps the figure's own canvas instead of cropping it to its
+    artists (``bbox_inches="tight"``), which draws the figure once instead of twice;
+    for a figure whose constrained layout already keeps every artist inside.
+    """
     try:
-        fig.savefig(fh, format="png", dpi=DPI, bbox_inches="tight")
+        fig.savefig(fh, format="png", dpi=DPI, bbox_inches="tight" if tight else None)
     finally:
         plt.close(fig)
 

@@ -773,7 +773,7 @@ def study_subject(item: Path | str | Session, options: FitOptions) -> SubjectOut
             result = _subject(session, options)
             name, build = _trajectory_figure(result)
             png = io.BytesIO()
-            figures.save_to(build(), png)
+            figures.save_to(build(), png, tight=False)  # constrained layout: one draw
     except Exception as exc:  # one bad session is named, never a traceback
         return SubjectOutcome(
             str(session.path or session.subject),
@@ -916,33 +916,33 @@ def run_study(
             raise FingerfitError(message)
         failures.append(SessionFailure(source, subject, message))
 
-    with staged_directory(out_dir, overwrite=overwrite) as tmp:
+    with staged_directory(out_dir, overwrite=overwrite) as tmp, contextlib.ExitStack() as stack:
         outcomes: list[SubjectOutcome | None] = [None] * len(sessions)
         fig09: dict[int, tuple[str, Path]] = {}
-        with study_executor(jobs, scheduler) as pool:
-            futures = {pool.submit(study_subject, s, options): i for i, s in enumerate(sessions)}
-            for future in as_completed(futures):
-                i = futures[future]
-                try:
-                    got = outcomes[i] = future.result()
-                except Exception as exc:  # a lost worker, not a bad session
-                    raise FingerfitError(
-                        f"a study worker failed on '{sessions[i]}' "
-                        f"({type(exc).__name__}: {_one_line(exc)})"
-                    ) from None
-                if got.result is not None and got.figure is not None:
-                    # Written as it arrives; only the path is kept.
-                    name, png = got.figure
-                    with atomic_write(tmp / name, "wb") as fh:
-                        fh.write(png)
-                    fig09[i] = (f"fig09_{got.subject}", tmp / name)
-                    got.figure = None
-                if got.read_error is not None:
-                    step(f"could not read {got.source}")
-                elif got.fit_error is not None:
-                    step(f"failed: {got.subject}")
-                else:
-                    step(f"fitted and evaluated {got.subject}")
+        pool = stack.enter_context(study_executor(jobs, scheduler))
+        futures = {pool.submit(study_subject, s, options): i for i, s in enumerate(sessions)}
+        for future in as_completed(futures):
+            i = futures[future]
+            try:
+                got = outcomes[i] = future.result()
+            except Exception as exc:  # a lost worker, not a bad session
+                raise FingerfitError(
+                    f"a study worker failed on '{sessions[i]}' "
+                    f"({type(exc).__name__}: {_one_line(exc)})"
+                ) from None
+            if got.result is not None and got.figure is not None:
+                # Written as it arrives; only the path is kept.
+                name, png = got.figure
+                with atomic_write(tmp / name, "wb") as fh:
+                    fh.write(png)
+                fig09[i] = (f"fig09_{got.subject}", tmp / name)
+                got.figure = None
+            if got.read_error is not None:
+                step(f"could not read {got.source}")
+            elif got.fit_error is not None:
+                step(f"failed: {got.subject}")
+            else:
+                step(f"fitted and evaluated {got.subject}")
         done = [o for o in outcomes if o is not None]
         for o in done:
             if o.read_error is not None:
@@ -977,7 +977,7 @@ def run_study(
             result = StudyResult(subjects, summary, tables, tmp, failures=failures)
             kept = {o.subject for o in ok if o.fit_error is None}
             drawn = dict(fig09[i] for i in sorted(fig09) if outcomes[i].subject in kept)
-            _write_outputs(result, tmp, drawn)
+            _write_outputs(result, tmp, drawn, pool)
         step("figures")
         with atomic_write(tmp / "summary.json") as fh:
             json.dump(_json_safe(summary), fh, indent=1, allow_nan=False)
@@ -1100,18 +1100,61 @@ def figure_builders(
     return out
 
 
+def draw_study_figure(key: str, tables: dict[str, pd.DataFrame]) -> bytes:
+    """PNG bytes of one figure of the whole study (a study task; no per-subject Fig. 9).
+
+    Parameters
+    ----------
+    key : str
+        A key of :func:`figure_builders` other than ``fig09_*`` (``fig08``, ``fig10``, ...).
+    tables : dict of str to DataFrame
+        The study's tables (:func:`summarize_study`).
+    """
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        _name, build = figure_builders([], tables)[key]
+        png = io.BytesIO()
+        figures.save_to(build(), png)
+    return png.getvalue()
+
+
 def _write_outputs(
-    result: StudyResult, out_dir: Path, drawn: dict[str, Path] | None = None
+    result: StudyResult,
+    out_dir: Path,
+    drawn: dict[str, Path] | None = None,
+    pool: Executor | None = None,
 ) -> None:
     """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``.
 
     ``drawn``: figures already written (key -> path), the per-subject Fig. 9 drawn by
-    the study tasks; listed after Fig. 8 in the order given.
+    the study tasks; listed after Fig. 8 in the order given. ``pool``: the study's
+    executor; the study-wide figures are drawn there side by side
+    (:func:`draw_study_figure`) while this process writes the tables, and written here.
     """
+    built = figure_builders(result.subjects, result.tables)
+    pending = {}
+    if pool is not None:
+        pending = {
+            key: pool.submit(draw_study_figure, key, result.tables)
+            for key in built
+            if not key.startswith("fig09")
+        }
     for name, table in result.tables.items():
         with atomic_write(out_dir / f"{name}.csv", newline="") as fh:
             table.to_csv(fh, index=False, lineterminator="\n", float_format="%.6g")
-    for key, (filename, build) in figure_builders(result.subjects, result.tables).items():
-        result.figures[key] = figures.save(build(), out_dir / filename)
+    for key, (filename, build) in built.items():
+        if key in pending:
+            try:
+                png = pending[key].result()
+            except Exception as exc:  # a lost worker: named, never a traceback
+                raise FingerfitError(
+                    f"a study worker failed drawing {filename} "
+                    f"({type(exc).__name__}: {_one_line(exc)})"
+                ) from None
+            with atomic_write(out_dir / filename, "wb") as fh:
+                fh.write(png)
+            result.figures[key] = out_dir / filename
+        else:
+            result.figures[key] = figures.save(build(), out_dir / filename)
         if key == "fig08":
             result.figures.update(drawn or {})
