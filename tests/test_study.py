@@ -123,7 +123,10 @@ def test_realistic_study_outputs(realistic_study) -> None:
     ):
         assert (out / name).stat().st_size > 0, name
     report = (out / "report.html").read_text()
-    assert report.count("data:image/png;base64,") >= 8
+    assert report.count("data:image/png;base64,") >= 5  # Figs. 8, 10-12, truth
+    for s in sm["subjects"]:  # each subject's Fig. 9: linked, the file beside it
+        assert f'src="fig09_trajectories_{s}.png"' in report
+        assert (out / f"fig09_trajectories_{s}.png").stat().st_size > 0
     assert 'id="model-data"' in report or "id='model-data'" in report
 
 

@@ -1,6 +1,7 @@
-"""The self-contained HTML report of a study.
+"""The HTML report of a study.
 
-Figures are embedded as base64 PNG, tables are HTML with reader's column names and
+The study-wide figures are embedded as base64 PNG; each subject's Fig. 9 is linked
+(the PNG beside the report, so the report of a large cohort stays small), tables are HTML with reader's column names and
 units, and an interactive 3D view (plain JavaScript on a canvas, no external files)
 shows each subject's fitted fingers: bones, joint centres, user axes (blue) and
 orthogonal axes (red), in the proximal-phalanx frame of the subject's first finger
@@ -15,9 +16,11 @@ from __future__ import annotations
 import base64
 import html
 import json
+import os
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING
+from urllib.parse import quote
 
 import numpy as np
 import pandas as pd
@@ -119,6 +122,15 @@ sel.onchange = () => { fit(); draw(); }; fit(); draw();
 def _img(path: Path, alt: str) -> str:
     b64 = base64.b64encode(path.read_bytes()).decode()
     return f'<figure><img alt="{html.escape(alt)}" src="data:image/png;base64,{b64}"></figure>'
+
+
+def _linked_img(path: Path, report: Path, alt: str) -> str:
+    """A figure linked by its path relative to the report (not read, not embedded)."""
+    rel = quote(Path(os.path.relpath(path, report.parent)).as_posix())
+    return (
+        f'<figure><a href="{html.escape(rel)}"><img alt="{html.escape(alt)}" '
+        f'src="{html.escape(rel)}" loading="lazy"></a></figure>'
+    )
 
 
 _NUMERIC = re.compile(r"^[-−+]?\d|^—$")
@@ -319,7 +331,10 @@ def _problems(result: StudyResult) -> list[str]:
 
 
 def write_report(result: StudyResult, path: Path) -> Path:
-    """Write ``report.html`` (self-contained) for a study result.
+    """Write ``report.html`` for a study result.
+
+    Study-wide figures are embedded; each subject's Fig. 9 is linked relative to
+    ``path`` (the study writes it beside the report).
 
     Numbers are shown to the precision of the measurement: 0.1 mm, 0.1 deg, whole
     percent, p as ``p < 0.001`` or three decimals. Statistics that were not computed
@@ -389,7 +404,7 @@ def write_report(result: StudyResult, path: Path) -> Path:
         f"<p>Student t-tests between joints: {html.escape(tt)}. Paper: DIP 0.2 (0.1) mm, "
         "PIP 0.3 (0.1) mm, MP larger.</p>",
         "<h2>Grasp: fingertip trajectories (Fig. 9)</h2>",
-        *[_img(p, f"Fig. 9 {k[6:]}") for k, p in fig.items() if k.startswith("fig09")],
+        *[_linked_img(p, path, f"Fig. 9 {k[6:]}") for k, p in fig.items() if k.startswith("fig09")],
         "<h2>Grasp: error at maximal flexion (Fig. 10)</h2>",
         _img(fig["fig10"], "Fig. 10 maximal flexion")
         if "fig10" in fig
