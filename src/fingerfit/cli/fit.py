@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 
 if TYPE_CHECKING:
     from ..model import HandModel
+    from ..session import Recording
 import typer
 from rich.markup import escape
 from rich.table import Table
@@ -75,6 +76,27 @@ def quality_table(model: HandModel) -> Table:
                 two_axes,
             )
     return t
+
+
+def read_checked_recording(
+    model: HandModel, path: Path, units: str, rate: float | None, force: bool
+) -> Recording:
+    """A pose CSV read for a model (``angles``, ``stream --source replay:``): its repair
+    notes shown, then checked against the model -- a wrong ``--units`` or quaternion order,
+    or another subject's recording, gives wrong angles without complaint
+    (:mod:`fingerfit.estimate.plausibility`); ``force`` goes on with warnings."""
+    from ..estimate.plausibility import check_recording, enforce
+    from ..io import read_pose_csv
+
+    rec = read_pose_csv(path, units=units, rate_hz=rate)
+    for note in rec.notes:
+        notice("note", note)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        enforce(check_recording(model, rec, units, path), force)
+    for w in caught:
+        notice("warning", str(w.message))
+    return rec
 
 
 @app.command()
@@ -177,8 +199,6 @@ def angles(
     quiet: Quiet = False,
 ) -> None:
     """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
-    from ..estimate.plausibility import check_recording, enforce
-    from ..io import read_pose_csv
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.fastcsv import write_table
     from ..kinematics import compute_kinematics, kinematics_table
@@ -193,16 +213,7 @@ def angles(
     units = units or model.session_units
     if units not in UNITS_TO_MM:
         raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
-    rec = read_pose_csv(recording, units=units, rate_hz=rate)
-    for note in rec.notes:
-        notice("note", note)
-    # The recording against the model: a wrong --units or quaternion order, or another
-    # subject's recording, gives wrong angles without complaint (fingerfit.estimate.plausibility).
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        enforce(check_recording(model, rec, units, recording), force)
-    for w in caught:
-        notice("warning", str(w.message))
+    rec = read_checked_recording(model, recording, units, rate, force)
     with progress(quiet) as bar:
         n = rec.n_frames
         task = bar.add_task("angles and fingertips", total=n + n)

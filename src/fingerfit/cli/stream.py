@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from typing import Annotated
 
@@ -147,18 +146,10 @@ def stream(
     # The source first: a file that does not read, or a device that does not open, fails
     # before any output exists.
     if kind == "replay":
-        from ..estimate.plausibility import check_recording, enforce
-        from ..io import read_pose_csv
+        from .fit import read_checked_recording
 
         path, speed = src.parse_replay(source)
-        rec = read_pose_csv(path, units=units, rate_hz=rate)
-        for note in rec.notes:
-            notice("note", note)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            enforce(check_recording(model, rec, units, path), force)
-        for w in caught:
-            notice("warning", str(w.message))
+        rec = read_checked_recording(model, path, units, rate, force)
         the_source = src.ReplaySource(rec, speed)
         step = float(np.nanmedian(np.diff(rec.time))) if rec.n_frames > 1 else 0.0
         native = rate or (1.0 / step if step > 0 else 0.0)
