@@ -322,7 +322,7 @@ def test_names_order_limits_axes(case: str, tmp: str) -> None:
     r0 = model.reference_poses["hand"][1]
     expected = []
     for f, fm in model.fingers.items():
-        for jm in (jm for j in fm.joints for jm in fm.axes(j)):
+        for jm in fm.chain():
             top = max(jm.quality.rom_deg) + MARGIN_DEG
             lim = (-top, top) if jm.name in SYMMETRIC else (-MARGIN_DEG, top)
             expected.append((f"{f}_{jm.name}", np.radians(lim), r0.T @ jm.axis))

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+#: The sensor on the back of the hand: the parent of every digit's first segment.
+HAND_SENSOR = "hand"
 #: The order of a two-axis joint's axes, proximal first.
 ABDUCTION_FIRST = "abduction_first"
 FLEXION_FIRST = "flexion_first"
@@ -67,9 +69,13 @@ class Digit:
         """Sensor name of a segment, e.g. ``thumb.metacarpal``."""
         return f"{self.name}.{segment}"
 
+    def sensors(self) -> list[str]:
+        """The hand sensor and the digit's three segment sensors, proximal to distal."""
+        return [HAND_SENSOR, *(self.sensor(s) for s in self.segments)]
+
     def joint_sensors(self) -> dict[str, tuple[str, str]]:
         """Joint -> (parent sensor, child sensor); the first joint's parent is ``hand``."""
-        chain = ["hand", *(self.sensor(s) for s in self.segments)]
+        chain = self.sensors()
         return {j: (chain[i], chain[i + 1]) for i, j in enumerate(self.joints)}
 
     def angle_names(self, two_axis: tuple[str, ...] = ()) -> tuple[str, ...]:

@@ -316,12 +316,11 @@ def chain_points(
         rolling-contact migration), distal axes first.
     """
     steps = []
-    for j in reversed(list(finger.joints)[:depth]):
-        for jm in reversed(finger.axes(j)):
-            centre = jm.center
-            if jm.migration is not None:
-                centre = centre + np.multiply.outer(angles[jm.name], jm.migration)
-            steps.append((centre, jm.axis_for(variant), angles[jm.name]))
+    for jm in reversed(finger.chain(depth)):
+        centre = jm.center
+        if jm.migration is not None:
+            centre = centre + np.multiply.outer(angles[jm.name], jm.migration)
+        steps.append((centre, jm.axis_for(variant), angles[jm.name]))
     return rotate_about_lines(points, steps)
 
 
@@ -606,7 +605,7 @@ class KinematicsPlan:
                     ([x.name for x in axes], jm.parent, jm.child, _weights(pr.T @ cr, mats))
                 )
             self.joints[f] = joints
-            axes_out = [jm for j in reversed(list(fm.joints)) for jm in reversed(fm.axes(j))]
+            axes_out = fm.chain()[::-1]
             for v in self.variants:
                 steps, prev = [], None
                 for jm in axes_out:

@@ -184,6 +184,12 @@ class DigitModel:
             return [first]
         return [second, first] if self.order(joint) == "abduction_first" else [first, second]
 
+    def chain(self, depth: int = 3) -> list[JointModel]:
+        """Every axis of the first ``depth`` joints, proximal to distal (:meth:`axes` of
+        each joint in turn): the order of the robot joints and, reversed, of the turns
+        that move a point of the distal segment."""
+        return [jm for j in list(self.joints)[:depth] for jm in self.axes(j)]
+
     def angle_names(self) -> tuple[str, ...]:
         """Angle names of the digit: flexion joints, then ``<joint>_abduction`` of each
         two-axis joint (the angles CSV's column order)."""

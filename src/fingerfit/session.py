@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from .digits import DIGIT_NAMES, DIGITS, FINGER_JOINTS, FINGER_SEGMENTS
 from .digits import FINGERS as FINGERS
+from .digits import HAND_SENSOR as HAND_SENSOR
 from .errors import FingerfitError, shown
 from .transforms import FloatArray
 
@@ -24,7 +25,6 @@ FORMAT = "fingerfit.session/1"
 # The fingers' segment and joint names (the thumb's are in ``digits.DIGITS["thumb"]``).
 SEGMENTS = FINGER_SEGMENTS
 JOINTS = FINGER_JOINTS
-HAND_SENSOR = "hand"
 UNITS_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
 _FINGER = "(index|middle|ring|little)"
@@ -107,7 +107,7 @@ def joint_sensors(digit: str) -> dict[str, tuple[str, str]]:
 
 def digit_sensors(digit: str) -> list[str]:
     """The hand sensor and the digit's three segment sensors, proximal to distal."""
-    return [HAND_SENSOR, *(sensor_name(digit, s) for s in DIGITS[digit].segments)]
+    return DIGITS[digit].sensors()
 
 
 @dataclass(frozen=True)

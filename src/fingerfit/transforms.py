@@ -261,6 +261,17 @@ def distance_point_to_line(point: FloatArray, centre: FloatArray, axis: FloatArr
     return np.linalg.norm(np.cross(d, unit(axis)), axis=-1)
 
 
+def distance_between_lines(c1: FloatArray, a1: FloatArray, c2: FloatArray, a2: FloatArray) -> float:
+    """Shortest distance (mm) between the line through ``c1 (3,)`` along ``a1 (3,)`` and the
+    line through ``c2`` along ``a2`` (the length of their common perpendicular; for
+    parallel lines, the distance of ``c2`` to the first line)."""
+    n = np.cross(a1, a2)
+    norm = np.linalg.norm(n)
+    if norm < 1e-12:  # parallel lines
+        return float(distance_point_to_line(c2, c1, a1))
+    return float(abs((np.asarray(c2) - c1) @ n) / norm)
+
+
 def relative_pose(
     parent_rotation: FloatArray,
     parent_position: FloatArray,

@@ -40,6 +40,8 @@ def quality_table(model: HandModel) -> Table:
     """
     import numpy as np
 
+    from ..transforms import angle_between_axes, distance_between_lines
+
     two = sorted({f"{j.upper()}" for fm in model.fingers.values() for j in fm.second_axes})
     t = Table(
         title=f"{escape(model.subject)}: method {escape(model.method)}"
@@ -60,9 +62,8 @@ def quality_table(model: HandModel) -> Table:
             if ab is None:
                 two_axes = "–"
             else:
-                n = np.cross(jm.axis, ab.axis)
-                gap = abs((ab.center - jm.center) @ n) / np.linalg.norm(n)
-                angle = np.degrees(np.arccos(np.clip(abs(jm.axis @ ab.axis), 0.0, 1.0)))
+                gap = distance_between_lines(jm.center, jm.axis, ab.center, ab.axis)
+                angle = np.degrees(angle_between_axes(jm.axis, ab.axis))
                 two_axes = f"{angle:.0f}°, {gap:.1f} mm"
             t.add_row(
                 f,

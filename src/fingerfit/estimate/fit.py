@@ -546,8 +546,6 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             guesses = np.stack([nxt, side * np.cross(along, nxt)]) @ reference[parent][1]
             try:
                 est, notes = _saddle(data, guesses[0], guesses[1]), []
-            except FitError:
-                raise
             except FingerfitError as exc:
                 raise FitError(f"{finger} {j}: {exc.reason}") from None
         else:

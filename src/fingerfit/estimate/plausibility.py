@@ -134,7 +134,8 @@ def segment_bound(digit: str, segment: str) -> Bound:
 
 
 def finger_length_bound(finger: str) -> Bound:
-    """Plausible MP-centre-to-fingertip length (mm) of a finger: the hand-size check."""
+    """Plausible length (mm) of a digit from its first joint's centre (a finger's MP, the
+    thumb's CMC) to its tip: the hand-size check."""
     f = sum(SEGMENT_FRACTION[finger][s] for s in DIGITS[finger].segments)
     return Bound(
         MARGIN[0] * f * HAND_LENGTH_MM[0],
@@ -437,7 +438,8 @@ def check_model(model: HandModel, session: Session | None = None) -> list[Proble
         if not b.contains(total):
             problems.append(
                 Problem(
-                    f"{f} finger length (MP centre to tip) {fmt_mm(total)} mm (plausible "
+                    f"{f} {'finger ' if f != 'thumb' else ''}length "
+                    f"({DIGITS[f].joints[0].upper()} centre to tip) {fmt_mm(total)} mm (plausible "
                     f"{b.lo:.3g}-{b.hi:.3g} mm): {unit_cause(total, b, units)}",
                     path=path,
                 )

@@ -31,7 +31,7 @@ from ..io.atomic import atomic_write, staged_directory
 from ..kinematics import compute_kinematics
 from ..model import VARIANTS, HandModel, save_model
 from ..session import HAND_SENSOR, JOINTS, PoseSeries, Recording, Session, check_subject_id
-from ..transforms import angle_between_axes, apply_inverse_pose
+from ..transforms import angle_between_axes, apply_inverse_pose, distance_between_lines
 from . import figures
 from .fingertip import GraspEvaluation, evaluate_grasp, evaluate_targets, skipped_events
 from .pinch import PINCH_COLUMNS, evaluate_pinches
@@ -264,16 +264,6 @@ def _angle_errors(
     return rows
 
 
-def _skew_offset(c1, a1, c2, a2) -> float:
-    """Shortest distance between two lines (mm): points ``c`` ``(3,)``, directions ``a``."""
-    n = np.cross(a1, a2)
-    norm = np.linalg.norm(n)
-    if norm < 1e-12:  # parallel lines
-        d = c2 - c1
-        return float(np.linalg.norm(d - (d @ a1) / (a1 @ a1) * a1))
-    return float(abs((c2 - c1) @ n) / norm)
-
-
 def thumb_geometry(subject: SubjectResult) -> pd.DataFrame:
     """Per two-axis thumb joint: the offset between its two axis lines (mm) and the angle
     between them (deg), fitted and (with ground truth) true; ``_THUMB_GEOMETRY_COLUMNS``."""
@@ -287,7 +277,7 @@ def thumb_geometry(subject: SubjectResult) -> pd.DataFrame:
                 (
                     subject.subject,
                     j,
-                    _skew_offset(first.center, first.axis, second.center, second.axis),
+                    distance_between_lines(first.center, first.axis, second.center, second.axis),
                     float(doc.get("axis_offset_mm", {}).get(j, np.nan)),
                     float(np.degrees(angle_between_axes(first.axis, second.axis))),
                     float(doc.get("axes_angle_deg", {}).get(j, np.nan)),

@@ -108,7 +108,7 @@ def axis_errors(model: HandModel, truth: Truth, finger: str) -> pd.DataFrame:
     rows = []
     fm = model.fingers[finger]
     known = truth.document["fingers"][finger]["joints"]
-    names = [a.name for j in fm.joints for a in fm.axes(j)]
+    names = [a.name for a in fm.chain()]
     for joint in [n for n in names if n in known]:
         c, a = model.in_parent(finger, joint)
         ct, at = truth.joint(finger, joint)

@@ -264,12 +264,7 @@ def joint_names(model: HandModel) -> list[str]:
         :attr:`RobotHand.joints`, of the joints in the URDF/MJCF files and of the
         columns of the ``--urdf-names`` trajectory.
     """
-    return [f"{f}_{jm.name}" for f, fm in model.fingers.items() for jm in _chain(fm)]
-
-
-def _chain(digit) -> list[JointModel]:
-    """Every axis of a digit chain, proximal to distal."""
-    return [jm for j in digit.joints for jm in digit.axes(j)]
+    return [f"{f}_{jm.name}" for f, fm in model.fingers.items() for jm in fm.chain()]
 
 
 def capsule_inertial(
@@ -347,7 +342,7 @@ def robot_hand(
         names = list(fm.joints)
         centres = to_hand_frame(model, np.stack([fm.joints[j].center for j in names] + [fm.tip]))
         prox_len = float(np.linalg.norm(centres[1] - centres[0]))
-        for jm in _chain(fm):
+        for jm in fm.chain():
             if jm.migration is not None and np.any(np.asarray(jm.migration) != 0):
                 raise FingerfitError(
                     "rolling-contact centre migration cannot be exported as a fixed "

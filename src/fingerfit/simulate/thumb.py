@@ -27,7 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..digits import THUMB_JOINTS
-from ..transforms import FloatArray, axis_angle_matrix, unit
+from ..transforms import (
+    FloatArray,
+    angle_between_axes,
+    axis_angle_matrix,
+    distance_between_lines,
+    unit,
+)
 from .anatomy import BUCHHOLZ, INDEX_LENGTHS, compose, joint_transform
 
 #: The thumb's angles (rad), in the order of the truth tables.
@@ -177,14 +183,14 @@ class ThumbAnatomy:
 
     def offset(self, joint: str) -> float:
         """Shortest distance between a two-axis joint's lines (mm)."""
-        a, b = self.axis[joint], self.axis[f"{joint}_abduction"]
-        n = unit(np.cross(a, b))
-        return float(abs((self.axis_point[f"{joint}_abduction"] - self.axis_point[joint]) @ n))
+        second = f"{joint}_abduction"
+        return distance_between_lines(
+            self.axis_point[joint], self.axis[joint], self.axis_point[second], self.axis[second]
+        )
 
     def axes_angle(self, joint: str) -> float:
         """Angle between a two-axis joint's axis lines (rad, in [0, pi/2])."""
-        c = abs(float(self.axis[joint] @ self.axis[f"{joint}_abduction"]))
-        return float(np.arccos(min(c, 1.0)))
+        return float(angle_between_axes(self.axis[joint], self.axis[f"{joint}_abduction"]))
 
 
 def _rot(axis: FloatArray, deg: float) -> FloatArray:
