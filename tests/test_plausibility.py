@@ -304,3 +304,30 @@ def main() -> None:  # pragma: no cover - prints the numbers quoted in docs/plau
 
 if __name__ == "__main__":  # pragma: no cover
     main()
+
+
+@pytest.mark.parametrize(
+    ("a", "b"),
+    [
+        ("index.middle", "index.distal"),  # neighbours: plausible everywhere else
+        ("thumb.proximal", "thumb.distal"),
+        ("thumb.metacarpal", "thumb.proximal"),
+    ],
+)
+def test_swapped_segment_sensors_are_named(a: str, b: str) -> None:
+    from dataclasses import replace
+
+    from fingerfit.session import Recording
+
+    def swap(rec: Recording) -> Recording:
+        poses = dict(rec.poses)
+        poses[a], poses[b] = poses[b], poses[a]
+        return Recording(rec.name, rec.time, poses, rec.notes)
+
+    s = subject("realistic", 3, ("thumb", "index")).session
+    wrong = replace(s, reference=swap(s.reference), grasp=[swap(r) for r in s.grasp])
+    digit = a.split(".")[0]
+    with pytest.raises(
+        PlausibilityError, match=rf"^{digit} sensors look swapped: {a} on the .*{b} on the "
+    ):
+        fit_session(wrong)
