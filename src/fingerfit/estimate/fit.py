@@ -253,7 +253,8 @@ def robust(data: JointData) -> AxisEstimate:
 
 
 def twoaxis(data: JointData) -> AxisEstimate:
-    """``robust``, with a two-axis MP joint where the data show one (:mod:`.twoaxis`)."""
+    """``robust``, with a second axis at a finger's MP or the thumb's MCP where the data show
+    one (:mod:`.twoaxis`)."""
     return _robust_family(data, two_axis=True, migration=False)
 
 
@@ -375,15 +376,17 @@ METHOD_SUMMARY = {
     "pooled": "the SARA hinge axis over all movement frames (Ehrig et al. 2007)",
     "robust": "the SARA hinge axis after rejecting outlier frames and cycles, cycles weighted "
     "by their residual",
-    "twoaxis": "robust SARA hinge axes, with a second (ab/adduction) axis at the MP joint "
-    "where the data show one",
+    "twoaxis": "robust SARA hinge axes, with a second (ab/adduction) axis at a finger's MP "
+    "and the thumb's MCP where the data show one",
     "rolling": "twoaxis, with rolling-contact migration of each joint centre",
 }
 ANGLE_SUMMARY = {
     "projection": "projection of the child sensor's position on the plane normal to each "
     "axis (paper Fig. 6)",
     "swing_twist": "the twist of the child sensor's relative orientation about each axis "
-    "(swing-twist decomposition; a two-axis MP: ab/adduction, then flexion)",
+    "(swing-twist decomposition; a two-axis joint: its proximal axis, then its distal one -- "
+    "a finger's MP ab/adduction then flexion, the thumb's CMC and MCP flexion then "
+    "ab/adduction)",
 }
 # Angle method each estimator's models use unless FitOptions.angle_method says otherwise.
 METHOD_ANGLES = {"tang2018": "projection"} | {m: "swing_twist" for m in METHODS if m != "tang2018"}
