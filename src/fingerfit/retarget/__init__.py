@@ -7,7 +7,7 @@
 * :mod:`.solve` -- the ``tip`` method; :mod:`.joint` -- the ``joint`` method;
 * :mod:`.figure` -- the person and the robot side by side.
 
-:mod:`.pipeline` ties them together (:func:`retarget`). ``docs/retargeting.md`` defines frames, scales and
+:mod:`.pipeline` ties them together (:func:`retarget` offline, :class:`Retargeter` block by block). ``docs/retargeting.md`` defines frames, scales and
 the evaluation. MuJoCo, Pinocchio and the robot files are the extra ``retarget``.
 """
 
@@ -16,6 +16,7 @@ from .pipeline import (
     CONTACT_MM,
     METHODS,
     PINCH_FAR_MM,
+    Retargeter,
     Retargeting,
     Setup,
     person_points,
@@ -33,6 +34,7 @@ __all__ = [
     "CONTACT_MM",
     "METHODS",
     "PINCH_FAR_MM",
+    "Retargeter",
     "Retargeting",
     "Setup",
     "TipOptions",

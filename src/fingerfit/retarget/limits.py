@@ -60,6 +60,8 @@ class Limits:
             Within every limit and coupling.
         """
         single = q.ndim == 1
+        if single and self.contains(q):  # the solver's usual case: nothing to do
+            return np.array(q, dtype=float)
         q = np.clip(np.atleast_2d(np.array(q, dtype=float)), self.lower, self.upper)
         if self.a.size:
             for _ in range(sweeps):
@@ -72,6 +74,15 @@ class Limits:
             q[:, self.b] = qb
             q[:, self.a] = np.clip(q[:, self.a], a_lo, a_hi)
         return q[0] if single else q
+
+    def contains(self, q: FloatArray) -> bool:
+        """Whether one configuration ``(nq,)`` is within every limit and coupling (exactly)."""
+        if not (np.all(q >= self.lower) and np.all(q <= self.upper)):
+            return False
+        if self.a.size:
+            s = self.ca * q[self.a] + self.cb * q[self.b]
+            return bool(np.all(s >= self.lo) and np.all(s <= self.hi))
+        return True
 
     def violations(self, q: FloatArray, tol: float = TOLERANCE) -> int:
         """Number of (frame, limit or coupling) pairs violated by more than ``tol``.

@@ -59,6 +59,11 @@ class DigitMap:
         Robot joint whose anchor is the digit's base (MP, thumb CMC).
     pad : str
         Robot frame for the pinch term (the person's pad point maps to it; default ``tip``).
+    pad_offset : ndarray, shape (3,), or None
+        The pad point's offset from ``pad`` (m, in ``pad``'s axes), for robots whose files
+        name no frame on the fingertip's pulp (Allegro: the tip sphere's centre); ``None``:
+        the frame itself. :func:`fingerfit.retarget.resolve` adds the point to the robot as
+        :func:`pad_point_name` and names it in ``pad``.
     scale : float or None
         Robot chain length over the person's; ``None``: measured (:mod:`.palm`).
     joints : dict[str, JointLink]
@@ -70,6 +75,16 @@ class DigitMap:
     pad: str
     scale: float | None
     joints: dict[str, JointLink]
+    pad_offset: FloatArray | None = None
+
+
+#: Largest pad offset (m): a larger one is a unit mistake (mm for m), not a fingertip.
+PAD_OFFSET_MAX = 0.05
+
+
+def pad_point_name(digit: str) -> str:
+    """Name of the robot frame :func:`fingerfit.retarget.resolve` adds for a ``pad_offset``."""
+    return f"fingerfit:{digit}.pad"
 
 
 @dataclass(frozen=True)
@@ -261,7 +276,7 @@ def parse_map(path: str | Path, text: str | None = None) -> RobotMap:
     digits: dict[str, DigitMap] = {}
     for name, dd in digits_doc.items():
         w = f"digits.{name}"
-        d = f.table(dd, w, ("tip", "base", "pad", "scale", "joints"))
+        d = f.table(dd, w, ("tip", "base", "pad", "pad_offset", "scale", "joints"))
         tip = f.string(d, "tip", w)
         joints_doc = f.table(d.get("joints", {}), f"{w}.joints", HUMAN_JOINTS[name])
         joints = {j: _link(f, v, f"{w}.joints.{j}") for j, v in joints_doc.items()}
@@ -270,8 +285,20 @@ def parse_map(path: str | Path, text: str | None = None) -> RobotMap:
             scale = f.number(d["scale"], f"{w}.scale")
             if scale <= 0:
                 raise f.err(f"{w}.scale", "must be > 0")
+        offset = None
+        if "pad_offset" in d:
+            v = d["pad_offset"]
+            if not isinstance(v, list) or len(v) != 3:
+                raise f.err(f"{w}.pad_offset", "must be a list of 3 numbers (m)")
+            offset = np.array([f.number(x, f"{w}.pad_offset") for x in v])
+            if np.linalg.norm(offset) > PAD_OFFSET_MAX:
+                raise f.err(
+                    f"{w}.pad_offset",
+                    f"{np.linalg.norm(offset):.3g} m from the pad frame: give metres "
+                    f"(at most {PAD_OFFSET_MAX} m)",
+                )
         digits[name] = DigitMap(
-            tip, f.string(d, "base", w), f.string(d, "pad", w, tip), scale, joints
+            tip, f.string(d, "base", w), f.string(d, "pad", w, tip), scale, joints, offset
         )
     couplings = []
     cdoc = doc.get("coupling", [])

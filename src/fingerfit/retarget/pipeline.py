@@ -7,7 +7,8 @@ scales and limits of one model on one robot, :func:`retarget` runs the ``tip`` o
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import time
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from ..session import Recording
 from ..transforms import FloatArray
 from .joint import copy_angles
 from .limits import Limits, limits_of
-from .maps import BUILTIN, RobotMap, builtin_map, check_map, parse_map
+from .maps import BUILTIN, RobotMap, builtin_map, check_map, pad_point_name, parse_map
 from .palm import (
     Frame,
     digit_base,
@@ -30,7 +31,7 @@ from .palm import (
     robot_palm,
 )
 from .robots import Robot, load_robot
-from .solve import MM, TipOptions, TipProblem, solve_tip
+from .solve import MM, TipOptions, TipProblem, TipSolver
 
 METHODS = ("tip", "joint")
 #: Person's pad distance (mm) below which the pinch term starts to weigh.
@@ -112,7 +113,13 @@ def resolve(robot: str | Path, map_path: str | Path | None, hand: str) -> tuple[
         raise FingerfitError("the map names no robot file ([robot] file)", path=rmap.path)
     r = load_robot(file)
     check_map(rmap, r)
-    return r, rmap
+    digits = dict(rmap.digits)
+    for d, dm in rmap.digits.items():
+        if dm.pad_offset is not None:
+            name = pad_point_name(d)
+            r.add_point(name, dm.pad, dm.pad_offset)
+            digits[d] = replace(dm, pad=name)
+    return r, replace(rmap, digits=digits)
 
 
 def setup(model: HandModel, robot: Robot, rmap: RobotMap) -> Setup:
@@ -284,6 +291,140 @@ def person_points(
     return out
 
 
+class Retargeter:
+    """One model on one robot, block of frames by block of frames (offline: one block).
+
+    Holds what carries from one frame to the next: the ``tip`` solver's warm start and
+    the ``joint`` method's last value of each angle (a missing sensor keeps it), so
+    :meth:`step` over blocks as they arrive gives the same joints as over the whole
+    recording at once (``fingerfit stream --retarget``).
+
+    Parameters
+    ----------
+    model : HandModel
+    robot, rmap : Robot, RobotMap
+        From :func:`resolve`.
+    method : {"tip", "joint"}
+    variant : {"user_axis", "orthogonal"}
+        The model variant whose kinematics drive the robot.
+    options : TipOptions, optional
+    contact_mm : float
+        See :func:`pinch_terms`.
+
+    Attributes
+    ----------
+    setup : Setup
+    frames : list of str
+        The robot's tip frames of ``setup.digits``.
+    notes : list of str
+        Mirroring, digits held or dropped, pinch term off.
+    held, missing : int
+        Frames so far where a missing angle kept its value (``joint``) and frames with a
+        missing sensor whose digits kept their pose (``tip``).
+    """
+
+    def __init__(
+        self,
+        model: HandModel,
+        robot: Robot,
+        rmap: RobotMap,
+        method: str = "tip",
+        variant: str = "user_axis",
+        options: TipOptions | None = None,
+        contact_mm: float = CONTACT_MM,
+    ) -> None:
+        if method not in METHODS:
+            raise FingerfitError(f"must be one of {', '.join(METHODS)}", field="--method")
+        self.model, self.method, self.variant = model, method, variant
+        self.contact_mm = contact_mm
+        self.setup = s = setup(model, robot, rmap)
+        self.frames = [rmap.digits[d].tip for d in s.digits]
+        self.notes = list(s.notes)
+        self.held = self.missing = 0
+        self._last: dict[str, dict[str, float]] = {}
+        self.solver: TipSolver | None = None
+        if method == "tip":
+            padded = {d for d in s.digits if model.fingers[d].pad is not None}
+            if not padded and rmap.pinch:
+                self.notes.append("the model has no pad points: pinch term off")
+            # the pairs pinch_terms gives: both digits retargeted and with a pad point
+            pairs = [(a, b) for a, b in rmap.pinch if a in padded and b in padded]
+            pad_frames = [rmap.digits[d].pad for pair in pairs for d in pair]
+            frames = self.frames + [f for f in dict.fromkeys(pad_frames) if f not in self.frames]
+            pidx = [
+                (frames.index(rmap.digits[a].pad), frames.index(rmap.digits[b].pad))
+                for a, b in pairs
+            ]
+            problem = TipProblem(robot, s.robot_palm, frames, s.free, s.hold, s.limits)
+            self.solver = TipSolver(problem, pidx, options)
+            self.pinch = bool(pairs)
+
+    def kinematics(self, recording: Recording) -> Kinematics:
+        """The person's kinematics :meth:`step` needs (the retargeted digits, one variant)."""
+        return compute_kinematics(
+            self.model, recording, variants=(self.variant,), fingers=self.setup.digits
+        )
+
+    def step(
+        self, recording: Recording, kin: Kinematics | None = None
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Robot joints for the next block of frames.
+
+        Parameters
+        ----------
+        recording : Recording
+            The block's frames (mm, tracker frame), hand sensor and retargeted digits.
+        kin : Kinematics, optional
+            Its :meth:`kinematics` (computed when not given).
+
+        Returns
+        -------
+        q : ndarray, shape (n, nq)
+            rad (m for slide joints), every robot joint, within limits and couplings.
+        targets : ndarray, shape (n, k, 3)
+            Scaled fingertip targets of ``setup.digits`` (robot palm frame, mm).
+        seconds : ndarray, shape (n,)
+            Per-frame solve time (``joint``: the block's time / n).
+        """
+        s, model, variant = self.setup, self.model, self.variant
+        kin = kin or self.kinematics(recording)
+        tips = person_points(s, model, kin, recording, variant, "tip")
+        tgt = targets(s, np.stack([tips[d] for d in s.digits], axis=1), s.digits)
+        start = time.perf_counter()
+        q_joint = self._copy({d: kin.motions[variant][d].angles for d in s.digits})
+        if self.solver is None:
+            q = q_joint
+            seconds = np.full(len(q), (time.perf_counter() - start) / max(len(q), 1))
+            return q, tgt, seconds
+        self.missing += int(np.sum(~np.isfinite(tgt).all(axis=(1, 2))))
+        vec = w = None
+        if self.pinch:
+            pads = person_points(s, model, kin, recording, variant, "pad")
+            _, vec, w, _ = pinch_terms(s, pads, self.contact_mm)
+        res = self.solver.solve(tgt, None, vec, w, prior=q_joint)
+        return res.q, tgt, res.seconds
+
+    def _copy(self, angles: dict[str, dict[str, FloatArray]]) -> FloatArray:
+        """The ``joint`` method on one block, a missing angle keeping its last value."""
+        filled: dict[str, dict[str, FloatArray]] = {}
+        for d, per in angles.items():
+            last = self._last.setdefault(d, {})
+            filled[d] = {}
+            for j, a in per.items():
+                a = np.asarray(a, dtype=float)
+                ok = np.isfinite(a)
+                if j in last and a.size and not ok[0]:
+                    a = a.copy()
+                    a[: int(np.argmax(ok)) if ok.any() else a.size] = last[j]
+                if ok.any():
+                    last[j] = float(a[np.flatnonzero(ok)[-1]])
+                filled[d][j] = a
+        s = self.setup
+        q, held = copy_angles(filled, s.rmap, s.robot.joint_names, s.hold, s.limits)
+        self.held += held
+        return q
+
+
 def retarget(
     model: HandModel,
     recording: Recording,
@@ -317,50 +458,22 @@ def retarget(
     -------
     Retargeting
     """
-    import time
-
-    if method not in METHODS:
-        raise FingerfitError(f"must be one of {', '.join(METHODS)}", field="--method")
-    s = setup(model, robot, rmap)
-    kin = kin or compute_kinematics(model, recording, variants=(variant,), fingers=s.digits)
-    tips = person_points(s, model, kin, recording, variant, "tip")
-    tgt = targets(s, np.stack([tips[d] for d in s.digits], axis=1), s.digits)
-    notes = list(s.notes)
-    frames = [rmap.digits[d].tip for d in s.digits]
-    start = time.perf_counter()
-    angles = {d: kin.motions[variant][d].angles for d in s.digits}
-    q_joint, held = copy_angles(angles, rmap, robot.joint_names, s.hold, s.limits)
-    if method == "joint":
-        q = q_joint
-        seconds = np.full(len(q), (time.perf_counter() - start) / max(len(q), 1))
-        if held:
-            notes.append(f"{held} frame(s) with a missing angle kept the previous value")
-    else:
-        pads = person_points(s, model, kin, recording, variant, "pad")
-        pairs, vec, w, _ = pinch_terms(s, pads, contact_mm) if pads else ([], None, None, None)
-        if not pads and rmap.pinch:
-            notes.append("the model has no pad points: pinch term off")
-        pad_frames = [rmap.digits[d].pad for pair in pairs for d in pair]
-        all_frames = frames + [f for f in dict.fromkeys(pad_frames) if f not in frames]
-        pidx = [
-            (all_frames.index(rmap.digits[a].pad), all_frames.index(rmap.digits[b].pad))
-            for a, b in pairs
-        ]
-        problem = TipProblem(robot, s.robot_palm, all_frames, s.free, s.hold, s.limits)
-        missing = int(np.sum(~np.isfinite(tgt).all(axis=(1, 2))))
-        if missing:
-            notes.append(f"{missing} frame(s) with a missing sensor: those digits kept their pose")
-        res = solve_tip(problem, tgt, None, pidx, vec, w, options, prior=q_joint)
-        q, seconds = res.q, res.seconds
+    r = Retargeter(model, robot, rmap, method, variant, options, contact_mm)
+    q, tgt, seconds = r.step(recording, kin)
+    notes = list(r.notes)
+    if r.held:
+        notes.append(f"{r.held} frame(s) with a missing angle kept the previous value")
+    if r.missing:
+        notes.append(f"{r.missing} frame(s) with a missing sensor: those digits kept their pose")
     return Retargeting(
         time=np.asarray(recording.time, dtype=float),
         joint_names=robot.joint_names,
         q=q,
         method=method,
-        digits=s.digits,
+        digits=r.setup.digits,
         targets=tgt,
-        tips=robot_points(s, q, frames),
+        tips=robot_points(r.setup, q, r.frames),
         seconds=seconds,
-        violations=s.limits.violations(q),
+        violations=r.setup.limits.violations(q),
         notes=notes,
     )

@@ -120,13 +120,25 @@ class Robot:
         self._backend.set(np.asarray(q, dtype=float))
         return self._backend.anchors()
 
+    def add_point(self, name: str, frame: str, offset: FloatArray) -> None:
+        """Add a frame fixed to ``frame`` at ``offset`` (m, in ``frame``'s axes).
+
+        For points a robot file does not name, e.g. the pad on a spherical fingertip whose
+        only frame is the sphere's centre (a map's ``pad_offset``). The new frame moves with
+        ``frame``'s body and has its orientation; MJCF gets a site, URDF an operational frame.
+        """
+        if self.has_frame(name):
+            raise ValueError(f"frame '{name}' exists")
+        self._backend.add_point(name, frame, np.asarray(offset, dtype=float))
+
 
 class _Mujoco:
     def __init__(self, path: Path) -> None:
         mujoco = require("mujoco")
         self.mj = mujoco
         try:
-            self.m = mujoco.MjModel.from_xml_path(str(path))
+            self.spec = mujoco.MjSpec.from_file(str(path))
+            self.m = self.spec.compile()
         except Exception as exc:  # mujoco raises ValueError with a multi-line text
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise FingerfitError(f"not a loadable MJCF robot: {first}", path=path) from None
@@ -205,6 +217,20 @@ class _Mujoco:
     def anchors(self) -> FloatArray:
         return self.d.xanchor.copy()
 
+    def add_point(self, name: str, frame: str, offset: FloatArray) -> None:
+        if (
+            self.frame_id(frame)[0] == "site"
+        ):  # a site's offset is in the site's axes: move it into its body's
+            site = self.spec.site(frame)
+            body, rot = site.parent, np.empty(9)
+            self.mj.mju_quat2Mat(rot, np.asarray(site.quat, dtype=float))
+            pos = np.asarray(site.pos, dtype=float) + rot.reshape(3, 3) @ offset
+            body.add_site(name=name, pos=pos, quat=np.asarray(site.quat, dtype=float))
+        else:
+            self.spec.body(frame).add_site(name=name, pos=offset)
+        self.m = self.spec.compile()
+        self.d = self.mj.MjData(self.m)
+
 
 class _Pinocchio:
     def __init__(self, path: Path) -> None:
@@ -273,6 +299,14 @@ class _Pinocchio:
         for j in range(1, m.njoints):
             out[m.joints[j].idx_q] = self.d.oMi[j].translation
         return out
+
+    def add_point(self, name: str, frame: str, offset: FloatArray) -> None:
+        pin, m = self.pin, self.m
+        fid = self.frame_id(frame)
+        parent = m.frames[fid]
+        placement = parent.placement * pin.SE3(np.eye(3), offset)
+        m.addFrame(pin.Frame(name, parent.parentJoint, fid, placement, pin.FrameType.OP_FRAME))
+        self.d = m.createData()
 
 
 def load_robot(path: str | Path) -> Robot:

@@ -12,7 +12,11 @@ minimises
 
 over the free joints (the digits' chains; the wrist and absent digits are held), with
 ``dq = -(A^T A + mu I)^-1 A^T r`` over the joints not pinned at a limit the step pushes
-against, then :meth:`fingerfit.retarget.limits.Limits.project` onto limits and couplings.
+against, shortened to a trust radius, then
+:meth:`fingerfit.retarget.limits.Limits.project` onto limits and couplings. A step that
+raises the cost is taken back and retried four times shorter: with targets out of the
+robot's reach the residuals are large, the linearisation poor, and plain Gauss-Newton
+alternated between two postures (on the Allegro it held a pinch 6 mm open).
 The prior is the ``joint`` method's posture (the person's angles through the map): a
 weak pull that picks, among robot postures reaching the same tips, the one most like the
 person's, and keeps the solver out of the local minima of fingers folded at a limit.
@@ -141,6 +145,237 @@ class TipResult:
     iterations: np.ndarray
 
 
+class TipSolver:
+    """The ``tip`` solver with its warm start: each :meth:`solve` continues from the last frame.
+
+    Offline, one call solves a whole recording (:func:`solve_tip`); live, one call per block
+    of frames as they arrive gives the same joints as one call over all of them.
+
+    Parameters
+    ----------
+    problem : TipProblem
+    pinch_pairs : list of (int, int), optional
+        Indices into ``problem.frames`` of each pinch pair's two points (``p`` pairs).
+    options : TipOptions, optional
+    """
+
+    def __init__(
+        self,
+        problem: TipProblem,
+        pinch_pairs: list[tuple[int, int]] | None = None,
+        options: TipOptions | None = None,
+    ) -> None:
+        self.problem = problem
+        self.options = o = options or TipOptions()
+        self.pairs = np.array(pinch_pairs or [], dtype=int).reshape(-1, 2)
+        free = problem.free
+        self.n_free = n_free = free.size
+        lim = problem.limits
+        # Stiff coupling rows over free joints (coupled joints are expected to be free),
+        # normalised so a row's value is a distance (rad) from the band's edges.
+        pos = {j: i for i, j in enumerate(free)}
+        rows = [
+            (pos[a], pos[b], ca, cb, lo, hi)
+            for a, b, ca, cb, lo, hi in zip(
+                lim.a, lim.b, lim.ca, lim.cb, lim.lo, lim.hi, strict=True
+            )
+            if a in pos and b in pos
+        ]
+        self.c_mat = np.zeros((len(rows), n_free))
+        for r, (ia, ib, ca, cb, _, _) in enumerate(rows):
+            self.c_mat[r, ia], self.c_mat[r, ib] = ca / np.hypot(ca, cb), cb / np.hypot(ca, cb)
+        self.c_lo = np.array([lo / np.hypot(ca, cb) for _, _, ca, cb, lo, _ in rows])
+        self.c_hi = np.array([hi / np.hypot(ca, cb) for _, _, ca, cb, _, hi in rows])
+        self.lo_f, self.hi_f = lim.lower[free], lim.upper[free]
+        self.eye = np.eye(n_free)
+        #: Configuration of the last frame solved (rad, ``(nq,)``); ``None`` before the first.
+        self.q: FloatArray | None = None
+        self._last = np.inf
+        self._frame = 0
+        self._smooth = o.smooth
+
+    def solve(
+        self,
+        targets: FloatArray,
+        weights: FloatArray | None = None,
+        pinch_targets: FloatArray | None = None,
+        pinch_weights: FloatArray | None = None,
+        prior: FloatArray | None = None,
+    ) -> TipResult:
+        """Solve the next frames, warm-started from the previous one.
+
+        Parameters
+        ----------
+        targets : ndarray, shape (n, k, 3)
+            Target of each of the first ``k`` frames of ``problem.frames`` (robot palm
+            frame, mm); NaN rows (a missing sensor) are left out of that frame's cost.
+        weights : ndarray, shape (n, k), optional
+            Per-frame fingertip weights (default 1).
+        pinch_targets : ndarray, shape (n, p, 3)
+            Target of ``point_a - point_b`` (mm, palm frame), with pinch pairs.
+        pinch_weights : ndarray, shape (n, p)
+            0 (no pinch) .. 1, scaled by ``options.pinch``.
+        prior : ndarray, shape (n, nq), optional
+            Posture prior per frame (rad), e.g. the ``joint`` method's output.
+
+        Returns
+        -------
+        TipResult
+            A frame whose targets are all missing keeps the previous configuration.
+        """
+        o, lim = self.options, self.problem.limits
+        n, k = targets.shape[:2]
+        weights = np.ones((n, k)) if weights is None else weights
+        out = np.empty((n, self.problem.hold.size))
+        secs = np.empty(n)
+        iters = np.zeros(n, dtype=int)
+        pw = pv = None
+        if self.q is None:
+            self.q = lim.project(self.problem.hold.copy() if prior is None else prior[0].copy())
+        q = self.q
+        for t in range(n):
+            start = time.perf_counter()
+            q_prev = q
+            tgt = targets[t]
+            ok = np.isfinite(tgt).all(axis=1)
+            w = np.where(ok, weights[t], 0.0)
+            tgt = np.where(ok[:, None], tgt, 0.0)
+            if self.pairs.size:
+                pw = o.pinch * np.nan_to_num(pinch_weights[t])
+                pv = np.nan_to_num(pinch_targets[t])
+            qp = None if prior is None else prior[t]
+            if ok.any():
+                q, cost, iters[t], worst = self._gauss_newton(q, q_prev, qp, tgt, w, pw, pv)
+                again = worst > self._last + 0.5 or (self._frame + t) % 10 == 0
+                if qp is not None and worst > o.restart_mm and again:
+                    # A finger caught folded at a limit: try again from the prior posture.
+                    q2, cost2, it2, worst2 = self._gauss_newton(
+                        lim.project(qp.copy()), q_prev, qp, tgt, w, pw, pv
+                    )
+                    iters[t] += it2
+                    if cost2 < cost:
+                        q, worst = q2, worst2
+                if o.polish_smooth < o.smooth:
+                    # Polish in the basin chosen: the strong smoothness picked the posture
+                    # (no flips), a weak one removes its lag behind a moving target.
+                    q, _, it3, worst = self._gauss_newton(
+                        q, q_prev, qp, tgt, w, pw, pv, o.polish_smooth, o.polish_iterations
+                    )
+                    iters[t] += it3
+                self._last = worst
+            out[t] = q
+            secs[t] = time.perf_counter() - start
+        self.q = q
+        self._frame += n
+        return TipResult(out, secs, iters)
+
+    def _gauss_newton(
+        self,
+        q: FloatArray,
+        q_prev: FloatArray,
+        prior: FloatArray | None,
+        tgt: FloatArray,
+        w: FloatArray,
+        pw: FloatArray | None,
+        pv: FloatArray | None,
+        smooth: float | None = None,
+        iterations: int | None = None,
+    ) -> tuple[FloatArray, float, int, float]:
+        """One frame: ``(q, cost, iterations, worst weighted fingertip error mm)``.
+
+        A step that raises the cost is taken back and retried four times shorter (a trust
+        region): far from the optimum, with fingertip targets out of the robot's reach, the
+        Gauss-Newton step overshoots and would alternate between two postures.
+        """
+        o, prob, lim = self.options, self.problem, self.problem.limits
+        free, pairs, n_free, k = prob.free, self.pairs, self.n_free, len(tgt)
+        smooth = o.smooth if smooth is None else smooth
+        iterations = o.iterations if iterations is None else iterations
+        diag = smooth**2 + (o.prior**2 if prior is not None else 0.0) + o.damping
+        radius = o.max_step
+        best: tuple | None = None
+        it, worst = 0, np.inf
+        for it in range(iterations):  # noqa: B007
+            qf = q[free]
+            p, jac = prob.kinematics(q)
+            e = (p[:k] - tgt) * w[:, None]
+            a = (jac[:k] * w[:, None, None]).reshape(-1, n_free)
+            h = a.T @ a
+            g = a.T @ e.ravel()
+            cost = float(np.sum(e * e))
+            if pairs.size:
+                d = (p[pairs[:, 0]] - p[pairs[:, 1]] - pv) * pw[:, None]
+                ad = ((jac[pairs[:, 0]] - jac[pairs[:, 1]]) * pw[:, None, None]).reshape(-1, n_free)
+                h += ad.T @ ad
+                g += ad.T @ d.ravel()
+                cost += float(np.sum(d * d))
+            dprev = qf - q_prev[free]
+            g += smooth**2 * dprev
+            cost += smooth**2 * float(dprev @ dprev)
+            if prior is not None:
+                dprior = qf - prior[free]
+                g += o.prior**2 * dprior
+                cost += o.prior**2 * float(dprior @ dprior)
+            if best is not None and cost > best[0]:
+                # The last step made things worse: back to where it started, shorter.
+                cost, q, qf, h, g, worst = best
+                radius *= 0.25
+            else:
+                worst = float(np.max(np.abs(p[:k] - tgt) * w[:, None]))
+                best = (cost, q, qf, h, g, worst)
+            h = h + diag * self.eye
+            dq = self._step(qf, h, g)
+            big = float(np.max(np.abs(dq)))
+            if big > radius:
+                dq *= radius / big
+            q = q.copy()
+            q[free] = qf + dq
+            q = lim.project(q)
+            if np.max(np.abs(q[free] - qf)) < o.tol:
+                break
+        return q, best[0] if best is not None else np.inf, it + 1, worst
+
+    def _step(self, qf: FloatArray, h: FloatArray, g: FloatArray) -> FloatArray:
+        """Gauss-Newton step over the free joints with active sets of limits and couplings.
+
+        Joints at a limit the step pushes against are pinned; a coupling whose band edge
+        the step would cross (or is outside of) becomes a stiff row ``c.(q + dq) = edge``,
+        so steps slide along the band instead of being bent by the projection afterwards.
+        Both sets grow until the step respects them (at most four rounds).
+        """
+        o, c_mat, n_free = self.options, self.c_mat, self.n_free
+        n_c = c_mat.shape[0]
+        pinned = np.zeros(n_free, dtype=bool)
+        act = np.zeros(n_c, dtype=bool)
+        edge = np.zeros(n_c)
+        s_now = c_mat @ qf if n_c else edge
+        dq = np.zeros(n_free)
+        for _ in range(4):
+            hh, gg = h, g
+            if act.any():
+                ca = o.coupling * c_mat[act]
+                hh = h + ca.T @ ca
+                gg = g + ca.T @ (o.coupling * (s_now[act] - edge[act]))
+            if pinned.any():
+                keep = ~pinned
+                dq = np.zeros(n_free)
+                dq[keep] = -np.linalg.solve(hh[np.ix_(keep, keep)], gg[keep])
+            else:
+                dq = -np.linalg.solve(hh, gg)
+            more = ((qf <= self.lo_f) & (dq < 0)) | ((qf >= self.hi_f) & (dq > 0))
+            grown = bool((more & ~pinned).any())
+            pinned |= more
+            if n_c:
+                s_new = s_now + c_mat @ dq
+                cross = ((s_new > self.c_hi + 1e-12) | (s_new < self.c_lo - 1e-12)) & ~act
+                edge = np.where(cross, np.where(s_new > self.c_hi, self.c_hi, self.c_lo), edge)
+                grown |= bool(cross.any())
+                act |= cross
+            if not grown:
+                break
+        return dq
+
+
 def solve_tip(
     problem: TipProblem,
     targets: FloatArray,
@@ -151,150 +386,9 @@ def solve_tip(
     options: TipOptions | None = None,
     prior: FloatArray | None = None,
 ) -> TipResult:
-    """Solve every frame, warm-started from the previous one.
+    """Solve a whole recording: :meth:`TipSolver.solve` of a fresh :class:`TipSolver`.
 
-    Parameters
-    ----------
-    problem : TipProblem
-    targets : ndarray, shape (n, k, 3)
-        Target of each of the first ``k`` frames of ``problem.frames`` (robot palm frame,
-        mm); NaN rows (a missing sensor) are left out of that frame's cost.
-    weights : ndarray, shape (n, k), optional
-        Per-frame fingertip weights (default 1).
-    pinch_pairs : list of (int, int), optional
-        Indices into ``problem.frames`` of each pinch pair's two points (``p``).
-    pinch_targets : ndarray, shape (n, p, 3)
-        Target of ``point_a - point_b`` (mm, palm frame).
-    pinch_weights : ndarray, shape (n, p)
-        0 (no pinch) .. 1, scaled by ``options.pinch``.
-    options : TipOptions, optional
-    prior : ndarray, shape (n, nq), optional
-        Posture prior per frame (rad), e.g. the ``joint`` method's output.
-
-    Returns
-    -------
-    TipResult
-        A frame whose targets are all missing keeps the previous configuration.
+    Parameters are those of :class:`TipSolver` and :meth:`TipSolver.solve`.
     """
-    o = options or TipOptions()
-    n, k = targets.shape[:2]
-    weights = np.ones((n, k)) if weights is None else weights
-    pairs = np.array(pinch_pairs or [], dtype=int).reshape(-1, 2)
-    n_free = problem.free.size
-    lim = problem.limits
-    # Soft coupling rows over free joints (coupled joints are expected to be free).
-    pos = {j: i for i, j in enumerate(problem.free)}
-    c_rows = [
-        (pos[a], pos[b], ca, cb, lo, hi)
-        for a, b, ca, cb, lo, hi in zip(lim.a, lim.b, lim.ca, lim.cb, lim.lo, lim.hi, strict=True)
-        if a in pos and b in pos
-    ]
-    c_mat = np.zeros((len(c_rows), n_free))
-    for r, (ia, ib, ca, cb, _, _) in enumerate(c_rows):
-        nrm = np.hypot(ca, cb)
-        c_mat[r, ia], c_mat[r, ib] = ca / nrm, cb / nrm
-    c_lo = np.array([lo / np.hypot(ca, cb) for _, _, ca, cb, lo, _ in c_rows])
-    c_hi = np.array([hi / np.hypot(ca, cb) for _, _, ca, cb, _, hi in c_rows])
-    lo_f, hi_f = lim.lower[problem.free], lim.upper[problem.free]
-    eye = np.eye(n_free)
-
-    out = np.empty((n, problem.hold.size))
-    secs = np.empty(n)
-    iters = np.zeros(n, dtype=int)
-
-    def gauss_newton(q, q_prev, t, tgt, w, pw, pv, smooth=o.smooth, iterations=o.iterations):
-        cost = np.inf
-        it = 0
-        for it in range(iterations):  # noqa: B007
-            p, jac = problem.kinematics(q)
-            res = [((p[:k] - tgt) * w[:, None]).ravel()]
-            rows = [(jac[:k] * w[:, None, None]).reshape(-1, n_free)]
-            if pairs.size:
-                d = p[pairs[:, 0]] - p[pairs[:, 1]] - pv
-                res.append((d * pw[:, None]).ravel())
-                rows.append(
-                    ((jac[pairs[:, 0]] - jac[pairs[:, 1]]) * pw[:, None, None]).reshape(-1, n_free)
-                )
-            qf = q[problem.free]
-            res.append(smooth * (qf - q_prev[problem.free]))
-            rows.append(smooth * eye)
-            if prior is not None:
-                res.append(o.prior * (qf - prior[t, problem.free]))
-                rows.append(o.prior * eye)
-            a = np.vstack(rows)
-            r = np.concatenate(res)
-            cost = float(r @ r)
-            h = a.T @ a + o.damping * eye
-            g = a.T @ r
-            # Active sets, grown until the step respects them: joints at a limit the step
-            # pushes against are pinned; a coupling whose band edge the step would cross
-            # (or already outside) becomes a stiff row c.(q + dq) = edge, so steps slide
-            # along the band instead of being bent by the projection afterwards.
-            pinned = np.zeros(n_free, dtype=bool)
-            act = np.zeros(len(c_rows), dtype=bool)
-            edge = np.zeros(len(c_rows))
-            s_now = c_mat @ qf if c_rows else edge
-            for _ in range(4):
-                hh, gg = h, g
-                if act.any():
-                    ca = o.coupling * c_mat[act]
-                    hh = h + ca.T @ ca
-                    gg = g + ca.T @ (o.coupling * (s_now[act] - edge[act]))
-                keep = ~pinned
-                dq = np.zeros(n_free)
-                dq[keep] = -np.linalg.solve(hh[np.ix_(keep, keep)], gg[keep])
-                more = ((qf <= lo_f) & (dq < 0)) | ((qf >= hi_f) & (dq > 0))
-                grown = bool((more & ~pinned).any())
-                pinned |= more
-                if c_rows:
-                    s_new = s_now + c_mat @ dq
-                    cross = ((s_new > c_hi + 1e-12) | (s_new < c_lo - 1e-12)) & ~act
-                    edge = np.where(cross, np.where(s_new > c_hi, c_hi, c_lo), edge)
-                    grown |= bool(cross.any())
-                    act |= cross
-                if not grown:
-                    break
-            big = np.max(np.abs(dq))
-            if big > o.max_step:  # trust region: Gauss-Newton overshoots far from the optimum
-                dq *= o.max_step / big
-            q = q.copy()
-            q[problem.free] = qf + dq
-            q = lim.project(q)
-            if np.max(np.abs(q[problem.free] - qf)) < o.tol:
-                break
-        return q, cost, it + 1, float(np.max(np.abs(p[:k] - tgt) * w[:, None]))
-
-    pw = pv = None
-    last = np.inf
-    q = lim.project(problem.hold.copy() if prior is None else prior[0].copy())
-    for t in range(n):
-        start = time.perf_counter()
-        q_prev = q.copy()
-        tgt = targets[t]
-        ok = np.isfinite(tgt).all(axis=1)
-        w = np.where(ok, weights[t], 0.0)
-        tgt = np.where(ok[:, None], tgt, 0.0)
-        if pairs.size:
-            pw = o.pinch * np.nan_to_num(pinch_weights[t])
-            pv = np.nan_to_num(pinch_targets[t])
-        if ok.any():
-            q, cost, iters[t], worst = gauss_newton(q, q_prev, t, tgt, w, pw, pv)
-            if prior is not None and worst > o.restart_mm and (worst > last + 0.5 or t % 10 == 0):
-                # A finger caught folded at a limit: try again from the prior posture.
-                q2, cost2, it2, _ = gauss_newton(
-                    lim.project(prior[t].copy()), q_prev, t, tgt, w, pw, pv
-                )
-                iters[t] += it2
-                if cost2 < cost:
-                    q = q2
-            if o.polish_smooth < o.smooth:
-                # Polish in the basin chosen: the strong smoothness picked the posture (no
-                # flips), a weak one removes its lag behind a moving target.
-                q, _, it3, worst = gauss_newton(
-                    q, q_prev, t, tgt, w, pw, pv, o.polish_smooth, o.polish_iterations
-                )
-                iters[t] += it3
-            last = worst
-        out[t] = q
-        secs[t] = time.perf_counter() - start
-    return TipResult(out, secs, iters)
+    solver = TipSolver(problem, pinch_pairs, options)
+    return solver.solve(targets, weights, pinch_targets, pinch_weights, prior)
