@@ -12,6 +12,8 @@ imported when a robot is loaded.
 
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -120,6 +122,11 @@ class Robot:
         self._backend.set(np.asarray(q, dtype=float))
         return self._backend.anchors()
 
+    @property
+    def mujoco_model(self) -> Any:
+        """The ``mujoco.MjModel`` of an MJCF robot (for rendering); ``None`` for a URDF one."""
+        return self._backend.m if isinstance(self._backend, _Mujoco) else None
+
     def add_point(self, name: str, frame: str, offset: FloatArray) -> None:
         """Add a frame fixed to ``frame`` at ``offset`` (m, in ``frame``'s axes).
 
@@ -132,8 +139,21 @@ class Robot:
         self._backend.add_point(name, frame, np.asarray(offset, dtype=float))
 
 
+def _headless_gl() -> None:
+    """Let MuJoCo render offscreen through EGL on a Linux machine without a display.
+
+    MuJoCo picks its OpenGL platform once, when first imported (``MUJOCO_GL``); its default
+    needs a display. A ``MUJOCO_GL`` the user set is kept.
+    """
+    if sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    ):
+        os.environ.setdefault("MUJOCO_GL", "egl")
+
+
 class _Mujoco:
     def __init__(self, path: Path) -> None:
+        _headless_gl()
         mujoco = require("mujoco")
         self.mj = mujoco
         try:
