@@ -149,13 +149,13 @@ def render_robot(
     look = -palm.rotation[:, 1]  # towards -y: the x-z plane seen from +y
     cam.azimuth = float(np.degrees(np.arctan2(look[1], look[0])))
     cam.elevation = float(np.degrees(np.arcsin(np.clip(look[2], -1.0, 1.0))))
-    cam.distance = 0.5
+    cam.distance = 0.32
     images = []
     try:
         for qi in np.atleast_2d(q):
             d.qpos[:] = qi
             mujoco.mj_forward(m, d)
-            cam.lookat[:] = palm.origin + palm.rotation[:, 0] * 0.04
+            cam.lookat[:] = palm.origin + palm.rotation[:, 0] * 0.07
             renderer.update_scene(d, cam)
             images.append(renderer.render().copy())
     finally:
