@@ -1,6 +1,7 @@
 """Retargeting benchmark: tip vs joint method vs the orthogonal model as source, one run.
 
     python bench/retarget.py [--subjects 1] [--frames 3000] [--out bench/retarget.json]
+                             [--dex-python /work/dexenv/bin/python]
 
 Simulated subjects (four fingers, ``fingerfit.simulate``), model fitted by
 ``fit_session``, the grasp recording retargeted onto Shadow (MJCF, MuJoCo) and Allegro
@@ -9,7 +10,15 @@ the scaled targets of the fitted (user-axis) model (median / p95, mm), joint-lim
 coupling violations, jerk (RMS third difference of the joint trajectory, rad/s^3),
 per-frame solve time (p50 / p99, ms). Then whole-hand subjects (thumb, pad points) on
 ``pinch.csv``: the robot pad points' distance during the person's touches (person's pad
-points closer than ``CONTACT_MM``), per thumb-finger pair the map names. dex-retargeting is not run: see docs/retargeting.md.
+points closer than ``CONTACT_MM``), per thumb-finger pair the map names.
+
+``--dex-python`` adds dex-retargeting (``pip install dex-retargeting torch`` in a venv of
+its own, docs/retargeting.md) on the Allegro URDF, the robot file fingerfit loads (it
+reads URDF only, not Shadow's MJCF): ``bench/dex_peer.py`` runs under that interpreter on
+exactly the frames and the scaled fingertip targets fingerfit's ``tip`` method gets
+(its ``PositionOptimizer`` on the tips; on the pinch recording also its
+``DexPilotOptimizer`` on the map's pad points), and its joint angles are scored here with
+fingerfit's robot kinematics and the same metrics.
 """
 
 from __future__ import annotations
@@ -17,7 +26,9 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import subprocess
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -32,8 +43,12 @@ from fingerfit.retarget import (
     pinch_terms,
     resolve,
     retarget,
+    robot_points,
     setup,
+    targets,
 )
+from fingerfit.retarget.pipeline import Setup
+from fingerfit.retarget.solve import MM
 from fingerfit.session import PoseSeries, Recording
 from fingerfit.simulate import SimConfig, simulate_subject
 
@@ -52,12 +67,161 @@ def jerk(q: np.ndarray, dt: float) -> float:
     return float(np.sqrt(np.mean(d3**2)))
 
 
+DEX_PEER = Path(__file__).with_name("dex_peer.py")
+#: dex-retargeting runs: (label, optimiser, output low-pass alpha, stopping tolerance).
+#: As shipped: the filter of its Allegro configs (``configs/offline/allegro_hand_right.yml``:
+#: 1 = off for position retargeting; ``configs/teleop/allegro_hand_right_dexpilot.yml``: 0.2
+#: for DexPilot) and the optimisers' own tolerance (None). The other two runs show what
+#: its stopping tolerance and its filter cost.
+DEX_RUNS = (
+    ("dex-position", "position", 1.0, None),
+    ("dex-position-ftol1e-8", "position", 1.0, 1e-8),
+    ("dex-dexpilot", "dexpilot", 0.2, None),
+    ("dex-dexpilot-nofilter", "dexpilot", 1.0, None),
+)
+#: Largest disagreement (m) between dex-retargeting's and fingerfit's kinematics of the
+#: same q: more means a joint-order or frame mix-up, and the comparison stops.
+FK_TOLERANCE = 1e-6
+
+
+def to_world(s: Setup, p_mm: np.ndarray) -> np.ndarray:
+    """Robot palm frame (mm) -> robot world = URDF root frame (m); ``(..., 3)``."""
+    return s.robot_palm.origin + (p_mm / MM) @ s.robot_palm.rotation.T
+
+
+def rigid_offset(s: Setup, frame: str, parent: str) -> np.ndarray:
+    """Offset ``(3,)`` (m, ``parent``'s axes) of ``frame`` rigidly carried by ``parent``.
+
+    For a point fingerfit added to the robot (a map's pad offset) that the URDF does not
+    name; checked at the neutral posture and at the joint-limit midpoints.
+    """
+    r = s.robot
+    mid = np.where(np.isfinite(r.lower + r.upper), 0.5 * (r.lower + r.upper), 0.0)
+    offs = []
+    for q in (s.hold, mid):
+        o, rot = r.pose(q, parent)
+        offs.append(rot.T @ (r.positions(q[None], [frame])[0, 0] - o))
+    if np.max(np.abs(offs[0] - offs[1])) > FK_TOLERANCE:
+        raise SystemExit(f"robot frame '{frame}' does not move rigidly with '{parent}'")
+    return offs[0]
+
+
+def urdf_links(path: Path) -> set[str]:
+    """Link names of a URDF file."""
+    import xml.etree.ElementTree as ET
+
+    return {e.get("name", "") for e in ET.parse(path).getroot().findall("link")}
+
+
+def run_dex(
+    dex_python: str,
+    s: Setup,
+    mode: str,
+    alpha: float,
+    frames: list[str],
+    parents: list[str],
+    points_mm: np.ndarray,
+    pair_vectors_mm: np.ndarray | None = None,
+    ftol: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """dex-retargeting's joint angles for one recording, in fingerfit's joint order.
+
+    Parameters
+    ----------
+    frames : list of str
+        ``k`` robot frames to place (``dexpilot``: thumb first); a frame that is not a
+        URDF link (a pad point fingerfit added) is given to dex-retargeting as a fixed
+        child link of ``parents[i]`` at the same offset.
+    points_mm : ndarray, shape (n, k, 3)
+        Where each frame should be (robot palm frame, mm).
+    pair_vectors_mm : ndarray, shape (n, k, k, 3), optional
+        ``dexpilot``: ``[:, i, j]`` = the commanded ``frame_i - frame_j`` (robot palm frame
+        axes, mm), whose length switches DexPilot's pinch projection on and off.
+    ftol : float, optional
+        The optimiser's stopping tolerance; None: the package's own.
+
+    Returns
+    -------
+    q : ndarray, shape (n, nq)
+        rad, fingerfit's ``robot.joint_names`` order.
+    seconds : ndarray, shape (n,)
+        Per-frame solve time in dex-retargeting.
+    version : str
+    """
+    if not np.isfinite(points_mm).all():
+        raise SystemExit("dex-retargeting needs every target: a frame has a missing one")
+    robot = s.robot
+    links = urdf_links(robot.path)
+    names, extra_names, extra_parents, extra_offsets = [], [], [], []
+    for f, par in zip(frames, parents, strict=True):
+        if f in links:
+            names.append(f)
+        else:
+            names.append(f"dex_peer_{len(extra_names)}")
+            extra_names.append(names[-1])
+            extra_parents.append(par)
+            extra_offsets.append(rigid_offset(s, f, par))
+    free = [robot.joint_names[i] for i in s.free]
+    held = [n for i, n in enumerate(robot.joint_names) if i not in set(s.free.tolist())]
+    inputs = {
+        "urdf": str(robot.path),
+        "mode": mode,
+        "links": np.array(names),
+        "points": to_world(s, points_mm),
+        "joints": np.array(free),
+        "fixed_names": np.array(held, dtype=str),
+        "fixed_values": np.array([s.hold[robot.joint_names.index(n)] for n in held]),
+        "extra_names": np.array(extra_names, dtype=str),
+        "extra_parents": np.array(extra_parents, dtype=str),
+        "extra_offsets": np.array(extra_offsets, dtype=float).reshape(-1, 3),
+        "low_pass_alpha": alpha,
+    }
+    if mode == "dexpilot":
+        inputs["wrist"] = s.rmap.palm
+        inputs["wrist_point"] = robot.pose(s.hold, s.rmap.palm)[0]
+        if pair_vectors_mm is not None:
+            inputs["pair_vectors"] = (pair_vectors_mm / MM) @ s.robot_palm.rotation.T
+    if ftol is not None:
+        inputs["ftol_abs"] = ftol
+    with tempfile.TemporaryDirectory(prefix="bench-dex-") as tmp:
+        src, dst = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
+        np.savez(src, **inputs)
+        run = subprocess.run(
+            [dex_python, str(DEX_PEER), str(src), str(dst)], capture_output=True, text=True
+        )
+        if run.returncode != 0:
+            last = (run.stderr.strip().splitlines() or ["no output"])[-1]
+            raise SystemExit(f"dex-retargeting ({dex_python}) failed: {last}")
+        out = dict(np.load(dst, allow_pickle=False))
+    dex_names = [str(x) for x in out["joint_names"]]
+    if sorted(dex_names) != sorted(robot.joint_names):
+        raise SystemExit(f"dex-retargeting's joints {dex_names} are not {robot.joint_names}")
+    q = out["q"][:, [dex_names.index(n) for n in robot.joint_names]]
+    # Same q, same frames: both kinematics must agree (joint order, root frame, offsets).
+    gap = np.abs(robot.positions(q, frames) - out["links_reached"]).max()
+    if gap > FK_TOLERANCE:
+        raise SystemExit(f"dex-retargeting's kinematics disagree with fingerfit's by {gap} m")
+    return q, out["seconds"], str(out["version"])
+
+
+def limit_excess(s: Setup, q: np.ndarray) -> float:
+    """Largest joint-limit excess (rad) of ``q (n, nq)``; 0 when within limits."""
+    over = np.maximum(s.robot.lower - q, q - s.robot.upper)
+    return float(max(np.max(over), 0.0))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--subjects", type=int, default=1)
     ap.add_argument("--frames", type=int, default=3000)
     ap.add_argument("--out", type=Path, default=Path("bench/retarget.json"))
+    ap.add_argument(
+        "--dex-python",
+        default=None,
+        help="python of a venv with dex-retargeting and torch: compare it on the Allegro",
+    )
     a = ap.parse_args()
+    dex_version = None
     rows = []
     for seed in range(a.subjects):
         sub = simulate_subject(SimConfig(fingers=FINGERS), seed)
@@ -74,31 +238,44 @@ def main() -> None:
         dt = float(np.median(np.diff(rec.time)))
         for robot_name in ("shadow", "allegro"):
             robot, rmap = resolve(robot_name, None, model.hand)
+            s = setup(model, robot, rmap)
+            tips = [rmap.digits[d].tip for d in s.digits]
             ref = None
+            runs = []
             for method, variant in SOURCES:
                 t0 = time.perf_counter()
                 res = retarget(model, rec, robot, rmap, method, variant)
                 wall = time.perf_counter() - t0
                 if ref is None:
                     ref = res.targets  # user-axis targets: what the person did
-                err = np.linalg.norm(res.tips - ref, axis=2)
-                rows.append(
-                    {
-                        "subject": seed,
-                        "robot": robot_name,
-                        "method": method,
-                        "source": variant,
-                        "frames": len(res.time),
-                        "tip_err_median_mm": float(np.nanmedian(err)),
-                        "tip_err_p95_mm": float(np.nanpercentile(err, 95)),
-                        "violations": res.violations,
-                        "jerk_rad_s3": jerk(res.q, dt),
-                        "solve_p50_ms": float(np.median(res.seconds) * 1e3),
-                        "solve_p99_ms": float(np.percentile(res.seconds, 99) * 1e3),
-                        "wall_s": wall,
-                    }
-                )
-                r = rows[-1]
+                runs.append((method, variant, res.q, res.seconds, wall))
+            if a.dex_python and robot_name == "allegro":
+                for label, mode, alpha, ftol in DEX_RUNS:
+                    if mode != "position":  # no thumb: nothing to pinch
+                        continue
+                    t0 = time.perf_counter()
+                    q, sec, dex_version = run_dex(
+                        a.dex_python, s, mode, alpha, tips, tips, ref, ftol=ftol
+                    )
+                    runs.append((label, "user_axis", q, sec, time.perf_counter() - t0))
+            for method, variant, q, sec, wall in runs:
+                err = np.linalg.norm(robot_points(s, q, tips) - ref, axis=2)
+                r = {
+                    "subject": seed,
+                    "robot": robot_name,
+                    "method": method,
+                    "source": variant,
+                    "frames": len(q),
+                    "tip_err_median_mm": float(np.nanmedian(err)),
+                    "tip_err_p95_mm": float(np.nanpercentile(err, 95)),
+                    "violations": s.limits.violations(q),
+                    "limit_excess_max_rad": limit_excess(s, q),
+                    "jerk_rad_s3": jerk(q, dt),
+                    "solve_p50_ms": float(np.median(sec) * 1e3),
+                    "solve_p99_ms": float(np.percentile(sec, 99) * 1e3),
+                    "wall_s": wall,
+                }
+                rows.append(r)
                 print(
                     f"| {robot_name} | {method} | {variant} | {r['tip_err_median_mm']:.2f} | "
                     f"{r['tip_err_p95_mm']:.1f} | {r['violations']} | {r['jerk_rad_s3']:.0f} | "
@@ -121,18 +298,55 @@ def main() -> None:
         for robot_name in ("shadow", "allegro"):
             robot, rmap = resolve(robot_name, None, model.hand)
             s = setup(model, robot, rmap)
+            tips = [rmap.digits[d].tip for d in s.digits]
             kin = compute_kinematics(model, rec)
             pads = person_points(s, model, kin, rec, "user_axis", "pad")
             pairs, _, _, dist = pinch_terms(s, pads)
             touch = dist < CONTACT_MM  # the person's pads touch (pair, frame)
             ref = None
+            runs = []
             for method, variant in SOURCES:
                 res = retarget(model, rec, robot, rmap, method, variant, kin=kin)
                 ref = res.targets if ref is None else ref
-                pa = robot.positions(res.q, [rmap.digits[x].pad for x, _ in pairs])
-                pb = robot.positions(res.q, [rmap.digits[y].pad for _, y in pairs])
+                runs.append((method, variant, res.q, res.seconds))
+            if a.dex_python and robot_name == "allegro":
+                # DexPilot: the thumb first; its finger points are the map's pad points
+                # (those the pinch is measured on). Wrist-to-finger: the pad targets scaled
+                # per digit like the tips. Finger-to-finger: the person's pad-to-pad
+                # vector, mirrored and scaled by the pair's mean scale (the pinch term's
+                # vector before --contact-mm): per-digit scaling about different bases
+                # puts touching pads' targets ~50 mm apart, which never pinches.
+                order = ["thumb", *(d for d in s.digits if d != "thumb")]
+                pp = np.stack([pads[d] for d in order], axis=1)
+                pad_targets = targets(s, pp, order)
+                mirror = np.array([1.0, -1.0 if s.mirror else 1.0, 1.0])
+                k = np.array([s.scale[d] for d in order])
+                pair_vec = (
+                    0.5
+                    * (k[:, None] + k[None, :])[None, :, :, None]
+                    * (pp[:, :, None, :] - pp[:, None, :, :])
+                    * mirror
+                )
+                _, vec0, _, _ = pinch_terms(s, pads, 0.0)  # the tip method's, unshortened
+                for i, (x, y) in enumerate(pairs):
+                    if not np.allclose(vec0[:, i], pair_vec[:, order.index(x), order.index(y)]):
+                        raise SystemExit(f"DexPilot's {x}-{y} vector is not the pinch term's")
+                for label, mode, alpha, ftol in DEX_RUNS:
+                    if mode == "position":
+                        frames, parents, pts = tips, tips, ref
+                    else:
+                        frames = [rmap.digits[d].pad for d in order]
+                        parents = [rmap.digits[d].tip for d in order]
+                        pts = pad_targets
+                    q, sec, dex_version = run_dex(
+                        a.dex_python, s, mode, alpha, frames, parents, pts, pair_vec, ftol
+                    )
+                    runs.append((label, "user_axis", q, sec))
+            for method, variant, q, sec in runs:
+                pa = robot.positions(q, [rmap.digits[x].pad for x, _ in pairs])
+                pb = robot.positions(q, [rmap.digits[y].pad for _, y in pairs])
                 rd = np.linalg.norm(pa - pb, axis=2) * 1000.0
-                err = np.linalg.norm(res.tips - ref, axis=2)
+                err = np.linalg.norm(robot_points(s, q, tips) - ref, axis=2)
                 r = {
                     "subject": seed,
                     "robot": robot_name,
@@ -142,10 +356,12 @@ def main() -> None:
                     "pinch_median_mm": float(np.median(rd[touch])),
                     "pinch_p95_mm": float(np.percentile(rd[touch], 95)),
                     "tip_err_median_mm": float(np.nanmedian(err)),
-                    "violations": res.violations,
-                    "jerk_rad_s3": jerk(res.q, dt),
-                    "solve_p50_ms": float(np.median(res.seconds) * 1e3),
-                    "solve_p99_ms": float(np.percentile(res.seconds, 99) * 1e3),
+                    "tip_err_p95_mm": float(np.nanpercentile(err, 95)),
+                    "violations": s.limits.violations(q),
+                    "limit_excess_max_rad": limit_excess(s, q),
+                    "jerk_rad_s3": jerk(q, dt),
+                    "solve_p50_ms": float(np.median(sec) * 1e3),
+                    "solve_p99_ms": float(np.percentile(sec, 99) * 1e3),
                 }
                 pinch_rows.append(r)
                 print(
@@ -161,7 +377,9 @@ def main() -> None:
             {
                 "command": " ".join(["python", *sys.argv]),
                 "python": platform.python_version(),
+                "dex_retargeting": dex_version,
                 "rows": rows,
+                "pinch_rows": pinch_rows,
             },
             indent=1,
         )
