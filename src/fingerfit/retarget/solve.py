@@ -75,6 +75,10 @@ class TipOptions:
         Largest joint change of one iteration (rad); a longer step is shortened.
     tol : float
         Stop when the largest joint step is below this (rad).
+    ftol : float
+        Or when an iteration lowered the cost by less than this fraction of it (with a
+        target out of reach Gauss-Newton converges slowly, by steps of a few mrad that move
+        nothing that matters).
     """
 
     smooth: float = 20.0
@@ -88,6 +92,7 @@ class TipOptions:
     polish_iterations: int = 3
     max_step: float = 0.2
     tol: float = 1e-4
+    ftol: float = 1e-5
 
 
 @dataclass(frozen=True)
@@ -292,7 +297,7 @@ class TipSolver:
         smooth = o.smooth if smooth is None else smooth
         iterations = o.iterations if iterations is None else iterations
         diag = smooth**2 + (o.prior**2 if prior is not None else 0.0) + o.damping
-        radius = o.max_step
+        radius = taken = o.max_step
         best: tuple | None = None
         it, worst = 0, np.inf
         for it in range(iterations):  # noqa: B007
@@ -319,15 +324,19 @@ class TipSolver:
             if best is not None and cost > best[0]:
                 # The last step made things worse: back to where it started, shorter.
                 cost, q, qf, h, g, worst = best
-                radius *= 0.25
+                radius = 0.25 * taken
             else:
                 worst = float(np.max(np.abs(p[:k] - tgt) * w[:, None]))
+                converged = best is not None and best[0] - cost < o.ftol * (1.0 + cost)
                 best = (cost, q, qf, h, g, worst)
+                if converged:  # the last step bought next to nothing: keep it, stop
+                    break
             h = h + diag * self.eye
             dq = self._step(qf, h, g)
             big = float(np.max(np.abs(dq)))
             if big > radius:
                 dq *= radius / big
+            taken = min(big, radius)
             q = q.copy()
             q[free] = qf + dq
             q = lim.project(q)
