@@ -622,7 +622,13 @@ class KinematicsPlan:
                 # The point at the reference posture, then in the hand sensor's frame.
                 to_hand = (r0.T @ last.basis.T, r0.T)
                 points = {"tip": fm.tip} | ({} if fm.pad is None else {"pad": fm.pad})
-                self.chains[v][f] = {"steps": steps, "to_hand": to_hand, "points": points}
+                stacked = np.array(list(points.values())).T  # (3, k)
+                self.chains[v][f] = {
+                    "steps": steps,
+                    "to_hand": to_hand,
+                    "points": points,
+                    "stacked": stacked,
+                }
         self.p0 = p0
 
     def run(self, recording: Recording) -> Kinematics:
@@ -667,15 +673,18 @@ class KinematicsPlan:
                         angles[v][f][k][s:e] = ang
                     chain = self.chains[v][f]
                     rot, r0t = chain["to_hand"]
-                    for name, point in chain["points"].items():
-                        y, centre = _chain(chain["steps"], cs[v], point)
-                        local = rot @ y + r0t @ (centre - self.p0[:, None])
+                    # The digit's points (tip, pad) go through the chain together.
+                    y, centre = _chain(chain["steps"], cs[v], chain["stacked"])
+                    local = (rot @ y.reshape(3, -1)).reshape(y.shape)
+                    local += (r0t @ (centre - self.p0[:, None]))[:, None, :]
+                    for k, name in enumerate(chain["points"]):
                         block = points[v][f][name][s:e]
+                        lk = local[:, k]
                         for i in range(3):
                             o = block[:, i]
-                            o[:] = h[3 * i] * local[0]
-                            o += h[3 * i + 1] * local[1]
-                            o += h[3 * i + 2] * local[2]
+                            o[:] = h[3 * i] * lk[0]
+                            o += h[3 * i + 1] * lk[1]
+                            o += h[3 * i + 2] * lk[2]
                             o += hp[i]
         motions = {
             v: {
@@ -688,25 +697,28 @@ class KinematicsPlan:
 
 
 def _chain(
-    steps: list[_Step], cs: dict[str, tuple[FloatArray, FloatArray, FloatArray]], point: FloatArray
+    steps: list[_Step], cs: dict[str, tuple[FloatArray, FloatArray, FloatArray]], points: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
-    """A point ``(3,)`` turned through ``steps`` with each angle's cosine and sine given.
+    """Points ``(3, k)`` turned through ``steps`` with each angle's cosine and sine given.
 
-    Returns ``y (3, m)``, the coordinates in the last step's basis about its centre, and
+    Returns ``y (3, k, m)``, the coordinates in the last step's basis about its centre, and
     that centre ``(3, 1|m)``: :func:`~fingerfit.transforms.rotate_about_lines` (which
     see) with the model's constants taken from the plan.
     """
     y = centre = None
+    k = points.shape[1]
     for st in steps:
         ang, cos, sin = cs[st.name]
         c = st.centre if st.migration is None else st.centre + np.multiply.outer(st.migration, ang)
         if y is None:
-            x = st.basis @ (point[:, None] - c)
-        elif st.offset is not None:
-            x = st.carry @ y + st.offset
+            d = points[:, :, None] - c[:, None, :]  # (3, k, 1|m)
+            x = np.broadcast_to(
+                (st.basis @ d.reshape(3, -1)).reshape(d.shape), (3, k, cos.shape[0])
+            )
         else:
-            x = st.carry @ y + st.basis @ (centre - c)
-        out = np.empty((3, cos.shape[0]))
+            x = (st.carry @ y.reshape(3, -1)).reshape(y.shape)
+            x += (st.offset if st.offset is not None else st.basis @ (centre - c))[:, None, :]
+        out = np.empty((3, k, cos.shape[0]))
         np.multiply(x[0], cos, out=out[0])
         out[0] -= x[1] * sin
         np.multiply(x[0], sin, out=out[1])
