@@ -303,6 +303,8 @@ def main() -> None:
             pads = person_points(s, model, kin, rec, "user_axis", "pad")
             pairs, _, _, dist = pinch_terms(s, pads)
             touch = dist < CONTACT_MM  # the person's pads touch (pair, frame)
+            pad_frames = [rmap.digits[d].pad for d in s.digits]
+            pad_ref = targets(s, np.stack([pads[d] for d in s.digits], axis=1), s.digits)
             ref = None
             runs = []
             for method, variant in SOURCES:
@@ -347,12 +349,17 @@ def main() -> None:
                 pb = robot.positions(q, [rmap.digits[y].pad for _, y in pairs])
                 rd = np.linalg.norm(pa - pb, axis=2) * 1000.0
                 err = np.linalg.norm(robot_points(s, q, tips) - ref, axis=2)
+                pad_err = np.linalg.norm(robot_points(s, q, pad_frames) - pad_ref, axis=2)
                 r = {
                     "subject": seed,
                     "robot": robot_name,
                     "method": method,
                     "source": variant,
                     "touch_frames": int(touch.sum()),
+                    "tip_err_median_mm_by_digit": dict(
+                        zip(s.digits, np.nanmedian(err, axis=0).tolist(), strict=True)
+                    ),
+                    "pad_err_median_mm": float(np.nanmedian(pad_err)),
                     "pinch_median_mm": float(np.median(rd[touch])),
                     "pinch_p95_mm": float(np.percentile(rd[touch], 95)),
                     "tip_err_median_mm": float(np.nanmedian(err)),
