@@ -397,7 +397,8 @@ def write_report(result: StudyResult, path: Path) -> Path:
         + "; ".join(html.escape(ANGLE_SUMMARY.get(m, m)) for m in sm["angle_methods"])
         + "; fingertips by forward kinematics from the hand sensor. Reference fingertip = "
         "distal sensor pose carrying the stylus-measured tip vector. Statistics: Student "
-        "t-tests (scipy), two-factor ANOVA with interaction (statsmodels, type II).</p>",
+        "t-tests (scipy), two-factor ANOVA with interaction (type II, from the cells' "
+        "sums, equal to statsmodels' anova_lm).</p>",
         _subjects_table(result),
         "<p class=note>See docs/methods.md for equations and docs/conventions.md for frames "
         "and units.</p>",
