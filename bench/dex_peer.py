@@ -65,13 +65,25 @@ from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
-import torch
-from dex_retargeting.optimizer import DexPilotOptimizer
-from dex_retargeting.retargeting_config import RetargetingConfig
 
 
-def derived_urdf(urdf: Path, names: list[str], parents: list[str], offsets: np.ndarray) -> Path:
-    """A copy of ``urdf`` with a fixed child link per extra point (temporary folder)."""
+def derived_urdf(
+    urdf: Path, names: list[str], parents: list[str], offsets: np.ndarray, folder: Path
+) -> Path:
+    """A copy of ``urdf`` in ``folder`` with a fixed child link per extra point.
+
+    Parameters
+    ----------
+    names, parents : list of str
+        ``e`` new link names and the existing link each is fixed to.
+    offsets : ndarray, shape (e, 3)
+        Each new link's origin in its parent's frame (m).
+
+    Returns
+    -------
+    Path
+        The copy (same file name; mesh references unchanged).
+    """
     tree = ET.parse(urdf)
     root = tree.getroot()
     links = {e.get("name") for e in root.findall("link")}
@@ -83,13 +95,23 @@ def derived_urdf(urdf: Path, names: list[str], parents: list[str], offsets: np.n
         ET.SubElement(joint, "parent", link=parent)
         ET.SubElement(joint, "child", link=name)
         ET.SubElement(joint, "origin", xyz=" ".join(f"{v:.9g}" for v in off), rpy="0 0 0")
-    out = Path(tempfile.mkdtemp(prefix="dex_peer-")) / urdf.name
+    out = folder / urdf.name
     tree.write(out)
     return out
 
 
 def main() -> None:
     src, dst = Path(sys.argv[1]), Path(sys.argv[2])
+    with tempfile.TemporaryDirectory(prefix="dex_peer-") as tmp:
+        run(src, dst, Path(tmp))
+
+
+def run(src: Path, dst: Path, tmp: Path) -> None:
+    """Read the inputs ``src``, retarget every frame, write ``dst`` (module docstring)."""
+    import torch
+    from dex_retargeting.optimizer import DexPilotOptimizer
+    from dex_retargeting.retargeting_config import RetargetingConfig
+
     z = np.load(src, allow_pickle=False)
     urdf = Path(str(z["urdf"]))
     mode = str(z["mode"])
@@ -104,6 +126,7 @@ def main() -> None:
             [str(x) for x in z["extra_names"]],
             [str(x) for x in z["extra_parents"]],
             np.asarray(z["extra_offsets"], dtype=float),
+            tmp,
         )
     torch.set_num_threads(1)  # tiny tensors; fingerfit's solver is single-threaded too
     common = {
@@ -112,6 +135,8 @@ def main() -> None:
         "low_pass_alpha": float(z["low_pass_alpha"]),
     }
     if mode == "position":
+        if len(links) < 2:  # it squeezes the index array: one target fails its shape check
+            raise SystemExit("dex_peer: dex-retargeting's position config needs 2+ links")
         cfg = RetargetingConfig(
             type="position",
             target_link_names=links,
