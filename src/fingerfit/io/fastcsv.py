@@ -248,6 +248,45 @@ class RowArrays:
         return self.data[: self.n]
 
 
+def quat_norm(quat: np.ndarray) -> np.ndarray:
+    """Norms of quaternions, ``(n,)``, from ``(n, 4)`` rows (any order, any stride).
+
+    The same sum in the same order as ``np.linalg.norm(quat, axis=1)`` (so the same
+    bits, an overflow giving inf alike) without its ``(n, 4)`` temporaries.
+    """
+    a, b, c, d = quat[:, 0], quat[:, 1], quat[:, 2], quat[:, 3]
+    s = a * a
+    s += b * b
+    s += c * c
+    s += d * d
+    return np.sqrt(s, out=s)
+
+
+def put_rows(out: np.ndarray, at: np.ndarray, values: np.ndarray) -> None:
+    """``out[at] = values``, as a slice copy when ``at`` is a run of consecutive rows.
+
+    Parameters
+    ----------
+    out : ndarray, shape (n, ...)
+    at : ndarray of int, shape (m,)
+        Target rows.
+    values : ndarray, shape (m, ...)
+    """
+    if at.size and at[-1] - at[0] == at.size - 1 and (at.size < 2 or (np.diff(at) == 1).all()):
+        out[at[0] : at[0] + at.size] = values
+    else:
+        out[at] = values
+
+
+def gap_rows(n: int, filled: Sequence[np.ndarray]) -> np.ndarray | None:
+    """Rows of ``range(n)`` in none of the index arrays ``filled`` (None when there are none)."""
+    mask = np.ones(n, dtype=bool)
+    for f in filled:
+        mask[f] = False
+    rows = np.flatnonzero(mask)
+    return rows if rows.size else None
+
+
 def estimate_rows(path: Path, sample_rows: int, sample_bytes: int) -> int:
     """An upper estimate of the data rows of ``path`` from a first batch's size."""
     size = Path(path).stat().st_size

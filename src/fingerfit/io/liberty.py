@@ -42,6 +42,7 @@ from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz
 from .atomic import atomic_write
+from .fastcsv import gap_rows, put_rows, quat_norm
 from .hygiene import (
     check_grid_size,
     check_recording,
@@ -949,7 +950,7 @@ def records_to_recording(
     if "quaternion" in items:
         q = taken("quaternion")
         with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
-            norm = np.linalg.norm(q, axis=1)
+            norm = quat_norm(q)
         bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
         if bad.size:
             i = int(sel[bad[0]])
@@ -981,20 +982,29 @@ def records_to_recording(
     order = np.argsort(scol_sel, kind="stable")
     bounds = np.searchsorted(scol_sel[order], np.arange(len(names) + 1))
     for k, name in enumerate(names):
-        pos = np.full((n, 3), np.nan)
-        rot = np.full((n, 3, 3), np.nan)
+        # every frame is written once: by a record below or as a gap (NaN) at the end
+        pos = np.empty((n, 3))
+        rot = np.empty((n, 3, 3))
         rows_k = order[bounds[k] : bounds[k + 1]]
         for lo in range(0, rows_k.size, _BLOCK):
             r = rows_k[lo : lo + _BLOCK]
             at = frame_of_rec[r]
             src = r if every else sel[r]
-            pos[at] = records.values["position"][src] * scale
+            put_rows(pos, at, records.values["position"][src] * scale)
             if "quaternion" in items:
-                rot[at] = matrix_from_quat_wxyz(records.values["quaternion"][src])
+                put_rows(rot, at, matrix_from_quat_wxyz(records.values["quaternion"][src]))
             else:
-                rot[at] = Rotation.from_euler(
-                    "ZYX", records.values["euler"][src], degrees=True
-                ).as_matrix()
+                put_rows(
+                    rot,
+                    at,
+                    Rotation.from_euler(
+                        "ZYX", records.values["euler"][src], degrees=True
+                    ).as_matrix(),
+                )
+        gap = gap_rows(n, [frame_of_rec[rows_k]])
+        if gap is not None:
+            pos[gap] = np.nan
+            rot[gap] = np.nan
         poses[name] = PoseSeries(pos, rot)
     del order
     flagged = records.indicator if every else records.indicator[sel]

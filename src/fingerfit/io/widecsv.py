@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
-from .fastcsv import NotPlain, read_header
+from .fastcsv import NotPlain, gap_rows, put_rows, quat_norm, read_header
 from .hygiene import (
     check_increasing,
     check_recording,
@@ -41,7 +41,6 @@ from .hygiene import (
     implausible_message,
     implausible_rows,
     place_on_grid,
-    repeated_rows,
     sensor_missing_notes,
 )
 from .posecsv import check_field_counts
@@ -289,6 +288,45 @@ def _decode_exact(
     return vals, (lambda: numeric(lay.time)) if lay.time is not None else None
 
 
+def _repeats(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Repeated rows and held values of ``vals (n, stations, keys)``.
+
+    Returns
+    -------
+    rep : ndarray of bool, shape (n,)
+        Row ``i`` equals row ``i - 1`` in every field (NaN equal to NaN) and holds a
+        number at all (as :func:`~fingerfit.io.hygiene.repeated_rows`, restricted).
+    same : ndarray of bool, shape (n, stations)
+        Station ``j``'s fields of row ``i`` equal those of row ``i - 1`` (NaN never
+        equal); row 0 never.
+    """
+    n = vals.shape[0]
+    same = np.zeros(vals.shape[:2], dtype=bool)
+    rep = np.zeros(n, dtype=bool)
+    if n < 2:
+        return rep, same
+    eq = vals[1:] == vals[:-1]
+    same[1:] = eq.all(axis=2)
+    del eq
+    rep[1:] = same[1:].all(axis=1)
+    # rows that differ only where both rows hold NaN are repeats too
+    odd = ~np.isfinite(vals).all(axis=(1, 2))  # rows holding a NaN (or an infinity)
+    cand = np.flatnonzero(~rep[1:] & odd[1:] & odd[:-1]) + 1
+    if cand.size:
+        rep[cand] = _pair_equal(vals[cand - 1], vals[cand])
+    # a row holding no finite number at all is no sample, so no repeat
+    empty = np.flatnonzero(rep & odd)
+    if empty.size:
+        rep[empty] = np.isfinite(vals[empty]).any(axis=(1, 2))
+    return rep, same
+
+
+def _pair_equal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rows of ``a`` and ``b (m, ...)`` equal in every field, NaN equal to NaN."""
+    same = (a == b) | (np.isnan(a) & np.isnan(b))
+    return same.reshape(a.shape[0], -1).all(axis=1)
+
+
 def read_wide_csv(
     path: str | Path,
     *,
@@ -379,7 +417,7 @@ def read_wide_csv(
     notes.insert(0, f"{n_rows} rows of {len(stations)} stations read")
 
     # A row repeating the previous one is a repeat only if it holds a sample at all.
-    rep = repeated_rows(vals.reshape(n_rows, -1)) & np.isfinite(vals).any(axis=(1, 2))
+    rep, same_all = _repeats(vals)
     if rep.any():
         notes.append(
             f"{int(rep.sum())} exactly repeated rows dropped (a logger polling faster "
@@ -394,8 +432,11 @@ def read_wide_csv(
         v, t_rows, row_lines = vals, tcol, lines
     del vals
     n_kept = v.shape[0]
-    same = np.zeros((n_kept, len(stations)), dtype=bool)  # a held (repeated) value
-    same[1:] = (v[1:] == v[:-1]).all(axis=2)  # missing (NaN) is never "held"
+    # a held (repeated) value; missing (NaN) is never "held". Between a kept row and the
+    # kept row before it lie only exact repeats of the latter, so comparing with the
+    # row just before (in the file) gives the same.
+    same = same_all[keep] if rep.any() else same_all
+    del same_all
     partial = same.any(axis=1) & ~same.all(axis=1)
     if len(stations) > 1 and partial.mean() > 0.5:
         rows_u, st_u = np.nonzero(~same)
@@ -463,22 +504,25 @@ def read_wide_csv(
 
     scale = UNITS_TO_MM[units]
     poses: dict[str, PoseSeries] = {}
-    complete = np.isfinite(frame_vals).all(axis=2)
-    partial_s = ~complete & np.isfinite(frame_vals).any(axis=2)
+    finite = np.isfinite(frame_vals)
+    complete = finite.all(axis=2)
+    partial_s = ~complete & finite.any(axis=2)
+    del finite
     if partial_s.any():
         notes.append(f"{int(partial_s.sum())} samples with empty fields treated as missing")
     for j, name in enumerate(names):
         rows = np.flatnonzero(complete[:, j])
-        pos = np.full((n, 3), np.nan)
-        rot = np.full((n, 3, 3), np.nan)
+        # every row is written once: by a sample below or as a gap (NaN) at the end
+        pos = np.empty((n, 3))
+        rot = np.empty((n, 3, 3))
         for lo in range(0, rows.size, _BLOCK):  # blocks bound the temporary memory
             r = rows[lo : lo + _BLOCK]
             fv = frame_vals[r, j]
             at = grid_idx[r]
-            pos[at] = fv[:, :3] * scale
+            put_rows(pos, at, fv[:, :3] * scale)
             if lay.orientation == _QUAT:
                 with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
-                    norm = np.linalg.norm(fv[:, 3:], axis=1)
+                    norm = quat_norm(fv[:, 3:])
                 bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
                 if bad.size:
                     raise FingerfitError(
@@ -488,9 +532,13 @@ def read_wide_csv(
                         line=int(f_lines[r[bad[0]]]),
                         field=_column(lay.columns["qw"], stations[j]),
                     )
-                rot[at] = matrix_from_quat_wxyz(fv[:, 3:])
+                put_rows(rot, at, matrix_from_quat_wxyz(fv[:, 3:]))
             else:
-                rot[at] = Rotation.from_euler("ZYX", fv[:, 3:], degrees=True).as_matrix()
+                put_rows(rot, at, Rotation.from_euler("ZYX", fv[:, 3:], degrees=True).as_matrix())
+        gap = gap_rows(n, [grid_idx[rows]])
+        if gap is not None:
+            pos[gap] = np.nan
+            rot[gap] = np.nan
         poses[name] = PoseSeries(pos, rot)
     rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes)
     rec.notes.extend(sensor_missing_notes(rec))

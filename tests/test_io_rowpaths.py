@@ -1,0 +1,96 @@
+"""The readers' shared row helpers against the plain NumPy they replace, bit for bit.
+
+``quat_norm`` must give the bits of ``np.linalg.norm(q, axis=1)`` (the quaternion check
+and its message use it); ``put_rows``/``gap_rows`` must fill a pose array exactly as
+``np.full(nan)`` followed by ``out[at] = values`` did; the wide reader's ``_repeats`` must
+flag the rows ``repeated_rows(...) & isfinite(...).any(...)`` flagged, and its held values
+(computed once, before repeated rows are dropped) must equal those computed after.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from fingerfit.io.fastcsv import gap_rows, put_rows, quat_norm
+from fingerfit.io.hygiene import repeated_rows
+from fingerfit.io.widecsv import _repeats
+
+SETTINGS = settings(max_examples=60, deadline=None)
+
+
+def test_quat_norm_is_linalg_norm_bit_for_bit():
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(20000, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[:5000] *= rng.uniform(0.99, 1.01, size=(5000, 1))
+    q[5000:5010] = [1e200, 1e200, 0, 0]  # overflows to inf in both
+    q[5010:5020] = [1e-200, 0, 0, 0]  # underflows alike
+    q[5020] = np.nan
+    wide = np.concatenate([rng.normal(size=(q.shape[0], 3)), q], axis=1)  # strided view
+    with np.errstate(over="ignore", under="ignore"):
+        for arr in (q, wide[:, 3:]):
+            assert np.array_equal(quat_norm(arr), np.linalg.norm(arr, axis=1), equal_nan=True)
+        assert np.isinf(quat_norm(q[5000:5010])).all()
+
+
+@SETTINGS
+@given(
+    n=st.integers(1, 40),
+    rows=st.lists(st.integers(0, 39), max_size=40, unique=True),
+    sort=st.booleans(),
+)
+def test_put_rows_and_gap_rows_fill_like_full_and_fancy_index(n, rows, sort):
+    at = np.array([r for r in rows if r < n], dtype=np.int64)
+    if sort:
+        at = np.sort(at)
+    values = np.arange(at.size * 9, dtype=float).reshape(-1, 3, 3) + 0.5
+    expected = np.full((n, 3, 3), np.nan)
+    expected[at] = values
+    got = np.empty((n, 3, 3))
+    got[:] = 7.0  # whatever np.empty holds must not survive
+    put_rows(got, at, values)
+    gap = gap_rows(n, [at])
+    if gap is not None:
+        got[gap] = np.nan
+    assert np.array_equal(got, expected, equal_nan=True)
+    assert (gap is None) == (np.unique(at).size == n)
+
+
+def test_put_rows_contiguous_run_is_a_slice_and_blocks_tile():
+    out = np.full((10, 3), np.nan)
+    put_rows(out, np.arange(2, 6), np.ones((4, 3)))
+    put_rows(out, np.array([6, 8]), 2 * np.ones((2, 3)))
+    assert np.isnan(out[[0, 1, 7, 9]]).all() and (out[2:6] == 1).all() and (out[[6, 8]] == 2).all()
+    gap = gap_rows(10, [np.arange(2, 6), np.array([6, 8])])
+    assert gap.tolist() == [0, 1, 7, 9]
+    assert gap_rows(5, [np.arange(0, 2), np.arange(2, 5)]) is None
+
+
+# values from a small set, so that repeats, held values, NaN, -0.0 and empty rows occur
+_VALUES = st.sampled_from([0.0, -0.0, 1.0, 2.5, np.nan])
+
+
+@SETTINGS
+@given(
+    vals=hnp.arrays(
+        float,
+        st.tuples(st.integers(0, 30), st.integers(1, 3), st.integers(1, 3)),
+        elements=_VALUES,
+    )
+)
+def test_repeats_matches_the_reference_definitions(vals):
+    n = vals.shape[0]
+    rep, same_all = _repeats(vals)
+    if n:
+        ref = repeated_rows(vals.reshape(n, -1)) & np.isfinite(vals).any(axis=(1, 2))
+    else:
+        ref = np.zeros(0, dtype=bool)
+    assert np.array_equal(rep, ref)
+    # held values after dropping the repeats, as the reader computed them before
+    v = vals[~ref]
+    held = np.zeros(v.shape[:2], dtype=bool)
+    held[1:] = (v[1:] == v[:-1]).all(axis=2)
+    assert np.array_equal(same_all[~rep], held)
