@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from fingerfit.io.fastcsv import gap_rows, put_rows, quat_norm
+from fingerfit.io.fastcsv import gap_rows, put_rows, quat_norm, rows_where
 from fingerfit.io.hygiene import repeated_rows
 from fingerfit.io.widecsv import _repeats
 
@@ -94,3 +94,20 @@ def test_repeats_matches_the_reference_definitions(vals):
     held = np.zeros(v.shape[:2], dtype=bool)
     held[1:] = (v[1:] == v[:-1]).all(axis=2)
     assert np.array_equal(same_all[~rep], held)
+
+
+@SETTINGS
+@given(
+    codes=hnp.arrays(np.int32, st.integers(0, 30), elements=st.integers(0, 3)), k=st.integers(0, 3)
+)
+def test_rows_where_selects_the_rows_of_one_code(codes, k):
+    expected = np.flatnonzero(codes == k)
+    got = np.arange(codes.size)[rows_where(codes, k)]
+    assert np.array_equal(got, expected)
+
+
+def test_rows_where_is_a_slice_for_sensors_taking_turns():
+    codes = np.tile(np.array([2, 0, 1], dtype=np.int32), 5)
+    assert rows_where(codes, 0) == slice(1, 14, 3)
+    codes[4] = 2
+    assert isinstance(rows_where(codes, 0), np.ndarray)

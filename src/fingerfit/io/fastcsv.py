@@ -278,6 +278,19 @@ def put_rows(out: np.ndarray, at: np.ndarray, values: np.ndarray) -> None:
         out[at] = values
 
 
+def rows_where(codes: np.ndarray, k: int) -> slice | np.ndarray:
+    """The positions of ``k`` in ``codes (n,)``: a slice when they are evenly spaced (rows
+    of sensors taking turns), else an index array. Either selects the same rows."""
+    idx = np.flatnonzero(codes == k)
+    if idx.size == 1:
+        return slice(int(idx[0]), int(idx[0]) + 1)
+    if idx.size > 1:
+        step = int(idx[1] - idx[0])
+        if idx[-1] - idx[0] == step * (idx.size - 1) and (np.diff(idx) == step).all():
+            return slice(int(idx[0]), int(idx[-1]) + 1, step)
+    return idx
+
+
 def gap_rows(n: int, filled: Sequence[np.ndarray]) -> np.ndarray | None:
     """Rows of ``range(n)`` in none of the index arrays ``filled`` (None when there are none)."""
     mask = np.ones(n, dtype=bool)

@@ -19,6 +19,7 @@ import pandas as pd
 from ..errors import FingerfitError, shown
 from ..session import PoseSeries, Recording, is_sensor_name
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from .fastcsv import put_rows, rows_where
 from .hygiene import check_grid_size, implausible_message, implausible_rows
 
 HEADER = ("time", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz")
@@ -418,10 +419,11 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
         r = matrix_from_quat_wxyz(p[:, 3:])
         xyz = p[:, :3] * scale_to_mm
         for k in np.flatnonzero(np.bincount(c, minlength=len(rows.names))):
-            m = c == k
-            pos[int(k)][f[m]] = xyz[m]
-            rot[int(k)][f[m]] = r[m]
-            filled[int(k)][f[m]] = True
+            m = rows_where(c, k)  # a strided slice when sensors take turns regularly
+            fk = f[m]
+            put_rows(pos[int(k)], fk, xyz[m])
+            put_rows(rot[int(k)], fk, r[m])
+            put_rows(filled[int(k)], fk, True)
     poses: dict[str, PoseSeries] = {}
     for k in appear:
         name = rows.names[k]
