@@ -393,12 +393,16 @@ def _ascii_to_csv(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     starts = events[~is_nl]
     first = after_nl[~is_nl]
     nl_at = events[is_nl]
-    # bytes kept before each token: the tokens before it and the newlines before it
-    length = ends - starts
-    kept_before = np.cumsum(length) - length
-    kept_before += np.cumsum(is_nl)[~is_nl]
-    del events, is_nl, after_nl, length
-    out = np.insert(b[tok | nl], kept_before[~first], 44)
+    del events, is_nl, after_nl
+    # A token that is not first on its line follows a run of blanks: the run's first
+    # byte (the end of the token before) becomes the comma, the other blanks go.
+    keep = tok | nl
+    comma = ends[np.flatnonzero(~first[1:])]  # token t (t >= 1) not first: end of t - 1
+    keep[comma] = True
+    b = b.copy()
+    b[comma] = 44
+    out = b[keep]
+    del keep, comma
     heads = starts[first]
     if heads.size == nl_at.size + (1 if n and b[-1] != 10 else 0):
         return out, np.arange(heads.size)  # no blank line
