@@ -212,7 +212,8 @@ def two_way_anova(data: pd.DataFrame, value: str, a: str, b: str) -> pd.DataFram
         ss_a = within_b - within_a + ss_b
     df = np.array([na - 1, nb - 1, (na - 1) * (nb - 1), n - na * nb], dtype=float)
     ss = np.array([ss_a, ss_b, ss_ab, within])
-    f = (ss[:3] / df[:3]) / (within / df[3])
+    with np.errstate(divide="ignore", invalid="ignore"):  # exact data: no residual, F inf
+        f = (ss[:3] / df[:3]) / (within / df[3])
     table = pd.DataFrame(
         {
             "sum_sq": ss,

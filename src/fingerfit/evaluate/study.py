@@ -17,6 +17,7 @@ from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_complet
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import pandas as pd
@@ -73,7 +74,13 @@ _THUMB_GEOMETRY_COLUMNS = [
 
 @dataclass
 class SubjectResult:
-    """Everything the study computed for one session."""
+    """Everything the study computed for one session.
+
+    The tables (``max_flexion`` ... ``truth_angles``) are the subject's rows of the
+    study's tables. In :attr:`StudyResult.subjects` of :func:`run_study` they are None:
+    the study moved them into :attr:`StudyResult.tables` as each subject arrived
+    (:class:`StudyTables`), so it keeps a few KB per subject, not a DataFrame each.
+    """
 
     subject: str
     session: Session
@@ -89,22 +96,32 @@ class SubjectResult:
     pinches: pd.DataFrame | None = None  # evaluate_pinches, with ``subject``
     skipped_events: tuple[dict, ...] = ()  # fingertip.skipped_events
     truth_angles: pd.DataFrame | None = None  # _TRUTH_ANGLE_COLUMNS
+    frames: int = 0  # rows of all the session's recordings that were read
 
     def compact(self) -> SubjectResult:
-        """The same result without the per-frame arrays (what a study keeps per subject).
+        """The same result without the per-frame arrays (what a study task sends back).
 
         The session keeps its subject, path, landmarks and recording names (every
-        recording with zero frames); the grasp evaluations and the true fingertip
-        trajectories are dropped. Model, tables and warnings are kept as they are.
+        recording with zero frames, one shared empty pose series per sensor); the grasp
+        evaluations and the true trajectories are dropped, and of the truth document
+        only what :func:`thumb_geometry` reads (``fingers.<digit>.axis_offset_mm`` and
+        ``axes_angle_deg``). Model, tables and warnings are kept as they are.
         """
-        truth = None if self.truth is None else Truth(self.truth.document, {})
+        truth = None
+        if self.truth is not None:
+            keep = ("axis_offset_mm", "axes_angle_deg")
+            digits = self.truth.document.get("fingers", {})
+            doc = {"fingers": {f: {k: d[k] for k in keep if k in d} for f, d in digits.items()}}
+            truth = Truth(doc, {})
         return replace(self, session=_without_frames(self.session), grasp={}, truth=truth)
+
+
+_NO_FRAMES = PoseSeries(np.empty((0, 3)), np.empty((0, 3, 3)))
 
 
 def _empty(rec: Recording) -> Recording:
     """A recording with its name and sensors but no frames (no view on the original)."""
-    poses = {k: PoseSeries(np.empty((0, 3)), np.empty((0, 3, 3))) for k in rec.poses}
-    return Recording(rec.name, np.empty(0), poses, list(rec.notes))
+    return Recording(rec.name, np.empty(0), dict.fromkeys(rec.poses, _NO_FRAMES), list(rec.notes))
 
 
 def _without_frames(session: Session) -> Session:
@@ -201,12 +218,13 @@ def _subject(session: Session, options: FitOptions) -> SubjectResult:
         warnings=warned,
         pinches=pinches,
         skipped_events=tuple(skipped_events(model, session)),
+        frames=sum(rec.n_frames for rec in session.recordings()),
     )
     if truth is not None:
         fingers = [f for f in model.fingers if f in truth.document.get("fingers", {})]
         res.truth_axes = _concat(
             [axis_errors(model, truth, f).assign(subject=session.subject) for f in fingers],
-            ["subject", "finger", "joint", "axis_error_deg", "centre_to_axis_mm"],
+            _TRUTH_AXIS_COLUMNS,
         )
         rows, angle_rows = [], []
         for rec in session.recordings()[1:]:
@@ -339,10 +357,94 @@ def _concat(frames: list[pd.DataFrame], columns: list[str]) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+_TRUTH_AXIS_COLUMNS = ["subject", "finger", "joint", "axis_error_deg", "centre_to_axis_mm"]
+# SubjectResult field -> its columns in the study's table.
+_SUBJECT_TABLES = {
+    "max_flexion": _FLEX_COLUMNS,
+    "distances": _DIST_COLUMNS,
+    "targets": _TARGET_COLUMNS,
+    "truth_axes": _TRUTH_AXIS_COLUMNS,
+    "truth_tips": _TRUTH_TIP_COLUMNS,
+    "truth_angles": _TRUTH_ANGLE_COLUMNS,
+    "pinches": _PINCH_COLUMNS,
+}
+
+
+def _or_empty(table: pd.DataFrame | None, columns: list[str]) -> pd.DataFrame:
+    return _concat([], columns) if table is None else table
+
+
+class StudyTables:
+    """The per-subject rows of a study, gathered as the subjects arrive, in any order.
+
+    A subject's tables (one small DataFrame each, a few KB of rows but tens of KB of
+    pandas overhead) are taken out of its result and joined with the rows gathered so
+    far every ``chunk`` subjects, so memory grows by the rows alone. :meth:`tables`
+    gives the same tables as concatenating every subject's, in the subjects' order.
+
+    Parameters
+    ----------
+    chunk : int
+        Subjects whose tables are held as separate DataFrames before they are joined.
+    """
+
+    def __init__(self, chunk: int = 32) -> None:
+        self._chunk = chunk
+        self._pending: dict[str, list[pd.DataFrame]] = {k: [] for k in _SUBJECT_TABLES}
+        self._joined: dict[str, list[pd.DataFrame]] = {k: [] for k in _SUBJECT_TABLES}
+        self._rows: dict[str, list[tuple[int, int]]] = {k: [] for k in _SUBJECT_TABLES}
+        self._present: set[str] = set()  # tables some subject has (not None)
+
+    def add(self, order: int, result: SubjectResult) -> SubjectResult:
+        """Take a subject's tables; the result without them (its table fields None).
+
+        ``order``: the subject's place in the study (its rows come out in this order).
+        """
+        for key, columns in _SUBJECT_TABLES.items():
+            table = getattr(result, key)
+            if table is None:
+                continue
+            self._present.add(key)
+            if table.empty:
+                continue
+            self._pending[key].append(table[columns])
+            self._rows[key].append((order, len(table)))
+            if len(self._pending[key]) >= self._chunk:
+                self._join(key)
+        return replace(result, **dict.fromkeys(_SUBJECT_TABLES))
+
+    def _join(self, key: str) -> None:
+        if self._pending[key]:
+            both = [*self._joined[key], *self._pending[key]]
+            self._joined[key] = [_concat(both, _SUBJECT_TABLES[key])]
+            self._pending[key] = []
+
+    def tables(self) -> dict[str, pd.DataFrame | None]:
+        """SubjectResult field -> the study's table, rows in the subjects' order
+        (None: no subject has the table)."""
+        out: dict[str, pd.DataFrame | None] = {}
+        for key, columns in _SUBJECT_TABLES.items():
+            if key not in self._present:
+                out[key] = None
+                continue
+            self._join(key)
+            joined = _concat(self._joined[key], columns)
+            rows = self._rows[key]
+            given = [o for o, _n in rows]
+            if given != sorted(given):  # arrived in another order
+                starts = np.cumsum([0] + [n for _o, n in rows])
+                order = np.argsort(given, kind="stable")
+                take = np.concatenate([np.arange(starts[i], starts[i] + rows[i][1]) for i in order])
+                joined = joined.take(take).reset_index(drop=True)
+            out[key] = joined
+        return out
+
+
 def summarize_study(
     subjects: list[SubjectResult],
     options: FitOptions,
     failures: list[SessionFailure] | None = None,
+    gathered: StudyTables | None = None,
 ) -> tuple[dict, dict[str, pd.DataFrame]]:
     """Statistics and headline of the study, plus its tables.
 
@@ -354,6 +456,9 @@ def summarize_study(
     options : FitOptions
     failures : list of SessionFailure, optional
         Sessions that could not be fitted (``--keep-going``), listed in the summary.
+    gathered : StudyTables, optional
+        The subjects' tables, already taken out of ``subjects`` (whose table fields
+        are then None), as :func:`run_study` does; by default they are gathered here.
 
     Returns
     -------
@@ -363,11 +468,17 @@ def summarize_study(
         under ``"skipped"``.
     tables : dict of str to DataFrame
     """
-    flex_all = _concat([s.max_flexion for s in subjects], _FLEX_COLUMNS)
+    if gathered is None:
+        gathered = StudyTables()
+        for i, s in enumerate(subjects):
+            gathered.add(i, s)
+    study_rows = gathered.tables()
+    flex_all = _or_empty(study_rows["max_flexion"], _FLEX_COLUMNS)
     # The paper's figures (headline, Fig. 10) are the four fingers'; the thumb's own section.
     flex = flex_all[flex_all["finger"].isin(FINGERS)]
-    dist = _concat([s.distances for s in subjects], _DIST_COLUMNS)
-    targets = _concat([s.targets for s in subjects], _TARGET_COLUMNS)
+    dist = _or_empty(study_rows["distances"], _DIST_COLUMNS)
+    targets = _or_empty(study_rows["targets"], _TARGET_COLUMNS)
+    with_targets = set(targets["subject"])
     tables = {"max_flexion": flex_all, "axis_quality": dist, "targets": targets}
     summary: dict = {
         "format": "fingerfit.study/1",
@@ -381,7 +492,7 @@ def summarize_study(
             s.subject: {
                 "path": None if s.session.path is None else str(s.session.path),
                 "fingers": list(s.model.fingers),
-                "has_targets": bool(len(s.targets)),
+                "has_targets": s.subject in with_targets,
                 "has_truth": s.truth is not None,
             }
             for s in subjects
@@ -452,12 +563,9 @@ def summarize_study(
         )
         summary["targets"] = tg
     # Ground truth (simulated sessions only).
-    truth_axes = [s.truth_axes for s in subjects if s.truth_axes is not None]
-    if truth_axes:
-        ta = pd.concat(truth_axes, ignore_index=True)
-        tt = _concat(
-            [s.truth_tips for s in subjects if s.truth_tips is not None], _TRUTH_TIP_COLUMNS
-        )
+    if study_rows["truth_axes"] is not None:
+        ta = study_rows["truth_axes"]
+        tt = _or_empty(study_rows["truth_tips"], _TRUTH_TIP_COLUMNS)
         tables["truth_axes"], tables["truth_fingertip"] = ta, tt
         summary["truth"] = {
             "subjects": sorted(ta["subject"].unique()),
@@ -480,7 +588,9 @@ def summarize_study(
                 for (r, v), g in tt[tt["finger"].isin(FINGERS)].groupby(["recording", "variant"])
             },
         }
-        _whole_hand_truth(subjects, summary, tables, tt)
+        _whole_hand_truth(
+            _or_empty(study_rows["truth_angles"], _TRUTH_ANGLE_COLUMNS), summary, tables, tt
+        )
     # Model geometry per subject: how far the fitted axes are from perpendicular.
     rows = []
     for s in subjects:
@@ -514,7 +624,9 @@ def summarize_study(
             "segment_length_mm",
         ],
     )
-    _thumb_and_pinch(subjects, summary, tables, flex_all)
+    _thumb_and_pinch(
+        subjects, summary, tables, flex_all, _or_empty(study_rows["pinches"], _PINCH_COLUMNS)
+    )
     summary["skipped"] = _skips(
         {
             k: summary[k]
@@ -538,16 +650,11 @@ def _mean_sd(x: pd.Series) -> dict:
     return {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
 
 
-def _whole_hand_truth(
-    subjects: list[SubjectResult], summary: dict, tables: dict, tt: pd.DataFrame
-) -> None:
+def _whole_hand_truth(ang: pd.DataFrame, summary: dict, tables: dict, tt: pd.DataFrame) -> None:
     """Every digit's tip and every joint angle against truth: ``summary["truth"]`` keys
     ``tip_mm_per_digit`` (digit -> ``recording/variant`` -> mean, p95 mm) and
     ``angle_error_deg`` (digit -> angle -> variant -> mean |error| deg), table
-    ``truth_angles``."""
-    ang = _concat(
-        [s.truth_angles for s in subjects if s.truth_angles is not None], _TRUTH_ANGLE_COLUMNS
-    )
+    ``truth_angles`` (``ang``)."""
     tables["truth_angles"] = ang
     summary["truth"]["tip_mm_per_digit"] = {
         f: {
@@ -569,7 +676,11 @@ def _whole_hand_truth(
 
 
 def _thumb_and_pinch(
-    subjects: list[SubjectResult], summary: dict, tables: dict, flex_all: pd.DataFrame
+    subjects: list[SubjectResult],
+    summary: dict,
+    tables: dict,
+    flex_all: pd.DataFrame,
+    pin: pd.DataFrame,
 ) -> None:
     """``summary["thumb"]`` (the thumb's fingertip at maximal flexion, axes and tip against
     truth, CMC/MCP geometry) and ``summary["pinch"]`` (tip distances and pad gaps during
@@ -624,7 +735,6 @@ def _thumb_and_pinch(
                 tips[r] = h
             th["truth_tip"] = tips
         summary["thumb"] = th
-    pin = _concat([s.pinches for s in subjects if s.pinches is not None], _PINCH_COLUMNS)
     if pin.empty:
         return
     tables["pinch"] = pin
@@ -722,7 +832,27 @@ class SubjectOutcome:
     path: str | None = None
 
 
-def study_subject(item: Path | str | Session, options: FitOptions) -> SubjectOutcome:
+@runtime_checkable
+class SessionSource(Protocol):
+    """A study input that makes its session folder where the study task runs.
+
+    ``open()`` is a context manager giving the folder (read like any session folder)
+    and cleaning up after the task; ``str(source)`` names it in messages. Picklable,
+    so it can travel to a worker process or a Dask worker.
+    (:class:`fingerfit.simulate.source.SimulatedSession`: simulate on the worker.)
+    """
+
+    def open(self) -> contextlib.AbstractContextManager[Path]: ...
+
+
+def _is_source(item: object) -> bool:
+    """A :class:`SessionSource` (a Path has an ``open`` method too: not one)."""
+    return not isinstance(item, Path | str | Session) and isinstance(item, SessionSource)
+
+
+def study_subject(
+    item: Path | str | Session | SessionSource, options: FitOptions
+) -> SubjectOutcome:
     """Read, fit and evaluate one session; render its Fig. 9 (one study task).
 
     Runs in a worker process (``--jobs``), on a Dask worker (``--scheduler``) or in
@@ -731,8 +861,9 @@ def study_subject(item: Path | str | Session, options: FitOptions) -> SubjectOut
 
     Parameters
     ----------
-    item : Path, str or Session
-        Session folder (or an in-memory session).
+    item : Path, str, Session or SessionSource
+        Session folder (or an in-memory session, or a source that makes the folder
+        here: the outcome then names the source, and its session has no path).
     options : FitOptions
 
     Returns
@@ -740,6 +871,20 @@ def study_subject(item: Path | str | Session, options: FitOptions) -> SubjectOut
     SubjectOutcome
         Never raises for a bad session: its error comes back as one line.
     """
+    if _is_source(item):
+        try:
+            with item.open() as folder:
+                got = study_subject(folder, options)
+        except Exception as exc:  # the source could not make its session: named
+            return SubjectOutcome(
+                str(item), read_error=f"{item}: could not be made ({_one_line(exc)})"
+            )
+        got.source, got.path = str(item), None
+        if got.read_error is not None:
+            got.read_error = got.read_error.replace(str(folder), str(item))
+        if got.result is not None:
+            got.result.session.path = None  # the folder is gone
+        return got
     if isinstance(item, Session):
         source = str(item.path or item.subject)
     else:
@@ -838,7 +983,7 @@ def study_executor(jobs: int = 1, scheduler: str | None = None) -> Iterator[Exec
 
 
 def run_study(
-    sessions: list[Path | Session],
+    sessions: list[Path | Session | SessionSource],
     out_dir: Path,
     options: FitOptions | None = None,
     progress: Callable[[str], None] | None = None,
@@ -858,10 +1003,11 @@ def run_study(
 
     Parameters
     ----------
-    sessions : list of Path or Session
-        Session directories (or loaded sessions), one subject each; any mix of
-        sessions with or without target recordings, test recordings, ground truth
-        and fingers.
+    sessions : list of Path, Session or SessionSource
+        Session directories (or loaded sessions, or sources that make their folder
+        in the study task, e.g. :class:`~fingerfit.simulate.source.SimulatedSession`),
+        one subject each; any mix of sessions with or without target recordings, test
+        recordings, ground truth and fingers.
     out_dir : Path
         Output folder; must be absent or empty unless ``overwrite``.
     options : FitOptions, optional
@@ -909,6 +1055,7 @@ def run_study(
     with staged_directory(out_dir, overwrite=overwrite) as tmp, contextlib.ExitStack() as stack:
         outcomes: list[SubjectOutcome | None] = [None] * len(sessions)
         fig09: dict[int, tuple[str, Path]] = {}
+        gathered = StudyTables()
         pool = stack.enter_context(study_executor(jobs, scheduler))
         futures = {pool.submit(study_subject, s, options): i for i, s in enumerate(sessions)}
         for future in as_completed(futures):
@@ -927,6 +1074,8 @@ def run_study(
                     fh.write(png)
                 fig09[i] = (f"fig09_{got.subject}", tmp / name)
                 got.figure = None
+            if got.result is not None:  # its rows join the study's tables now
+                got.result = gathered.add(i, got.result)
             if got.read_error is not None:
                 step(f"could not read {got.source}")
             elif got.fit_error is not None:
@@ -948,7 +1097,11 @@ def run_study(
                     f"'{first.path or '(in memory)'}' and '{o.path or '(in memory)'}'",
                     field="subject",
                 )
-        given = [x.path if isinstance(x, Session) else Path(x) for x in sessions]
+        given = [
+            x.path if isinstance(x, Session) else Path(x)
+            for x in sessions
+            if not _is_source(x)  # made and removed on the worker
+        ]
         _check_not_input(out_dir, [p for p in given if p is not None])
         subjects: list[SubjectResult] = []
         for o in ok:
@@ -963,7 +1116,7 @@ def run_study(
             raise FingerfitError(f"no session could be fitted and evaluated: {detail}")
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            summary, tables = summarize_study(subjects, options, failures)
+            summary, tables = summarize_study(subjects, options, failures, gathered)
             result = StudyResult(subjects, summary, tables, tmp, failures=failures)
             kept = {o.subject for o in ok if o.fit_error is None}
             drawn = dict(fig09[i] for i in sorted(fig09) if outcomes[i].subject in kept)
