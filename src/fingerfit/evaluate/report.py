@@ -523,6 +523,8 @@ def _json_script(data: dict) -> str:
 
 def _subjects_table(result: StudyResult) -> str:
     sm = result.summary
+    tg = result.tables["targets"]
+    touches = tg.loc[tg["source"] == "reference", "subject"].value_counts()
     rows = [
         {
             "subject": s.subject,
@@ -530,9 +532,7 @@ def _subjects_table(result: StudyResult) -> str:
             "grasp cycles at max. flexion (n)": str(
                 sm["max_flexion"]["per_subject"][s.subject]["n"]
             ),
-            "target touches (n)": str(
-                int((s.targets["source"] == "reference").sum()) if len(s.targets) else 0
-            ),
+            "target touches (n)": str(int(touches.get(s.subject, 0))),
             "ground truth": "yes" if s.truth is not None else "no",
             "warnings (n)": str(len(s.warnings)),
         }
