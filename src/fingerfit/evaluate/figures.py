@@ -52,13 +52,23 @@ def save_to(fig: Figure, fh: BinaryIO, *, tight: bool = True) -> None:
         plt.close(fig)
 
 
+# A figure with one group per subject stops growing here (7040 px at DPI): a study of
+# ~500 subjects would pass the PNG limit of 65536 px, and its workers' memory grew with it.
+MAX_WIDTH_IN = 64.0
+
+
 def _tick_labels(ax, labels: list[str], axis_len_in: float) -> None:
-    """Category tick labels, rotated when they would not fit side by side."""
+    """Category tick labels, rotated when they would not fit side by side; every k-th
+    label only when even rotated ones (~0.17 in apart at 9 pt) would overlap."""
     longest = max((len(str(s)) for s in labels), default=1)
     per_label_in = axis_len_in / max(1, len(labels))
     rotate = longest * 0.075 > per_label_in  # ~0.075 in per character at 9 pt
+    step = max(1, int(np.ceil(0.17 / max(per_label_in, 1e-9))))
     ax.set_xticks(
-        range(len(labels)), labels, rotation=45 if rotate else 0, ha="right" if rotate else "center"
+        range(0, len(labels), step),
+        list(labels)[::step],
+        rotation=45 if rotate else 0,
+        ha="right" if rotate else "center",
     )
 
 
@@ -69,10 +79,10 @@ def make_axis_quality(distances: pd.DataFrame) -> Figure:
     the thumb's joints (``cmc``, ``mcp``, ``ip``) a third panel shows them.
     """
     subjects = list(pd.unique(distances["subject"]))  # study order
-    width_in = max(10.0, 1.0 * len(subjects) + 3)
+    width_in = min(MAX_WIDTH_IN, max(10.0, 1.0 * len(subjects) + 3))
     thumb = bool(distances["joint"].isin(("cmc", "mcp", "ip")).any())
     if thumb:
-        width_in = max(13.0, 1.5 * len(subjects) + 4)
+        width_in = min(MAX_WIDTH_IN, max(13.0, 1.5 * len(subjects) + 4))
     fig, axes = plt.subplots(
         1, 3 if thumb else 2, figsize=(width_in, 4.0), layout="constrained", squeeze=False
     )
@@ -169,7 +179,7 @@ def make_paired_boxes(
 ) -> Figure:
     """Box plots of ``user_axis`` vs ``orthogonal`` errors (mm) per value of ``by`` (Fig. 10)."""
     groups = list(pd.unique(data[by])) if by == "subject" else sorted(data[by].unique())
-    width_in = max(6.0, 1.2 * len(groups) + 3)
+    width_in = min(MAX_WIDTH_IN, max(6.0, 1.2 * len(groups) + 3))
     fig, ax = plt.subplots(figsize=(width_in, 4.0), layout="constrained")
     for k, src in enumerate(("user_axis", "orthogonal")):
         vals = [data.loc[data[by] == g, src].dropna() for g in groups]
