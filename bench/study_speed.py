@@ -10,7 +10,14 @@ Part of ``make bench`` (``bench/speed.py`` calls :func:`run`); alone:
   large one, and the large one on a local Dask cluster (2 worker processes, 1 thread each)
   through ``--scheduler``. Each study runs in a fresh process that reports its own peak
   RSS (``VmHWM``) and the largest peak RSS of its worker processes (``getrusage``
-  ``RUSAGE_CHILDREN``; a worker's figure includes what it shared with its parent at start).
+  ``RUSAGE_CHILDREN``; a worker's figure includes what it shared with its parent at start);
+  the study process's growth per subject between the two cohort sizes;
+- ``--cluster-subjects N``: an ``N``-subject cohort on a local Dask cluster (2 worker
+  processes, 1 thread each) that is simulated in the workers: each study task simulates
+  its subject (:class:`fingerfit.simulate.source.SimulatedSession`), writes the session
+  folder to a temporary folder there, studies it like any folder and removes it, so the
+  cohort needs neither the time nor the disk (34 MB per subject) up front. Its wall time
+  therefore includes the simulation, measured separately per subject in this process.
 """
 
 from __future__ import annotations
@@ -46,6 +53,29 @@ me = int(status[0])
 kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
 print("\\n" + json.dumps({{"wall_s": wall, "parent_peak_mb": me / 1024,
                           "largest_child_peak_mb": kids / 1024}}))
+"""
+
+_SOURCES = """
+import json, sys, time
+from pathlib import Path
+from fingerfit.evaluate import run_study
+from fingerfit.simulate import SimConfig
+from fingerfit.simulate.source import simulated_cohort
+n, out, address = {n!r}, Path({out!r}), {address!r}
+sources = simulated_cohort(SimConfig(fingers={fingers!r}), n, 2018)
+t = time.perf_counter()
+done = [0]
+def step(msg):
+    done[0] += 1
+    if done[0] % 50 == 0 or not msg.startswith(("fitted", "failed", "could not")):
+        print(f"{{time.perf_counter() - t:7.1f}} s  {{done[0]}} steps  {{msg}}", file=sys.stderr,
+              flush=True)
+result = run_study(sources, out, progress=step, keep_going=True, scheduler=address)
+wall = time.perf_counter() - t
+status = open("/proc/self/status").read().split("VmHWM:")[1].split()
+print("\\n" + json.dumps({{"wall_s": wall, "parent_peak_mb": int(status[0]) / 1024,
+                          "frames": sum(s.frames for s in result.subjects),
+                          "failed": len(result.failures)}}))
 """
 
 _CLUSTER = """
@@ -112,7 +142,36 @@ def study(sessions: list[Path], out: Path, *extra: str) -> dict:
     return found
 
 
-def on_local_cluster(sessions: list[Path], out: Path) -> dict:
+def simulated_in_workers(address: str, n: int, out: Path) -> dict:
+    """``run_study`` of an ``n``-subject cohort simulated in the workers of ``address``,
+    in a fresh process: wall time, its peak RSS, frames studied, failed sessions."""
+    code = _SOURCES.format(n=n, out=str(out), address=address, fingers=FINGERS)
+    # stderr (progress every 50 subjects) goes to the benchmark's own stderr.
+    res = subprocess.run([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    if res.returncode:
+        raise RuntimeError(f"the {n}-subject study failed (its error above)")
+    found = json.loads(res.stdout.strip().splitlines()[-1])
+    found["subjects"] = n
+    return found
+
+
+def simulate_one_s(repeat: int = 3) -> float:
+    """Mean wall time (s) to simulate and write one subject (4 fingers), in this process."""
+    from fingerfit.simulate import SimConfig, simulate_subject, write_subject
+
+    times = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(repeat):
+            t = time.perf_counter()
+            sim = simulate_subject(SimConfig(fingers=FINGERS), 1000 + i, f"T{i}")
+            write_subject(sim, Path(tmp) / f"T{i}")
+            times.append(time.perf_counter() - t)
+    return statistics.mean(times)
+
+
+def on_local_cluster(sessions: list[Path] | int, out: Path) -> dict:
+    """The study on a fresh local Dask cluster: of session folders (through ``fingerfit
+    study --scheduler``), or of that many subjects simulated in the workers."""
     proc = subprocess.Popen(
         [sys.executable, "-c", _CLUSTER],
         stdin=subprocess.PIPE,
@@ -121,7 +180,10 @@ def on_local_cluster(sessions: list[Path], out: Path) -> dict:
     )
     try:
         address = json.loads(proc.stdout.readline())
-        result = study(sessions, out, "--scheduler", address)
+        if isinstance(sessions, int):
+            result = simulated_in_workers(address, sessions, out)
+        else:
+            result = study(sessions, out, "--scheduler", address)
     finally:
         proc.stdin.close()
     # The tasks ran in the cluster's worker processes, children of the cluster process.
@@ -130,37 +192,62 @@ def on_local_cluster(sessions: list[Path], out: Path) -> dict:
     return result
 
 
-def run(subjects: int = 100, small: int = 20, cluster: bool = True) -> dict:
-    results: dict = {"startup": startup()}
+def run(
+    subjects: int = 100, small: int = 20, cluster: bool = True, cluster_subjects: int = 0
+) -> dict:
+    results: dict = {"startup": startup(), "study": {}}
     root = Path(tempfile.mkdtemp(prefix="fingerfit-bench-"))
     try:
-        sim_s, frames = simulate(root / "sessions", subjects)
-        dirs = sorted((root / "sessions").iterdir())
-        per_subject = frames / subjects
-        results["cohort"] = {
-            "subjects": subjects,
-            "fingers": len(FINGERS),
-            "frames": frames,
-            "simulate_s": sim_s,
-        }
-        runs = {}
-        for name, chosen, extra in (
-            (f"{small} subjects, --jobs 1", dirs[:small], ("--jobs", "1")),
-            (f"{small} subjects, --jobs 2", dirs[:small], ("--jobs", "2")),
-            (f"{subjects} subjects, --jobs 2", dirs, ("--jobs", "2")),
-        ):
-            runs[name] = study(chosen, root / name.replace(" ", "_"), *extra)
-            runs[name]["subjects"] = len(chosen)
-        if cluster:
-            name = f"{subjects} subjects, local Dask cluster (2 workers)"
-            runs[name] = on_local_cluster(dirs, root / "cluster")
-            runs[name]["subjects"] = subjects
-        for r in runs.values():
-            r["frames_per_s"] = r["subjects"] * per_subject / r["wall_s"]
-        results["study"] = runs
+        if subjects:
+            folder_studies(results, root, subjects, small, cluster)
+        if cluster_subjects:
+            name = f"{cluster_subjects} subjects simulated in the workers, local Dask cluster"
+            results["simulate_one_s"] = simulate_one_s()
+            started, load = time.strftime("%Y-%m-%d %H:%M", time.gmtime()), os.getloadavg()[0]
+            r = on_local_cluster(cluster_subjects, root / "cluster-sim")
+            r["frames_per_s"] = r["frames"] / r["wall_s"]
+            r["started"], r["load_average"] = started, load
+            r["load_average_end"] = os.getloadavg()[0]
+            results["study"][name] = r
     finally:
         shutil.rmtree(root, ignore_errors=True)
     return results
+
+
+def folder_studies(results: dict, root: Path, subjects: int, small: int, cluster: bool) -> None:
+    """Simulate ``subjects`` session folders and study them: ``--jobs 1`` and ``2`` on the
+    first ``small``, ``--jobs 2`` and (``cluster``) a local Dask cluster on all."""
+    sim_s, frames = simulate(root / "sessions", subjects)
+    dirs = sorted((root / "sessions").iterdir())
+    per_subject = frames / subjects
+    results["cohort"] = {
+        "subjects": subjects,
+        "fingers": len(FINGERS),
+        "frames": frames,
+        "simulate_s": sim_s,
+    }
+    runs = {}
+    for name, chosen, extra in (
+        (f"{small} subjects, --jobs 1", dirs[:small], ("--jobs", "1")),
+        (f"{small} subjects, --jobs 2", dirs[:small], ("--jobs", "2")),
+        (f"{subjects} subjects, --jobs 2", dirs, ("--jobs", "2")),
+    ):
+        runs[name] = study(chosen, root / name.replace(" ", "_"), *extra)
+        runs[name]["subjects"] = len(chosen)
+    if cluster:
+        name = f"{subjects} subjects, local Dask cluster (2 workers)"
+        runs[name] = on_local_cluster(dirs, root / "cluster")
+        runs[name]["subjects"] = subjects
+    for r in runs.values():
+        r["frames_per_s"] = r["subjects"] * per_subject / r["wall_s"]
+    a, b = runs[f"{small} subjects, --jobs 2"], runs[f"{subjects} subjects, --jobs 2"]
+    results["growth_kb_per_subject"] = {
+        "parent": (b["parent_peak_mb"] - a["parent_peak_mb"]) * 1024 / (subjects - small),
+        "largest_worker": (b["largest_child_peak_mb"] - a["largest_child_peak_mb"])
+        * 1024
+        / (subjects - small),
+    }
+    results["study"].update(runs)
 
 
 def table(results: dict) -> str:
@@ -174,18 +261,40 @@ def table(results: dict) -> str:
             for flag in ("--help", "--version")
         ),
     ]
-    c = results["cohort"]
-    rows.append(
-        f"| simulate {c['subjects']} subjects × {c['fingers']} fingers ({c['frames']:,} frames; "
-        f"2 processes) | {c['simulate_s']:.0f} s |"
-    )
-    for name, r in results["study"].items():
+    c = results.get("cohort")
+    if c:
         rows.append(
-            f"| `fingerfit study`, {name} | {r['wall_s']:.1f} s, "
+            f"| simulate {c['subjects']} subjects × {c['fingers']} fingers ({c['frames']:,} "
+            f"frames; 2 processes) | {c['simulate_s']:.0f} s |"
+        )
+    if "simulate_one_s" in results:
+        rows.append(
+            f"| simulate and write one subject × {len(FINGERS)} fingers (mean of 3, one process) "
+            f"| {results['simulate_one_s']:.2f} s |"
+        )
+    for name, r in results["study"].items():
+        what = "`run_study`" if "simulated in the workers" in name else "`fingerfit study`"
+        frames = f" ({r['frames']:,} frames)" if "frames" in r else ""
+        when = (
+            f"; started {r['started']} UTC, load average {r['load_average']:.1f} before, "
+            f"{r['load_average_end']:.1f} after"
+            if "started" in r
+            else ""
+        )
+        rows.append(
+            f"| {what}, {name}{frames} | {r['wall_s']:.1f} s, "
             f"{r['frames_per_s'] / 1e3:.0f} k frames/s; peak RSS {r['parent_peak_mb']:.0f} MB "
-            f"(parent), {r['largest_child_peak_mb']:.0f} MB (largest worker)"
+            f"(study process), {r['largest_child_peak_mb']:.0f} MB (largest worker)"
             + (f"; {r['failed']} session(s) failed (--keep-going)" if r["failed"] else "")
+            + when
             + " |"
+        )
+    g = results.get("growth_kb_per_subject")
+    if g:
+        rows.append(
+            f"| peak RSS growth per subject, {c['subjects']} vs the small cohort, `--jobs 2` "
+            f"| {g['parent']:.0f} KB (study process), {g['largest_worker']:.0f} KB "
+            "(largest worker) |"
         )
     return "\n".join(rows)
 
@@ -194,11 +303,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--subjects", type=int, default=100)
     ap.add_argument("--small", type=int, default=20)
-    ap.add_argument("--no-cluster", action="store_true")
+    ap.add_argument("--no-cluster", action="store_true", help="no Dask run of the folders")
+    ap.add_argument(
+        "--cluster-subjects",
+        type=int,
+        default=0,
+        help="also study this many subjects simulated in the workers of a local Dask cluster",
+    )
     ap.add_argument("--json", type=Path)
     args = ap.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    results = run(args.subjects, args.small, not args.no_cluster)
+    results = run(args.subjects, args.small, not args.no_cluster, args.cluster_subjects)
     print("| measurement | result |\n|---|---|\n" + table(results))
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
