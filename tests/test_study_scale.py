@@ -132,7 +132,7 @@ def test_a_source_that_cannot_be_made_is_named(tmp_path) -> None:
 
 def test_a_study_keeps_tens_of_kb_per_subject(tmp_path) -> None:
     """What the study process holds per subject after the tables moved out: the model,
-    the landmarks and names (measured: 13 KB pickled here, 21 KB with 4 fingers)."""
+    the landmarks and names (measured: 6.8 KB pickled here, 21 KB with 4 fingers)."""
     res = run_study(simulated_cohort(CONFIG, 2, 9), tmp_path / "o", FitOptions())
     for s in res.subjects:
         assert all(getattr(s, k) is None for k in _SUBJECT_TABLES)
