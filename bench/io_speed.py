@@ -8,6 +8,12 @@ before the read, beside the bytes of the arrays the returned recording keeps. Wr
 ``src`` folder of another checkout, e.g. ``git worktree add /tmp/before <commit>``) every
 measurement is repeated with that code in the same run, for ratios.
 
+Beside rows per second the table gives MB/s of file and numbers per second (a wide row
+holds 15 numbers, a pose-CSV row 8), and the speed of the library alone on the same file
+as the floor: Arrow's CSV reader with the column types declared (all threads) for the
+CSV files, ``np.fromfile`` and the float64 conversion of the values for Liberty binary,
+and ``pyarrow.csv.write_csv`` of the written table (read back) for the writers.
+
 Run by ``bench/speed.py`` (``make bench``) or alone::
 
     python bench/io_speed.py --rows 2000000 --before /tmp/before/src
@@ -67,8 +73,10 @@ def write(rec, p):
         table = kinematics_table(compute_kinematics(model, rec))
         base = status("VmRSS:")
         t = time.perf_counter()
-        writer = getattr(__import__("fingerfit.io.fastcsv", fromlist=["x"]), "write_table", None) \
-            if out == "now" else None
+        try:  # the code under test's own writer (code older than write_table: pandas)
+            from fingerfit.io.fastcsv import write_table as writer
+        except ImportError:
+            writer = None
         if writer is not None:
             writer(p, table)
         else:
@@ -91,9 +99,39 @@ if kind.startswith("write"):
                 else rec.n_frames)
     import os
     size = os.path.getsize(target)
+    peak = status("VmHWM:") - base
+    with open(target) as fh:
+        n_cols = len(fh.readline().split(","))
+    numbers = rows * (n_cols - (1 if kind == "write-pose" else 0))  # pose: sensor is text
+    floor = None
+    if out == "now":  # Arrow writing the same table (read back typed): the formatting floor
+        import pyarrow.csv as pacsv
+        table = pacsv.read_csv(target)
+        t = time.perf_counter()
+        pacsv.write_csv(table, target + ".floor",
+                        pacsv.WriteOptions(quoting_style="none", quoting_header="none"))
+        floor = time.perf_counter() - t
+        os.unlink(target + ".floor")
     os.unlink(target)
-    print(json.dumps({"seconds": seconds, "rows": rows, "bytes": size,
-                      "peak_above": status("VmHWM:") - base}))
+    print(json.dumps({"seconds": seconds, "rows": rows, "bytes": size, "numbers": numbers,
+                      "peak_above": peak, "floor_seconds": floor}))
+    raise SystemExit(0)
+
+if kind.startswith("floor"):
+    # the raw speed of the library alone on the same file: Arrow's CSV reader with the
+    # column types declared (all threads), or NumPy's structured view of the records
+    t = time.perf_counter()
+    if kind == "floor-csv":
+        import pyarrow as pa, pyarrow.csv as pacsv
+        with open(path) as fh:
+            names = fh.readline().strip().split(",")
+        types = {n: (pa.string() if n == "sensor" else pa.float64()) for n in names}
+        pacsv.read_csv(path, convert_options=pacsv.ConvertOptions(column_types=types))
+    else:  # floor-binary: the records' values as float64
+        dt = liberty._binary_dtype(liberty.parse_items("pos,quat,frame"))
+        recs = np.fromfile(path, dtype=dt)
+        vals = [recs[k].astype(float) for k in ("position", "quaternion", "frame")]
+    print(json.dumps({"seconds": time.perf_counter() - t}))
     raise SystemExit(0)
 
 # warm-up on a small file of the same kind (first-call imports and caches)
@@ -108,6 +146,10 @@ print(json.dumps({"seconds": seconds, "peak_above": status("VmHWM:") - base, "ke
 """
 
 FORMATS = ("pose", "wide", "liberty-ascii", "liberty-binary")
+#: Numbers per row (record) of each file read: pose CSV time, x, y, z, qw, qx, qy, qz (and
+#: a sensor name); wide CSV time and 7 per station (2 stations); Liberty position (3),
+#: quaternion (4) and frame count (and a station number).
+NUMBERS_PER_ROW = {"pose": 8, "wide": 15, "liberty-ascii": 8, "liberty-binary": 8}
 WRITERS = ("write-pose", "write-wide", "write-angles")
 
 
@@ -199,6 +241,16 @@ def run(rows: int, before: Path | None = None, repeat: int = 2) -> dict:
                     key=lambda r: r["seconds"],
                 )
                 entry[label] = best | {"rows_per_s": count / best["seconds"]}
+            floor_kind = {
+                "pose": "floor-csv",
+                "wide": "floor-csv",
+                "liberty-binary": "floor-binary",
+            }
+            if kind in floor_kind:
+                entry["floor_seconds"] = min(
+                    child(src_now, floor_kind[kind], big, str(small))["seconds"]
+                    for _ in range(repeat)
+                )
             results["read"][kind] = entry
         big_pose = files["pose"][0]
         for kind in WRITERS:
@@ -220,15 +272,19 @@ def run(rows: int, before: Path | None = None, repeat: int = 2) -> dict:
 def table(res: dict) -> str:
     """The results as a Markdown table."""
     has_before = any("before" in e for e in res["read"].values())
-    head = "| measurement | rows (file) | now | peak above start / arrays kept |"
+    head = (
+        "| measurement | rows (file) | now | MB/s | M numbers/s | library alone, same file |"
+        " peak above start / arrays kept |"
+    )
     if has_before:
         head += " before | before peak / kept | speed-up |"
     lines = [head, "|---" * (head.count("|") - 1) + "|"]
 
-    def row(label: str, e: dict, unit: str) -> str:
+    def row(label: str, e: dict, unit: str, numbers: int | None) -> str:
         now = e["now"]
         n = e.get("rows", now.get("rows"))
-        size = f" ({e['file_bytes'] / 1e6:.0f} MB)" if "file_bytes" in e else ""
+        size = e.get("file_bytes", now.get("bytes"))
+        numbers = numbers if numbers is not None else now.get("numbers", 0)
         kept = now.get("kept")
         mem = (
             f"{now['peak_above'] / 1e6:.0f} MB / {kept / 1e6:.0f} MB "
@@ -236,7 +292,13 @@ def table(res: dict) -> str:
             if kept
             else f"{now['peak_above'] / 1e6:.0f} MB"
         )
-        s = f"| {label} | {n:,}{size} | {now['rows_per_s'] / 1e6:.2f} M {unit}/s ({now['seconds']:.2f} s) | {mem} |"
+        floor = e.get("floor_seconds", now.get("floor_seconds"))
+        fl = f"{n / floor / 1e6:.2f} M {unit}/s ({floor:.2f} s)" if floor else "n/a (not CSV)"
+        s = (
+            f"| {label} | {n:,} ({size / 1e6:.0f} MB) | {now['rows_per_s'] / 1e6:.2f} M {unit}/s "
+            f"({now['seconds']:.2f} s) | {size / now['seconds'] / 1e6:.0f} | "
+            f"{numbers / now['seconds'] / 1e6:.1f} | {fl} | {mem} |"
+        )
         if "before" in e:
             b = e["before"]
             bm = f"{b['peak_above'] / 1e6:.0f} MB" + (
@@ -244,7 +306,7 @@ def table(res: dict) -> str:
             )
             s += (
                 f" {b['rows_per_s'] / 1e6:.2f} M {unit}/s ({b['seconds']:.2f} s) | {bm} | "
-                f"{b['seconds'] / now['seconds']:.1f}x |"
+                f"{b['seconds'] / now['seconds']:.2f}x |"
             )
         elif has_before:
             s += " | | |"
@@ -257,9 +319,10 @@ def table(res: dict) -> str:
         "liberty-binary": "read Liberty binary",
     }
     for kind, e in res["read"].items():
-        lines.append(row(names[kind], e, "records" if kind == "liberty-binary" else "rows"))
+        unit = "records" if kind == "liberty-binary" else "rows"
+        lines.append(row(names[kind], e, unit, e["rows"] * NUMBERS_PER_ROW[kind]))
     for kind, e in res["write"].items():
-        lines.append(row(f"write {kind} CSV", e, "rows"))
+        lines.append(row(f"write {kind} CSV", e, "rows", None))
     lines.append(
         f"(load average {res.get('load_before', 0):.1f} before, "
         f"{res.get('load_after', 0):.1f} after: the machine's 2 cores are shared)"
