@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from fingerfit.io.fastcsv import gap_rows, put_rows, quat_norm, rows_where
+from fingerfit.io.fastcsv import gap_rows, put_rows, quat_norm, row_blocks, rows_where
 from fingerfit.io.hygiene import repeated_rows
 from fingerfit.io.widecsv import _repeats
 
@@ -111,3 +111,20 @@ def test_rows_where_is_a_slice_for_sensors_taking_turns():
     assert rows_where(codes, 0) == slice(1, 14, 3)
     codes[4] = 2
     assert isinstance(rows_where(codes, 0), np.ndarray)
+
+
+@SETTINGS
+@given(
+    start=st.integers(0, 5),
+    count=st.integers(0, 30),
+    step=st.integers(1, 4),
+    size=st.integers(1, 7),
+    as_slice=st.booleans(),
+)
+def test_row_blocks_cover_the_rows_in_order(start, count, step, size, as_slice):
+    idx = start + step * np.arange(count)
+    rows = slice(start, int(idx[-1]) + 1 if count else start, step) if as_slice else idx
+    pieces = [np.arange(200)[b] for b in row_blocks(rows, size)]
+    assert all(0 < p.size <= size for p in pieces)
+    got = np.concatenate(pieces) if pieces else np.zeros(0, dtype=int)
+    assert np.array_equal(got, idx)

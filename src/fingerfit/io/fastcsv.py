@@ -291,6 +291,19 @@ def rows_where(codes: np.ndarray, k: int) -> slice | np.ndarray:
     return idx
 
 
+def row_blocks(rows: slice | np.ndarray, size: int) -> Iterator[slice | np.ndarray]:
+    """``rows`` (a slice with a step, or an index array) in pieces of ``size`` rows."""
+    if isinstance(rows, slice):
+        start, step = rows.start or 0, rows.step or 1
+        count = len(range(start, rows.stop, step))
+        for lo in range(0, count, size):
+            hi = min(lo + size, count)
+            yield slice(start + lo * step, start + (hi - 1) * step + 1, step)
+    else:
+        for lo in range(0, rows.size, size):
+            yield rows[lo : lo + size]
+
+
 def gap_rows(n: int, filled: Sequence[np.ndarray]) -> np.ndarray | None:
     """Rows of ``range(n)`` in none of the index arrays ``filled`` (None when there are none)."""
     mask = np.ones(n, dtype=bool)

@@ -42,7 +42,7 @@ from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz
 from .atomic import atomic_write
-from .fastcsv import gap_rows, put_rows, quat_norm
+from .fastcsv import gap_rows, put_rows, quat_norm, row_blocks, rows_where
 from .hygiene import (
     check_grid_size,
     check_recording,
@@ -657,7 +657,8 @@ def parse_liberty_binary(
         v = recs[item].astype(float)
         values[item] = v
     err = recs["error"]
-    indicator = np.where(err == 0, "", np.array([chr(c) for c in range(256)])[err])
+    chars = np.array([""] + [chr(c) for c in range(1, 256)])  # error byte 0: no indicator
+    indicator = chars[err]
     out = LibertyRecords(
         items_t,
         recs["station"].astype(np.int64),
@@ -983,15 +984,12 @@ def records_to_recording(
     # Per station, a block of records at a time (bounded temporary memory).
     poses: dict[str, PoseSeries] = {}
     scol_sel = scol if every else scol[sel]
-    order = np.argsort(scol_sel, kind="stable")
-    bounds = np.searchsorted(scol_sel[order], np.arange(len(names) + 1))
     for k, name in enumerate(names):
         # every frame is written once: by a record below or as a gap (NaN) at the end
         pos = np.empty((n, 3))
         rot = np.empty((n, 3, 3))
-        rows_k = order[bounds[k] : bounds[k + 1]]
-        for lo in range(0, rows_k.size, _BLOCK):
-            r = rows_k[lo : lo + _BLOCK]
+        rows_k = rows_where(scol_sel, k)  # a strided slice when stations take turns
+        for r in row_blocks(rows_k, _BLOCK):
             at = frame_of_rec[r]
             src = r if every else sel[r]
             put_rows(pos, at, records.values["position"][src] * scale)
@@ -1010,7 +1008,6 @@ def records_to_recording(
             pos[gap] = np.nan
             rot[gap] = np.nan
         poses[name] = PoseSeries(pos, rot)
-    del order
     flagged = records.indicator if every else records.indicator[sel]
     flagged = flagged[flagged != ""]
     for ch in sorted(set(np.unique(flagged).tolist())):
