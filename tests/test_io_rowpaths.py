@@ -128,3 +128,26 @@ def test_row_blocks_cover_the_rows_in_order(start, count, step, size, as_slice):
     assert all(0 < p.size <= size for p in pieces)
     got = np.concatenate(pieces) if pieces else np.zeros(0, dtype=int)
     assert np.array_equal(got, idx)
+
+
+def test_wide_reader_returns_arrays_of_their_own(tmp_path):
+    """No returned array may be a view into the parsed rows (that would keep them all)."""
+    from fingerfit.io.widecsv import read_wide_csv, write_wide_csv
+    from fingerfit.session import PoseSeries, Recording
+    from fingerfit.transforms import matrix_from_quat_wxyz
+
+    rng = np.random.default_rng(5)
+    n = 50
+    poses = {
+        s: PoseSeries(rng.normal(size=(n, 3)) * 100, matrix_from_quat_wxyz(rng.normal(size=(n, 4))))
+        for s in ("1", "2")
+    }
+    path = write_wide_csv(tmp_path / "w.csv", Recording("w", np.arange(n) / 240.0, poses))
+    for rate in (None, 240.0):
+        rec = read_wide_csv(path, units="mm", rate_hz=rate, check=False)
+        assert np.array_equal(rec.time, np.arange(n) / 240.0)
+        for a in [rec.time] + [x for p in rec.poses.values() for x in (p.position, p.rotation)]:
+            assert a.base is None and a.flags.c_contiguous
+        for s, p in poses.items():
+            assert np.array_equal(rec.poses[s].position, p.position)
+            assert np.allclose(rec.poses[s].rotation, p.rotation, atol=1e-15)

@@ -89,7 +89,7 @@ MAX_EULER_DEG = 360.0
 QUAT_NORM_TOLERANCE = 1e-3
 _INT_ITEMS = ("timestamp", "frame")
 #: Records converted to rotation matrices at a time (bounds the temporary memory).
-_BLOCK = 1 << 17
+_BLOCK = 1 << 16
 _MAGIC = (b"LY", b"PA")
 
 

@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
-from .fastcsv import NotPlain, gap_rows, put_rows, quat_norm, read_header
+from .fastcsv import NotPlain, gap_rows, put_rows, quat_norm, read_header, row_blocks
 from .hygiene import (
     check_increasing,
     check_recording,
@@ -454,10 +454,13 @@ def read_wide_csv(
         )
     else:
         frame_vals = v
-        first_row = np.arange(n_kept)
+        first_row = None  # every kept row is a frame
         n_frames = n_kept
-    f_lines = row_lines[first_row]
-    f_time = None if t_rows is None else t_rows[first_row]
+    if first_row is None:  # no copies
+        f_lines, f_time = row_lines, t_rows
+    else:
+        f_lines = row_lines[first_row]
+        f_time = None if t_rows is None else t_rows[first_row]
 
     if f_time is None:
         if rate_hz is None:
@@ -469,7 +472,7 @@ def read_wide_csv(
         notes.append(f"time = frame / {rate_hz:g} Hz (no time column: lost frames undetectable)")
     elif rate_hz is None:
         check_increasing(f_time, f_lines, path, what="time")
-        time, grid_idx = f_time, np.arange(n_frames)
+        time, grid_idx = f_time.copy(), np.arange(n_frames)  # not a view of all values
         notes.append(
             "no --rate: frames kept at the time column's values, not on a grid"
             + (" (a logger's clock: give --rate for reliable timing)" if n_frames != n_kept else "")
@@ -511,12 +514,12 @@ def read_wide_csv(
     if partial_s.any():
         notes.append(f"{int(partial_s.sum())} samples with empty fields treated as missing")
     for j, name in enumerate(names):
-        rows = np.flatnonzero(complete[:, j])
+        ok_j = complete[:, j]
+        rows = slice(0, n_frames) if ok_j.all() else np.flatnonzero(ok_j)
         # every row is written once: by a sample below or as a gap (NaN) at the end
         pos = np.empty((n, 3))
         rot = np.empty((n, 3, 3))
-        for lo in range(0, rows.size, _BLOCK):  # blocks bound the temporary memory
-            r = rows[lo : lo + _BLOCK]
+        for r in row_blocks(rows, _BLOCK):  # blocks bound the temporary memory
             fv = frame_vals[r, j]
             at = grid_idx[r]
             put_rows(pos, at, fv[:, :3] * scale)
@@ -529,7 +532,7 @@ def read_wide_csv(
                         f"quaternion of station {stations[j]} has norm {norm[bad[0]]:.6g}, "
                         "not 1 (wrong --columns?)",
                         path=path,
-                        line=int(f_lines[r[bad[0]]]),
+                        line=int(f_lines[np.arange(n_frames)[r][bad[0]]]),
                         field=_column(lay.columns["qw"], stations[j]),
                     )
                 put_rows(rot, at, matrix_from_quat_wxyz(fv[:, 3:]))
