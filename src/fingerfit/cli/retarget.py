@@ -11,6 +11,92 @@ from ..errors import FingerfitError
 from ._names import RETARGET_METHODS, RETARGET_ROBOTS
 from .app import Quiet, app, notice, progress, say, user_errors
 
+# --- Options shared with `fingerfit stream --retarget` ---------------------------------------
+
+ROBOT_HELP = f"{' or '.join(RETARGET_ROBOTS)} (shipped maps), or a .urdf/.xml file (needs --map)."
+MapOption = Annotated[
+    Path | None, typer.Option("--map", help="Robot map TOML (docs/retargeting.md).")
+]
+MethodOption = Annotated[
+    str,
+    typer.Option(
+        "--method",
+        help=f"{' or '.join(RETARGET_METHODS)}. tip: fingertips (scaled, palm frame) + pinch + "
+        "smoothness; joint: angles copied through the map.",
+    ),
+]
+OrthogonalOption = Annotated[
+    bool,
+    typer.Option(
+        "--orthogonal",
+        help="Drive from the orthogonal model (axes perpendicular "
+        "to the bones) instead of the fitted axes.",
+    ),
+]
+ContactOption = Annotated[
+    float,
+    typer.Option(
+        "--contact-mm",
+        help="Person's pad-point distance (mm) that counts as touching (pinch term).",
+    ),
+]
+
+
+def check_robot_options(
+    robot: str, map_path: Path | None, method: str, contact_mm: float
+) -> list[Path]:
+    """Check ``--method`` and ``--contact-mm``; return the robot's input files.
+
+    Parameters
+    ----------
+    robot : str
+        A built-in robot name or a ``.urdf``/``.xml`` file.
+    map_path : Path, optional
+    method : str
+    contact_mm : float
+        mm.
+
+    Returns
+    -------
+    list of Path
+        The map and the robot file when given (inputs no output may overwrite).
+
+    Raises
+    ------
+    FingerfitError
+        ``field '--method'`` or ``field '--contact-mm'``.
+    """
+    import math
+
+    if method not in RETARGET_METHODS:
+        raise FingerfitError(f"must be one of {', '.join(RETARGET_METHODS)}", field="--method")
+    if not (math.isfinite(contact_mm) and contact_mm >= 0):
+        raise FingerfitError("must be a finite number >= 0", field="--contact-mm")
+    inputs = [map_path] if map_path is not None else []
+    if robot.lower().endswith((".urdf", ".xml")):
+        inputs.append(Path(robot))
+    return inputs
+
+
+def resolve_robot(robot: str, map_path: Path | None, hand: str, option: str = "--robot"):
+    """:func:`fingerfit.retarget.resolve`, its errors about the robot naming ``option``.
+
+    Loads the robot file (MuJoCo or Pinocchio) and checks the map against it.
+
+    Returns
+    -------
+    robot : fingerfit.retarget.robots.Robot
+    rmap : fingerfit.retarget.maps.RobotMap
+    """
+    from ..retarget import resolve
+
+    try:
+        return resolve(robot, map_path, hand)
+    except FingerfitError as exc:
+        if exc.field == "--robot" and option != "--robot":
+            raise FingerfitError(exc.reason, path=exc.path, line=exc.line, field=option) from None
+        raise
+
 
 @app.command()
 @user_errors
@@ -28,31 +114,10 @@ def retarget(
             "the same arrays are written to OUT.npz.",
         ),
     ],
-    robot: Annotated[
-        str,
-        typer.Option(
-            help=f"{' or '.join(RETARGET_ROBOTS)} (shipped maps), or a .urdf/.xml file "
-            "(needs --map)."
-        ),
-    ] = "shadow",
-    map_path: Annotated[
-        Path | None, typer.Option("--map", help="Robot map TOML (docs/retargeting.md).")
-    ] = None,
-    method: Annotated[
-        str,
-        typer.Option(
-            help=f"{' or '.join(RETARGET_METHODS)}. tip: fingertips (scaled, palm frame) + pinch + smoothness; "
-            "joint: angles copied through the map."
-        ),
-    ] = "tip",
-    orthogonal: Annotated[
-        bool,
-        typer.Option(
-            "--orthogonal",
-            help="Drive from the orthogonal model (axes perpendicular "
-            "to the bones) instead of the fitted axes.",
-        ),
-    ] = False,
+    robot: Annotated[str, typer.Option(help=ROBOT_HELP)] = "shadow",
+    map_path: MapOption = None,
+    method: MethodOption = "tip",
+    orthogonal: OrthogonalOption = False,
     units: Annotated[
         str | None,
         typer.Option(help="Units of the recording (default: the model's session units)."),
@@ -64,13 +129,7 @@ def retarget(
             "by side at them into OUT.png."
         ),
     ] = None,
-    contact_mm: Annotated[
-        float,
-        typer.Option(
-            "--contact-mm",
-            help="Person's pad-point distance (mm) that counts as touching (pinch term).",
-        ),
-    ] = 8.0,
+    contact_mm: ContactOption = 8.0,
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace existing output files.")
     ] = False,
@@ -85,22 +144,16 @@ def retarget(
     from ..io import read_pose_csv
     from ..io.atomic import check_target, refuse_writing_inputs, write_files
     from ..model import load_model
-    from ..retarget import METHODS, resolve
     from ..retarget import retarget as run
     from ..session import UNITS_TO_MM
 
-    if method not in METHODS:
-        raise FingerfitError(f"must be one of {', '.join(METHODS)}", field="--method")
-    if not (np.isfinite(contact_mm) and contact_mm >= 0):
-        raise FingerfitError("must be a finite number >= 0", field="--contact-mm")
+    robot_files = check_robot_options(robot, map_path, method, contact_mm)
     if output.suffix.lower() != ".csv":
         raise FingerfitError("must end in .csv (OUT.npz is written beside it)", field="--output")
     npz = output.with_suffix(".npz")
     png = output.with_suffix(".png")
     targets = [output, npz] + ([png] if figure is not None else [])
-    inputs = [model_path, recording] + ([map_path] if map_path is not None else [])
-    if robot.lower().endswith((".urdf", ".xml")):
-        inputs.append(Path(robot))
+    inputs = [model_path, recording, *robot_files]
     refuse_writing_inputs(targets, inputs)
     for t in targets:
         check_target(t, overwrite=overwrite)
@@ -116,7 +169,7 @@ def retarget(
                 "must be comma-separated frame numbers (0-based)", field="--figure"
             )
         frames = [int(v) for v in items]
-    robot_model, rmap = resolve(robot, map_path, model.hand)
+    robot_model, rmap = resolve_robot(robot, map_path, model.hand)
     rec = read_pose_csv(recording, units=units)
     for note in rec.notes:
         notice("note", note)

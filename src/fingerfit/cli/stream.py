@@ -8,6 +8,17 @@ from typing import Annotated
 import typer
 
 from .app import app, notice, say, user_errors
+from .retarget import (
+    ContactOption,
+    MapOption,
+    MethodOption,
+    OrthogonalOption,
+    check_robot_options,
+    resolve_robot,
+)
+
+#: :data:`fingerfit.retarget.CONTACT_MM` (``fingerfit retarget``'s default).
+CONTACT_MM = 8.0
 
 
 @app.command()
@@ -91,6 +102,20 @@ def stream(
             "sensors), with a warning.",
         ),
     ] = False,
+    retarget: Annotated[
+        str | None,
+        typer.Option(
+            "--retarget",
+            metavar="ROBOT",
+            help="Drive a robot hand: shadow, allegro or a .urdf/.xml file (needs --map). "
+            "--ros2/--ros2-bag then carry the robot's joints (rad) and --lsl adds the "
+            "outlet PREFIX-robot; the values are those of `fingerfit retarget`.",
+        ),
+    ] = None,
+    map_path: MapOption = None,
+    method: MethodOption = "tip",
+    orthogonal: OrthogonalOption = False,
+    contact_mm: ContactOption = CONTACT_MM,
     quiet: Annotated[
         bool,
         typer.Option(
@@ -103,7 +128,8 @@ def stream(
     """Stream joint angles and fingertips of a live or replayed hand (Ctrl-C to stop).
 
     The values are those of `fingerfit angles` (same kinematics). A frame with a missing
-    sensor holds the last values and has valid = 0.
+    sensor holds the last values and has valid = 0. With --retarget ROBOT, the robot's
+    joints of `fingerfit retarget` go out too.
     """
     import numpy as np
 
@@ -126,7 +152,20 @@ def stream(
         raise FingerfitError("only a replay source waits for consumers", field="--wait")
     if stations is not None and kind != "liberty":
         raise FingerfitError("only a liberty source has stations", field="--stations")
-    inputs = [model_path] + ([replay_path] if replay_path is not None else [])
+    if retarget is None:
+        alone = [
+            (map_path is not None, "--map"),
+            (method != "tip", "--method"),
+            (orthogonal, "--orthogonal"),
+            (contact_mm != CONTACT_MM, "--contact-mm"),
+        ]
+        for given, name in alone:
+            if given:
+                raise FingerfitError("applies only with --retarget ROBOT", field=name)
+        robot_files: list[Path] = []
+    else:
+        robot_files = check_robot_options(retarget, map_path, method, contact_mm)
+    inputs = [model_path, *robot_files] + ([replay_path] if replay_path is not None else [])
     files = [p for p in (record, ros2_bag) if p is not None]
     refuse_writing_inputs(files, inputs)
     if record is not None:
@@ -142,6 +181,18 @@ def stream(
     if units not in UNITS_TO_MM:
         raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
     sensors = model_sensors(model)
+    retargeter = None
+    if retarget is not None:
+        # The robot (MuJoCo / Pinocchio loaded here, not in the loop) and its map are
+        # checked before the source opens: a bad map or robot leaves nothing behind.
+        from ..live.stream import robot_joint_units
+        from ..retarget import Retargeter
+
+        robot, rmap = resolve_robot(retarget, map_path, model.hand, "--retarget")
+        variant = "orthogonal" if orthogonal else "user_axis"
+        retargeter = Retargeter(model, robot, rmap, method, variant, contact_mm=contact_mm)
+        for note in retargeter.notes:
+            notice("note", note)
 
     # The source first: a file that does not read, or a device that does not open, fails
     # before any output exists.
@@ -168,12 +219,23 @@ def stream(
 
     from ..export.geometry import joint_names
 
-    names = joint_names(model)
+    names = list(robot.joint_names) if retargeter is not None else joint_names(model)
     streamer = None
     try:
         lsl_out = ros_out = bag_out = rec_out = None
         ch = channels_of(model, compute_kinematics(model, empty_recording(sensors), ("user_axis",)))
-        if lsl:
+        if lsl and retargeter is not None:
+            lsl_out = LslOutput(
+                lsl_name,
+                ch.angle_labels,
+                ch.tip_labels,
+                nominal,
+                tips_frame,
+                robot_labels=names,
+                robot_units=robot_joint_units(robot),
+                robot_name=rmap.name,
+            )
+        elif lsl:
             lsl_out = LslOutput(lsl_name, ch.angle_labels, ch.tip_labels, nominal, tips_frame)
         if ros2 is not None:
             ros_out = Ros2Output(ros2, names)
@@ -190,6 +252,7 @@ def stream(
             record_units=units,
             tips_frame=tips_frame,
             channels=ch,
+            retargeter=retargeter,
         )
     except BaseException:
         the_source.close()
@@ -215,9 +278,12 @@ def stream(
             raise FingerfitError(f"{exc} (after {streamer.summary.frames} frames{extra})") from None
         raise
     lat = summary.latency_ms()
+    comp = summary.compute_ms_per_frame()
     lat_text = (
         f"; arrival -> sent p50 {np.percentile(lat, 50):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms"
-        if lat.size
+        f"; compute per frame{' (retargeting included)' if retargeter is not None else ''} "
+        f"p50 {np.percentile(comp, 50):.2f} ms, p99 {np.percentile(comp, 99):.2f} ms"
+        if lat.size and comp.size
         else ""
     )
     say(
@@ -229,6 +295,16 @@ def stream(
         lat_text,
         " -- stopped by Ctrl-C" if summary.interrupted else "",
     )
+    if retargeter is not None and (retargeter.missing or retargeter.held):
+        notice(
+            "note",
+            f"robot ({rmap.name}, {method}): "
+            + (
+                f"{retargeter.missing} frame(s) with a missing sensor kept those digits' pose"
+                if method == "tip"
+                else f"{retargeter.held} frame(s) with a missing angle kept the previous value"
+            ),
+        )
     if the_source.stats.skipped_bytes or the_source.stats.rejected:
         notice(
             "note",

@@ -4,7 +4,8 @@
   ``<digit>.<joint>`` in degrees) and ``PREFIX-tips`` (type ``MoCap``, channels
   ``<digit>.tip.x|y|z`` in millimetres), each with a last channel ``valid``; double64;
   XDF channel metadata (label, unit, type); each sample stamped with its frame's arrival
-  on the LSL clock.
+  on the LSL clock. With ``--retarget``, a third outlet ``PREFIX-robot`` (type
+  ``JointAngles``, one channel per robot joint, radians).
 * :class:`Ros2Output` -- ``sensor_msgs/msg/JointState`` (radians, names
   ``<digit>_<joint>`` of the exported URDF) on the DDS topic ``rt/<topic>`` with the
   type name ``sensor_msgs::msg::dds_::JointState_``, final (XCDR1) types, reliable
@@ -94,12 +95,12 @@ def _channel_info(info, channels: list[tuple[str, str, str]]) -> None:
 
 
 class LslOutput:
-    """Two LSL outlets: joint angles and fingertips.
+    """LSL outlets: joint angles and fingertips, and the robot's joints when retargeting.
 
     Parameters
     ----------
     prefix : str
-        Stream names ``<prefix>-angles`` and ``<prefix>-tips``.
+        Stream names ``<prefix>-angles``, ``<prefix>-tips`` (and ``<prefix>-robot``).
     angle_labels, tip_labels : list of str
         ``<digit>.<joint>`` and ``<digit>.tip.x|y|z`` (without ``valid``).
     rate_hz : float
@@ -108,6 +109,13 @@ class LslOutput:
         Frame of the tips, stated in the stream description.
     source_id : str
         LSL source id stem (a consumer re-connects to the same source on restart).
+    robot_labels : list of str, optional
+        The robot's joint names: a third outlet ``<prefix>-robot`` (type ``JointAngles``).
+    robot_units : list of str, optional
+        Unit of each robot joint (``radians``; ``meters`` for a slide joint); default
+        radians.
+    robot_name : str
+        The robot (stated in the stream description).
     """
 
     def __init__(
@@ -118,6 +126,9 @@ class LslOutput:
         rate_hz: float,
         tips_frame: str = "tracker",
         source_id: str = "fingerfit",
+        robot_labels: list[str] | None = None,
+        robot_units: list[str] | None = None,
+        robot_name: str = "",
     ) -> None:
         pylsl = require("pylsl")
         self.pylsl = pylsl
@@ -134,6 +145,18 @@ class LslOutput:
                 [(lab, "millimeters", "Position" + lab[-1].upper()) for lab in tip_labels],
             ),
         ]
+        if robot_labels is not None:
+            units = robot_units or ["radians"] * len(robot_labels)
+            specs.append(
+                (
+                    f"{prefix}-robot",
+                    "JointAngles",
+                    [
+                        (lab, u, "JointAngle" if u == "radians" else "JointPosition")
+                        for lab, u in zip(robot_labels, units, strict=True)
+                    ],
+                )
+            )
         for name, kind, channels in specs:
             channels = [*channels, ("valid", "boolean", "Valid")]
             info = pylsl.StreamInfo(
@@ -142,18 +165,21 @@ class LslOutput:
             _channel_info(info, channels)
             info.desc().append_child_value("tips_frame", tips_frame)
             info.desc().append_child_value("valid", "1 when every sensor of the frame was present")
+            if name.endswith("-robot"):
+                info.desc().append_child_value("robot", robot_name)
             self.outlets.append(pylsl.StreamOutlet(info, chunk_size=0, max_buffered=10))
         # LSL clock = steady clock; arrival times are time.monotonic(): one offset.
         self.offset = pylsl.local_clock() - time.monotonic()
         self._first_consumer: float | None = None  # when one outlet first had a consumer
 
-    #: Once one outlet has a consumer, how long (s) the other may take to get one too
-    #: (a consumer may want only one of the two; one that opens both opens them in turn).
+    #: Once one outlet has a consumer, how long (s) the others may take to get one too
+    #: (a consumer may want only some of them; one that opens several opens them in turn).
     SECOND_CONSUMER_GRACE_S = 1.0
 
     def has_consumers(self) -> bool:
-        """Whether both outlets have a consumer, or one has had one for
-        :attr:`SECOND_CONSUMER_GRACE_S` (a consumer may want only the angles or the tips)."""
+        """Whether every outlet has a consumer, or one has had one for
+        :attr:`SECOND_CONSUMER_GRACE_S` (a consumer may want only the angles, the tips or
+        the robot's joints)."""
         have = [o.have_consumers() for o in self.outlets]
         if all(have):
             return True
@@ -166,7 +192,12 @@ class LslOutput:
         return now - self._first_consumer >= self.SECOND_CONSUMER_GRACE_S
 
     def push(
-        self, angles: FloatArray, tips: FloatArray, valid: FloatArray, arrival: FloatArray
+        self,
+        angles: FloatArray,
+        tips: FloatArray,
+        valid: FloatArray,
+        arrival: FloatArray,
+        robot: FloatArray | None = None,
     ) -> None:
         """Push frames.
 
@@ -180,9 +211,12 @@ class LslOutput:
             1.0 or 0.0.
         arrival : ndarray, shape (n,)
             ``time.monotonic()`` seconds; pushed as LSL timestamps.
+        robot : ndarray, shape (n, n_robot_joints), optional
+            The robot's joints (rad; m for a slide joint), when the outlet exists.
         """
         stamps = (arrival + self.offset).tolist()
-        for o, x in zip(self.outlets, (angles, tips), strict=True):
+        values = (angles, tips) if robot is None else (angles, tips, robot)
+        for o, x in zip(self.outlets, values, strict=True):
             o.push_chunk(np.column_stack([x, valid]), stamps)
 
     def close(self) -> None:

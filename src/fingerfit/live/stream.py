@@ -7,6 +7,11 @@ frame whose value could not be computed (a sensor missing) holds the column's la
 the ``valid`` channel says whether every sensor the model uses was present in the frame.
 The angles CSV (``--record``) gets the frames as ``fingerfit angles`` writes them (empty
 fields where a sensor is missing), not the held values.
+
+With a :class:`fingerfit.retarget.Retargeter` (``--retarget ROBOT``), each block's
+kinematics then go through :meth:`~fingerfit.retarget.Retargeter.step`, which keeps the
+solver's warm start across blocks (the offline ``fingerfit retarget`` joints); the ROS 2
+outputs carry the robot's joints and LSL gets a third outlet ``PREFIX-robot``.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -38,6 +44,37 @@ def model_sensors(model: HandModel) -> list[str]:
                 if s not in out:
                     out.append(s)
     return out
+
+
+def robot_joint_units(robot: Any) -> list[str]:
+    """Unit of each robot joint's value: ``radians`` (hinge/revolute) or ``meters``
+    (slide/prismatic).
+
+    Parameters
+    ----------
+    robot : fingerfit.retarget.robots.Robot
+
+    Returns
+    -------
+    list of str
+        One per ``robot.joint_names``.
+    """
+    backend = robot._backend
+    units = ["radians"] * robot.nq
+    if hasattr(backend, "mj"):  # MuJoCo: joints in index order = configuration order
+        slide = int(backend.mj.mjtJoint.mjJNT_SLIDE)
+        for i in range(robot.nq):
+            if int(backend.m.jnt_type[i]) == slide:
+                units[i] = "meters"
+    elif hasattr(backend, "pin"):  # Pinocchio: prismatic joint models are JointModelP*
+        m = backend.m
+        for j in range(1, m.njoints):
+            # JointModelPX|PY|PZ|PrismaticUnaligned
+            if m.names[j] in robot.joint_names and m.joints[j].shortname().startswith(
+                "JointModelP"
+            ):
+                units[robot.joint_names.index(m.names[j])] = "meters"
+    return units
 
 
 def empty_recording(sensors: list[str]) -> Recording:
@@ -194,9 +231,13 @@ class Summary:
         Per block, per frame: arrival to the moment every network output had it (s);
         :meth:`latency_ms` joins them.
     compute, sizes : list
-        Seconds in kinematics per block, and the block sizes (frames).
+        Seconds of compute per block (kinematics, and the robot's joints when
+        retargeting), and the block sizes (frames).
     window : list of ndarray
         Latencies since the status line last read them.
+    compute_window : list of float
+        Per-frame compute (s: a block's compute / its frames) since the status line last
+        read it.
     seconds : float
         Wall time from the first frame's arrival to the end.
     interrupted : bool
@@ -212,6 +253,7 @@ class Summary:
     seconds: float = 0.0
     interrupted: bool = False
     window: list = field(default_factory=list)
+    compute_window: list = field(default_factory=list)
 
     def add(self, latency: FloatArray, compute: float, size: int) -> None:
         """Record one block; lists are merged into one array now and then (a long
@@ -220,15 +262,29 @@ class Summary:
         self.window.append(latency)
         self.compute.append(compute)
         self.sizes.append(size)
+        if size:
+            self.compute_window.append(compute / size)
         if len(self.window) > 4096:  # no status line reads it
             del self.window[:-64]
+            del self.compute_window[:-64]
         if len(self.latency) >= 4096:
             self.latency = [np.concatenate(self.latency)]
             self.compute = [np.concatenate([np.atleast_1d(c) for c in self.compute])]
             self.sizes = [np.concatenate([np.atleast_1d(c) for c in self.sizes])]
 
     def latency_ms(self) -> FloatArray:
+        """Arrival -> sent of every frame (ms), shape (frames,)."""
         return 1e3 * (np.concatenate(self.latency) if self.latency else np.zeros(0))
+
+    def compute_ms_per_frame(self) -> FloatArray:
+        """Per-frame compute of every non-empty block (ms): the block's compute divided by
+        its frames, shape (blocks,)."""
+        if not self.compute:
+            return np.zeros(0)
+        c = np.concatenate([np.atleast_1d(x) for x in self.compute]).astype(float)
+        n = np.concatenate([np.atleast_1d(x) for x in self.sizes]).astype(float)
+        keep = n > 0
+        return 1e3 * c[keep] / n[keep]
 
 
 class Streamer:
@@ -247,6 +303,10 @@ class Streamer:
         Frame of the LSL fingertips.
     channels : Channels, optional
         The streamed names (default: from the model); the LSL outlets must use the same.
+    retargeter : fingerfit.retarget.Retargeter, optional
+        Drives a robot hand: every block's kinematics go through its ``step``; the ROS 2
+        outputs then carry the robot's joints (``robot.joint_names``, rad) and the LSL
+        output its ``-robot`` outlet (built with ``robot_labels``).
     """
 
     def __init__(
@@ -260,6 +320,7 @@ class Streamer:
         record_units: str = "mm",
         tips_frame: str = "tracker",
         channels: Channels | None = None,
+        retargeter: Any = None,
     ) -> None:
         if tips_frame not in ("tracker", "hand"):
             raise FingerfitError("must be tracker or hand", field="--tips-frame")
@@ -268,7 +329,11 @@ class Streamer:
         self.record_units = record_units
         self.tips_frame = tips_frame
         self.sensors = model_sensors(model)
-        self.variants = ("user_axis", "orthogonal") if record is not None else ("user_axis",)
+        variants = ["user_axis"] + (["orthogonal"] if record is not None else [])
+        if retargeter is not None and retargeter.variant not in variants:
+            variants.append(retargeter.variant)  # --orthogonal: computed with the others
+        self.variants = tuple(variants)
+        self.retargeter = retargeter
         # Names from a probe of no frames; values are then taken by name from every
         # block, so the channel order is fixed for the whole stream.
         self.channels = channels or channels_of(
@@ -298,23 +363,34 @@ class Streamer:
             kin = self.plan.run(rec)
         else:
             kin = compute_kinematics(self.model, rec, self.variants)
+        robot = None
+        if self.retargeter is not None:
+            # The block's kinematics hold every digit in the retargeter's variant.
+            robot = (
+                self.retargeter.step(rec, kin)[0]
+                if rec.n_frames
+                else np.zeros((0, self.retargeter.setup.robot.nq))
+            )
         compute = time.perf_counter() - t
         v = block_values(kin, self.channels, block.recording, self.sensors, self.tips_frame)
         held = {}
-        for key in ("angles", "tips", "joints"):
-            x = getattr(v, key)
+        values = {"angles": v.angles, "tips": v.tips, "joints": v.joints}
+        if robot is not None:
+            values["robot"] = robot
+        for key, x in values.items():
             last = self._last.get(key, np.full(x.shape[1], np.nan))
             held[key] = hold(x, last) if x.size and not np.isfinite(x).all() else x
             if x.shape[0]:
                 self._last[key] = held[key][-1]
         if self.lsl is not None:
-            self.lsl.push(held["angles"], held["tips"], v.valid, block.arrival)
+            self.lsl.push(held["angles"], held["tips"], v.valid, block.arrival, held.get("robot"))
         if self.ros2 is not None or self.bag is not None:
             wall = block.arrival + self.wall_offset
+            joints = held["robot"] if robot is not None else held["joints"]
             if self.ros2 is not None:
-                self.ros2.push(held["joints"], wall)
+                self.ros2.push(joints, wall)
             if self.bag is not None:
-                self.bag.push(held["joints"], wall)
+                self.bag.push(joints, wall)
         done = time.monotonic()
         if self.record is not None:  # after the network outputs: not on the latency path
             self.record.push(kinematics_table(kin, units=self.record_units))
@@ -356,9 +432,12 @@ class StatusLine:
             return
         rate = (s.frames - self._frames) / max(now - self._t, 1e-9)
         lat = 1e3 * np.concatenate(s.window) if s.window else np.zeros(1)
+        comp = 1e3 * np.array(s.compute_window) if s.compute_window else np.zeros(1)
         s.window.clear()
+        s.compute_window.clear()
         sys.stderr.write(
             f"\r{rate:6.1f} frames/s  latency {np.median(lat):5.2f} ms (max {lat.max():5.2f})"
+            f"  compute {np.median(comp):5.2f} ms/frame"
             f"  lost {s.lost}  held {s.invalid}  sent {s.frames}\x1b[K"
         )
         sys.stderr.flush()

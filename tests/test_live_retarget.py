@@ -1,0 +1,195 @@
+"""`fingerfit stream --retarget ROBOT`: the robot's joints, live, equal `fingerfit retarget`.
+
+A simulated whole hand (thumb + four fingers, pad points) is replayed through a pinch with
+sensors missing in a few frames. What an LSL consumer receives on ``PREFIX-robot`` and what
+the rosbag2 holds equal the joints ``fingerfit retarget`` writes for the same recording to
+1e-9 rad, frame for frame, within the robot's limits and couplings.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+import warnings
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fingerfit.io import write_pose_csv
+from fingerfit.session import PoseSeries, Recording
+
+from .bad_inputs._cli import run
+from .conftest import subject
+
+pylsl = pytest.importorskip("pylsl")
+pytest.importorskip("rosbags")
+pytest.importorskip("mujoco")
+pytest.importorskip("pinocchio")
+
+FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
+HAND = ("thumb", "index", "middle", "ring", "little")
+N = 240
+#: (frame, sensor) missing in the replayed recording (absent rows of the pose CSV).
+HOLES = ((60, "index.middle"), (61, "index.middle"), (150, "hand"), (151, "thumb.distal"))
+DEADLINE = 90.0
+
+
+@pytest.fixture(scope="module")
+def hand(tmp_path_factory) -> tuple[Path, Path, np.ndarray]:
+    """``(model.json, rec.csv, valid)``: a fitted whole-hand model and N frames of its
+    pinch recording around the first thumb-index touch, with :data:`HOLES`."""
+    from fingerfit.estimate import fit_session
+    from fingerfit.kinematics import compute_kinematics
+    from fingerfit.model import save_model
+
+    sub = subject("realistic", 2, HAND)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = fit_session(sub.session)
+    full = sub.session.recording("pinch.csv")
+    kin = compute_kinematics(model, full, ("user_axis",))
+    m = kin.motions["user_axis"]
+    gap = np.linalg.norm(m["thumb"].pad - m["index"].pad, axis=1)
+    first = int(np.argmax(gap < 8.0))
+    assert gap[first] < 8.0, "the pinch recording has no touch"
+    start = max(first - N // 2, 0)
+    cut = slice(start, start + N)
+    poses = {
+        k: PoseSeries(v.position[cut].copy(), v.rotation[cut].copy()) for k, v in full.poses.items()
+    }
+    for i, s in HOLES:
+        poses[s].position[i] = np.nan
+        poses[s].rotation[i] = np.nan
+    rec = Recording("pinch.csv", full.time[cut].copy(), poses)
+    d = tmp_path_factory.mktemp("live-retarget")
+    model_path = save_model(model, d / "model.json")
+    csv = write_pose_csv(d / "rec.csv", rec, units=model.session_units)
+    valid = np.ones(N)
+    valid[[i for i, _ in HOLES]] = 0
+    return model_path, csv, valid
+
+
+def _offline(tmp_path: Path, model: Path, csv: Path, *args: str) -> pd.DataFrame:
+    out = tmp_path / "offline" / "q.csv"
+    out.parent.mkdir()
+    res = run("retarget", model, csv, "-o", out, "-q", *args)
+    assert res.exit_code == 0, res.output
+    return pd.read_csv(out)
+
+
+def _limits_hold(robot_name: str, model_path: Path, q: np.ndarray) -> None:
+    from fingerfit.model import load_model
+    from fingerfit.retarget import resolve, setup
+
+    model = load_model(model_path)
+    robot, rmap = resolve(robot_name, None, model.hand)
+    assert np.all(q >= robot.lower - 1e-12) and np.all(q <= robot.upper + 1e-12)
+    assert setup(model, robot, rmap).limits.violations(q) == 0
+
+
+def _bag(path: Path) -> tuple[list[str], np.ndarray, str]:
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader(path) as r:
+        (conn,) = r.connections
+        msgs = [store.deserialize_cdr(raw, conn.msgtype) for _, _, raw in r.messages()]
+    assert {tuple(m.name) for m in msgs} == {tuple(msgs[0].name)}
+    return list(msgs[0].name), np.array([m.position for m in msgs]), conn.topic
+
+
+def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path: Path) -> None:
+    model_path, csv, valid = hand
+    want = _offline(tmp_path, model_path, csv, "--robot", "shadow")
+    names = [c for c in want.columns if c != "time"]
+    q_want = want[names].to_numpy()
+    assert len(q_want) == N and len(names) == 24  # the Shadow hand's 24 joints
+
+    prefix = f"ffrt{os.getpid()}"
+    bag, record = tmp_path / "bag", tmp_path / "live.csv"
+    proc = subprocess.Popen(
+        [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@2", "--retarget",
+         "shadow", "--lsl", "--lsl-name", prefix, "--ros2-bag", str(bag), "--record",
+         str(record), "--wait", "--wait-timeout", "30", "-q"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    inlets, data = {}, {}
+    try:
+        for kind in ("robot", "angles"):
+            found = pylsl.resolve_byprop("name", f"{prefix}-{kind}", timeout=20)
+            assert found, f"no LSL stream {prefix}-{kind}"
+            inlets[kind] = pylsl.StreamInlet(found[0], max_buflen=60, processing_flags=0)
+            inlets[kind].open_stream(timeout=10)
+            data[kind] = []
+        t_end = time.monotonic() + DEADLINE
+        while time.monotonic() < t_end and not all(len(v) >= N for v in data.values()):
+            for kind, inlet in inlets.items():
+                x, _ = inlet.pull_chunk(timeout=0.0)
+                data[kind] += x
+            time.sleep(0.005)
+        info = inlets["robot"].info(timeout=5)
+    finally:
+        try:
+            out, err = proc.communicate(timeout=DEADLINE)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+    assert proc.returncode == 0, out + err
+    assert f"{N} frames streamed" in out and "Traceback" not in err
+    assert "compute per frame (retargeting included) p50" in out
+
+    # --- LSL PREFIX-robot: channels, units, every frame, the offline joints ------------
+    assert info.type() == "JointAngles" and info.channel_format() == pylsl.cf_double64
+    chans = ET.fromstring(info.as_xml()).find("desc/channels").findall("channel")
+    assert [c.findtext("label") for c in chans] == [*names, "valid"]
+    assert {c.findtext("unit") for c in chans[:-1]} == {"radians"}
+    x = np.asarray(data["robot"])
+    assert x.shape == (N, len(names) + 1)  # no frame lost
+    np.testing.assert_allclose(x[:, :-1], q_want, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(x[:, -1], valid)
+    _limits_hold("shadow", model_path, x[:, :-1])
+    # The person's frames that lost a sensor keep the robot's pose (tip method).
+    np.testing.assert_array_equal(x[150, :-1], x[149, :-1])
+
+    # --- the person's outlets are unchanged ---------------------------------------------
+    live = pd.read_csv(record)
+    labels = [c.findtext("label") for c in ET.fromstring(inlets["angles"].info(5).as_xml())
+              .find("desc/channels").findall("channel")]  # fmt: skip
+    assert labels[:-1] == [c for c in live.columns if c.count(".") == 1 and c != "time"]
+    a = np.asarray(data["angles"])
+    np.testing.assert_allclose(a[:, :-1], live[labels[:-1]].ffill().to_numpy(), atol=1e-9)
+
+    # --- rosbag2: the robot's JointState, the same values ---------------------------------
+    bag_names, pos, topic = _bag(bag)
+    assert bag_names == names and topic == "/joint_states"
+    np.testing.assert_array_equal(pos, x[:, :-1])
+
+
+def test_stream_retarget_allegro_joint_orthogonal_equals_retarget(hand, tmp_path: Path) -> None:
+    model_path, csv, _ = hand
+    args = ("--method", "joint", "--orthogonal")
+    want = _offline(tmp_path, model_path, csv, "--robot", "allegro", *args)
+    names = [c for c in want.columns if c != "time"]
+    bag, record = tmp_path / "bag", tmp_path / "live.csv"
+    res = run(
+        "stream", model_path, "--source", f"replay:{csv}@50", "--retarget", "allegro", *args,
+        "--ros2-bag", bag, "--record", record, "-q",
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert f"{N} frames streamed" in res.output
+    bag_names, pos, _ = _bag(bag)
+    assert bag_names == names and pos.shape == (N, 16)  # the Allegro hand's 16 joints
+    np.testing.assert_allclose(pos, want[names].to_numpy(), rtol=0, atol=1e-9)
+    _limits_hold("allegro", model_path, pos)
+    # --record is still the person's angles CSV of `fingerfit angles`.
+    angles = tmp_path / "angles.csv"
+    assert run("angles", model_path, csv, "-o", angles, "-q").exit_code == 0
+    pd.testing.assert_frame_equal(
+        pd.read_csv(record), pd.read_csv(angles), check_exact=False, rtol=0, atol=1e-9
+    )
