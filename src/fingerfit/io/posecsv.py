@@ -266,7 +266,7 @@ def read_pose_csv(
 
 
 #: Rows converted to rotation matrices at a time (bounds the temporary memory).
-_BLOCK = 1 << 17
+_BLOCK = 1 << 16
 
 
 def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None) -> Recording:
@@ -352,17 +352,18 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
         new = new[keep]
         new[0] = True
         new[1:] = time[1:] != time[:-1]
-        frame_of_row = np.cumsum(new, dtype=np.int64) - 1
         del keep
     else:
         lines = None
-    del order, same_key
+    del order, same_key, frame_of_row  # a row's frame is cumsum(new) - 1, made again below
 
     def line_of(i: int) -> int:
         return int(lines[i]) if lines is not None else i + 2
 
-    complete = np.isfinite(pose).all(axis=1)
-    n_partial = int(np.count_nonzero(~complete & np.isfinite(pose).any(axis=1)))
+    finite = np.isfinite(pose)
+    complete = finite.all(axis=1)
+    n_partial = int(np.count_nonzero(~complete & finite.any(axis=1)))
+    del finite
     if n_partial:
         notes.append(f"{n_partial} samples with empty fields treated as missing")
     q = pose[:, 3:]
@@ -378,6 +379,7 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
 
     row_of_frame = np.flatnonzero(new)
     frame_times = time[row_of_frame]
+    grid = None  # frame -> grid index, when frames go on the sampling grid
     if rate_hz is not None and frame_times.size > 1:
         t0 = frame_times[0]
         frame_lines = row_of_frame + 2 if lines is None else lines[row_of_frame]
@@ -397,10 +399,10 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
         full_time[idx] = frame_times
         if n > frame_times.size:
             notes.append(f"{n - frame_times.size} frames missing for every sensor (kept as NaN)")
-        np.take(idx, frame_of_row, out=frame_of_row)
+        grid = idx
         frame_times = full_time
     n = frame_times.size
-    del new, row_of_frame
+    del row_of_frame
 
     # Per sensor in order of first appearance: positions (mm) and rotation matrices,
     # converted a block of rows at a time.
@@ -410,10 +412,16 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
     pos = {k: np.empty((n, 3)) for k in appear}
     rot = {k: np.empty((n, 3, 3)) for k in appear}
     filled = {k: np.zeros(n, dtype=bool) for k in appear}
+    frames_before = 0
     for lo in range(0, time.size, _BLOCK):
         hi = min(lo + _BLOCK, time.size)
         ok = complete[lo:hi]
-        c, f, p = code[lo:hi], frame_of_row[lo:hi], pose[lo:hi]
+        f = np.cumsum(new[lo:hi], dtype=np.int64)  # the rows' frames
+        f += frames_before - 1
+        frames_before = int(f[-1]) + 1
+        if grid is not None:
+            f = grid[f]
+        c, p = code[lo:hi], pose[lo:hi]
         if not ok.all():
             c, f, p = c[ok], f[ok], p[ok]
         r = matrix_from_quat_wxyz(p[:, 3:])
