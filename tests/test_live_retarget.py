@@ -193,3 +193,46 @@ def test_stream_retarget_allegro_joint_orthogonal_equals_retarget(hand, tmp_path
     pd.testing.assert_frame_equal(
         pd.read_csv(record), pd.read_csv(angles), check_exact=False, rtol=0, atol=1e-9
     )
+
+
+SLIDE_XML = """
+<mujoco model="slide">
+  <worldbody>
+    <body name="palm">
+      <body name="f1">
+        <joint name="hinge" type="hinge" axis="1 0 0" range="0 1"/>
+        <geom type="sphere" size="0.01"/>
+        <body name="f2" pos="0 0 0.04">
+          <joint name="slide" type="slide" axis="0 0 1" range="0 0.02"/>
+          <geom type="sphere" size="0.01"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+SLIDE_URDF = """<?xml version="1.0"?>
+<robot name="slide">
+  <link name="palm"/><link name="f1"/><link name="f2"/>
+  <joint name="slide" type="prismatic">
+    <parent link="palm"/><child link="f1"/><axis xyz="0 0 1"/>
+    <limit lower="0" upper="0.02" effort="1" velocity="1"/>
+  </joint>
+  <joint name="hinge" type="revolute">
+    <parent link="f1"/><child link="f2"/><origin xyz="0 0 0.04"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="1" effort="1" velocity="1"/>
+  </joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize(("name", "text"), [("r.xml", SLIDE_XML), ("r.urdf", SLIDE_URDF)])
+def test_robot_outlet_units_name_slide_joints_in_meters(tmp_path: Path, name, text) -> None:
+    from fingerfit.live.stream import robot_joint_units
+    from fingerfit.retarget import load_robot
+
+    (tmp_path / name).write_text(text)
+    robot = load_robot(tmp_path / name)
+    units = dict(zip(robot.joint_names, robot_joint_units(robot), strict=True))
+    assert units == {"hinge": "radians", "slide": "meters"}
