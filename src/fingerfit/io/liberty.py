@@ -416,7 +416,14 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
     must judge line by line: a byte that is not printable ASCII, a field count that
     differs, a token that is not a number or station, or no records at all.
     """
-    from .fastcsv import NotPlain, RowArrays, block_parser, estimate_rows, line_blocks
+    from .fastcsv import (
+        NotPlain,
+        RowArrays,
+        block_parser,
+        estimate_rows,
+        line_blocks,
+        release_freed_memory,
+    )
 
     width = sum(ITEM_SIZE[i] for i in items)
     names = [f"c{j}" for j in range(width + 1)]
@@ -464,6 +471,8 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
         line0 += n_lines
     if rows is None or rows.n == 0:
         raise NotPlain("no records")
+    del cols, text, codes, tokens, parsed
+    release_freed_memory()
     n = rows.n
     nums = rows.array()
     values, k = {}, 0
