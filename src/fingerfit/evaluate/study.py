@@ -11,8 +11,9 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import pickle
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
@@ -157,11 +158,47 @@ class SessionFailure:
         return {"session": self.source, "subject": self.subject, "error": self.message}
 
 
+class PackedSubjects(Sequence):
+    """A study's subjects, each kept as one pickle; every access makes a fresh
+    :class:`SubjectResult` (so holding a thousand costs their pickles, about 20 KB each
+    with four fingers, not the ~1500 Python objects of each model and session).
+
+    Read-only: a subject changed after access is not stored back.
+    """
+
+    def __init__(self, subjects: list[SubjectResult] | None = None) -> None:
+        self._blobs: list[bytes] = []
+        for s in subjects or []:
+            self.append(s)
+
+    def append(self, subject: SubjectResult | bytes) -> None:
+        """Keep a subject (or its pickle)."""
+        if not isinstance(subject, bytes):
+            subject = pickle.dumps(subject, protocol=pickle.HIGHEST_PROTOCOL)
+        self._blobs.append(subject)
+
+    def __len__(self) -> int:
+        return len(self._blobs)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [pickle.loads(b) for b in self._blobs[i]]
+        return pickle.loads(self._blobs[i])
+
+    def __iter__(self) -> Iterator[SubjectResult]:
+        for b in self._blobs:
+            yield pickle.loads(b)
+
+
 @dataclass
 class StudyResult:
-    """The study's tables, statistics and output paths."""
+    """The study's tables, statistics and output paths.
 
-    subjects: list[SubjectResult]
+    ``subjects``: from :func:`run_study` a :class:`PackedSubjects` (compact results
+    without their tables, which are in ``tables``).
+    """
+
+    subjects: Sequence[SubjectResult]
     summary: dict
     tables: dict[str, pd.DataFrame]
     out_dir: Path
@@ -441,7 +478,7 @@ class StudyTables:
 
 
 def summarize_study(
-    subjects: list[SubjectResult],
+    subjects: Sequence[SubjectResult],
     options: FitOptions,
     failures: list[SessionFailure] | None = None,
     gathered: StudyTables | None = None,
@@ -450,9 +487,9 @@ def summarize_study(
 
     Parameters
     ----------
-    subjects : list of SubjectResult
+    subjects : sequence of SubjectResult
         At least one; any mix of sessions with or without targets, test recordings,
-        ground truth, and different fingers.
+        ground truth, and different fingers (read one at a time, a few passes).
     options : FitOptions
     failures : list of SessionFailure, optional
         Sessions that could not be fitted (``--keep-going``), listed in the summary.
@@ -685,15 +722,19 @@ def _thumb_and_pinch(
     """``summary["thumb"]`` (the thumb's fingertip at maximal flexion, axes and tip against
     truth, CMC/MCP geometry) and ``summary["pinch"]`` (tip distances and pad gaps during
     pinch events), with their tables, for studies with a thumb or pinch events."""
-    with_thumb = [s for s in subjects if "thumb" in s.model.fingers]
+    # One subject at a time (a study's subjects may be packed, one made per access).
+    with_thumb = [s.subject for s in subjects if "thumb" in s.model.fingers]
     if with_thumb:
-        th: dict = {"subjects": [s.subject for s in with_thumb]}
+        th: dict = {"subjects": with_thumb}
         tf = flex_all[flex_all["finger"] == "thumb"]
         if not tf.empty:
             mf = _headline(tf)
             mf["paired_t_test"] = _stat(paired_ttest_or_skip(tf["user_axis"], tf["orthogonal"]))
             th["max_flexion"] = mf
-        geo = _concat([thumb_geometry(s) for s in with_thumb], _THUMB_GEOMETRY_COLUMNS)
+        geo = _concat(
+            [thumb_geometry(s) for s in subjects if "thumb" in s.model.fingers],
+            _THUMB_GEOMETRY_COLUMNS,
+        )
         tables["thumb_geometry"] = geo
         th["geometry"] = {
             j: {
@@ -1056,6 +1097,7 @@ def run_study(
         outcomes: list[SubjectOutcome | None] = [None] * len(sessions)
         fig09: dict[int, tuple[str, Path]] = {}
         gathered = StudyTables()
+        packed: dict[int, bytes] = {}
         pool = stack.enter_context(study_executor(jobs, scheduler))
         futures = {pool.submit(study_subject, s, options): i for i, s in enumerate(sessions)}
         for future in as_completed(futures):
@@ -1074,8 +1116,13 @@ def run_study(
                     fh.write(png)
                 fig09[i] = (f"fig09_{got.subject}", tmp / name)
                 got.figure = None
-            if got.result is not None:  # its rows join the study's tables now
-                got.result = gathered.add(i, got.result)
+            if got.result is not None:
+                # Its rows join the study's tables and its model is written now; the
+                # rest (model, landmarks, names) is kept as one pickle.
+                light = gathered.add(i, got.result)
+                save_model(light.model, tmp / "models" / f"{light.subject}.json")
+                packed[i] = pickle.dumps(light, protocol=pickle.HIGHEST_PROTOCOL)
+                got.result = light = None
             if got.read_error is not None:
                 step(f"could not read {got.source}")
             elif got.fit_error is not None:
@@ -1103,14 +1150,14 @@ def run_study(
             if not _is_source(x)  # made and removed on the worker
         ]
         _check_not_input(out_dir, [p for p in given if p is not None])
-        subjects: list[SubjectResult] = []
-        for o in ok:
+        subjects = PackedSubjects()
+        for i, o in enumerate(outcomes):
+            if o is None or o.read_error is not None:
+                continue
             if o.fit_error is not None:
                 failed(o.source, o.subject, o.fit_error)
                 continue
-            assert o.result is not None
-            subjects.append(o.result)
-            save_model(o.result.model, tmp / "models" / f"{o.result.subject}.json")
+            subjects.append(packed.pop(i))
         if not subjects:
             detail = "; ".join(f.message for f in failures) or "no sessions given"
             raise FingerfitError(f"no session could be fitted and evaluated: {detail}")
