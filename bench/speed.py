@@ -70,6 +70,13 @@ def main() -> None:
         "--study-subjects", type=int, default=100, help="0: no start-up and study benchmark"
     )
     ap.add_argument(
+        "--cluster-subjects",
+        type=int,
+        default=0,
+        help="also a cohort of this many subjects simulated in the workers of a local Dask "
+        "cluster (bench/study_speed.py; 1000: about half an hour on 2 cores)",
+    )
+    ap.add_argument(
         "--before",
         type=Path,
         default=None,
@@ -154,10 +161,12 @@ def main() -> None:
 
         results["io"] = io_speed.run(args.io_rows, args.io_before)
         print(io_speed.table(results["io"]))
-    if args.study_subjects:
+    if args.study_subjects or args.cluster_subjects:
         import study_speed  # bench/study_speed.py, beside this file
 
-        results["study_speed"] = study_speed.run(args.study_subjects)
+        results["study_speed"] = study_speed.run(
+            args.study_subjects, cluster_subjects=args.cluster_subjects
+        )
         print(study_speed.table(results["study_speed"]))
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")
