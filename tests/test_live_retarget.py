@@ -236,3 +236,19 @@ def test_robot_outlet_units_name_slide_joints_in_meters(tmp_path: Path, name, te
     robot = load_robot(tmp_path / name)
     units = dict(zip(robot.joint_names, robot_joint_units(robot), strict=True))
     assert units == {"hinge": "radians", "slide": "meters"}
+
+
+def test_stream_takes_retargets_robot_options() -> None:
+    """The robot options are `fingerfit retarget`'s: same names, help and defaults."""
+    import inspect
+
+    from fingerfit.cli.retarget import retarget as retarget_command
+    from fingerfit.cli.stream import stream as stream_command
+    from fingerfit.retarget import CONTACT_MM
+
+    ours = inspect.signature(stream_command).parameters
+    theirs = inspect.signature(retarget_command).parameters
+    for name in ("map_path", "method", "orthogonal", "contact_mm"):
+        assert ours[name].annotation == theirs[name].annotation, name
+        assert ours[name].default == theirs[name].default, name
+    assert ours["contact_mm"].default == CONTACT_MM

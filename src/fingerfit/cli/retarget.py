@@ -33,6 +33,8 @@ OrthogonalOption = Annotated[
         "to the bones) instead of the fitted axes.",
     ),
 ]
+#: :data:`fingerfit.retarget.CONTACT_MM` (without importing NumPy at start-up).
+DEFAULT_CONTACT_MM = 8.0
 ContactOption = Annotated[
     float,
     typer.Option(
@@ -129,7 +131,7 @@ def retarget(
             "by side at them into OUT.png."
         ),
     ] = None,
-    contact_mm: ContactOption = 8.0,
+    contact_mm: ContactOption = DEFAULT_CONTACT_MM,
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace existing output files.")
     ] = False,

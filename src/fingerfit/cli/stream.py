@@ -9,6 +9,7 @@ import typer
 
 from .app import app, notice, say, user_errors
 from .retarget import (
+    DEFAULT_CONTACT_MM,
     ContactOption,
     MapOption,
     MethodOption,
@@ -16,9 +17,6 @@ from .retarget import (
     check_robot_options,
     resolve_robot,
 )
-
-#: :data:`fingerfit.retarget.CONTACT_MM` (``fingerfit retarget``'s default).
-CONTACT_MM = 8.0
 
 
 @app.command()
@@ -115,7 +113,7 @@ def stream(
     map_path: MapOption = None,
     method: MethodOption = "tip",
     orthogonal: OrthogonalOption = False,
-    contact_mm: ContactOption = CONTACT_MM,
+    contact_mm: ContactOption = DEFAULT_CONTACT_MM,
     quiet: Annotated[
         bool,
         typer.Option(
@@ -157,7 +155,7 @@ def stream(
             (map_path is not None, "--map"),
             (method != "tip", "--method"),
             (orthogonal, "--orthogonal"),
-            (contact_mm != CONTACT_MM, "--contact-mm"),
+            (contact_mm != DEFAULT_CONTACT_MM, "--contact-mm"),
         ]
         for given, name in alone:
             if given:
