@@ -151,3 +151,44 @@ def test_wide_reader_returns_arrays_of_their_own(tmp_path):
         for s, p in poses.items():
             assert np.array_equal(rec.poses[s].position, p.position)
             assert np.allclose(rec.poses[s].rotation, p.rotation, atol=1e-15)
+
+
+_TOKENS = st.sampled_from(["01", "02A", "1.5", "-0.25", "+3", "1e-3", "x", ","])
+_BLANKS = st.sampled_from([" ", "  ", "\t", " \t ", "\r"])
+
+
+@SETTINGS
+@given(
+    lines=st.lists(
+        st.tuples(
+            st.lists(st.tuples(_BLANKS, _TOKENS), max_size=5),  # (blanks before, token)
+            st.sampled_from(["", " ", "\r", "  \r"]),  # the line's end before its newline
+        ),
+        min_size=1,
+        max_size=8,
+    ),
+    newline_at_end=st.booleans(),
+)
+def test_ascii_quick_conversion_is_the_token_conversion(lines, newline_at_end):
+    """The quick blank-to-comma conversion gives the located-token conversion's text
+    (plus one empty last field per line when every line ends in blanks), or declines."""
+    from fingerfit.io.liberty import _ascii_to_csv, _ascii_to_csv_quick
+
+    text = "\n".join("".join(blank + tok for blank, tok in toks) + end for toks, end in lines)
+    text += "\n" if newline_at_end else ""
+    b = np.frombuffer(text.encode(), dtype=np.uint8)
+    n_lines = text.count("\n") + (0 if text.endswith("\n") else 1)
+    reference, _ = _ascii_to_csv(b)
+    quick = _ascii_to_csv_quick(b, n_lines)
+    with_tokens = [end != "" for toks, end in lines if toks]  # ends in blanks?
+    if all(with_tokens):
+        assert quick is not None and quick[1] is True
+        # one empty last field on every line that holds a token
+        ref = "\n".join(ln + "," if ln else ln for ln in reference.tobytes().decode().split("\n"))
+    elif len(with_tokens) == len(lines) and not any(with_tokens):
+        assert quick is not None and quick[1] is False
+        ref = reference.tobytes().decode()
+    else:
+        assert quick is None
+        return
+    assert quick[0].tobytes().decode() == ref

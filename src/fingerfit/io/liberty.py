@@ -409,6 +409,45 @@ def _ascii_to_csv(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return out, np.searchsorted(nl_at, heads)
 
 
+def _ascii_to_csv_quick(b: np.ndarray, n_lines: int) -> tuple[np.ndarray, bool] | None:
+    """:func:`_ascii_to_csv` for blocks whose lines all end alike, without locating tokens.
+
+    The first blank after every token becomes a comma and the other blanks go. When every
+    line ends in blanks (a CR/LF stream: the CR is a blank) each line gets one empty
+    last field (``trailing``); when none does, the text is that of :func:`_ascii_to_csv`.
+
+    Parameters
+    ----------
+    b : ndarray of uint8, shape (n_bytes,)
+        Whole lines of printable ASCII.
+    n_lines : int
+        Lines in the block.
+
+    Returns
+    -------
+    (csv, trailing) or None
+        None when some lines end in blanks and others do not (then use
+        :func:`_ascii_to_csv`). Blank lines come out empty, as there.
+    """
+    nl = b == 10
+    blank = (b == 32) | (b == 9) | (b == 13)
+    tok = ~(blank | nl)
+    sep = np.empty(b.size, dtype=bool)
+    sep[:1] = False
+    np.logical_and(blank[1:], tok[:-1], out=sep[1:])  # the first blank after a token
+    # tokens ending at a line end (the others end at a blank): one per line, or none
+    n_last = int(np.count_nonzero(tok[:-1] & nl[1:])) + int(b.size > 0 and bool(tok[-1]))
+    if n_last == 0:
+        trailing = True
+    elif n_last == n_lines:
+        trailing = False
+    else:
+        return None
+    keep = tok | nl | sep
+    out = np.where(sep, np.uint8(44), b)[keep]
+    return out, trailing
+
+
 def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
     """Whole ASCII streams of plain records, in batches into preallocated arrays.
 
@@ -428,6 +467,7 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
     width = sum(ITEM_SIZE[i] for i in items)
     names = [f"c{j}" for j in range(width + 1)]
     parse = block_parser(names, text=("c0",))
+    parse_end = block_parser([*names, "end"], text=("c0",))  # lines ending in blanks
     rows: RowArrays | None = None
     station = np.empty(0, dtype=np.int64)
     indicator = np.empty(0, dtype="<U1")
@@ -441,12 +481,22 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
         sign = (b[1:] == 43) | (b[1:] == 45)
         if np.any(sign & (b[:-1] >= 48) & (b[:-1] <= 57)):  # numbers glued by a sign
             b = np.frombuffer(glued.sub(rb"\1 ", bytes(b)), dtype=np.uint8)
-        text, rec_line = _ascii_to_csv(b)
         n_lines = int(np.count_nonzero(b == 10)) + (1 if b.size and b[-1] != 10 else 0)
+        quick = _ascii_to_csv_quick(b, n_lines)
+        rec_line = None  # every line a record
+        if quick is not None:
+            text, trailing = quick
+            n, cols = (parse_end if trailing else parse)(memoryview(text))
+            if trailing and n and not np.isnan(cols["end"]).all():
+                raise NotPlain("field count")
+            if n != n_lines:  # blank lines: find the records' lines
+                quick = None
+        if quick is None:
+            text, rec_line = _ascii_to_csv(b)
+            n, cols = parse(memoryview(text))
+            if n != rec_line.size:
+                raise NotPlain("field count")
         del b
-        n, cols = parse(memoryview(text))
-        if n != rec_line.size:
-            raise NotPlain("field count")
         if rows is None:
             cap = estimate_rows(path, n, cut)
             rows = RowArrays(cap, width)
@@ -467,7 +517,10 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
             raise NotPlain("station token")
         station[at : at + n] = np.array([int(m.group(1)) for m in parsed], dtype=np.int64)[codes]
         indicator[at : at + n] = np.array([m.group(2) for m in parsed], dtype="<U1")[codes]
-        where[at : at + n] = line0 + rec_line + 1
+        if rec_line is None:
+            where[at : at + n] = np.arange(line0 + 1, line0 + 1 + n)
+        else:
+            where[at : at + n] = line0 + rec_line + 1
         line0 += n_lines
     if rows is None or rows.n == 0:
         raise NotPlain("no records")
