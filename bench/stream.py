@@ -9,14 +9,18 @@ keep the figures). Two parts, in one run:
    built once (user-axis variant), side by side with a fresh
    :func:`fingerfit.kinematics.compute_kinematics` per frame, and the streamed values
    (:func:`fingerfit.live.stream.block_values`) --
-   p50 / p99 / max over 2000 frames.
+   p50 / p99 / max over 2000 frames. The ``hand5-shadow`` row adds, per frame, the
+   robot's joints (:meth:`fingerfit.retarget.Retargeter.step` on the block's
+   kinematics, Shadow hand, ``tip`` method): what ``fingerfit stream --retarget shadow``
+   computes per block.
 2. **End to end**: a ``fingerfit stream`` subprocess replays a 240 Hz recording in real
    time (``--seconds`` long) to LSL and to ROS 2 over DDS; this process receives both
    (a pylsl inlet and a cyclonedds reader, each in its own blocking thread) and measures,
    per frame, receipt minus the frame's arrival at fingerfit (LSL: ``local_clock()``
    minus the sample timestamp; DDS: ``time.time()`` minus ``header.stamp``), the frames
    each consumer missed, and the stream process's CPU time over the streaming period
-   (``/proc/PID/stat``) as a share of one core.
+   (``/proc/PID/stat``) as a share of one core. With ``--retarget`` the LSL consumer
+   reads the ``PREFIX-robot`` outlet and the DDS reader the robot's ``JointState``.
 """
 
 from __future__ import annotations
@@ -54,17 +58,24 @@ def subject_for(fingers: tuple[str, ...]):
         return None
 
 
-def per_frame_compute(model, rec: Recording, n: int = 2000) -> dict[str, float]:
+def per_frame_compute(model, rec: Recording, n: int = 2000, retargeter=None) -> dict[str, float]:
     """Microseconds per single-frame block, p50, p99, max: the stream's plan (built once)
-    and, interleaved frame by frame, a fresh ``compute_kinematics`` call (``call_*``)."""
+    and, interleaved frame by frame, a fresh ``compute_kinematics`` call (``call_*``).
+    With a ``retargeter``, each frame's robot joints are part of the stream's time and
+    also timed alone (``retarget_*``: :meth:`~fingerfit.retarget.Retargeter.step`;
+    ``solver_*``: the tip solver's own time it reports)."""
     sensors = model_sensors(model)
     plan = KinematicsPlan(model, ("user_axis",))
     ch = None
-    times, calls = [], []
+    times, calls, solves, solver = [], [], [], []
     for i in range(n):
         block = rec.slice(slice(i, i + 1))
         t = time.perf_counter()
         kin = plan.run(block)
+        if retargeter is not None:
+            t_solve = time.perf_counter()
+            solver.append(retargeter.step(block, kin)[2][0])  # the tip solver's own time
+            solves.append(time.perf_counter() - t_solve)
         ch = ch or channels_of(model, kin)
         block_values(kin, ch, block, sensors, "tracker")
         times.append(time.perf_counter() - t)
@@ -74,7 +85,17 @@ def per_frame_compute(model, rec: Recording, n: int = 2000) -> dict[str, float]:
         )
         calls.append(time.perf_counter() - t)
     us, cus = 1e6 * np.array(times[50:]), 1e6 * np.array(calls[50:])  # first frames warm up
-    return {
+    extra = {}
+    if solves:
+        sus, gus = 1e6 * np.array(solves[50:]), 1e6 * np.array(solver[50:])
+        extra = {
+            "retarget_p50_us": float(np.percentile(sus, 50)),
+            "retarget_p99_us": float(np.percentile(sus, 99)),
+            "retarget_max_us": float(sus.max()),
+            "solver_p50_us": float(np.percentile(gus, 50)),
+            "solver_p99_us": float(np.percentile(gus, 99)),
+        }
+    return extra | {
         "p50_us": float(np.percentile(us, 50)),
         "p99_us": float(np.percentile(us, 99)),
         "max_us": float(us.max()),
@@ -99,8 +120,9 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def end_to_end(model_path: Path, csv: Path, n: int, tag: str) -> dict:
-    """Stream ``csv`` in real time to LSL and DDS; measure latency, losses and CPU."""
+def end_to_end(model_path: Path, csv: Path, n: int, tag: str, retarget: str | None = None) -> dict:
+    """Stream ``csv`` in real time to LSL and DDS; measure latency, losses and CPU
+    (``retarget``: ``--retarget ROBOT``, the robot's outlet and JointState)."""
     import pylsl
     from cyclonedds.core import Policy, Qos
     from cyclonedds.domain import DomainParticipant
@@ -118,7 +140,8 @@ def end_to_end(model_path: Path, csv: Path, n: int, tag: str) -> dict:
     name = f"bench{tag}{os.getpid()}"
     proc = subprocess.Popen(
         [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}", "--lsl",
-         "--lsl-name", name, "--ros2", topic, "--wait", "--wait-timeout", "60", "-q"],
+         "--lsl-name", name, "--ros2", topic, "--wait", "--wait-timeout", "60", "-q",
+         *(["--retarget", retarget] if retarget else [])],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
     )  # fmt: skip
@@ -128,7 +151,8 @@ def end_to_end(model_path: Path, csv: Path, n: int, tag: str) -> dict:
     deadline = time.monotonic() + n / 240.0 + 90
 
     def lsl_consumer() -> None:
-        found = pylsl.resolve_byprop("name", f"{name}-angles", timeout=30)
+        outlet = "robot" if retarget else "angles"
+        found = pylsl.resolve_byprop("name", f"{name}-{outlet}", timeout=30)
         inlet = pylsl.StreamInlet(found[0], max_buflen=60, processing_flags=0)
         inlet.open_stream(timeout=10)
         while len(lsl_lat) < n and time.monotonic() < deadline:
@@ -182,12 +206,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="replay length (s)")
     ap.add_argument("--json", type=Path, help="write the figures here")
-    ap.add_argument("--models", default="index,hand4,hand5", help="which models to run")
+    ap.add_argument(
+        "--models",
+        default="index,hand4,hand5,hand5-shadow",
+        help="which models to run (hand5-shadow: the whole hand with --retarget shadow)",
+    )
     args = ap.parse_args()
     wanted = {
         "index": ("index",),
         "hand4": ("index", "middle", "ring", "little"),
         "hand5": HAND,
+        "hand5-shadow": HAND,
     }
     results: dict = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
@@ -205,11 +234,17 @@ def main() -> None:
             model = fit_session(sim.session)
             model_path = save_model(model, Path(tmp) / f"{key}.json")
             rec = sim.session.test[0]
-            compute = per_frame_compute(model, rec)
+            robot = "shadow" if key.endswith("-shadow") else None
+            retargeter = None
+            if robot is not None:
+                from fingerfit.retarget import Retargeter, resolve
+
+                retargeter = Retargeter(model, *resolve(robot, None, model.hand), "tip")
+            compute = per_frame_compute(model, rec, retargeter=retargeter)
             print(f"{key}: per-frame compute {compute}", flush=True)
             long = long_recording(rec, args.seconds)
             csv = write_pose_csv(Path(tmp) / f"{key}.csv", long)
-            e2e = end_to_end(model_path, csv, long.n_frames, key)
+            e2e = end_to_end(model_path, csv, long.n_frames, key.replace("-", ""), robot)
             print(f"{key}: end to end {json.dumps(e2e)}", flush=True)
             results["models"][key] = {"per_frame_compute": compute, "end_to_end": e2e}
     results["load_average_at_end"] = os.getloadavg()
