@@ -7,9 +7,10 @@
   on the LSL clock. With ``--retarget``, a third outlet ``PREFIX-robot`` (type
   ``JointAngles``, one channel per robot joint, radians).
 * :class:`Ros2Output` -- ``sensor_msgs/msg/JointState`` (radians, names
-  ``<digit>_<joint>`` of the exported URDF) on the DDS topic ``rt/<topic>`` with the
-  type name ``sensor_msgs::msg::dds_::JointState_``, final (XCDR1) types, reliable
-  keep-last-10, domain ``ROS_DOMAIN_ID``; ``header.stamp`` = arrival on the system clock.
+  ``<digit>_<joint>`` of the exported URDF, or the robot's joints with ``--retarget``) on
+  the DDS topic ``rt/<topic>`` with the type name ``sensor_msgs::msg::dds_::JointState_``,
+  final (XCDR1) types, reliable keep-last-10, domain ``ROS_DOMAIN_ID``; ``header.stamp`` =
+  arrival on the system clock.
 * :class:`BagOutput` -- the same messages in a rosbag2 (rosbags), written all-or-nothing.
 * :class:`RecordOutput` -- the angles CSV ``fingerfit angles`` writes, all-or-nothing.
 """
@@ -268,7 +269,8 @@ class Ros2Output:
     topic : str
         ROS 2 topic (``/hand/joint_states``); DDS topic ``rt/hand/joint_states``.
     names : list of str
-        Joint names (``<digit>_<joint>``, :func:`fingerfit.export.geometry.joint_names`).
+        Joint names (``<digit>_<joint>``, :func:`fingerfit.export.geometry.joint_names`;
+        with ``--retarget``, the robot's ``joint_names``).
     frame_id : str
         ``header.frame_id``.
     """
