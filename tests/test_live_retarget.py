@@ -1,9 +1,10 @@
 """`fingerfit stream --retarget ROBOT`: the robot's joints, live, equal `fingerfit retarget`.
 
 A simulated whole hand (thumb + four fingers, pad points) is replayed through a pinch with
-sensors missing in a few frames. What an LSL consumer receives on ``PREFIX-robot`` and what
-the rosbag2 holds equal the joints ``fingerfit retarget`` writes for the same recording to
-1e-9 rad, frame for frame, within the robot's limits and couplings.
+sensors missing in a few frames. What an LSL consumer receives on ``PREFIX-robot``, what a
+DDS subscriber receives as ``JointState`` and what the rosbag2 holds equal the joints
+``fingerfit retarget`` writes for the same recording to 1e-9 rad, frame for frame, within
+the robot's limits and couplings.
 """
 
 from __future__ import annotations
@@ -111,15 +112,30 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
     q_want = want[names].to_numpy()
     assert len(q_want) == N and len(names) == 24  # the Shadow hand's 24 joints
 
+    pytest.importorskip("cyclonedds")
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    from fingerfit.live.ros2types import JointState
+
     prefix = f"ffrt{os.getpid()}"
+    domain = 1 + (os.getpid() + 97) % 200
+    topic = f"/ffrt_{os.getpid()}/joint_states"
+    participant = DomainParticipant(domain)
+    qos = Qos(Policy.Reliability.Reliable(0), Policy.History.KeepAll)
+    reader = DataReader(participant, Topic(participant, "rt" + topic, JointState, qos=qos), qos=qos)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    env.pop("CYCLONEDDS_URI", None)
     bag, record = tmp_path / "bag", tmp_path / "live.csv"
     proc = subprocess.Popen(
         [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@2", "--retarget",
-         "shadow", "--lsl", "--lsl-name", prefix, "--ros2-bag", str(bag), "--record",
-         str(record), "--wait", "--wait-timeout", "30", "-q"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+         "shadow", "--lsl", "--lsl-name", prefix, "--ros2", topic, "--ros2-bag", str(bag),
+         "--record", str(record), "--wait", "--wait-timeout", "30", "-q"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
-    inlets, data = {}, {}
+    inlets, data, messages = {}, {}, []
     try:
         for kind in ("robot", "angles"):
             found = pylsl.resolve_byprop("name", f"{prefix}-{kind}", timeout=20)
@@ -128,10 +144,13 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
             inlets[kind].open_stream(timeout=10)
             data[kind] = []
         t_end = time.monotonic() + DEADLINE
-        while time.monotonic() < t_end and not all(len(v) >= N for v in data.values()):
+        while time.monotonic() < t_end and not (
+            all(len(v) >= N for v in data.values()) and len(messages) >= N
+        ):
             for kind, inlet in inlets.items():
                 x, _ = inlet.pull_chunk(timeout=0.0)
                 data[kind] += x
+            messages += [m for m in reader.take(N=1000) if isinstance(m, JointState)]
             time.sleep(0.005)
         info = inlets["robot"].info(timeout=5)
     finally:
@@ -165,9 +184,11 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
     a = np.asarray(data["angles"])
     np.testing.assert_allclose(a[:, :-1], live[labels[:-1]].ffill().to_numpy(), atol=1e-9)
 
-    # --- rosbag2: the robot's JointState, the same values ---------------------------------
-    bag_names, pos, topic = _bag(bag)
-    assert bag_names == names and topic == "/joint_states"
+    # --- ROS 2 over DDS and the rosbag2: the robot's JointState, the same values -----------
+    assert len(messages) == N and all(list(m.name) == names for m in messages)
+    np.testing.assert_array_equal(np.array([m.position for m in messages]), x[:, :-1])
+    bag_names, pos, bag_topic = _bag(bag)
+    assert bag_names == names and bag_topic == topic
     np.testing.assert_array_equal(pos, x[:, :-1])
 
 
