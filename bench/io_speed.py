@@ -3,8 +3,9 @@
 Makes one simulated recording of ``--rows`` rows in each tracker format (pose CSV, wide
 CSV, Liberty ASCII, Liberty binary), then reads each in a fresh process and reports rows
 (or records) per second and the peak resident memory above the process's state just
-before the read, beside the bytes of the arrays the returned recording keeps. Writers
-(pose CSV, wide CSV, the angles CSV) are timed the same way. With ``--before SRC`` (the
+before the read (``/proc/self/clear_refs`` resets the peak there), beside the bytes of the
+arrays the returned recording keeps. Writers (pose CSV, wide CSV, the angles CSV) are
+timed the same way. With ``--before SRC`` (the
 ``src`` folder of another checkout, e.g. ``git worktree add /tmp/before <commit>``) every
 measurement is repeated with that code in the same run, for ratios.
 
@@ -43,6 +44,16 @@ def status(key):
                 return int(line.split()[1]) * 1024
     return 0
 
+def start():
+    # reset the peak (VmHWM) to the current size and return that size: the peak then
+    # belongs to what follows, not to an earlier step of this process
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+    except OSError:
+        pass
+    return status("VmRSS:")
+
 import numpy as np
 import fingerfit.io.posecsv as posecsv, fingerfit.io.widecsv as widecsv
 import fingerfit.io.liberty as liberty
@@ -71,7 +82,7 @@ def write(rec, p):
         model = fit_session(simulate_subject(SimConfig(fingers=("index",)), 0).session,
                             FitOptions(method="tang2018"))
         table = kinematics_table(compute_kinematics(model, rec))
-        base = status("VmRSS:")
+        base = start()
         t = time.perf_counter()
         try:  # the code under test's own writer (code older than write_table: pandas)
             from fingerfit.io.fastcsv import write_table as writer
@@ -91,7 +102,7 @@ if kind.startswith("write"):
     if kind == "write-angles":
         seconds, base, rows = write(rec, target)
     else:
-        base = status("VmRSS:")
+        base = start()
         t = time.perf_counter()
         write(rec, target)
         seconds = time.perf_counter() - t
@@ -136,7 +147,7 @@ if kind.startswith("floor"):
 
 # warm-up on a small file of the same kind (first-call imports and caches)
 read(out)
-base = status("VmRSS:")
+base = start()
 t = time.perf_counter()
 rec = read(path)
 seconds = time.perf_counter() - t
