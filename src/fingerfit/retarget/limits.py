@@ -60,7 +60,7 @@ class Limits:
             Within every limit and coupling.
         """
         single = q.ndim == 1
-        if single and self.contains(q):  # the solver's usual case: nothing to do
+        if self.contains(q):  # the solver's usual case: nothing to do
             return np.array(q, dtype=float)
         q = np.clip(np.atleast_2d(np.array(q, dtype=float)), self.lower, self.upper)
         if self.a.size:
@@ -76,11 +76,12 @@ class Limits:
         return q[0] if single else q
 
     def contains(self, q: FloatArray) -> bool:
-        """Whether one configuration ``(nq,)`` is within every limit and coupling (exactly)."""
+        """Whether configurations ``(nq,)`` or ``(n, nq)`` are all within every limit and
+        coupling (exactly; NaN is not)."""
         if not (np.all(q >= self.lower) and np.all(q <= self.upper)):
             return False
         if self.a.size:
-            s = self.ca * q[self.a] + self.cb * q[self.b]
+            s = self.ca * q[..., self.a] + self.cb * q[..., self.b]
             return bool(np.all(s >= self.lo) and np.all(s <= self.hi))
         return True
 

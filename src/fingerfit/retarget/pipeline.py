@@ -18,7 +18,7 @@ from ..kinematics import Kinematics, compute_kinematics
 from ..model import HandModel
 from ..session import Recording
 from ..transforms import FloatArray
-from .joint import copy_angles
+from .joint import AngleCopy
 from .limits import Limits, limits_of
 from .maps import BUILTIN, RobotMap, builtin_map, check_map, pad_point_name, parse_map
 from .palm import (
@@ -263,18 +263,15 @@ def pinch_terms(
     pairs = [(a, b) for a, b in s.rmap.pinch if a in pads and b in pads]
     n = len(next(iter(pads.values()))) if pads else 0
     m = np.array([1.0, -1.0 if s.mirror else 1.0, 1.0])
-    vec = np.zeros((n, len(pairs), 3))
-    w = np.zeros((n, len(pairs)))
-    dist = np.zeros((n, len(pairs)))
-    for i, (a, b) in enumerate(pairs):
-        v = (pads[a] - pads[b]) * m
-        d = np.linalg.norm(v, axis=1)
-        k = 0.5 * (s.scale[a] + s.scale[b])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            shrink = np.where(d > 0, np.maximum(d - contact_mm, 0.0) / d, 0.0)
-        vec[:, i] = k * v * shrink[:, None]
-        w[:, i] = np.clip((PINCH_FAR_MM - d) / (PINCH_FAR_MM - contact_mm), 0.0, 1.0)
-        dist[:, i] = d
+    if not pairs:
+        return pairs, np.zeros((n, 0, 3)), np.zeros((n, 0)), np.zeros((n, 0))
+    v = (np.stack([pads[a] for a, _ in pairs], 1) - np.stack([pads[b] for _, b in pairs], 1)) * m
+    dist = np.linalg.norm(v, axis=2)
+    k = np.array([0.5 * (s.scale[a] + s.scale[b]) for a, b in pairs])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shrink = np.where(dist > 0, np.maximum(dist - contact_mm, 0.0) / dist, 0.0)
+    vec = k[:, None] * v * shrink[:, :, None]
+    w = np.clip((PINCH_FAR_MM - dist) / (PINCH_FAR_MM - contact_mm), 0.0, 1.0)
     return pairs, vec, np.nan_to_num(w), dist
 
 
@@ -341,7 +338,15 @@ class Retargeter:
         self.frames = [rmap.digits[d].tip for d in s.digits]
         self.notes = list(s.notes)
         self.held = self.missing = 0
-        self._last: dict[str, dict[str, float]] = {}
+        self.copy = AngleCopy(
+            rmap,
+            robot.joint_names,
+            s.hold,
+            s.limits,
+            [(d, a) for d in s.digits for a in model.fingers[d].angle_names()],
+        )
+        self.pinch = False
+        self._padded: list[str] = []
         self.solver: TipSolver | None = None
         if method == "tip":
             padded = {d for d in s.digits if model.fingers[d].pad is not None}
@@ -349,6 +354,7 @@ class Retargeter:
                 self.notes.append("the model has no pad points: pinch term off")
             # the pairs pinch_terms gives: both digits retargeted and with a pad point
             pairs = [(a, b) for a, b in rmap.pinch if a in padded and b in padded]
+            self._padded = [d for d in s.digits if d in padded and any(d in p for p in pairs)]
             pad_frames = [rmap.digits[d].pad for pair in pairs for d in pair]
             frames = self.frames + [f for f in dict.fromkeys(pad_frames) if f not in self.frames]
             pidx = [
@@ -388,10 +394,19 @@ class Retargeter:
         """
         s, model, variant = self.setup, self.model, self.variant
         kin = kin or self.kinematics(recording)
-        tips = person_points(s, model, kin, recording, variant, "tip")
-        tgt = targets(s, np.stack([tips[d] for d in s.digits], axis=1), s.digits)
+        motions = kin.motions[variant]
+        # The tips of every digit and the pads of the pinching ones, into the palm frame
+        # at once.
+        pts = [motions[d].tip for d in s.digits] + [motions[d].pad for d in self._padded]
+        palm = in_palm(model, s.palm, recording, np.stack(pts, axis=1))
+        k = len(s.digits)
+        tgt = targets(s, palm[:, :k], s.digits)
         start = time.perf_counter()
-        q_joint = self._copy({d: kin.motions[variant][d].angles for d in s.digits})
+        angles = np.empty((recording.n_frames, len(self.copy.keys)))
+        for i, (d, a) in enumerate(self.copy.keys):
+            angles[:, i] = motions[d].angles[a]
+        q_joint, held = self.copy(angles)
+        self.held += held
         if self.solver is None:
             q = q_joint
             seconds = np.full(len(q), (time.perf_counter() - start) / max(len(q), 1))
@@ -399,30 +414,10 @@ class Retargeter:
         self.missing += int(np.sum(~np.isfinite(tgt).all(axis=(1, 2))))
         vec = w = None
         if self.pinch:
-            pads = person_points(s, model, kin, recording, variant, "pad")
+            pads = {d: palm[:, k + i] for i, d in enumerate(self._padded)}
             _, vec, w, _ = pinch_terms(s, pads, self.contact_mm)
         res = self.solver.solve(tgt, None, vec, w, prior=q_joint)
         return res.q, tgt, res.seconds
-
-    def _copy(self, angles: dict[str, dict[str, FloatArray]]) -> FloatArray:
-        """The ``joint`` method on one block, a missing angle keeping its last value."""
-        filled: dict[str, dict[str, FloatArray]] = {}
-        for d, per in angles.items():
-            last = self._last.setdefault(d, {})
-            filled[d] = {}
-            for j, a in per.items():
-                a = np.asarray(a, dtype=float)
-                ok = np.isfinite(a)
-                if j in last and a.size and not ok[0]:
-                    a = a.copy()
-                    a[: int(np.argmax(ok)) if ok.any() else a.size] = last[j]
-                if ok.any():
-                    last[j] = float(a[np.flatnonzero(ok)[-1]])
-                filled[d][j] = a
-        s = self.setup
-        q, held = copy_angles(filled, s.rmap, s.robot.joint_names, s.hold, s.limits)
-        self.held += held
-        return q
 
 
 def retarget(
