@@ -59,22 +59,7 @@ def robot_joint_units(robot: Any) -> list[str]:
     list of str
         One per ``robot.joint_names``.
     """
-    backend = robot._backend
-    units = ["radians"] * robot.nq
-    if hasattr(backend, "mj"):  # MuJoCo: joints in index order = configuration order
-        slide = int(backend.mj.mjtJoint.mjJNT_SLIDE)
-        for i in range(robot.nq):
-            if int(backend.m.jnt_type[i]) == slide:
-                units[i] = "meters"
-    elif hasattr(backend, "pin"):  # Pinocchio: prismatic joint models are JointModelP*
-        m = backend.m
-        for j in range(1, m.njoints):
-            # JointModelPX|PY|PZ|PrismaticUnaligned
-            if m.names[j] in robot.joint_names and m.joints[j].shortname().startswith(
-                "JointModelP"
-            ):
-                units[robot.joint_names.index(m.names[j])] = "meters"
-    return units
+    return ["meters" if slide else "radians" for slide in robot.slide]
 
 
 def empty_recording(sensors: list[str]) -> Recording:

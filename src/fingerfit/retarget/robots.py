@@ -123,6 +123,12 @@ class Robot:
         return self._backend.anchors()
 
     @property
+    def slide(self) -> np.ndarray:
+        """``(nq,)`` bool: the joint is a slide (MJCF) / prismatic (URDF) joint, in metres;
+        the others are hinges / revolute joints, in radians."""
+        return self._backend.slide
+
+    @property
     def mujoco_model(self) -> Any:
         """The ``mujoco.MjModel`` of an MJCF robot (for rendering); ``None`` for a URDF one."""
         return self._backend.m if isinstance(self._backend, _Mujoco) else None
@@ -175,6 +181,7 @@ class _Mujoco:
         if m.nq != m.njnt or m.nv != m.njnt:
             raise FingerfitError("robot has joints with more than one degree of freedom", path=path)
         self.names = tuple(m.joint(j).name for j in range(m.njnt))
+        self.slide = m.jnt_type == int(mujoco.mjtJoint.mjJNT_SLIDE)
         limited = m.jnt_limited.astype(bool)
         self.lower = np.where(limited, m.jnt_range[:, 0], -np.inf)
         self.upper = np.where(limited, m.jnt_range[:, 1], np.inf)
@@ -271,6 +278,8 @@ class _Pinocchio:
                 )
         order = sorted(range(1, m.njoints), key=lambda j: m.joints[j].idx_q)
         self.names = tuple(m.names[j] for j in order)
+        # JointModelPX|PY|PZ|PrismaticUnaligned move in metres (multi-DOF joints are refused).
+        self.slide = np.array([m.joints[j].shortname().startswith("JointModelP") for j in order])
         self.idx = {m.names[j]: m.joints[j].idx_q for j in order}
         lo, hi = np.array(m.lowerPositionLimit, float), np.array(m.upperPositionLimit, float)
         # URDF continuous joints and missing limits come out as +-max float.
