@@ -9,7 +9,12 @@ import pytest
 
 from fingerfit.estimate import FitOptions
 from fingerfit.evaluate import figures
-from fingerfit.evaluate.study import draw_study_figure, figure_builders, run_study
+from fingerfit.evaluate.study import (
+    draw_study_figure,
+    figure_builders,
+    figure_tables,
+    run_study,
+)
 from fingerfit.simulate import write_subject
 
 from .conftest import subject
@@ -33,6 +38,10 @@ def test_a_figure_task_gives_the_same_png_as_drawing_it_here(study) -> None:
         assert task[:8] == b"\x89PNG\r\n\x1a\n", key
         assert task == here.getvalue(), key
         assert (study.out_dir / built[key][0]).read_bytes() == task, key
+        # The study sends each task only the figure's own table: the same PNG.
+        sent = figure_tables(key, study.tables)
+        assert sum(len(t) for t in sent.values()) < sum(len(t) for t in study.tables.values())
+        assert draw_study_figure(key, sent) == task, key
 
 
 def test_fig09_is_linked_and_the_rest_embedded(study) -> None:

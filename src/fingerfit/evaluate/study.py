@@ -1290,6 +1290,27 @@ def figure_builders(
     return out
 
 
+# The one table each study-wide figure draws (figure_builders).
+_FIGURE_TABLE = {
+    "fig08": "axis_quality",
+    "fig10": "max_flexion",
+    "fig11": "targets",
+    "fig12": "targets",
+    "truth": "truth_fingertip",
+    "thumb": "truth_fingertip",
+    "pinch": "pinch",
+}
+
+
+def figure_tables(key: str, tables: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
+    """What a study task drawing figure ``key`` needs of the study's tables: its own table,
+    and ``max_flexion`` and ``targets`` without rows (:func:`figure_builders` looks at
+    them), so each task is sent one table rather than all of them."""
+    out = {k: tables[k].iloc[:0] for k in ("max_flexion", "targets")}
+    out[_FIGURE_TABLE[key]] = tables[_FIGURE_TABLE[key]]
+    return out
+
+
 def draw_study_figure(key: str, tables: dict[str, pd.DataFrame]) -> bytes:
     """PNG bytes of one figure of the whole study (a study task; no per-subject Fig. 9).
 
@@ -1325,7 +1346,7 @@ def _write_outputs(
     pending = {}
     if pool is not None:
         pending = {
-            key: pool.submit(draw_study_figure, key, result.tables)
+            key: pool.submit(draw_study_figure, key, figure_tables(key, result.tables))
             for key in built
             if not key.startswith("fig09")
         }
