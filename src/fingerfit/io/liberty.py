@@ -152,7 +152,7 @@ class LibertyRecords:
     ----------
     items : tuple of str
         Data items in stream order (see :func:`parse_items`).
-    station : ndarray of int, shape (n_records,)
+    station : ndarray of int (int16 from the readers), shape (n_records,)
         Station numbers 1-16.
     values : dict[str, ndarray]
         Per item, in device units: ``position`` ``(n, 3)`` (file units),
@@ -327,7 +327,7 @@ def parse_liberty_ascii(
             line=int(lines[i]),
             field="station",
         )
-    station = np.array([int(m.group(1)) for m in parsed], dtype=np.int64)[inverse]
+    station = np.array([int(m.group(1)) for m in parsed], dtype=np.int16)[inverse]
     indicator = np.array([m.group(2) for m in parsed], dtype=str)[inverse]
     nums = np.empty((lines.size, expected - 1))
     raw_text: dict[int, pd.Series] = {}
@@ -469,9 +469,9 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
     parse = block_parser(names, text=("c0",))
     parse_end = block_parser([*names, "end"], text=("c0",))  # lines ending in blanks
     rows: RowArrays | None = None
-    station = np.empty(0, dtype=np.int64)
+    station = np.empty(0, dtype=np.int16)  # 1-2 digits
     indicator = np.empty(0, dtype="<U1")
-    where = np.empty(0, dtype=np.int64)
+    where = np.empty(0, dtype=np.int32)  # file lines (below 2**31, else NotPlain)
     line0 = 0
     glued = re.compile(rb"(\.\d+)(?=[+-])")
     for buf, cut in line_blocks(path, chunk_bytes=_ASCII_CHUNK):
@@ -482,6 +482,8 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
         if np.any(sign & (b[:-1] >= 48) & (b[:-1] <= 57)):  # numbers glued by a sign
             b = np.frombuffer(glued.sub(rb"\1 ", bytes(b)), dtype=np.uint8)
         n_lines = int(np.count_nonzero(b == 10)) + (1 if b.size and b[-1] != 10 else 0)
+        if line0 + n_lines >= 2**31:
+            raise NotPlain("line numbers beyond int32")
         quick = _ascii_to_csv_quick(b, n_lines)
         rec_line = None  # every line a record
         if quick is not None:
@@ -500,9 +502,9 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
         if rows is None:
             cap = estimate_rows(path, n, cut)
             rows = RowArrays(cap, width)
-            station = np.empty(cap, dtype=np.int64)
+            station = np.empty(cap, dtype=np.int16)
             indicator = np.empty(cap, dtype="<U1")
-            where = np.empty(cap, dtype=np.int64)
+            where = np.empty(cap, dtype=np.int32)
         at = rows.n
         block = rows.reserve(n)
         for j in range(width):
@@ -515,7 +517,7 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
         parsed = [_STATION_TOKEN.fullmatch(t) for t in tokens]
         if any(m is None for m in parsed):
             raise NotPlain("station token")
-        station[at : at + n] = np.array([int(m.group(1)) for m in parsed], dtype=np.int64)[codes]
+        station[at : at + n] = np.array([int(m.group(1)) for m in parsed], dtype=np.int16)[codes]
         indicator[at : at + n] = np.array([m.group(2) for m in parsed], dtype="<U1")[codes]
         if rec_line is None:
             where[at : at + n] = np.arange(line0 + 1, line0 + 1 + n)
@@ -723,10 +725,10 @@ def parse_liberty_binary(
     indicator = chars[err]
     out = LibertyRecords(
         items_t,
-        recs["station"].astype(np.int64),
+        recs["station"].astype(np.int16),
         values,
         indicator.astype(str),
-        np.arange(1, n + 1),
+        np.arange(1, n + 1, dtype=np.int32 if n < 2**31 else np.int64),
         binary=True,
         record_size=dt.itemsize,
         family=raw[:2].decode("ascii"),
@@ -997,6 +999,10 @@ def records_to_recording(
                 field="rate",
             )
         frame_of_rec = frame_of
+        del cycle
+    del frame_of
+    if n < 2**31:  # a frame index per record in half the memory while the arrays fill
+        frame_of_rec = frame_of_rec.astype(np.int32)
 
     sel = rec_idx
     every = len(sel) == station.size  # no record dropped: use the arrays without a copy
