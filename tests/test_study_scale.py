@@ -168,3 +168,27 @@ def test_study_tables_of_light_results_are_not_gathered_twice() -> None:
     again = StudyTables()
     again.add(0, replace(light))
     assert all(v is None for v in again.tables().values())
+
+
+def test_a_dask_worker_does_not_keep_the_results_read(tmp_path) -> None:
+    """Each finished task's future is dropped once its outcome is read, so the cluster's
+    workers hold at most the results not yet read (they kept every one before)."""
+    distributed = pytest.importorskip("distributed")
+    held: list[int] = []
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        worker = next(iter(cluster.workers.values()))
+
+        def step(msg: str) -> None:
+            if msg.startswith("fitted"):
+                held.append(len(worker.data))
+
+        run_study(
+            simulated_cohort(CONFIG, 3, 17),
+            tmp_path / "o",
+            progress=step,
+            scheduler=cluster.scheduler_address,
+        )
+    assert len(held) == 3
+    assert max(held) <= 2 and held[-1] <= 1, held  # before: 1, 2, 3 (every result kept)

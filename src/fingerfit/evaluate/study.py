@@ -1101,7 +1101,8 @@ def run_study(
         pool = stack.enter_context(study_executor(jobs, scheduler))
         futures = {pool.submit(study_subject, s, options): i for i, s in enumerate(sessions)}
         for future in as_completed(futures):
-            i = futures[future]
+            # Dropped once read: a Dask worker keeps a task's result while its future lives.
+            i = futures.pop(future)
             try:
                 got = outcomes[i] = future.result()
             except Exception as exc:  # a lost worker, not a bad session
