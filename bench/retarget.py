@@ -210,6 +210,17 @@ def limit_excess(s: Setup, q: np.ndarray) -> float:
     return float(max(np.max(over), 0.0))
 
 
+def trajectory_metrics(s: Setup, q: np.ndarray, sec: np.ndarray, dt: float) -> dict:
+    """Limits, jerk and per-frame solve time of one joint trajectory ``q (n, nq)``."""
+    return {
+        "violations": s.limits.violations(q),
+        "limit_excess_max_rad": limit_excess(s, q),
+        "jerk_rad_s3": jerk(q, dt),
+        "solve_p50_ms": float(np.median(sec) * 1e3),
+        "solve_p99_ms": float(np.percentile(sec, 99) * 1e3),
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--subjects", type=int, default=1)
@@ -268,11 +279,7 @@ def main() -> None:
                     "frames": len(q),
                     "tip_err_median_mm": float(np.nanmedian(err)),
                     "tip_err_p95_mm": float(np.nanpercentile(err, 95)),
-                    "violations": s.limits.violations(q),
-                    "limit_excess_max_rad": limit_excess(s, q),
-                    "jerk_rad_s3": jerk(q, dt),
-                    "solve_p50_ms": float(np.median(sec) * 1e3),
-                    "solve_p99_ms": float(np.percentile(sec, 99) * 1e3),
+                    **trajectory_metrics(s, q, sec, dt),
                     "wall_s": wall,
                 }
                 rows.append(r)
@@ -364,11 +371,7 @@ def main() -> None:
                     "pinch_p95_mm": float(np.percentile(rd[touch], 95)),
                     "tip_err_median_mm": float(np.nanmedian(err)),
                     "tip_err_p95_mm": float(np.nanpercentile(err, 95)),
-                    "violations": s.limits.violations(q),
-                    "limit_excess_max_rad": limit_excess(s, q),
-                    "jerk_rad_s3": jerk(q, dt),
-                    "solve_p50_ms": float(np.median(sec) * 1e3),
-                    "solve_p99_ms": float(np.percentile(sec, 99) * 1e3),
+                    **trajectory_metrics(s, q, sec, dt),
                 }
                 pinch_rows.append(r)
                 print(
