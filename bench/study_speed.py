@@ -284,7 +284,12 @@ def table(results: dict) -> str:
         rows.append(
             f"| {what}, {name}{frames} | {r['wall_s']:.1f} s, "
             f"{r['frames_per_s'] / 1e3:.0f} k frames/s; peak RSS {r['parent_peak_mb']:.0f} MB "
-            f"(study process), {r['largest_child_peak_mb']:.0f} MB (largest worker)"
+            "(study process)"
+            + (
+                f", {r['largest_child_peak_mb']:.0f} MB (largest worker)"
+                if r["largest_child_peak_mb"] >= 1
+                else " (no workers)"
+            )
             + (f"; {r['failed']} session(s) failed (--keep-going)" if r["failed"] else "")
             + when
             + " |"
