@@ -5,7 +5,9 @@
 The first ``--base`` session folders of ``SESSIONS`` are studied once (``study_subject``
 in 2 processes; their outcomes are kept in a pickle beside nothing: a temporary folder).
 Then, for each size N, a fresh process runs ``run_study`` over N inputs with ``--jobs 2``
-whose tasks return one of those outcomes under a new subject ID (``F0001``...): the study
+whose tasks return one of those outcomes under a new subject ID (``F0001``...) after
+0.1 s (``FINGERFIT_BENCH_TASK_S``; a real task takes ~1 s, and outcomes arriving all at
+once would wait in the study process together): the study
 process does exactly what it does for N real subjects (receives each result and its
 Fig. 9, gathers the tables, saves the models, the statistics, the tables, the study-wide
 figures drawn in the workers, the report) at the cost of unpickling a result per subject.
@@ -22,6 +24,7 @@ import pickle
 import subprocess
 import sys
 import tempfile
+import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -44,6 +47,9 @@ def renamed(item: str, _options) -> object:
         tables_of = ("max_flexion", "distances", "targets", "truth_axes", "truth_tips")
         tables_of += ("truth_angles", "pinches")
 
+    # A real task takes about a second; without a pause every outcome would arrive at once
+    # and wait in the study process together, a peak a real study does not have.
+    time.sleep(float(os.environ.get("FINGERFIT_BENCH_TASK_S", "0.1")))
     global _OUTCOMES
     if _OUTCOMES is None:
         with open(os.environ["FINGERFIT_BENCH_OUTCOMES"], "rb") as fh:
