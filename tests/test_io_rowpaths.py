@@ -180,6 +180,8 @@ def test_ascii_quick_conversion_is_the_token_conversion(lines, newline_at_end):
     n_lines = text.count("\n") + (0 if text.endswith("\n") else 1)
     reference, _ = _ascii_to_csv(b)
     quick = _ascii_to_csv_quick(b, n_lines)
+    if len(lines) > 1 and not newline_at_end and lines[-1] == ([], ""):
+        lines = lines[:-1]  # an empty last line without its newline is not in the text
     with_tokens = [end != "" for toks, end in lines if toks]  # ends in blanks?
     if all(with_tokens):
         assert quick is not None and quick[1] is True
