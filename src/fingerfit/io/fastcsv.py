@@ -58,7 +58,7 @@ def release_freed_memory() -> None:
             import ctypes
 
             _TRIM = ctypes.CDLL(None).malloc_trim
-        except (OSError, AttributeError):
+        except (OSError, AttributeError, TypeError):  # TypeError: no CDLL(None) on Windows
             _TRIM = lambda pad: 0  # noqa: E731 -- not the GNU C library
     _TRIM(0)
 
