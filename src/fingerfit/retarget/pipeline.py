@@ -345,7 +345,7 @@ class Retargeter:
             s.limits,
             [(d, a) for d in s.digits for a in model.fingers[d].angle_names()],
         )
-        self.pinch = False
+        # Digits of the pinch pairs, whose pads the tip method needs (none: no pinch term).
         self._padded: list[str] = []
         self.solver: TipSolver | None = None
         if method == "tip":
@@ -363,7 +363,6 @@ class Retargeter:
             ]
             problem = TipProblem(robot, s.robot_palm, frames, s.free, s.hold, s.limits)
             self.solver = TipSolver(problem, pidx, options)
-            self.pinch = bool(pairs)
 
     def kinematics(self, recording: Recording) -> Kinematics:
         """The person's kinematics :meth:`step` needs (the retargeted digits, one variant)."""
@@ -413,7 +412,7 @@ class Retargeter:
             return q, tgt, seconds
         self.missing += int(np.sum(~np.isfinite(tgt).all(axis=(1, 2))))
         vec = w = None
-        if self.pinch:
+        if self._padded:
             pads = {d: palm[:, k + i] for i, d in enumerate(self._padded)}
             _, vec, w, _ = pinch_terms(s, pads, self.contact_mm)
         res = self.solver.solve(tgt, None, vec, w, prior=q_joint)

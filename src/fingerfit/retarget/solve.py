@@ -171,7 +171,7 @@ class TipSolver:
         options: TipOptions | None = None,
     ) -> None:
         self.problem = problem
-        self.options = o = options or TipOptions()
+        self.options = options or TipOptions()
         self.pairs = np.array(pinch_pairs or [], dtype=int).reshape(-1, 2)
         free = problem.free
         self.n_free = n_free = free.size
@@ -197,7 +197,6 @@ class TipSolver:
         self.q: FloatArray | None = None
         self._last = np.inf
         self._frame = 0
-        self._smooth = o.smooth
 
     def solve(
         self,
