@@ -10,13 +10,23 @@ flag the rows ``repeated_rows(...) & isfinite(...).any(...)`` flagged, and its h
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from fingerfit.io.fastcsv import gap_rows, put_rows, quat_norm, row_blocks, rows_where
+from fingerfit.io.fastcsv import (
+    gap_rows,
+    put_quat_rows,
+    put_rows,
+    put_scaled_rows,
+    quat_norm,
+    row_blocks,
+    rows_where,
+)
 from fingerfit.io.hygiene import repeated_rows
 from fingerfit.io.widecsv import _repeats
+from fingerfit.transforms import matrix_from_quat_wxyz
 
 SETTINGS = settings(max_examples=60, deadline=None)
 
@@ -67,6 +77,55 @@ def test_put_rows_contiguous_run_is_a_slice_and_blocks_tile():
     gap = gap_rows(10, [np.arange(2, 6), np.array([6, 8])])
     assert gap.tolist() == [0, 1, 7, 9]
     assert gap_rows(5, [np.arange(0, 2), np.arange(2, 5)]) is None
+
+
+def _matrix_reference(quat: np.ndarray) -> np.ndarray:
+    """The plain formula, whole arrays: the bits the block kernel must give."""
+    q = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack(
+        [
+            1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+            2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+            2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y),
+        ],
+        axis=1,
+    ).reshape(-1, 3, 3)  # fmt: skip
+
+
+def test_matrix_from_quat_blocks_and_out_give_the_formulas_bits():
+    rng = np.random.default_rng(5)
+    n = 3 * 4096 + 17  # several blocks and a short last one
+    q = rng.normal(size=(n, 4)) * rng.uniform(0.5, 2.0, size=(n, 1))
+    q[[3, 5000]] = np.nan
+    expected = _matrix_reference(q)
+    wide = np.concatenate([q, rng.normal(size=(n, 3))], axis=1)[:, :4]  # strided input
+    with np.errstate(invalid="ignore"):
+        assert np.array_equal(matrix_from_quat_wxyz(q), expected, equal_nan=True)
+        host = np.full((2 * n, 3, 3), 7.0)
+        got = matrix_from_quat_wxyz(wide, out=host[::2])  # strided output, in place
+        assert np.shares_memory(got, host)
+        assert np.array_equal(host[::2], expected, equal_nan=True)
+        assert (host[1::2] == 7.0).all()  # nothing written between the rows
+        assert np.array_equal(matrix_from_quat_wxyz(q[7]), expected[7])
+    assert matrix_from_quat_wxyz(np.empty((0, 4))).shape == (0, 3, 3)
+
+
+@pytest.mark.parametrize("at", [np.arange(3, 9), np.array([0, 2, 3, 9, 1, 4])])
+def test_put_quat_and_scaled_rows_are_fancy_index_assignments(at):
+    rng = np.random.default_rng(6)
+    q = rng.normal(size=(at.size, 4))
+    xyz = rng.normal(size=(at.size, 3))
+    rot = np.full((10, 3, 3), np.nan)
+    pos = np.full((10, 3), np.nan)
+    put_quat_rows(rot, at, q)
+    put_scaled_rows(pos, at, xyz, 25.4)
+    expected_rot = np.full((10, 3, 3), np.nan)
+    expected_rot[at] = _matrix_reference(q)
+    expected_pos = np.full((10, 3), np.nan)
+    expected_pos[at] = xyz * 25.4
+    assert np.array_equal(rot, expected_rot, equal_nan=True)
+    assert np.array_equal(pos, expected_pos, equal_nan=True)
 
 
 # values from a small set, so that repeats, held values, NaN, -0.0 and empty rows occur

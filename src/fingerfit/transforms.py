@@ -18,37 +18,81 @@ from scipy.spatial.transform import Rotation
 FloatArray = NDArray[np.float64]
 
 
-def matrix_from_quat_wxyz(quat: FloatArray) -> FloatArray:
+def matrix_from_quat_wxyz(quat: FloatArray, out: FloatArray | None = None) -> FloatArray:
     """Rotation matrices from scalar-first unit quaternions.
 
     Parameters
     ----------
     quat : ndarray, shape (n, 4) or (4,)
         Quaternions ``(w, x, y, z)``; need not be exactly unit (they are
-        normalised). Rows containing NaN give NaN matrices.
+        normalised). Rows containing NaN give NaN matrices. Any strides.
+    out : ndarray, shape (n, 3, 3), optional
+        Where to write the matrices (float64, any strides, e.g. a run of rows of a
+        recording's rotation array); no ``(n, 3, 3)`` temporary is made then.
 
     Returns
     -------
     ndarray, shape (n, 3, 3) or (3, 3)
         Rotation matrices (sensor -> tracker when the quaternion is a sensor
-        orientation).
+        orientation); ``out`` when given. The same bits with or without ``out``.
     """
     q = np.asarray(quat, dtype=float)
     single = q.ndim == 1
     q = np.atleast_2d(q)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    out = np.empty((q.shape[0], 3, 3))
-    out[:, 0, 0] = 1 - 2 * (y * y + z * z)
-    out[:, 0, 1] = 2 * (x * y - z * w)
-    out[:, 0, 2] = 2 * (x * z + y * w)
-    out[:, 1, 0] = 2 * (x * y + z * w)
-    out[:, 1, 1] = 1 - 2 * (x * x + z * z)
-    out[:, 1, 2] = 2 * (y * z - x * w)
-    out[:, 2, 0] = 2 * (x * z - y * w)
-    out[:, 2, 1] = 2 * (y * z + x * w)
-    out[:, 2, 2] = 1 - 2 * (x * x + y * y)
+    n = q.shape[0]
+    if out is None:
+        out = np.empty((n, 3, 3))
+    elif out.shape != (n, 3, 3) or out.dtype != np.float64:
+        raise ValueError(f"out must be float64 of shape ({n}, 3, 3); got {out.dtype} {out.shape}")
+    # A block of rows at a time, every temporary in cache; the operations are those of
+    # q / np.linalg.norm(q, axis=1) and the formula below, in the same order (same bits).
+    m = min(n, _QUAT_BLOCK)
+    w, x, y, z, s, a, b, c, d, e = (np.empty(m) for _ in range(10))
+    for lo in range(0, n, _QUAT_BLOCK):
+        hi = min(lo + _QUAT_BLOCK, n)
+        k = hi - lo
+        qb, ob = q[lo:hi], out[lo:hi]
+        w_, x_, y_, z_, s_ = w[:k], x[:k], y[:k], z[:k], s[:k]
+        a_, b_, c_, d_, e_ = a[:k], b[:k], c[:k], d[:k], e[:k]
+        # the norm: ((w^2 + x^2) + y^2) + z^2, as np.linalg.norm sums a row of 4
+        np.multiply(qb[:, 0], qb[:, 0], out=s_)
+        for j in (1, 2, 3):
+            np.multiply(qb[:, j], qb[:, j], out=a_)
+            s_ += a_
+        np.sqrt(s_, out=s_)
+        np.divide(qb[:, 0], s_, out=w_)
+        np.divide(qb[:, 1], s_, out=x_)
+        np.divide(qb[:, 2], s_, out=y_)
+        np.divide(qb[:, 3], s_, out=z_)
+        np.multiply(x_, x_, out=a_)  # a = x x, b = y y, c = z z
+        np.multiply(y_, y_, out=b_)
+        np.multiply(z_, z_, out=c_)
+        _one_minus_twice(b_, c_, ob[:, 0, 0], s_)  # 1 - 2 (y y + z z)
+        _one_minus_twice(a_, c_, ob[:, 1, 1], s_)  # 1 - 2 (x x + z z)
+        _one_minus_twice(a_, b_, ob[:, 2, 2], s_)  # 1 - 2 (x x + y y)
+        for u, v, p, r, lo_out, hi_out in (
+            (x_, y_, z_, w_, ob[:, 0, 1], ob[:, 1, 0]),  # 2 (x y -+ z w)
+            (x_, z_, y_, w_, ob[:, 2, 0], ob[:, 0, 2]),  # 2 (x z -+ y w)
+            (y_, z_, x_, w_, ob[:, 1, 2], ob[:, 2, 1]),  # 2 (y z -+ x w)
+        ):
+            np.multiply(u, v, out=d_)
+            np.multiply(p, r, out=e_)
+            np.subtract(d_, e_, out=a_)
+            np.multiply(a_, 2, out=lo_out)
+            np.add(d_, e_, out=a_)
+            np.multiply(a_, 2, out=hi_out)
     return out[0] if single else out
+
+
+#: Rows per block of :func:`matrix_from_quat_wxyz` (its ten temporaries stay in cache).
+_QUAT_BLOCK = 4096
+
+
+def _one_minus_twice(u: FloatArray, v: FloatArray, out: FloatArray, tmp: FloatArray) -> None:
+    """``out = 1 - 2 (u + v)`` in that order of operations."""
+    np.add(u, v, out=tmp)
+    tmp *= 2
+    np.subtract(1.0, tmp, out=out)
 
 
 def quat_wxyz_from_matrix(matrix: FloatArray) -> FloatArray:

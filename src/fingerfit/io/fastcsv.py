@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FingerfitError
+from ..transforms import matrix_from_quat_wxyz
 
 #: Bytes of file parsed per batch.
 CHUNK_BYTES = 1 << 22
@@ -286,6 +287,13 @@ def quat_norm(quat: np.ndarray) -> np.ndarray:
     return np.sqrt(s, out=s)
 
 
+def run_start(at: np.ndarray) -> int | None:
+    """The first of ``at``'s rows when they are a run of consecutive rows, else None."""
+    if at.size and at[-1] - at[0] == at.size - 1 and (at.size < 2 or (np.diff(at) == 1).all()):
+        return int(at[0])
+    return None
+
+
 def put_rows(out: np.ndarray, at: np.ndarray, values: np.ndarray) -> None:
     """``out[at] = values``, as a slice copy when ``at`` is a run of consecutive rows.
 
@@ -296,10 +304,54 @@ def put_rows(out: np.ndarray, at: np.ndarray, values: np.ndarray) -> None:
         Target rows.
     values : ndarray, shape (m, ...)
     """
-    if at.size and at[-1] - at[0] == at.size - 1 and (at.size < 2 or (np.diff(at) == 1).all()):
-        out[at[0] : at[0] + at.size] = values
+    first = run_start(at)
+    if first is not None:
+        out[first : first + at.size] = values
     else:
         out[at] = values
+
+
+def put_scaled_rows(out: np.ndarray, at: np.ndarray, values: np.ndarray, scale: float) -> None:
+    """``out[at] = values * scale`` (positions to mm), without a temporary for a run.
+
+    Parameters
+    ----------
+    out : ndarray, shape (n, 3)
+        Positions (mm).
+    at : ndarray of int, shape (m,)
+        Target rows.
+    values : ndarray, shape (m, 3)
+        Positions in the file's units (any strides).
+    scale : float
+        Millimetres per file unit.
+    """
+    first = run_start(at)
+    if first is not None:
+        np.multiply(values, scale, out=out[first : first + at.size])
+    else:
+        out[at] = values * scale
+
+
+def put_quat_rows(out: np.ndarray, at: np.ndarray, quat: np.ndarray) -> None:
+    """``out[at]`` = the rotation matrices of quaternions ``(w, x, y, z)``.
+
+    Written in place for a run of rows (no ``(m, 3, 3)`` temporary); the same bits as
+    :func:`~fingerfit.transforms.matrix_from_quat_wxyz`.
+
+    Parameters
+    ----------
+    out : ndarray, shape (n, 3, 3)
+        Rotations (sensor -> tracker).
+    at : ndarray of int, shape (m,)
+        Target rows.
+    quat : ndarray, shape (m, 4)
+        Scalar-first quaternions (any strides).
+    """
+    first = run_start(at)
+    if first is not None:
+        matrix_from_quat_wxyz(quat, out=out[first : first + at.size])
+    else:
+        out[at] = matrix_from_quat_wxyz(quat)
 
 
 def rows_where(codes: np.ndarray, k: int) -> slice | np.ndarray:

@@ -278,10 +278,14 @@ def sensor_missing_notes(recording: Recording) -> list[str]:
     """One note per sensor with missing frames: ``sensor 'x': k of n frames missing``."""
     out = []
     for name, pose in recording.poses.items():
-        missing = recording.n_frames - int(pose.valid.sum())
-        if missing:
-            out.append(f"sensor '{name}': {missing} of {recording.n_frames} frames missing")
+        out += missing_note(name, recording.n_frames - int(pose.valid.sum()), recording.n_frames)
     return out
+
+
+def missing_note(sensor: str, missing: int, n_frames: int) -> list[str]:
+    """The note of :func:`sensor_missing_notes` for one sensor (none when nothing is
+    missing), for a reader that counted the frames it left empty."""
+    return [f"sensor '{sensor}': {missing} of {n_frames} frames missing"] if missing else []
 
 
 def fill_gaps(recording: Recording, max_gap: int) -> Recording:

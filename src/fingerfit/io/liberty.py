@@ -40,18 +40,25 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
-from ..transforms import matrix_from_quat_wxyz
 from .atomic import atomic_write
-from .fastcsv import gap_rows, put_rows, quat_norm, row_blocks, rows_where
+from .fastcsv import (
+    gap_rows,
+    put_quat_rows,
+    put_rows,
+    put_scaled_rows,
+    quat_norm,
+    row_blocks,
+    rows_where,
+)
 from .hygiene import (
     check_grid_size,
     check_recording,
     frames_missing_note,
     implausible_message,
     implausible_rows,
+    missing_note,
     place_on_grid,
     repeated_rows,
-    sensor_missing_notes,
 )
 
 #: Number of values of each data item.
@@ -225,6 +232,15 @@ class LibertyRecords:
 def _read_bytes(path: str | Path) -> bytes:
     try:
         return Path(path).read_bytes()
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+
+
+def _read_array(path: str | Path) -> np.ndarray:
+    """The file's bytes as a uint8 array (NumPy's allocation: large pages where the
+    system has them, a fraction of the page faults of a ``bytes`` object)."""
+    try:
+        return np.fromfile(path, dtype=np.uint8)
     except OSError as exc:
         raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
 
@@ -675,20 +691,21 @@ def parse_liberty_binary(
         list, a truncated last record, a bad station, a non-finite value.
     """
     items_t = parse_items(items)
-    raw = _read_bytes(path) if data is None else data
+    raw = _read_array(path) if data is None else np.frombuffer(data, dtype=np.uint8)
+    head = raw[:8].tobytes()
     dt = _binary_dtype(items_t)
     body = dt.itemsize - 8
     if len(raw) < 8:
         raise FingerfitError(
             f"record 1 (byte 0): truncated header ({len(raw)} of 8 bytes)", path=path
         )
-    if raw[:2] not in _MAGIC:
+    if head[:2] not in _MAGIC:
         raise FingerfitError(
             f"record 1 (byte 0): not a Liberty/Patriot binary record (header "
-            f"{raw[:2]!r}, expected 'LY' or 'PA'; ASCII output? use the liberty format)",
+            f"{head[:2]!r}, expected 'LY' or 'PA'; ASCII output? use the liberty format)",
             path=path,
         )
-    size0 = int.from_bytes(raw[6:8], "little")
+    size0 = int.from_bytes(head[6:8], "little")
     if size0 != body:
         raise FingerfitError(
             f"record 1 (byte 0): body of {size0} bytes, but the output list "
@@ -697,13 +714,13 @@ def parse_liberty_binary(
         )
     n = len(raw) // dt.itemsize
     recs = np.frombuffer(raw, dtype=dt, count=n)
-    magic_bad = (recs["magic"] != raw[:2]) | (recs["size"] != size0)
+    magic_bad = (recs["magic"] != head[:2]) | (recs["size"] != size0)
     if magic_bad.any():
         k = int(np.flatnonzero(magic_bad)[0])
         r = recs[k]
         what = (
-            f"header {bytes(r['magic'])!r} instead of {raw[:2]!r}"
-            if r["magic"] != raw[:2]
+            f"header {bytes(r['magic'])!r} instead of {head[:2]!r}"
+            if r["magic"] != head[:2]
             else f"body size {int(r['size'])} instead of {size0}"
         )
         raise FingerfitError(
@@ -731,7 +748,7 @@ def parse_liberty_binary(
         np.arange(1, n + 1, dtype=np.int32 if n < 2**31 else np.int64),
         binary=True,
         record_size=dt.itemsize,
-        family=raw[:2].decode("ascii"),
+        family=head[:2].decode("ascii"),
     )
     first = _first_non_finite(out)
     if first is not None:
@@ -1051,6 +1068,7 @@ def records_to_recording(
         del e
     # Per station, a block of records at a time (bounded temporary memory).
     poses: dict[str, PoseSeries] = {}
+    missing: list[str] = []
     scol_sel = scol if every else scol[sel]
     for k, name in enumerate(names):
         # every frame is written once: by a record below or as a gap (NaN) at the end
@@ -1060,9 +1078,9 @@ def records_to_recording(
         for r in row_blocks(rows_k, _BLOCK):
             at = frame_of_rec[r]
             src = r if every else sel[r]
-            put_rows(pos, at, records.values["position"][src] * scale)
+            put_scaled_rows(pos, at, records.values["position"][src], scale)
             if "quaternion" in items:
-                put_rows(rot, at, matrix_from_quat_wxyz(records.values["quaternion"][src]))
+                put_quat_rows(rot, at, records.values["quaternion"][src])
             else:
                 put_rows(
                     rot,
@@ -1075,6 +1093,8 @@ def records_to_recording(
         if gap is not None:
             pos[gap] = np.nan
             rot[gap] = np.nan
+        # every record placed is finite (refused otherwise): the gaps are what is missing
+        missing += missing_note(name, 0 if gap is None else gap.size, n)
         poses[name] = PoseSeries(pos, rot)
     flagged = records.indicator if every else records.indicator[sel]
     flagged = flagged[flagged != ""]
@@ -1082,9 +1102,7 @@ def records_to_recording(
         notes.append(
             f"{int((flagged == ch).sum())} records with indicator '{ch}' after the station number"
         )
-    rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes)
-    rec.notes.extend(sensor_missing_notes(rec))
-    return rec
+    return Recording(path.name, np.asarray(time, dtype=float), poses, notes + missing)
 
 
 def read_liberty_ascii(

@@ -18,9 +18,9 @@ import pandas as pd
 
 from ..errors import FingerfitError, shown
 from ..session import PoseSeries, Recording, is_sensor_name
-from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
-from .fastcsv import put_rows, rows_where
-from .hygiene import check_grid_size, implausible_message, implausible_rows
+from ..transforms import quat_wxyz_from_matrix
+from .fastcsv import put_quat_rows, put_rows, put_scaled_rows, rows_where
+from .hygiene import check_grid_size, implausible_message, implausible_rows, missing_note
 
 HEADER = ("time", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz")
 _NUMERIC = ("time", "x", "y", "z", "qw", "qx", "qy", "qz")
@@ -424,13 +424,11 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
         c, p = code[lo:hi], pose[lo:hi]
         if not ok.all():
             c, f, p = c[ok], f[ok], p[ok]
-        r = matrix_from_quat_wxyz(p[:, 3:])
-        xyz = p[:, :3] * scale_to_mm
         for k in np.flatnonzero(np.bincount(c, minlength=len(rows.names))):
             m = rows_where(c, k)  # a strided slice when sensors take turns regularly
             fk = f[m]
-            put_rows(pos[int(k)], fk, xyz[m])
-            put_rows(rot[int(k)], fk, r[m])
+            put_scaled_rows(pos[int(k)], fk, p[m, :3], scale_to_mm)
+            put_quat_rows(rot[int(k)], fk, p[m, 3:])
             put_rows(filled[int(k)], fk, True)
     poses: dict[str, PoseSeries] = {}
     for k in appear:
@@ -440,9 +438,7 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
         p_k[gap] = np.nan
         r_k[gap] = np.nan
         poses[name] = PoseSeries(p_k, r_k)
-        missing = int(np.count_nonzero(gap))
-        if missing:
-            notes.append(f"sensor '{name}': {missing} of {n} frames missing")
+        notes += missing_note(name, int(np.count_nonzero(gap)), n)
     return Recording(path.name, frame_times, poses, notes)
 
 

@@ -32,16 +32,25 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
-from ..transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
-from .fastcsv import NotPlain, gap_rows, put_rows, quat_norm, read_header, row_blocks
+from ..transforms import quat_wxyz_from_matrix
+from .fastcsv import (
+    NotPlain,
+    gap_rows,
+    put_quat_rows,
+    put_rows,
+    put_scaled_rows,
+    quat_norm,
+    read_header,
+    row_blocks,
+)
 from .hygiene import (
     check_increasing,
     check_recording,
     frames_missing_note,
     implausible_message,
     implausible_rows,
+    missing_note,
     place_on_grid,
-    sensor_missing_notes,
 )
 from .posecsv import check_field_counts
 
@@ -507,6 +516,7 @@ def read_wide_csv(
 
     scale = UNITS_TO_MM[units]
     poses: dict[str, PoseSeries] = {}
+    missing: list[str] = []
     finite = np.isfinite(frame_vals)
     complete = finite.all(axis=2)
     partial_s = ~complete & finite.any(axis=2)
@@ -522,7 +532,7 @@ def read_wide_csv(
         for r in row_blocks(rows, _BLOCK):  # blocks bound the temporary memory
             fv = frame_vals[r, j]
             at = grid_idx[r]
-            put_rows(pos, at, fv[:, :3] * scale)
+            put_scaled_rows(pos, at, fv[:, :3], scale)
             if lay.orientation == _QUAT:
                 with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
                     norm = quat_norm(fv[:, 3:])
@@ -535,16 +545,17 @@ def read_wide_csv(
                         line=int(f_lines[np.arange(n_frames)[r][bad[0]]]),
                         field=_column(lay.columns["qw"], stations[j]),
                     )
-                put_rows(rot, at, matrix_from_quat_wxyz(fv[:, 3:]))
+                put_quat_rows(rot, at, fv[:, 3:])
             else:
                 put_rows(rot, at, Rotation.from_euler("ZYX", fv[:, 3:], degrees=True).as_matrix())
         gap = gap_rows(n, [grid_idx[rows]])
         if gap is not None:
             pos[gap] = np.nan
             rot[gap] = np.nan
+        # only complete (finite) samples are placed: the gaps are what is missing
+        missing += missing_note(name, 0 if gap is None else gap.size, n)
         poses[name] = PoseSeries(pos, rot)
-    rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes)
-    rec.notes.extend(sensor_missing_notes(rec))
+    rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes + missing)
     if check:
         check_recording(rec, path)
     return rec
