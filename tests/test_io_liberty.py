@@ -8,6 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fingerfit.errors import FingerfitError
+from fingerfit.io import liberty
 from fingerfit.io.liberty import (
     LibertyRecords,
     format_liberty_ascii,
@@ -378,3 +379,38 @@ def test_random_binary_corruptions_end_in_a_clear_error(tmp_path, recs, cut, fli
         assert str(err).startswith(f"{path}: record ")
     else:  # pragma: no cover - the assertion below reports it
         pytest.fail("a corrupted binary stream was read without an error")
+
+
+@pytest.mark.parametrize("records_per_block", [1, 3, 7, 1000])
+def test_binary_blocks_give_the_whole_file_and_name_the_record(
+    tmp_path, monkeypatch, records_per_block
+) -> None:
+    """The binary parse converts a block of records at a time into its arrays: any block
+    size gives the same records, from a file or from bytes, and a garbled record in a
+    later block is named by its own number and byte."""
+    recs = make_records(5, items=("position", "quaternion", "frame"))
+    raw = liberty_binary_bytes(recs)
+    size = len(raw) // recs.n_records
+    (tmp_path / "r.bin").write_bytes(raw)
+    whole = parse_liberty_binary(tmp_path / "r.bin", "2,7,9")
+    monkeypatch.setattr(liberty, "_BINARY_BLOCK_BYTES", records_per_block * size)
+    for got in (
+        parse_liberty_binary(tmp_path / "r.bin", "2,7,9"),
+        parse_liberty_binary("r.bin", "2,7,9", data=raw),
+    ):
+        assert np.array_equal(got.station, whole.station)
+        assert np.array_equal(got.indicator, whole.indicator)
+        for item in whole.items:
+            assert np.array_equal(got.values[item], whole.values[item])
+            assert got.values[item].dtype == np.float64
+    k = 8  # record 9: in the third block of 3, the second of 7, the first of 1000
+    bad = (
+        raw[: k * size]
+        + b"LY"
+        + raw[k * size + 2 : k * size + 6]
+        + b"\x00\x00"
+        + raw[k * size + 8 :]
+    )
+    (tmp_path / "bad.bin").write_bytes(bad)
+    with pytest.raises(FingerfitError, match=rf"record 9 \(byte {k * size}\): body size 0 "):
+        parse_liberty_binary(tmp_path / "bad.bin", "2,7,9")

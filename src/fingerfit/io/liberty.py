@@ -29,8 +29,10 @@ from __future__ import annotations
 
 import csv
 import io
+import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -236,13 +238,45 @@ def _read_bytes(path: str | Path) -> bytes:
         raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
 
 
-def _read_array(path: str | Path) -> np.ndarray:
-    """The file's bytes as a uint8 array (NumPy's allocation: large pages where the
-    system has them, a fraction of the page faults of a ``bytes`` object)."""
+#: Bytes of binary records converted per block.
+_BINARY_BLOCK_BYTES = 1 << 20
+
+
+@contextmanager
+def _binary_source(
+    path: str | Path, data: bytes | None
+) -> Iterator[tuple[int, Callable[[np.ndarray, int], np.ndarray]]]:
+    """The size of a file (or of ``data``) and a function that fills a uint8 buffer
+    from a byte offset and returns it (a view of ``data`` when given)."""
+    if data is not None:
+        whole = np.frombuffer(data, dtype=np.uint8)
+
+        def from_data(buf: np.ndarray, offset: int) -> np.ndarray:
+            return whole[offset : offset + buf.size]
+
+        yield whole.size, from_data
+        return
     try:
-        return np.fromfile(path, dtype=np.uint8)
+        fh = open(path, "rb")  # closed by the with below
     except OSError as exc:
         raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    with fh:
+        size = os.fstat(fh.fileno()).st_size
+
+        def from_file(buf: np.ndarray, offset: int) -> np.ndarray:
+            try:
+                fh.seek(offset)
+                got = fh.readinto(memoryview(buf))
+            except OSError as exc:
+                raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+            if got != buf.size:
+                raise FingerfitError(
+                    f"cannot read: the file changed while it was read (byte {offset + got})",
+                    path=path,
+                )
+            return buf
+
+        yield size, from_file
 
 
 def _line_of(b: np.ndarray, positions: np.ndarray) -> np.ndarray:
@@ -691,64 +725,74 @@ def parse_liberty_binary(
         list, a truncated last record, a bad station, a non-finite value.
     """
     items_t = parse_items(items)
-    raw = _read_array(path) if data is None else np.frombuffer(data, dtype=np.uint8)
-    head = raw[:8].tobytes()
     dt = _binary_dtype(items_t)
     body = dt.itemsize - 8
-    if len(raw) < 8:
-        raise FingerfitError(
-            f"record 1 (byte 0): truncated header ({len(raw)} of 8 bytes)", path=path
-        )
-    if head[:2] not in _MAGIC:
-        raise FingerfitError(
-            f"record 1 (byte 0): not a Liberty/Patriot binary record (header "
-            f"{head[:2]!r}, expected 'LY' or 'PA'; ASCII output? use the liberty format)",
-            path=path,
-        )
-    size0 = int.from_bytes(head[6:8], "little")
-    if size0 != body:
-        raise FingerfitError(
-            f"record 1 (byte 0): body of {size0} bytes, but the output list "
-            f"({', '.join(items_t)}) needs {body} (wrong --items?)",
-            path=path,
-        )
-    n = len(raw) // dt.itemsize
-    recs = np.frombuffer(raw, dtype=dt, count=n)
-    magic_bad = (recs["magic"] != head[:2]) | (recs["size"] != size0)
-    if magic_bad.any():
-        k = int(np.flatnonzero(magic_bad)[0])
-        r = recs[k]
-        what = (
-            f"header {bytes(r['magic'])!r} instead of {head[:2]!r}"
-            if r["magic"] != head[:2]
-            else f"body size {int(r['size'])} instead of {size0}"
-        )
-        raise FingerfitError(
-            f"record {k + 1} (byte {k * dt.itemsize}): {what} (garbled or misaligned record)",
-            path=path,
-        )
-    rest = len(raw) - n * dt.itemsize
+    with _binary_source(path, data) as (size, read_into):
+        head_b = read_into(np.empty(min(size, 8), dtype=np.uint8), 0).tobytes()
+        if size < 8:
+            raise FingerfitError(
+                f"record 1 (byte 0): truncated header ({size} of 8 bytes)", path=path
+            )
+        if head_b[:2] not in _MAGIC:
+            raise FingerfitError(
+                f"record 1 (byte 0): not a Liberty/Patriot binary record (header "
+                f"{head_b[:2]!r}, expected 'LY' or 'PA'; ASCII output? use the liberty format)",
+                path=path,
+            )
+        size0 = int.from_bytes(head_b[6:8], "little")
+        if size0 != body:
+            raise FingerfitError(
+                f"record 1 (byte 0): body of {size0} bytes, but the output list "
+                f"({', '.join(items_t)}) needs {body} (wrong --items?)",
+                path=path,
+            )
+        n = size // dt.itemsize
+        # read a block of records at a time into one reused buffer, converting into the
+        # final arrays: no copy of the whole file in memory
+        values = {item: np.empty((n, *dt[item].shape)) for item in items_t}
+        station = np.empty(n, dtype=np.int16)
+        err = np.empty(n, dtype=np.uint8)
+        block = max(1, _BINARY_BLOCK_BYTES // dt.itemsize)
+        buf = np.empty(min(n, block) * dt.itemsize, dtype=np.uint8)
+        for lo in range(0, n, block):
+            m = min(block, n - lo)
+            recs = read_into(buf[: m * dt.itemsize], lo * dt.itemsize).view(dt)
+            magic_bad = (recs["magic"] != head_b[:2]) | (recs["size"] != size0)
+            if magic_bad.any():
+                k = int(np.flatnonzero(magic_bad)[0])
+                r = recs[k]
+                what = (
+                    f"header {bytes(r['magic'])!r} instead of {head_b[:2]!r}"
+                    if r["magic"] != head_b[:2]
+                    else f"body size {int(r['size'])} instead of {size0}"
+                )
+                k += lo
+                raise FingerfitError(
+                    f"record {k + 1} (byte {k * dt.itemsize}): {what} (garbled or misaligned "
+                    "record)",
+                    path=path,
+                )
+            for item in items_t:
+                values[item][lo : lo + m] = recs[item]  # exact float32 -> float64
+            station[lo : lo + m] = recs["station"]
+            err[lo : lo + m] = recs["error"]
+        del buf
+    rest = size - n * dt.itemsize
     if rest:
         raise FingerfitError(
             f"record {n + 1} (byte {n * dt.itemsize}): truncated ({rest} of {dt.itemsize} bytes)",
             path=path,
         )
-    values: dict[str, np.ndarray] = {}
-    for item in items_t:
-        v = recs[item].astype(float)
-        values[item] = v
-    err = recs["error"]
     chars = np.array([""] + [chr(c) for c in range(1, 256)])  # error byte 0: no indicator
-    indicator = chars[err]
     out = LibertyRecords(
         items_t,
-        recs["station"].astype(np.int16),
+        station,
         values,
-        indicator.astype(str),
+        chars[err],
         np.arange(1, n + 1, dtype=np.int32 if n < 2**31 else np.int64),
         binary=True,
         record_size=dt.itemsize,
-        family=head[:2].decode("ascii"),
+        family=head_b[:2].decode("ascii"),
     )
     first = _first_non_finite(out)
     if first is not None:
