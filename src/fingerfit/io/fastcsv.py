@@ -321,10 +321,11 @@ def put_scaled_rows(out: np.ndarray, at: np.ndarray, values: np.ndarray, scale: 
     at : ndarray of int, shape (m,)
         Target rows.
     values : ndarray, shape (m, 3)
-        Positions in the file's units (any strides).
+        Positions in the file's units (any strides; float32 is taken as float64 first).
     scale : float
         Millimetres per file unit.
     """
+    values = np.asarray(values, dtype=np.float64)
     first = run_start(at)
     if first is not None:
         np.multiply(values, scale, out=out[first : first + at.size])

@@ -88,18 +88,21 @@ def implausible_rows(values: np.ndarray, scale_to_mm: float = 1.0) -> np.ndarray
     ndarray of int
         Indices of the offending rows, in order.
     """
-    v = np.asarray(values, dtype=float)
+    v = np.asarray(values)
+    if v.dtype not in (np.float32, np.float64):
+        v = v.astype(float)
     if v.ndim == 1:
         v = v[:, None]
     columns = [(slice(None), *k) for k in np.ndindex(v.shape[1:])]
     if not columns:
         return np.zeros(0, dtype=np.int64)
-    # Largest magnitude per row, NaN ignored, one column at a time (no (n, ...) copies).
+    # Largest magnitude per row, NaN ignored, one column at a time (no (n, ...) copies);
+    # exact in float32 too, which is scaled as float64 like the values will be.
     peak = np.abs(v[columns[0]])
     for k in columns[1:]:
         np.fmax(peak, np.abs(v[k]), out=peak)
     with np.errstate(over="ignore", invalid="ignore"):
-        return np.flatnonzero(peak * abs(scale_to_mm) > MAX_COORDINATE_MM)
+        return np.flatnonzero(peak.astype(float, copy=False) * abs(scale_to_mm) > MAX_COORDINATE_MM)
 
 
 def implausible_message(value: float) -> str:

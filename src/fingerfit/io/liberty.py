@@ -167,7 +167,9 @@ class LibertyRecords:
         Per item, in device units: ``position`` ``(n, 3)`` (file units),
         ``euler`` ``(n, 3)`` degrees (azimuth, elevation, roll), ``quaternion``
         ``(n, 4)`` scalar first ``(w, x, y, z)``, ``timestamp`` ``(n,)`` ms and
-        ``frame`` ``(n,)`` counts (integer valued floats).
+        ``frame`` ``(n,)`` counts (integer valued floats). float64, except position,
+        Euler angles and quaternion from a binary stream: float32 as sent (exact; use
+        them as float64, e.g. ``np.asarray(v, dtype=float)``, before any arithmetic).
     indicator : ndarray of str, shape (n_records,)
         Indicator character after the station number (ASCII) or the error byte
         (binary) as a character; ``""`` when none.
@@ -749,7 +751,14 @@ def parse_liberty_binary(
         n = size // dt.itemsize
         # read a block of records at a time into one reused buffer, converting into the
         # final arrays: no copy of the whole file in memory
-        values = {item: np.empty((n, *dt[item].shape)) for item in items_t}
+        # float items stay float32 as sent (half the memory; converted to float64 a
+        # block at a time where they are used); counts become float64
+        values = {
+            item: np.empty(
+                (n, *dt[item].shape), dtype=np.float64 if item in _INT_ITEMS else np.float32
+            )
+            for item in items_t
+        }
         station = np.empty(n, dtype=np.int16)
         err = np.empty(n, dtype=np.uint8)
         block = max(1, _BINARY_BLOCK_BYTES // dt.itemsize)
@@ -773,7 +782,7 @@ def parse_liberty_binary(
                     path=path,
                 )
             for item in items_t:
-                values[item][lo : lo + m] = recs[item]  # exact float32 -> float64
+                values[item][lo : lo + m] = recs[item]  # counts: exact uint32 -> float64
             station[lo : lo + m] = recs["station"]
             err[lo : lo + m] = recs["error"]
         del buf
@@ -1083,21 +1092,22 @@ def records_to_recording(
         )
     if "quaternion" in items:
         q = taken("quaternion")
-        with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
-            norm = quat_norm(q)
-        bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
-        if bad.size:
-            i = int(sel[bad[0]])
-            raise records.error(
-                f"quaternion (w,x,y,z) has norm {norm[bad[0]]:.6g}, not 1 (wrong --items?)",
-                i,
-                path,
-            )
-        del norm, q
+        for r in row_blocks(slice(0, q.shape[0]), _BLOCK):  # float64 a block at a time
+            with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
+                norm = quat_norm(np.asarray(q[r], dtype=float))
+            bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
+            if bad.size:
+                i = int(sel[r.start + bad[0]])
+                raise records.error(
+                    f"quaternion (w,x,y,z) has norm {norm[bad[0]]:.6g}, not 1 (wrong --items?)",
+                    i,
+                    path,
+                )
+        del q
         if "euler" in items:
             notes.append("orientation from the quaternion item (Euler angles not used)")
     else:
-        e = taken("euler")
+        e = np.asarray(taken("euler"), dtype=float)
         wild = np.flatnonzero((np.abs(e) > MAX_EULER_DEG).any(axis=1))
         if wild.size:
             i = int(sel[wild[0]])
@@ -1130,7 +1140,7 @@ def records_to_recording(
                     rot,
                     at,
                     Rotation.from_euler(
-                        "ZYX", records.values["euler"][src], degrees=True
+                        "ZYX", np.asarray(records.values["euler"][src], dtype=float), degrees=True
                     ).as_matrix(),
                 )
         gap = gap_rows(n, [frame_of_rec[rows_k]])
