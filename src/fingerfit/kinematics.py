@@ -518,20 +518,36 @@ def _weights(reference: FloatArray, mats: list[FloatArray]) -> FloatArray:
 
 def _half_angle(y: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``theta = 2 atan2(y, x)`` with its cosine and sine (1 and 0 where ``x = y = 0``)."""
-    r2 = x * x + y * y
-    ok = r2 != 0.0
-    cos = np.divide(x * x - y * y, r2, out=np.ones_like(r2), where=ok)
-    sin = np.divide(2.0 * x * y, r2, out=np.zeros_like(r2), where=ok)
-    return 2.0 * np.arctan2(y, x), cos, sin
+    xx, yy = x * x, y * y
+    r2 = xx + yy
+    cos = np.subtract(xx, yy, out=xx)
+    sin = np.multiply(x, 2.0, out=yy)
+    sin *= y
+    with np.errstate(divide="ignore", invalid="ignore"):  # x = y = 0: set below
+        cos /= r2
+        sin /= r2
+    _no_angle(r2, cos, sin)
+    theta = np.arctan2(y, x)
+    theta *= 2.0
+    return theta, cos, sin
 
 
 def _full_angle(y: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``beta = atan2(y, x)`` with its cosine and sine (1 and 0 where ``x = y = 0``)."""
     h = np.hypot(x, y)
-    ok = h != 0.0
-    cos = np.divide(x, h, out=np.ones_like(h), where=ok)
-    sin = np.divide(y, h, out=np.zeros_like(h), where=ok)
+    with np.errstate(divide="ignore", invalid="ignore"):  # x = y = 0: set below
+        cos = x / h
+        sin = y / h
+    _no_angle(h, cos, sin)
     return np.arctan2(y, x), cos, sin
+
+
+def _no_angle(r: FloatArray, cos: FloatArray, sin: FloatArray) -> None:
+    """Cosine 1 and sine 0 where the radius ``r`` is zero (no direction, angle 0)."""
+    zero = r == 0.0
+    if zero.any():
+        cos[zero] = 1.0
+        sin[zero] = 0.0
 
 
 @dataclass(frozen=True)
@@ -677,15 +693,10 @@ class KinematicsPlan:
                     y, centre = _chain(chain["steps"], cs[v], chain["stacked"])
                     local = (rot @ y.reshape(3, -1)).reshape(y.shape)
                     local += (r0t @ (centre - self.p0[:, None]))[:, None, :]
+                    world = np.einsum("ijm,jkm->kim", h.reshape(3, 3, -1), local)
+                    world += hp
                     for k, name in enumerate(chain["points"]):
-                        block = points[v][f][name][s:e]
-                        lk = local[:, k]
-                        for i in range(3):
-                            o = block[:, i]
-                            o[:] = h[3 * i] * lk[0]
-                            o += h[3 * i + 1] * lk[1]
-                            o += h[3 * i + 2] * lk[2]
-                            o += hp[i]
+                        points[v][f][name][s:e] = world[k].T
         motions = {
             v: {
                 f: FingerMotion(angles[v][f], points[v][f]["tip"], points[v][f].get("pad"))
