@@ -242,3 +242,31 @@ def test_write_table_round_trip_and_atomic(tmp_path):
     with pytest.raises(FingerfitError, match="cannot write as CSV"):
         write_table(tmp_path / "u.csv", {"s": np.array(["a,b"], dtype=object)})
     assert sorted(tmp_path.iterdir()) == before
+
+
+def test_write_table_parallel_batches_are_the_one_batch_bytes(tmp_path, monkeypatch):
+    """Batches are formatted in threads and written in order: the file is the same bytes
+    as one batch on one thread, the progress counts every row once, and an error in a
+    later batch leaves nothing behind."""
+    import fingerfit.io.fastcsv as fastcsv
+
+    rng = np.random.default_rng(1)
+    n = 1000
+    x = rng.standard_normal(n) * 10.0 ** rng.integers(-20, 20, n)
+    x[::97] = np.nan
+    names = np.array(["hand", "index_proximal", "stylus"], dtype=object)[rng.integers(0, 3, n)]
+    table = {"time": np.arange(n) / 240.0, "x": x, "sensor": names, "k": np.arange(n)}
+    monkeypatch.setattr(fastcsv, "WRITE_ROWS", 10**9)
+    monkeypatch.setattr(fastcsv, "_WRITE_THREADS", 1)
+    one = write_table(tmp_path / "one.csv", table).read_bytes()
+    monkeypatch.setattr(fastcsv, "WRITE_ROWS", 37)
+    monkeypatch.setattr(fastcsv, "_WRITE_THREADS", 3)
+    seen: list[int] = []
+    many = write_table(tmp_path / "many.csv", table, progress=seen.append).read_bytes()
+    assert many == one and one.count(b"\n") == n + 1
+    assert sum(seen) == n and len(seen) == -(-n // 37)
+    bad = dict(table, sensor=np.where(np.arange(n) == 900, "a,b", names))  # batch 25 of 28
+    before = sorted(tmp_path.iterdir())
+    with pytest.raises(FingerfitError, match="cannot write as CSV"):
+        write_table(tmp_path / "bad.csv", bad)
+    assert sorted(tmp_path.iterdir()) == before

@@ -17,7 +17,10 @@ field, and the file appears complete or not at all (:func:`fingerfit.io.atomic.a
 
 from __future__ import annotations
 
+import os
+from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -460,16 +463,41 @@ def write_table(
         return pa.RecordBatch.from_arrays(arrays, names=list(columns))
 
     opts = pacsv.WriteOptions(quoting_style="none", quoting_header="none")
+    rows_only = pacsv.WriteOptions(
+        include_header=False, quoting_style="none", quoting_header="none"
+    )
+
+    def formatted(lo: int, hi: int) -> tuple[int, object]:
+        # Arrow formats without the interpreter lock: batches format in parallel
+        sink = pa.BufferOutputStream()
+        pacsv.write_csv(batch(lo, hi), sink, write_options=rows_only)
+        return hi - lo, sink.getvalue()
+
     with atomic_path(path) as tmp:
         try:
-            with open(tmp, "wb") as fh:
-                schema = batch(0, 0).schema
-                with pacsv.CSVWriter(fh, schema, write_options=opts) as writer:
-                    for lo in range(0, max(n, 1), WRITE_ROWS):
-                        hi = min(lo + WRITE_ROWS, n)
-                        writer.write_batch(batch(lo, hi))
-                        if progress is not None:
-                            progress(hi - lo)
+            with open(tmp, "wb") as fh, ThreadPoolExecutor(_WRITE_THREADS) as pool:
+                header = pa.BufferOutputStream()
+                pacsv.write_csv(batch(0, 0), header, write_options=opts)
+                fh.write(header.getvalue())
+                pending: deque = deque()
+                for lo in range(0, n, WRITE_ROWS):
+                    pending.append(pool.submit(formatted, lo, min(lo + WRITE_ROWS, n)))
+                    if len(pending) > _WRITE_THREADS:  # at most one batch waiting
+                        _write_next(fh, pending, progress)
+                while pending:
+                    _write_next(fh, pending, progress)
         except pa.ArrowInvalid as exc:
             raise FingerfitError(f"cannot write as CSV: {exc}", path=path) from None
     return path
+
+
+#: Threads formatting batches of :func:`write_table` (written in order, one at a time).
+_WRITE_THREADS = max(1, min(4, os.cpu_count() or 1))
+
+
+def _write_next(fh, pending: deque, progress: Callable[[int], None] | None) -> None:
+    """Write the oldest formatted batch (waiting for it) and report its rows."""
+    rows, data = pending.popleft().result()
+    fh.write(data)
+    if progress is not None:
+        progress(rows)
