@@ -30,8 +30,11 @@ from ..transforms import matrix_from_quat_wxyz
 
 #: Bytes of file parsed per batch.
 CHUNK_BYTES = 1 << 22
-#: Rows written per batch.
+#: Rows written per batch at most.
 WRITE_ROWS = 1 << 18
+#: Bytes of text per written batch, about (a wide table's batches have fewer rows): the
+#: batches in flight, formatted but not yet written, stay a few of these.
+WRITE_BYTES = 1 << 22
 
 
 class NotPlain(Exception):
@@ -480,8 +483,10 @@ def write_table(
                 pacsv.write_csv(batch(0, 0), header, write_options=opts)
                 fh.write(header.getvalue())
                 pending: deque = deque()
-                for lo in range(0, n, WRITE_ROWS):
-                    pending.append(pool.submit(formatted, lo, min(lo + WRITE_ROWS, n)))
+                # about 24 bytes of text per number
+                step = min(WRITE_ROWS, max(1024, WRITE_BYTES // (24 * max(1, len(columns)))))
+                for lo in range(0, n, step):
+                    pending.append(pool.submit(formatted, lo, min(lo + step, n)))
                     if len(pending) > _WRITE_THREADS:  # at most one batch waiting
                         _write_next(fh, pending, progress)
                 while pending:

@@ -1,0 +1,51 @@
+"""Quaternions from rotation matrices against scipy's ``Rotation.from_matrix``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fingerfit.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+
+
+def _scipy_wxyz(matrix: np.ndarray) -> np.ndarray:
+    xyzw = Rotation.from_matrix(matrix).as_quat()  # scipy: scalar last
+    wxyz = np.concatenate([xyzw[:, 3:], xyzw[:, :3]], axis=1)
+    return wxyz * np.where(wxyz[:, :1] < 0, -1.0, 1.0)
+
+
+def test_quat_from_matrix_is_scipys_to_rounding_on_every_branch():
+    rng = np.random.default_rng(7)
+    axes = rng.normal(size=(400, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate(
+        [
+            rng.uniform(0, np.pi, 100),  # any
+            rng.uniform(0, 1e-9, 100),  # near identity: w largest
+            np.pi - rng.uniform(0, 1e-9, 100),  # near 180 degrees: x, y or z largest
+            np.full(100, np.pi),  # w = 0 exactly
+        ]
+    )
+    m = Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
+    m = np.concatenate([m, Rotation.random(5000, random_state=8).as_matrix()])
+    got = quat_wxyz_from_matrix(m)
+    assert np.abs(got - _scipy_wxyz(m)).max() <= 4.5e-16
+    assert (got[:, 0] >= 0).all()
+    assert np.abs(np.linalg.norm(got, axis=1) - 1).max() <= 4.5e-16
+    assert np.abs(matrix_from_quat_wxyz(got) - m).max() <= 2e-15
+    # every branch of the method was taken
+    d = np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], np.trace(m, axis1=1, axis2=2)])
+    assert set(np.argmax(d, axis=0).tolist()) == {0, 1, 2, 3}
+
+
+def test_quat_from_matrix_nan_rows_single_and_reflections():
+    m = Rotation.random(4, random_state=2).as_matrix()
+    m[1, 0, 2] = np.nan
+    m[2, 1, 1] = np.inf
+    got = quat_wxyz_from_matrix(m)
+    assert np.isnan(got[[1, 2]]).all() and np.isfinite(got[[0, 3]]).all()
+    assert np.array_equal(quat_wxyz_from_matrix(m[3]), got[3])
+    assert np.array_equal(quat_wxyz_from_matrix(np.eye(3)), [1.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"non-positive determinant .* rotation matrix 1"):
+        quat_wxyz_from_matrix(np.stack([np.eye(3), np.diag([1.0, 1.0, -1.0])]))
