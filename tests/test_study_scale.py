@@ -198,3 +198,84 @@ def test_a_dask_worker_does_not_keep_the_results_read(tmp_path) -> None:
         )
     assert len(held) == 3
     assert held == [1, 1, 1], held  # before: 1, 2, 3 (every result kept)
+
+
+def _cohort(n_subjects: int, per: int = 7, seed: int = 3) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    return pd.DataFrame(
+        {
+            "subject": np.repeat([f"S{i:04d}" for i in range(n_subjects)], per),
+            "user_axis": rng.gamma(2.0, 1.0, n_subjects * per),
+            "orthogonal": rng.gamma(3.0, 1.0, n_subjects * per),
+        }
+    )
+
+
+def test_large_cohort_boxes_are_collections_with_boxplot_statistics() -> None:
+    """Beyond SUMMARY_ABOVE groups a box plot is a few collections: the same number of
+    artists for 100 and 1000 subjects, and the boxes, medians and whiskers drawn are
+    matplotlib's boxplot statistics of each subject's values (1.5 IQR whiskers)."""
+    from matplotlib.cbook import boxplot_stats
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    counts = []
+    for n in (figs.SUMMARY_ABOVE + 40, 1000):
+        data = _cohort(n)
+        fig = figs.make_paired_boxes(data, "subject", "t", "mm")
+        try:
+            ax = fig.axes[0]
+            counts.append(len(ax.get_children()))
+            polys = [c for c in ax.collections if isinstance(c, PolyCollection)]
+            lines = [c for c in ax.collections if isinstance(c, LineCollection)]
+            assert len(polys) == len(lines) == 2  # one of each per model
+            for src, poly, line in zip(("user_axis", "orthogonal"), polys, lines, strict=True):
+                stats = [boxplot_stats(g[src].to_numpy())[0] for _, g in data.groupby("subject")]
+                boxes = np.array([p.vertices[:4] for p in poly.get_paths()])
+                assert np.allclose(boxes[:, 0, 1], [s["q1"] for s in stats])
+                assert np.allclose(boxes[:, 2, 1], [s["q3"] for s in stats])
+                q = np.quantile(data.loc[data.subject == "S0007", src], [0.25, 0.75])
+                assert np.allclose(boxes[7, [0, 2], 1], q)  # and those are the quartiles
+                segs = line.get_segments()
+                assert np.allclose([g[0, 1] for g in segs[:n]], [s["whislo"] for s in stats])
+                assert np.allclose([g[1, 1] for g in segs[n : 2 * n]], [s["whishi"] for s in stats])
+                assert np.allclose([g[0, 1] for g in segs[2 * n :]], [s["med"] for s in stats])
+            points = [ln for ln in ax.lines if len(ln.get_xdata())]
+            assert sum(len(ln.get_ydata()) for ln in points) == 2 * len(data)  # every value
+        finally:
+            plt.close(fig)
+    assert counts[0] == counts[1]  # nothing per subject
+
+
+def test_small_cohort_boxes_are_matplotlib_boxplots() -> None:
+    data = _cohort(figs.SUMMARY_ABOVE)
+    fig = figs.make_paired_boxes(data, "subject", "t", "mm")
+    try:
+        ax = fig.axes[0]
+        assert not ax.collections  # matplotlib's own boxes (patches), as before
+        assert len(ax.patches) == 2 * figs.SUMMARY_ABOVE
+    finally:
+        plt.close(fig)
+
+
+def test_axis_quality_of_a_large_cohort_draws_nothing_per_subject() -> None:
+    rng = np.random.default_rng(4)
+    counts = []
+    for n in (figs.SUMMARY_ABOVE + 1, 600):
+        joints = ["dip", "pip", "mp", "cmc", "mcp", "ip"]
+        d = pd.DataFrame(
+            {
+                "subject": np.repeat([f"S{i:04d}" for i in range(n)], 6 * 5),
+                "finger": "index",
+                "joint": np.tile(np.repeat(joints, 5), n),
+                "distance_mm": rng.gamma(2.0, 0.5, n * 30),
+            }
+        )
+        d.loc[::11, "distance_mm"] = 25.0  # outliers, drawn as fliers
+        fig = figs.make_axis_quality(d)
+        try:
+            counts.append([len(ax.get_children()) for ax in fig.axes])
+            fliers = sum(len(ln.get_ydata()) for ax in fig.axes for ln in ax.lines)
+            assert fliers >= (d.distance_mm == 25.0).sum() * 0.9
+        finally:
+            plt.close(fig)
+    assert counts[0] == counts[1]

@@ -72,6 +72,76 @@ def _tick_labels(ax, labels: list[str], axis_len_in: float) -> None:
     )
 
 
+#: Above this many groups a box plot is drawn as a few collections (boxes, whiskers,
+#: medians, points) instead of matplotlib's artists per box: the same statistics, and a
+#: drawing whose memory and time grow with the numbers only (about 260 KB per subject
+#: before, in the worker that draws Figs. 8 and 10). 60 is where groups begin to share
+#: the figure's width (:data:`MAX_WIDTH_IN`).
+SUMMARY_ABOVE = 60
+
+
+def _boxes(
+    ax,
+    data: list[np.ndarray],
+    positions: np.ndarray,
+    width: float,
+    color: str,
+    alpha: float,
+    fliers: bool,
+) -> None:
+    """Box plots of ``data`` (one array per group) at ``positions``: matplotlib's
+    ``boxplot`` for a few groups; beyond :data:`SUMMARY_ABOVE`, the same statistics
+    (``matplotlib.cbook.boxplot_stats``: quartiles, whiskers at 1.5 IQR, outliers) as one
+    box collection, one line collection and one marker line."""
+    if len(data) <= SUMMARY_ABOVE:
+        bp = ax.boxplot(
+            data, positions=positions, widths=width, patch_artist=True, showfliers=fliers
+        )
+        for b in bp["boxes"]:
+            b.set_facecolor(color)
+            b.set_alpha(alpha)
+        return
+    from matplotlib.cbook import boxplot_stats
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    stats = [
+        (x, st) for x, v in zip(positions, data, strict=True) if len(v) for st in boxplot_stats(v)
+    ]
+    if not stats:
+        return
+    x = np.array([p for p, _ in stats])
+    q1, q3, med, lo, hi = (
+        np.array([st[k] for _, st in stats]) for k in ("q1", "q3", "med", "whislo", "whishi")
+    )
+    h = width / 2
+    boxes = np.stack(
+        [
+            np.stack([x - h, q1], 1),
+            np.stack([x + h, q1], 1),
+            np.stack([x + h, q3], 1),
+            np.stack([x - h, q3], 1),
+        ],
+        axis=1,
+    )
+    ax.add_collection(
+        PolyCollection(boxes, facecolors=color, edgecolors="k", linewidths=0.5, alpha=alpha)
+    )
+    lines = np.concatenate(
+        [
+            np.stack([np.stack([x, lo], 1), np.stack([x, q1], 1)], 1),  # lower whiskers
+            np.stack([np.stack([x, q3], 1), np.stack([x, hi], 1)], 1),  # upper whiskers
+            np.stack([np.stack([x - h, med], 1), np.stack([x + h, med], 1)], 1),  # medians
+        ]
+    )
+    ax.add_collection(LineCollection(lines, colors="k", linewidths=0.6))
+    if fliers:
+        fx = np.concatenate([np.full(len(st["fliers"]), p) for p, st in stats])
+        fy = np.concatenate([np.asarray(st["fliers"], dtype=float) for _, st in stats])
+        ax.plot(fx, fy, "o", ms=2, mfc="none", mec="k", mew=0.4)
+    ax.set_xlim(min(ax.get_xlim()[0], x.min() - 1), max(ax.get_xlim()[1], x.max() + 1))
+    ax.autoscale_view()
+
+
 def make_axis_quality(distances: pd.DataFrame) -> Figure:
     """Fig. 8: distance of each cycle's centre of rotation to the fitted axis, per subject.
 
@@ -105,12 +175,7 @@ def make_axis_quality(distances: pd.DataFrame) -> Figure:
             sel = distances[distances["joint"] == j]
             data = [sel.loc[sel["subject"] == s, "distance_mm"].dropna() for s in subjects]
             pos = np.arange(len(subjects)) + (k - (len(joints) - 1) / 2) * width
-            bp = ax.boxplot(
-                data, positions=pos, widths=width * 0.9, patch_artist=True, showfliers=True
-            )
-            for b in bp["boxes"]:
-                b.set_facecolor(colors[j])
-                b.set_alpha(0.6)
+            _boxes(ax, data, pos, width * 0.9, colors[j], 0.6, fliers=True)
             ax.plot([], [], "s", color=colors[j], label=j.upper())
         _tick_labels(ax, subjects, width_in / len(panels) - 1)
         ax.set_xlabel("subject")
@@ -184,13 +249,16 @@ def make_paired_boxes(
     for k, src in enumerate(("user_axis", "orthogonal")):
         vals = [data.loc[data[by] == g, src].dropna() for g in groups]
         pos = np.arange(len(groups)) + (k - 0.5) * 0.38
-        bp = ax.boxplot(vals, positions=pos, widths=0.33, patch_artist=True, showfliers=False)
-        for b in bp["boxes"]:
-            b.set_facecolor(COLORS[src])
-            b.set_alpha(0.4)
-        for x, v in zip(pos, vals, strict=True):  # every value, so small n stays readable
-            jitter = np.linspace(-0.08, 0.08, len(v)) if len(v) > 1 else np.zeros(len(v))
-            ax.plot(x + jitter, v, "o", ms=3, color=COLORS[src], mec="k", mew=0.3)
+        _boxes(ax, vals, pos, 0.33, COLORS[src], 0.4, fliers=False)
+        # every value, so small n stays readable (one artist for all groups beyond a few)
+        spread = [
+            (x + (np.linspace(-0.08, 0.08, len(v)) if len(v) > 1 else np.zeros(len(v))), v)
+            for x, v in zip(pos, vals, strict=True)
+        ]
+        if len(vals) > SUMMARY_ABOVE:
+            spread = [tuple(np.concatenate(c) for c in zip(*spread, strict=True))]
+        for x, v in spread:
+            ax.plot(x, v, "o", ms=3, color=COLORS[src], mec="k", mew=0.3)
         ax.plot([], [], "s", color=COLORS[src], label=LABELS[src])
     _tick_labels(ax, groups, width_in - 3)
     ax.set_xlabel(xlabel or by)
