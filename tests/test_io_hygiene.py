@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from fingerfit.errors import FingerfitError
 from fingerfit.io.hygiene import (
+    centred_median,
     check_increasing,
     check_units,
     fill_gaps,
@@ -93,6 +94,21 @@ def test_find_jumps_hemisphere_flip_and_smooth_fast_motion() -> None:
     assert find_jumps(Recording("f.csv", t, {"hand": fast})) == []
     # ... but it is with a lower relative factor and a window spanning the whole recording.
     assert len(find_jumps(Recording("f.csv", t, {"hand": fast}), relative=0.5, window=401)) > 0
+
+
+@pytest.mark.parametrize("window", [1, 2, 3, 4, 21, 26])
+def test_centred_median_is_pandas_centred_rolling_median_at_the_indices(window) -> None:
+    """The jump rule's local median, taken at the fast steps only, is value for value
+    pandas' centred rolling median (NaN ignored, windows cut at both ends)."""
+    pd = pytest.importorskip("pandas")
+    rng = np.random.default_rng(window)
+    for n in (1, 2, 5, 40, 70_000):
+        v = rng.gamma(1.0, 1.0, n)
+        v[rng.random(n) < 0.1] = np.nan
+        at = np.flatnonzero(np.isfinite(v))
+        ref = pd.Series(v).rolling(window, center=True, min_periods=1).median().to_numpy()
+        assert np.array_equal(centred_median(v, at, window), ref[at])
+    assert centred_median(v, at[:0], window).shape == (0,)
 
 
 def hand_recording(scale: float) -> Recording:
