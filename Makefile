@@ -30,7 +30,7 @@ test: $(VENV)/.test-extras
 	$(BIN)/ruff format --check --quiet src tests bench
 	$(BIN)/python -m pytest -q
 
-# CLUSTER_SUBJECTS: the simulated cohort on a local Dask cluster (0: skip; 1000 take ~30 min).
+# CLUSTER_SUBJECTS: the simulated cohort on a local Dask cluster (0: skip; 1000 take 21-40 min here).
 CLUSTER_SUBJECTS ?= 1000
 bench: $(VENV)/.test-extras
 	$(BIN)/python bench/speed.py --json bench/speed.json --cluster-subjects $(CLUSTER_SUBJECTS)
