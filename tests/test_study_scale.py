@@ -225,6 +225,8 @@ def test_large_cohort_boxes_are_collections_with_boxplot_statistics() -> None:
         try:
             ax = fig.axes[0]
             counts.append(len(ax.get_children()))
+            # matplotlib's boxplot limits: the outer boxes' positions +- 0.5, no margin
+            assert np.allclose(ax.get_xlim(), (-0.19 - 0.5, n - 1 + 0.19 + 0.5))
             polys = [c for c in ax.collections if isinstance(c, PolyCollection)]
             lines = [c for c in ax.collections if isinstance(c, LineCollection)]
             assert len(polys) == len(lines) == 2  # one of each per model
@@ -252,6 +254,7 @@ def test_small_cohort_boxes_are_matplotlib_boxplots() -> None:
     try:
         ax = fig.axes[0]
         assert not ax.collections  # matplotlib's own boxes (patches), as before
+        assert np.allclose(ax.get_xlim(), (-0.19 - 0.5, figs.SUMMARY_ABOVE - 1 + 0.19 + 0.5))
         assert len(ax.patches) == 2 * figs.SUMMARY_ABOVE
     finally:
         plt.close(fig)

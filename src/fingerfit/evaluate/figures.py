@@ -133,12 +133,16 @@ def _boxes(
             np.stack([np.stack([x - h, med], 1), np.stack([x + h, med], 1)], 1),  # medians
         ]
     )
-    ax.add_collection(LineCollection(lines, colors="k", linewidths=0.6))
+    segments = LineCollection(lines, colors="k", linewidths=0.6)
+    # The x-limits of matplotlib's boxplot: the outer positions +- 0.5, no margin beyond
+    segments.sticky_edges.x.extend([x.min() - 0.5, x.max() + 0.5])
+    ax.add_collection(segments)
+    lim = ax.dataLim.intervalx
+    lim[:] = (min(lim[0], x.min() - 0.5), max(lim[1], x.max() + 0.5))
     if fliers:
         fx = np.concatenate([np.full(len(st["fliers"]), p) for p, st in stats])
         fy = np.concatenate([np.asarray(st["fliers"], dtype=float) for _, st in stats])
         ax.plot(fx, fy, "o", ms=2, mfc="none", mec="k", mew=0.4)
-    ax.set_xlim(min(ax.get_xlim()[0], x.min() - 1), max(ax.get_xlim()[1], x.max() + 1))
     ax.autoscale_view()
 
 
