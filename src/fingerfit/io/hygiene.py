@@ -397,6 +397,7 @@ def centred_median(values: np.ndarray, at: np.ndarray, window: int) -> np.ndarra
     at : ndarray of int, shape (k,)
         Indices into ``values`` whose values are finite.
     window : int
+        Values per window (at least 1).
 
     Returns
     -------
