@@ -133,7 +133,9 @@ def _boxes(
             np.stack([np.stack([x - h, med], 1), np.stack([x + h, med], 1)], 1),  # medians
         ]
     )
-    segments = LineCollection(lines, colors="k", linewidths=0.6)
+    median_color = matplotlib.rcParams["boxplot.medianprops.color"]  # as matplotlib's boxes
+    colors = ["k"] * (2 * len(x)) + [median_color] * len(x)
+    segments = LineCollection(lines, colors=colors, linewidths=0.6)
     # The x-limits of matplotlib's boxplot: the outer positions +- 0.5, no margin beyond
     segments.sticky_edges.x.extend([x.min() - 0.5, x.max() + 0.5])
     ax.add_collection(segments)
