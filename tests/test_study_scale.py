@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import pickle
+import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -12,13 +13,20 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pytest
 
 from fingerfit.errors import FingerfitError
 from fingerfit.estimate import FitOptions
 from fingerfit.evaluate import figures as figs
 from fingerfit.evaluate import run_study
-from fingerfit.evaluate.study import _SUBJECT_TABLES, StudyTables, SubjectResult, _concat
+from fingerfit.evaluate.study import (
+    _SUBJECT_TABLES,
+    PackedSubjects,
+    StudyTables,
+    SubjectResult,
+    _concat,
+)
 from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.simulate.source import simulated_cohort
 
@@ -72,6 +80,38 @@ def test_tables_in_the_order_given_whatever_the_arrival() -> None:
         pd.testing.assert_frame_equal(got[key], _concat(present, columns), check_exact=True)
     assert got["targets"].empty and got["truth_axes"] is None
     assert list(got["max_flexion"]["subject"].unique()) == [r.subject for r in results]
+    # Text columns in one piece, not one Arrow chunk per subject (75 here) as concat
+    # leaves them: a thousand subjects would hold tens of thousands of small buffers.
+    for key in ("max_flexion", "distances", "truth_tips"):
+        arrow = pa.Table.from_pandas(got[key])
+        assert {arrow.column(c).num_chunks for c in ("subject", "finger")} == {1}, key
+    again = gathered.tables()  # asked again: the same tables
+    for key, table in got.items():
+        if table is None:
+            assert again[key] is None
+        else:
+            pd.testing.assert_frame_equal(again[key], table, check_exact=True)
+
+
+def test_packed_subjects_live_in_an_unnamed_file(tmp_path) -> None:
+    rng = np.random.default_rng(2)
+    results = [_fake(f"S{i:02d}", rng, truth=False) for i in range(5)]
+    packed = PackedSubjects(folder=tmp_path)
+    for r in results:
+        packed.append(r)
+    assert len(packed) == 5 and [s.subject for s in packed] == [r.subject for r in results]
+    pd.testing.assert_frame_equal(packed[3].max_flexion, results[3].max_flexion)
+    assert [s.subject for s in packed[-2:]] == ["S03", "S04"] and packed[-1].subject == "S04"
+    packed.select([4, 0, 2])  # e.g. the order given, without a failed session
+    assert [s.subject for s in packed] == ["S04", "S00", "S02"]
+    packed.append(results[1])
+    assert [s.subject for s in packed] == ["S04", "S00", "S02", "S01"]
+    with pytest.raises(IndexError):
+        packed[4]
+    if sys.platform == "linux":  # O_TMPFILE: never a name in the folder
+        assert list(tmp_path.iterdir()) == []
+    with pytest.raises(TypeError, match="cannot be pickled"):
+        pickle.dumps(packed)
 
 
 def test_simulated_on_the_worker_is_the_study_of_the_written_folders(tmp_path) -> None:

@@ -12,6 +12,7 @@ import contextlib
 import io
 import json
 import pickle
+import tempfile
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
@@ -30,6 +31,7 @@ from ..errors import FingerfitError
 from ..estimate import FitOptions, fit_session
 from ..io import load_session
 from ..io.atomic import atomic_write, staged_directory
+from ..io.fastcsv import release_freed_memory
 from ..kinematics import compute_kinematics
 from ..model import VARIANTS, HandModel, save_model
 from ..session import HAND_SENSOR, JOINTS, PoseSeries, Recording, Session, check_subject_id
@@ -159,35 +161,63 @@ class SessionFailure:
 
 
 class PackedSubjects(Sequence):
-    """A study's subjects, each kept as one pickle; every access makes a fresh
-    :class:`SubjectResult` (so holding a thousand costs their pickles, about 20 KB each
-    with four fingers, not the ~1500 Python objects of each model and session).
+    """A study's subjects, each kept as one pickle in an anonymous temporary file; every
+    access makes a fresh :class:`SubjectResult` from it.
 
-    Read-only: a subject changed after access is not stored back.
+    Holding a thousand subjects costs this process a file offset each, not their
+    pickles (about 20 KB each with four fingers) nor the ~1500 Python objects of each
+    model and session. The file is made in ``folder`` (default: the system's temporary
+    folder; :func:`run_study` uses the output folder's parent, where its staging folder
+    is, so the pickles go to the disk the user chose and not to a RAM-backed /tmp). It
+    has no name on Linux and is removed by the operating system when it is closed, at
+    the latest when this object goes.
+
+    Read-only: a subject changed after access is not stored back. Not for several
+    threads at once (reads seek one shared file).
     """
 
-    def __init__(self, subjects: list[SubjectResult] | None = None) -> None:
-        self._blobs: list[bytes] = []
+    def __init__(
+        self, subjects: list[SubjectResult] | None = None, folder: Path | None = None
+    ) -> None:
+        self._file = tempfile.TemporaryFile(prefix=".fingerfit-subjects-", dir=folder)
+        self._spans: list[tuple[int, int]] = []  # (offset, bytes) of each pickle
+        self._end = 0
         for s in subjects or []:
             self.append(s)
 
     def append(self, subject: SubjectResult | bytes) -> None:
-        """Keep a subject (or its pickle)."""
+        """Keep a subject (or its pickle) after the others."""
         if not isinstance(subject, bytes):
             subject = pickle.dumps(subject, protocol=pickle.HIGHEST_PROTOCOL)
-        self._blobs.append(subject)
+        self._file.seek(self._end)
+        self._file.write(subject)
+        self._spans.append((self._end, len(subject)))
+        self._end += len(subject)
+
+    def select(self, positions: Sequence[int]) -> None:
+        """Keep the subjects at ``positions`` (indices into the current order), in that
+        order, and drop the others (no pickle is moved)."""
+        self._spans = [self._spans[k] for k in positions]
 
     def __len__(self) -> int:
-        return len(self._blobs)
+        return len(self._spans)
+
+    def _load(self, k: int) -> SubjectResult:
+        start, size = self._spans[k]
+        self._file.seek(start)
+        return pickle.loads(self._file.read(size))
 
     def __getitem__(self, i):
         if isinstance(i, slice):
-            return [pickle.loads(b) for b in self._blobs[i]]
-        return pickle.loads(self._blobs[i])
+            return [self._load(k) for k in range(len(self))[i]]
+        return self._load(range(len(self))[i])
 
     def __iter__(self) -> Iterator[SubjectResult]:
-        for b in self._blobs:
-            yield pickle.loads(b)
+        for k in range(len(self)):
+            yield self._load(k)
+
+    def __getstate__(self) -> dict:
+        raise TypeError("PackedSubjects holds an open temporary file and cannot be pickled")
 
 
 @dataclass
@@ -394,6 +424,20 @@ def _concat(frames: list[pd.DataFrame], columns: list[str]) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+def _contiguous(table: pd.DataFrame) -> pd.DataFrame:
+    """``table`` with each text column in one piece.
+
+    ``pd.concat`` and ``take`` keep an Arrow-backed text column as one chunk per input
+    table, each with its own small buffers; a study's table gathered from a thousand
+    subjects would hold tens of thousands of them (and its statistics would work chunk
+    by chunk). Rebuilt through Python strings: the tables are a few thousand rows.
+    """
+    text = {c: t for c, t in table.dtypes.items() if isinstance(t, pd.StringDtype)}
+    if not text:
+        return table
+    return table.astype(dict.fromkeys(text, object)).astype(text)
+
+
 _TRUTH_AXIS_COLUMNS = ["subject", "finger", "joint", "axis_error_deg", "centre_to_axis_mm"]
 # SubjectResult field -> its columns in the study's table.
 _SUBJECT_TABLES = {
@@ -415,9 +459,11 @@ class StudyTables:
     """The per-subject rows of a study, gathered as the subjects arrive, in any order.
 
     A subject's tables (one small DataFrame each, a few KB of rows but tens of KB of
-    pandas overhead) are taken out of its result and joined with the rows gathered so
-    far every ``chunk`` subjects, so memory grows by the rows alone. :meth:`tables`
-    gives the same tables as concatenating every subject's, in the subjects' order.
+    pandas overhead) are taken out of its result; every ``chunk`` subjects the ones
+    held are joined into one DataFrame per table, so memory grows by the rows alone,
+    and each row is copied twice in all (into its chunk, then into the study's table).
+    :meth:`tables` gives the same tables as concatenating every subject's, in the
+    subjects' order.
 
     Parameters
     ----------
@@ -452,8 +498,8 @@ class StudyTables:
 
     def _join(self, key: str) -> None:
         if self._pending[key]:
-            both = [*self._joined[key], *self._pending[key]]
-            self._joined[key] = [_concat(both, _SUBJECT_TABLES[key])]
+            joined = _concat(self._pending[key], _SUBJECT_TABLES[key])
+            self._joined[key].append(_contiguous(joined))
             self._pending[key] = []
 
     def tables(self) -> dict[str, pd.DataFrame | None]:
@@ -473,7 +519,11 @@ class StudyTables:
                 order = np.argsort(given, kind="stable")
                 take = np.concatenate([np.arange(starts[i], starts[i] + rows[i][1]) for i in order])
                 joined = joined.take(take).reset_index(drop=True)
+                self._rows[key] = [rows[i] for i in order]
+            joined = _contiguous(joined)
+            self._joined[key] = [joined]  # one copy, shared with the result
             out[key] = joined
+        release_freed_memory()  # the chunks' and the reordering's copies
         return out
 
 
@@ -555,8 +605,9 @@ def summarize_study(
     mf = _headline(flex)
     mf["paired_t_test"] = _stat(paired_ttest_or_skip(flex["user_axis"], flex["orthogonal"]))
     mf["per_subject"] = {}
+    rows_of = flex.groupby("subject", sort=False).indices  # one pass, not one per subject
     for s in subjects:
-        g = flex[flex["subject"] == s.subject]
+        g = flex.iloc[rows_of.get(s.subject, [])]
         u, o = summarize(g["user_axis"]), summarize(g["orthogonal"])
         mf["per_subject"][s.subject] = {
             "n": u.n,
@@ -1097,7 +1148,8 @@ def run_study(
         outcomes: list[SubjectOutcome | None] = [None] * len(sessions)
         fig09: dict[int, tuple[str, Path]] = {}
         gathered = StudyTables()
-        packed: dict[int, bytes] = {}
+        subjects = PackedSubjects(folder=tmp.parent)  # as they arrive; selected below
+        stored: dict[int, int] = {}  # session -> its place in ``subjects``
         pool = stack.enter_context(study_executor(jobs, scheduler))
         futures = {pool.submit(study_subject, s, options): i for i, s in enumerate(sessions)}
         for future in as_completed(futures):
@@ -1122,7 +1174,8 @@ def run_study(
                 # rest (model, landmarks, names) is kept as one pickle.
                 light = gathered.add(i, got.result)
                 save_model(light.model, tmp / "models" / f"{light.subject}.json")
-                packed[i] = pickle.dumps(light, protocol=pickle.HIGHEST_PROTOCOL)
+                stored[i] = len(subjects)
+                subjects.append(light)
                 got.result = light = None
             if got.read_error is not None:
                 step(f"could not read {got.source}")
@@ -1151,14 +1204,15 @@ def run_study(
             if not _is_source(x)  # made and removed on the worker
         ]
         _check_not_input(out_dir, [p for p in given if p is not None])
-        subjects = PackedSubjects()
+        keep = []
         for i, o in enumerate(outcomes):
             if o is None or o.read_error is not None:
                 continue
             if o.fit_error is not None:
                 failed(o.source, o.subject, o.fit_error)
                 continue
-            subjects.append(packed.pop(i))
+            keep.append(stored[i])
+        subjects.select(keep)
         if not subjects:
             detail = "; ".join(f.message for f in failures) or "no sessions given"
             raise FingerfitError(f"no session could be fitted and evaluated: {detail}")

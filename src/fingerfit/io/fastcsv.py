@@ -18,6 +18,7 @@ field, and the file appears complete or not at all (:func:`fingerfit.io.atomic.a
 from __future__ import annotations
 
 import os
+import sys
 from collections import deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -52,12 +53,14 @@ _TRIM: Callable[[int], int] | None = None
 
 
 def release_freed_memory() -> None:
-    """Hand memory freed by a parse back to the system before the result is built.
+    """Hand memory freed by a parse (or any pandas work) back to the system.
 
     The C library keeps freed blocks for reuse (Arrow's worker threads each keep their
-    own), and they count in the process's peak once the result's arrays are allocated
-    on top. ``malloc_trim(0)`` of the GNU C library returns them; elsewhere this does
-    nothing.
+    own), and so does Arrow's own allocator (mimalloc or jemalloc, which holds the
+    buffers of pandas' string columns); they count in the process's peak once the next
+    arrays are allocated on top. ``malloc_trim(0)`` of the GNU C library and Arrow's
+    ``MemoryPool.release_unused`` return them (Arrow only when it is imported already);
+    elsewhere the C library's part does nothing.
     """
     global _TRIM
     if _TRIM is None:
@@ -67,6 +70,9 @@ def release_freed_memory() -> None:
             _TRIM = ctypes.CDLL(None).malloc_trim
         except (OSError, AttributeError, TypeError):  # TypeError: no CDLL(None) on Windows
             _TRIM = lambda pad: 0  # noqa: E731 -- not the GNU C library
+    arrow = sys.modules.get("pyarrow")
+    if arrow is not None:
+        arrow.default_memory_pool().release_unused()
     _TRIM(0)
 
 
