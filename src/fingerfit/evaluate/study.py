@@ -738,28 +738,34 @@ def _mean_sd(x: pd.Series) -> dict:
     return {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
 
 
+def _group_means(table: pd.DataFrame, keys: list[str], values: list[str]) -> dict[tuple, list]:
+    """Means of ``values`` for each combination of ``keys`` (NaN skipped), in order of first
+    appearance: one grouping pass instead of one sub-table per level (a thousand
+    subjects' truth tables are tens of MB as nested groups)."""
+    agg = table.groupby(keys, sort=False)[values].mean()
+    return dict(zip(agg.index, agg.to_numpy().tolist(), strict=True))
+
+
 def _whole_hand_truth(ang: pd.DataFrame, summary: dict, tables: dict, tt: pd.DataFrame) -> None:
     """Every digit's tip and every joint angle against truth: ``summary["truth"]`` keys
     ``tip_mm_per_digit`` (digit -> ``recording/variant`` -> mean, p95 mm) and
     ``angle_error_deg`` (digit -> angle -> variant -> mean |error| deg), table
-    ``truth_angles`` (``ang``)."""
+    ``truth_angles`` (``ang``). Digits and angles in order of appearance, recordings and
+    variants sorted."""
     tables["truth_angles"] = ang
-    summary["truth"]["tip_mm_per_digit"] = {
-        f: {
-            f"{r}/{v}": {"mean": _num(g["mean_mm"].mean()), "p95": _num(g["p95_mm"].mean())}
-            for (r, v), g in gf.groupby(["recording", "variant"])
-        }
-        for f, gf in tt.groupby("finger", sort=False)
-    }
+    tips: dict = {}
+    means = _group_means(tt, ["finger", "recording", "variant"], ["mean_mm", "p95_mm"])
+    for (f, r, v), (mean, p95) in sorted(means.items(), key=lambda kv: kv[0][1:]):
+        tips.setdefault(f, {})[f"{r}/{v}"] = {"mean": _num(mean), "p95": _num(p95)}
+    order = list(dict.fromkeys(f for f, _r, _v in means))
+    summary["truth"]["tip_mm_per_digit"] = {f: tips[f] for f in order}
+    angles: dict = {}
+    means = _group_means(ang, ["finger", "joint", "variant"], ["mean_abs_deg", "p95_abs_deg"])
+    for (f, j, v), (mean, p95) in means.items():
+        angles.setdefault(f, {}).setdefault(j, {})[v] = {"mean": _num(mean), "p95": _num(p95)}
     summary["truth"]["angle_error_deg"] = {
-        f: {
-            j: {
-                v: {"mean": _num(g["mean_abs_deg"].mean()), "p95": _num(g["p95_abs_deg"].mean())}
-                for v, g in gj.groupby("variant")
-            }
-            for j, gj in gf.groupby("joint", sort=False)
-        }
-        for f, gf in ang.groupby("finger", sort=False)
+        f: {j: dict(sorted(by_variant.items())) for j, by_variant in by_joint.items()}
+        for f, by_joint in angles.items()
     }
 
 
