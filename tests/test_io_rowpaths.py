@@ -1,6 +1,6 @@
 """The readers' shared row helpers against the plain NumPy they replace, bit for bit.
 
-``quat_norm`` must give the bits of ``np.linalg.norm(q, axis=1)`` (the quaternion check
+``row_norms`` must give the bits of ``np.linalg.norm(q, axis=1)`` (the quaternion check
 and its message use it); ``put_rows``/``gap_rows`` must fill a pose array exactly as
 ``np.full(nan)`` followed by ``out[at] = values`` did; the wide reader's ``_repeats`` must
 flag the rows ``repeated_rows(...) & isfinite(...).any(...)`` flagged, and its held values
@@ -20,18 +20,19 @@ from fingerfit.io.fastcsv import (
     put_quat_rows,
     put_rows,
     put_scaled_rows,
-    quat_norm,
     row_blocks,
+    row_norms,
     rows_where,
 )
 from fingerfit.io.hygiene import repeated_rows
 from fingerfit.io.widecsv import _repeats
+from fingerfit.session import PoseSeries
 from fingerfit.transforms import matrix_from_quat_wxyz
 
 SETTINGS = settings(max_examples=60, deadline=None)
 
 
-def test_quat_norm_is_linalg_norm_bit_for_bit():
+def test_row_norms_is_linalg_norm_bit_for_bit():
     rng = np.random.default_rng(3)
     q = rng.normal(size=(20000, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
@@ -41,9 +42,25 @@ def test_quat_norm_is_linalg_norm_bit_for_bit():
     q[5020] = np.nan
     wide = np.concatenate([rng.normal(size=(q.shape[0], 3)), q], axis=1)  # strided view
     with np.errstate(over="ignore", under="ignore"):
-        for arr in (q, wide[:, 3:]):
-            assert np.array_equal(quat_norm(arr), np.linalg.norm(arr, axis=1), equal_nan=True)
-        assert np.isinf(quat_norm(q[5000:5010])).all()
+        for arr in (q, wide[:, 3:], wide[:, :3], wide[:, 2:5], q[:, :1]):
+            assert np.array_equal(row_norms(arr), np.linalg.norm(arr, axis=1), equal_nan=True)
+        assert np.isinf(row_norms(q[5000:5010])).all()
+
+
+def test_valid_frames_are_the_finite_ones():
+    """PoseSeries.valid, column by column, flags a frame with any one non-finite entry."""
+    rng = np.random.default_rng(4)
+    n = 3000
+    pos, rot = rng.normal(size=(n, 3)), rng.normal(size=(n, 3, 3))
+    hit = rng.choice(n, 400, replace=False)
+    for k, i in enumerate(hit):
+        bad = (np.nan, np.inf, -np.inf)[k % 3]
+        if k % 2:
+            pos[i, k % 3] = bad
+        else:
+            rot[i, k % 3, (k // 3) % 3] = bad
+    want = np.isfinite(pos).all(axis=1) & np.isfinite(rot).all(axis=(1, 2))
+    assert np.array_equal(PoseSeries(pos, rot).valid, want) and want.sum() == n - 400
 
 
 @SETTINGS

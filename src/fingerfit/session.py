@@ -140,7 +140,14 @@ class PoseSeries:
     @property
     def valid(self) -> np.ndarray:
         """Boolean mask ``(n_frames,)`` of frames with a complete sample."""
-        return np.isfinite(self.position).all(axis=1) & np.isfinite(self.rotation).all(axis=(1, 2))
+        # Column by column: NumPy's reductions over a short last axis go row by row.
+        pos = np.isfinite(self.position)
+        ok = pos[:, 0] & pos[:, 1]
+        ok &= pos[:, 2]
+        rot = np.isfinite(self.rotation).reshape(-1, 9)
+        for j in range(9):
+            ok &= rot[:, j]
+        return ok
 
     def take(self, index: np.ndarray | slice) -> PoseSeries:
         """Frames selected by a slice, boolean mask or index array."""

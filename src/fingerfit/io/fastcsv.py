@@ -287,17 +287,18 @@ class RowArrays:
         return self.data[: self.n]
 
 
-def quat_norm(quat: np.ndarray) -> np.ndarray:
-    """Norms of quaternions, ``(n,)``, from ``(n, 4)`` rows (any order, any stride).
+def row_norms(rows: np.ndarray) -> np.ndarray:
+    """Euclidean norms of rows, ``(n,)``, from ``(n, k)`` (any stride; e.g. quaternions in
+    any order, positions, steps between positions).
 
-    The same sum in the same order as ``np.linalg.norm(quat, axis=1)`` (so the same
-    bits, an overflow giving inf alike) without its ``(n, 4)`` temporaries.
+    The same sum in the same order as ``np.linalg.norm(rows, axis=1)`` (so the same bits,
+    an overflow giving inf alike) without its ``(n, k)`` temporaries, column by column
+    (NumPy's reduction over a short last axis goes row by row).
     """
-    a, b, c, d = quat[:, 0], quat[:, 1], quat[:, 2], quat[:, 3]
-    s = a * a
-    s += b * b
-    s += c * c
-    s += d * d
+    s = rows[:, 0] * rows[:, 0]
+    for j in range(1, rows.shape[1]):
+        c = rows[:, j]
+        s += c * c
     return np.sqrt(s, out=s)
 
 

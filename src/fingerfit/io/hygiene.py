@@ -31,6 +31,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from ..digits import DIGIT_NAMES, DIGITS
 from ..errors import FingerfitError
 from ..session import PoseSeries, Recording, digit_sensors, true_runs
+from .fastcsv import row_norms
 
 #: Default thresholds of :func:`find_jumps`: faster than any finger moves.
 MAX_SPEED_MM_S = 3000.0
@@ -450,15 +451,21 @@ def find_jumps(
     out: list[Jump] = []
     t = recording.time
     for name, pose in recording.poses.items():
-        idx = np.flatnonzero(pose.valid)
+        valid = pose.valid
+        idx = np.flatnonzero(valid)
         if idx.size < 2:
             continue
-        dt = np.diff(t[idx])
-        pos = pose.position[idx]
-        speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) / dt
-        r = pose.rotation[idx]
-        cos = (np.einsum("nij,nij->n", r[:-1], r[1:]) - 1.0) / 2.0
-        turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))) / dt
+        sel = slice(None) if idx.size == valid.size else idx  # no gap: views, not copies
+        dt = np.diff(t[sel])
+        pos = pose.position[sel]
+        speed = row_norms(pos[1:] - pos[:-1])
+        speed /= dt
+        r = pose.rotation[sel]
+        cos = np.einsum("nij,nij->n", r[:-1], r[1:])
+        cos -= 1.0
+        cos /= 2.0
+        turn = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0, out=cos), out=cos), out=cos)
+        turn /= dt
         for kind, rate, limit in (
             ("position", speed, max_speed_mm_s),
             ("orientation", turn, max_turn_deg_s),
@@ -545,10 +552,15 @@ def check_units(recording: Recording, path: str | Path | None = None) -> None:
         ``field 'units'``: naming the sensors and the distance found.
     """
     poses = recording.poses
-    for name, pose in poses.items():
-        ok = pose.valid
+    valid = {name: pose.valid for name, pose in poses.items()}
+
+    def where(name: str, ok: np.ndarray) -> np.ndarray:  # a view when every frame is valid
+        return poses[name].position if ok.all() else poses[name].position[ok]
+
+    for name in poses:
+        ok = valid[name]
         if ok.any():
-            r = float(np.median(np.linalg.norm(pose.position[ok], axis=1)))
+            r = float(np.median(row_norms(where(name, ok))))
             if r > WORKSPACE_MM:
                 raise FingerfitError(
                     f"sensor '{name}' is {r / 1000:.4g} m from the tracker origin (median): "
@@ -563,12 +575,10 @@ def check_units(recording: Recording, path: str | Path | None = None) -> None:
             a, b = chain[i], chain[i + 1]
             if a not in poses or b not in poses:
                 continue
-            ok = poses[a].valid & poses[b].valid
+            ok = valid[a] & valid[b]
             if not ok.any():
                 continue
-            d = float(
-                np.median(np.linalg.norm(poses[a].position[ok] - poses[b].position[ok], axis=1))
-            )
+            d = float(np.median(row_norms(where(a, ok) - where(b, ok))))
             lo, hi = NEIGHBOUR_RANGE_MM[(kinds[i], kinds[i + 1])]
             if not lo <= d <= hi:
                 raise FingerfitError(

@@ -48,8 +48,8 @@ from .fastcsv import (
     put_quat_rows,
     put_rows,
     put_scaled_rows,
-    quat_norm,
     row_blocks,
+    row_norms,
     rows_where,
 )
 from .hygiene import (
@@ -1094,7 +1094,7 @@ def records_to_recording(
         q = taken("quaternion")
         for r in row_blocks(slice(0, q.shape[0]), _BLOCK):  # float64 a block at a time
             with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
-                norm = quat_norm(np.asarray(q[r], dtype=float))
+                norm = row_norms(np.asarray(q[r], dtype=float))
             bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
             if bad.size:
                 i = int(sel[r.start + bad[0]])

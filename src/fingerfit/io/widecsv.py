@@ -39,9 +39,9 @@ from .fastcsv import (
     put_quat_rows,
     put_rows,
     put_scaled_rows,
-    quat_norm,
     read_header,
     row_blocks,
+    row_norms,
 )
 from .hygiene import (
     check_increasing,
@@ -535,7 +535,7 @@ def read_wide_csv(
             put_scaled_rows(pos, at, fv[:, :3], scale)
             if lay.orientation == _QUAT:
                 with np.errstate(over="ignore"):  # a huge component: norm inf, refused below
-                    norm = quat_norm(fv[:, 3:])
+                    norm = row_norms(fv[:, 3:])
                 bad = np.flatnonzero(np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)
                 if bad.size:
                     raise FingerfitError(
