@@ -187,3 +187,19 @@ def test_whole_hand_report_has_thumb_pinch_and_3d_view(whole) -> None:
     assert "index proximal-phalanx frame" in data["W01"]["frame"]
     assert "f.pad" in html  # the viewer draws the pads
     assert {"thumb", "pinch"} <= set(whole.summary)
+
+
+def test_viewer_json_is_made_one_subject_at_a_time_with_the_same_text() -> None:
+    """The 3D view's data are written subject by subject, as ``json.dumps`` of the whole
+    object would write them, with ``<`` and ``>`` escaped inside the script element."""
+    import json
+
+    from fingerfit.evaluate.report import _json_script
+
+    data = {
+        "S</script>": {"frame": "é, ü", "tip": [1.5, -0.25, 1e-7], "pad": None},
+        "S2": {"fingers": [{"name": "index", "centres": [[0.0, 1.0, 2.0]]}]},
+    }
+    want = json.dumps(data).replace("<", "\\u003c").replace(">", "\\u003e")
+    assert _json_script(data.items()) == want and "</script>" not in want
+    assert _json_script({}.items()) == "{}"

@@ -80,11 +80,12 @@ def test_tables_in_the_order_given_whatever_the_arrival() -> None:
         pd.testing.assert_frame_equal(got[key], _concat(present, columns), check_exact=True)
     assert got["targets"].empty and got["truth_axes"] is None
     assert list(got["max_flexion"]["subject"].unique()) == [r.subject for r in results]
-    # Text columns in one piece, not one Arrow chunk per subject (75 here) as concat
-    # leaves them: a thousand subjects would hold tens of thousands of small buffers.
+    # Text columns in one piece per join of 8 subjects (10 here), not one Arrow chunk per
+    # subject (75) as concat leaves them: a thousand subjects would hold tens of
+    # thousands of small buffers.
     for key in ("max_flexion", "distances", "truth_tips"):
         arrow = pa.Table.from_pandas(got[key])
-        assert {arrow.column(c).num_chunks for c in ("subject", "finger")} == {1}, key
+        assert max(arrow.column(c).num_chunks for c in ("subject", "finger")) <= 10, key
     again = gathered.tables()  # asked again: the same tables
     for key, table in got.items():
         if table is None:

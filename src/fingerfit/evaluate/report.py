@@ -18,6 +18,7 @@ import html
 import json
 import os
 import re
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
@@ -224,15 +225,15 @@ def _list(items: list[str]) -> str:
     return "<ul>" + "".join(f"<li>{html.escape(i)}</li>" for i in items) + "</ul>"
 
 
-def _viewer_data(result: StudyResult) -> dict:
-    """Per subject: the digits in one frame, the proximal-phalanx frame of its first finger.
+def _viewer_data(result: StudyResult) -> Iterator[tuple[str, dict]]:
+    """Per subject, one at a time (subject ID, its data): the digits in one frame, the
+    proximal-phalanx frame of its first finger.
 
     Origin at that finger's MP centre (mm), x along its proximal phalanx (a thumb alone:
     its metacarpal frame, origin at its CMC centre); every digit of the subject is drawn
     in this frame so several digits keep their places on the hand. Each digit carries its
     flexion axes (user and orthogonal), second axes, tip, pad point and landmarks.
     """
-    out = {}
     for s in result.subjects:
         first = next((f for f in s.model.fingers if f in FINGERS), next(iter(s.model.fingers)))
         fm0 = s.model.fingers[first]
@@ -261,15 +262,17 @@ def _viewer_data(result: StudyResult) -> dict:
                 }
             )
         seg, joint = fm0.segments[0], next(iter(fm0.joints)).upper()
-        out[s.subject] = {
-            "frame": f"{s.subject}: {first} proximal-phalanx frame, origin at the {first} MP "
-            "centre, x along the phalanx (mm)"
-            if first in FINGERS
-            else f"{s.subject}: {first} {seg} frame, origin at the {first} {joint} centre, "
-            f"x along the {seg} (mm)",
-            "fingers": fingers,
-        }
-    return out
+        yield (
+            s.subject,
+            {
+                "frame": f"{s.subject}: {first} proximal-phalanx frame, origin at the {first} MP "
+                "centre, x along the phalanx (mm)"
+                if first in FINGERS
+                else f"{s.subject}: {first} {seg} frame, origin at the {first} {joint} centre, "
+                f"x along the {seg} (mm)",
+                "fingers": fingers,
+            },
+        )
 
 
 _TARGET_NOTE = (
@@ -507,18 +510,23 @@ def write_report(result: StudyResult, path: Path) -> Path:
         "</script>",
         f"<script>{VIEWER_JS}</script>",
     ]
-    doc = (
-        f"<!DOCTYPE html><html lang=en><head><meta charset=utf-8><title>fingerfit study</title>"
-        f"<style>{CSS}</style></head><body>{''.join(parts)}</body></html>"
-    )
     with atomic_write(path, encoding="utf-8") as fh:
-        fh.write(doc)
+        fh.write(
+            "<!DOCTYPE html><html lang=en><head><meta charset=utf-8><title>fingerfit study"
+            f"</title><style>{CSS}</style></head><body>"
+        )
+        for part in parts:  # not joined into one more copy of the page
+            fh.write(part)
+        fh.write("</body></html>")
     return path
 
 
-def _json_script(data: dict) -> str:
-    """JSON safe inside a ``<script>`` element (no ``</script>`` in subject names)."""
-    return json.dumps(data).replace("<", "\\u003c").replace(">", "\\u003e")
+def _json_script(items: Iterable[tuple[str, object]]) -> str:
+    """The JSON object of ``items`` (key, value), safe inside a ``<script>`` element (no
+    ``</script>`` in subject names): the text of ``json.dumps(dict(items))``, made one item
+    at a time (a thousand subjects' viewer data are never Python objects all at once)."""
+    body = ", ".join(f"{json.dumps(k)}: {json.dumps(v)}" for k, v in items)
+    return ("{" + body + "}").replace("<", "\\u003c").replace(">", "\\u003e")
 
 
 def _subjects_table(result: StudyResult) -> str:

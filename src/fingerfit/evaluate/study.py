@@ -504,7 +504,8 @@ class StudyTables:
 
     def tables(self) -> dict[str, pd.DataFrame | None]:
         """SubjectResult field -> the study's table, rows in the subjects' order
-        (None: no subject has the table)."""
+        (None: no subject has the table). Its text columns are in one Arrow piece per
+        ``chunk`` subjects."""
         out: dict[str, pd.DataFrame | None] = {}
         for key, columns in _SUBJECT_TABLES.items():
             if key not in self._present:
@@ -512,6 +513,7 @@ class StudyTables:
                 continue
             self._join(key)
             joined = _concat(self._joined[key], columns)
+            self._joined[key] = [joined]  # the chunks go before the reordering's copy
             rows = self._rows[key]
             given = [o for o, _n in rows]
             if given != sorted(given):  # arrived in another order
@@ -519,9 +521,8 @@ class StudyTables:
                 order = np.argsort(given, kind="stable")
                 take = np.concatenate([np.arange(starts[i], starts[i] + rows[i][1]) for i in order])
                 joined = joined.take(take).reset_index(drop=True)
+                self._joined[key] = [joined]
                 self._rows[key] = [rows[i] for i in order]
-            joined = _contiguous(joined)
-            self._joined[key] = [joined]  # one copy, shared with the result
             out[key] = joined
         release_freed_memory()  # the chunks' and the reordering's copies
         return out
