@@ -1007,7 +1007,9 @@ def study_subject(
             result = _subject(session, options)
             name, build = _trajectory_figure(result)
             png = io.BytesIO()
-            figures.save_to(build(), png, tight=False)  # constrained layout: one draw
+            figures.save_to(
+                build(), png, tight=False
+            )  # its fixed layout keeps every artist inside: one draw
     except Exception as exc:  # one bad session is named, never a traceback
         return SubjectOutcome(
             str(session.path or session.subject),
