@@ -14,6 +14,7 @@ import json
 import pickle
 import tempfile
 import warnings
+import weakref
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
@@ -180,6 +181,7 @@ class PackedSubjects(Sequence):
         self, subjects: list[SubjectResult] | None = None, folder: Path | None = None
     ) -> None:
         self._file = tempfile.TemporaryFile(prefix=".fingerfit-subjects-", dir=folder)
+        weakref.finalize(self, self._file.close)  # closed with this object, quietly
         self._spans: list[tuple[int, int]] = []  # (offset, bytes) of each pickle
         self._end = 0
         for s in subjects or []:
@@ -1007,9 +1009,8 @@ def study_subject(
             result = _subject(session, options)
             name, build = _trajectory_figure(result)
             png = io.BytesIO()
-            figures.save_to(
-                build(), png, tight=False
-            )  # its fixed layout keeps every artist inside: one draw
+            # Its fixed layout keeps every artist inside the canvas: drawn once.
+            figures.save_to(build(), png, tight=False)
     except Exception as exc:  # one bad session is named, never a traceback
         return SubjectOutcome(
             str(session.path or session.subject),
