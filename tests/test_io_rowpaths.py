@@ -21,13 +21,12 @@ from fingerfit.io.fastcsv import (
     put_rows,
     put_scaled_rows,
     row_blocks,
-    row_norms,
     rows_where,
 )
 from fingerfit.io.hygiene import repeated_rows
 from fingerfit.io.widecsv import _repeats
 from fingerfit.session import PoseSeries
-from fingerfit.transforms import matrix_from_quat_wxyz
+from fingerfit.transforms import matrix_from_quat_wxyz, row_norms
 
 SETTINGS = settings(max_examples=60, deadline=None)
 

@@ -287,21 +287,6 @@ class RowArrays:
         return self.data[: self.n]
 
 
-def row_norms(rows: np.ndarray) -> np.ndarray:
-    """Euclidean norms of rows, ``(n,)``, from ``(n, k)`` (any stride; e.g. quaternions in
-    any order, positions, steps between positions).
-
-    The same sum in the same order as ``np.linalg.norm(rows, axis=1)`` (so the same bits,
-    an overflow giving inf alike) without its ``(n, k)`` temporaries, column by column
-    (NumPy's reduction over a short last axis goes row by row).
-    """
-    s = rows[:, 0] * rows[:, 0]
-    for j in range(1, rows.shape[1]):
-        c = rows[:, j]
-        s += c * c
-    return np.sqrt(s, out=s)
-
-
 def run_start(at: np.ndarray) -> int | None:
     """The first of ``at``'s rows when they are a run of consecutive rows, else None."""
     if at.size and at[-1] - at[0] == at.size - 1 and (at.size < 2 or (np.diff(at) == 1).all()):

@@ -31,7 +31,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from ..digits import DIGIT_NAMES, DIGITS
 from ..errors import FingerfitError
 from ..session import PoseSeries, Recording, digit_sensors, true_runs
-from .fastcsv import row_norms
+from ..transforms import row_norms
 
 #: Default thresholds of :func:`find_jumps`: faster than any finger moves.
 MAX_SPEED_MM_S = 3000.0

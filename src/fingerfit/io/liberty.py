@@ -42,6 +42,7 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
+from ..transforms import row_norms
 from .atomic import atomic_write
 from .fastcsv import (
     gap_rows,
@@ -49,7 +50,6 @@ from .fastcsv import (
     put_rows,
     put_scaled_rows,
     row_blocks,
-    row_norms,
     rows_where,
 )
 from .hygiene import (

@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
-from ..transforms import quat_wxyz_from_matrix
+from ..transforms import quat_wxyz_from_matrix, row_norms
 from .fastcsv import (
     NotPlain,
     gap_rows,
@@ -41,7 +41,6 @@ from .fastcsv import (
     put_scaled_rows,
     read_header,
     row_blocks,
-    row_norms,
 )
 from .hygiene import (
     check_increasing,
