@@ -326,8 +326,8 @@ def table(res: dict) -> str:
         check = now.get("check_seconds")
         ck = (
             f"{n / (now['seconds'] + check) / 1e6:.2f} M {unit}/s (check {check:.2f} s)"
-            if check
-            else "n/a (a writer)"
+            if check is not None
+            else "n/a (a writer, or code without the check)"
         )
         s = (
             f"| {label} | {n:,} ({size / 1e6:.0f} MB) | {now['rows_per_s'] / 1e6:.2f} M {unit}/s "
