@@ -60,6 +60,12 @@ def _finish(proc: subprocess.Popen) -> tuple[int, str]:
     return proc.returncode, out + err
 
 
+def _resolve_prefix(pylsl, prefix: str, n: int, timeout: float = 20.0) -> list:
+    """The LSL streams named ``<prefix>-*``, once at least ``n`` are seen (or the timeout)."""
+    pred = f"starts-with(name,'{prefix}-')"
+    return pylsl.resolve_bypred(pred, minimum=n, timeout=timeout)
+
+
 def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     from cyclonedds.core import Policy, Qos
     from cyclonedds.domain import DomainParticipant
@@ -90,12 +96,17 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     inlets, data, stamps, received = {}, {}, {}, {}
     messages = []
     try:
+        # Both streams are found before either is opened: `--wait` starts the stream 1 s
+        # after the first consumer, and a second search can take longer on a loaded machine.
+        found = {i.name(): i for i in _resolve_prefix(pylsl, prefix, 2)}
         for kind in ("angles", "tips"):
-            found = pylsl.resolve_byprop("name", f"{prefix}-{kind}", timeout=20)
-            assert found, f"no LSL stream {prefix}-{kind}"
-            inlets[kind] = pylsl.StreamInlet(found[0], max_buflen=60, processing_flags=0)
-            inlets[kind].open_stream(timeout=10)
+            assert f"{prefix}-{kind}" in found, f"no LSL stream {prefix}-{kind}"
+            inlets[kind] = pylsl.StreamInlet(
+                found[f"{prefix}-{kind}"], max_buflen=60, processing_flags=0
+            )
             data[kind], stamps[kind], received[kind] = [], [], []
+        for inlet in inlets.values():
+            inlet.open_stream(timeout=10)
         # A consumer that goes away mid-stream does not stop the stream.
         leaver = pylsl.StreamInlet(pylsl.resolve_byprop("name", f"{prefix}-tips", timeout=20)[0])
         leaver.open_stream(timeout=10)
@@ -269,3 +280,49 @@ def test_status_line_on_a_terminal_unless_quiet(tmp_path: Path) -> None:
     shown = _stderr_on_a_terminal(args)
     assert "frames/s" in shown and "latency" in shown and "lost 0" in shown
     assert "frames/s" not in _stderr_on_a_terminal([*args, "--quiet"])
+
+
+_BURST_THEN_CLOSE = """
+import sys, time
+import numpy as np
+from fingerfit.live.outputs import LslOutput
+angles = [f"index.a{k}" for k in range(16)]  # a finger's widths of the real streams
+tips = [f"index.tip{k}.{c}" for k in range(4) for c in "xyz"]
+out = LslOutput(sys.argv[1], angles, tips, rate_hz=480.0)
+t_end = time.monotonic() + 20
+while not out.has_consumers() and time.monotonic() < t_end:
+    time.sleep(0.01)
+n = int(sys.argv[2])
+a = np.repeat(np.arange(n, dtype=float)[:, None], len(angles), axis=1)
+x = np.repeat(np.arange(n, dtype=float)[:, None], len(tips), axis=1)
+t = time.monotonic() + np.arange(n) / 480
+for i in range(n):  # one-frame blocks at 480 Hz, the last half in a burst
+    out.push(a[i : i + 1], x[i : i + 1], np.ones(1), t[i : i + 1])
+    if i < n // 2:
+        time.sleep(1 / 480)
+out.close()
+"""
+
+
+def test_lsl_consumer_receives_the_frames_pushed_just_before_close() -> None:
+    """A stream that ends (replay done, Ctrl-C) still delivers its last frames."""
+    prefix, n = f"ffclose{os.getpid()}", 400
+    proc = subprocess.Popen([sys.executable, "-c", _BURST_THEN_CLOSE, prefix, str(n)])
+    try:
+        found = {i.name(): i for i in _resolve_prefix(pylsl, prefix, 2)}
+        assert len(found) == 2, f"LSL streams {prefix}-*: {sorted(found)}"
+        inlets = {k: pylsl.StreamInlet(i, processing_flags=0) for k, i in found.items()}
+        for inlet in inlets.values():
+            inlet.open_stream(timeout=10)
+        got: dict[str, list] = {k: [] for k in inlets}
+        t_end = time.monotonic() + 20
+        while min(map(len, got.values())) < n and time.monotonic() < t_end:
+            for k, inlet in inlets.items():
+                got[k] += inlet.pull_chunk(timeout=0.0)[0]
+            time.sleep(0.01)
+    finally:
+        proc.wait(timeout=30)
+    assert proc.returncode == 0
+    # Both outlets (without the linger the one destroyed first lost the burst).
+    for k, rows in got.items():
+        np.testing.assert_array_equal(np.asarray(rows)[:, 0], np.arange(n), err_msg=k)

@@ -220,8 +220,17 @@ class LslOutput:
         for o, x in zip(self.outlets, values, strict=True):
             o.push_chunk(np.column_stack([x, valid]), stamps)
 
+    #: How long (s) :meth:`close` lets connected consumers receive the last frames. liblsl
+    #: sends from its own thread and drops what is still queued when an outlet is
+    #: destroyed: without the wait, frames pushed in the last ~0.1 s were lost in every
+    #: trial; 0.05 s lost none. liblsl has no flush to wait on.
+    LINGER_S = 0.25
+
     def close(self) -> None:
-        """Drop the outlets (consumers see the stream end)."""
+        """Let connected consumers receive the last frames (:attr:`LINGER_S`), then drop the
+        outlets (consumers see the stream end)."""
+        if any(o.have_consumers() for o in self.outlets):
+            time.sleep(self.LINGER_S)
         self.outlets.clear()
 
 
