@@ -110,6 +110,41 @@ def test_realistic_four_fingers_fit_without_warnings() -> None:
             assert c.scale == pytest.approx(1.0, abs=0.06)
 
 
+def test_landmark_to_centre_one_joint_is_a_fit_not_a_unit_mistake() -> None:
+    """A fitted axis may pass at the skin; one far landmark is not a unit mistake; every
+    landmark of a digit off by one unit ratio is."""
+    from dataclasses import replace
+
+    s = subject("realistic", 2, ("index", "ring")).session
+    model = fit_session(s)
+    ring = model.fingers["ring"].joints
+    dip = ring["dip"].center
+
+    def moved(landmarks: dict, session=s):
+        return replace(session, landmarks={**session.landmarks, **landmarks})
+
+    # 0.3 mm from the centre: a DIP axis located 4 mm dorsal of the true one (a simulated
+    # 100-subject cohort had one, refused before as "centimetres declared as millimetres").
+    at_skin = moved({"ring.dip": dip + np.array([0.0, 0.0, 0.3])})
+    assert check_model(model, at_skin) == []
+    far = moved({"ring.dip": dip + np.array([0.0, 40.0, 0.0])})
+    (problem,) = check_model(model, far)
+    assert problem.message == (
+        "ring dip landmark-to-centre distance 40 mm (plausible < 30 mm): the landmark and "
+        "the fitted axis disagree: check that the landmark was digitised on this joint, and "
+        "the joint's axis quality"
+    )
+    # Every ring landmark 10x as far from its centre, in a session declared in centimetres
+    # (read x10): millimetres declared as centimetres, named for each joint.
+    ten = moved({f"ring.{j}": jm.center + 10 * (s.landmarks[f"ring.{j}"] - jm.center)
+                 for j, jm in ring.items()})  # fmt: skip
+    problems = check_model(replace(model, session_units="cm"), ten)
+    assert [p.message.split(" mm ")[0].rsplit(" ", 1)[0] for p in problems] == [
+        f"ring {j} landmark-to-centre distance" for j in ring
+    ]
+    assert all(p.message.endswith("millimetres declared as centimetres") for p in problems)
+
+
 def _rewrite(series: PoseSeries, kind: str) -> PoseSeries:
     """The series as read from a file written in another quaternion convention."""
     q = quat_wxyz_from_matrix(series.rotation)
