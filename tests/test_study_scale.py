@@ -13,7 +13,6 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-import pyarrow as pa
 import pytest
 
 from fingerfit.errors import FingerfitError
@@ -77,15 +76,20 @@ def test_tables_in_the_order_given_whatever_the_arrival() -> None:
         if not present:
             assert got[key] is None, key
             continue
-        pd.testing.assert_frame_equal(got[key], _concat(present, columns), check_exact=True)
+        want = _concat(present, columns)
+        text = {c: t for c, t in want.dtypes.items() if isinstance(t, pd.StringDtype)}
+        assert text or want.empty, key
+        for c in text:  # categorical, categories sorted as text sorts
+            cats = list(got[key][c].cat.categories)
+            assert cats == sorted(cats) == sorted(set(want[c])), (key, c)
+        pd.testing.assert_frame_equal(got[key].astype(text), want, check_exact=True)
+        # Text as categories: a fraction of the memory of Arrow text (measured 0.35x on
+        # a 100-subject study's tables).
+        if text:
+            used = got[key].memory_usage(deep=True).sum()
+            assert used < 0.8 * want.memory_usage(deep=True).sum(), key
     assert got["targets"].empty and got["truth_axes"] is None
     assert list(got["max_flexion"]["subject"].unique()) == [r.subject for r in results]
-    # Text columns in one piece per join of 8 subjects (10 here), not one Arrow chunk per
-    # subject (75) as concat leaves them: a thousand subjects would hold tens of
-    # thousands of small buffers.
-    for key in ("max_flexion", "distances", "truth_tips"):
-        arrow = pa.Table.from_pandas(got[key])
-        assert max(arrow.column(c).num_chunks for c in ("subject", "finger")) <= 10, key
     again = gathered.tables()  # asked again: the same tables
     for key, table in got.items():
         if table is None:

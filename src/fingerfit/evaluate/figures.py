@@ -361,7 +361,8 @@ def make_pinch(pinches: pd.DataFrame) -> Figure:
     """
     # Two-line labels (kind, digits), 1.4 in per group: side by side without rotation.
     groups = sorted({f"{k}\n{a}-{b}" for k, a, b in pinches[["kind", "finger", "target"]].values})
-    label = pinches["kind"] + "\n" + pinches["finger"] + "-" + pinches["target"]
+    text = pinches[["kind", "finger", "target"]].astype(str)  # categorical in a study
+    label = text["kind"] + "\n" + text["finger"] + "-" + text["target"]
     truth = bool(np.isfinite(pinches["tip_distance_error_mm"]).any())
     first = "tip_distance_error_mm" if truth else "tip_distance_mm"
     width_in = max(8.0, 1.4 * len(groups) + 3)

@@ -767,7 +767,11 @@ def _whole_hand(result: StudyResult) -> list[str]:
             _table(
                 pd.DataFrame(
                     {
-                        "pinch": per["kind"] + " " + per["finger"] + "-" + per["target"],
+                        "pinch": per["kind"].astype(str)
+                        + " "
+                        + per["finger"].astype(str)
+                        + "-"
+                        + per["target"].astype(str),
                         "source": per["source"].map(_model_name),
                         "tip distance (mm)": per["tip_distance_mm"].map(_fmt),
                         "true tip distance (mm)": per["true_tip_distance_mm"].map(_fmt),
