@@ -24,7 +24,9 @@ from fingerfit.evaluate.study import (
     PackedSubjects,
     StudyTables,
     SubjectResult,
+    _categorical,
     _concat,
+    _join_categorical,
 )
 from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.simulate.source import simulated_cohort
@@ -327,3 +329,15 @@ def test_axis_quality_of_a_large_cohort_draws_nothing_per_subject() -> None:
         finally:
             plt.close(fig)
     assert counts[0] == counts[1]
+
+
+def test_chunks_join_over_their_categories_even_when_one_chunk_has_no_text() -> None:
+    a = _categorical(pd.DataFrame({"subject": ["S2", "S1"], "note": ["x", None], "v": [1.0, 2]}))
+    b = _categorical(pd.DataFrame({"subject": ["S3"], "note": [np.nan], "v": [3.0]}))
+    assert b["note"].dtype == float  # all missing in this chunk: no text to make categories
+    got = _join_categorical([b, a], ["subject", "note", "v"])
+    assert list(got["subject"].cat.categories) == ["S1", "S2", "S3"]
+    assert list(got["note"].cat.categories) == ["x"]
+    assert got["subject"].tolist() == ["S3", "S2", "S1"]
+    assert got["note"].isna().tolist() == [True, False, True]
+    assert got["v"].tolist() == [3.0, 1.0, 2.0]

@@ -448,14 +448,20 @@ def _join_categorical(frames: list[pd.DataFrame], columns: list[str]) -> pd.Data
     frames = [f for f in frames if not f.empty]
     if len(frames) <= 1:
         return _concat(frames, columns)
-    cats = [c for c in columns if isinstance(frames[0][c].dtype, pd.CategoricalDtype)]
-    if cats:
-        union = {
-            c: pd.CategoricalDtype(
-                union_categoricals([f[c] for f in frames], sort_categories=True).categories
-            )
-            for c in cats
-        }
+
+    def categorical(x: pd.Series) -> pd.Series:  # a chunk's column may be all missing
+        return x if isinstance(x.dtype, pd.CategoricalDtype) else x.astype("str").astype("category")
+
+    union = {
+        c: pd.CategoricalDtype(
+            union_categoricals(
+                [categorical(f[c]) for f in frames], sort_categories=True, ignore_order=True
+            ).categories
+        )
+        for c in columns
+        if any(isinstance(f[c].dtype, pd.CategoricalDtype) for f in frames)
+    }
+    if union:
         frames = [f.astype(union) for f in frames]
     return _concat(frames, columns)
 
