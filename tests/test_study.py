@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+from pathlib import Path
 
 import matplotlib.image as mpimg
 import numpy as np
@@ -167,3 +168,26 @@ def test_cli_demo(tmp_path) -> None:
     assert res.exit_code == 0, res.output
     assert "report:" in res.output and (tmp_path / "d" / "study" / "report.html").is_file()
     assert "targets" in res.output and "paper" in res.output
+    # The sessions as summary.json names them: beside the study, not in the staging folder
+    # the demo was written into before it was renamed into place.
+    study = tmp_path / "d" / "study"
+    sessions = json.loads((study / "summary.json").read_text())["sessions"]
+    assert {k: v["path"] for k, v in sessions.items()} == {
+        "S01": "../sessions/S01",
+        "S02": "../sessions/S02",
+    }
+    assert all((study / v["path"] / "session.toml").is_file() for v in sessions.values())
+
+
+def test_summary_names_sessions_from_the_study_folder(tmp_path, monkeypatch) -> None:
+    from fingerfit.evaluate.study import summary_path
+
+    monkeypatch.chdir(tmp_path)
+    assert summary_path(Path("c100/S01"), Path("out")) == "../c100/S01"
+    # Not beside the study folder: absolute (a path relative to where it ran means nothing).
+    assert summary_path(Path("c100/S01"), Path("runs/out")) == str(Path.cwd() / "c100/S01")
+    assert summary_path(tmp_path / "a" / "S01", Path("out")) == "../a/S01"
+    outside = Path("/nonexistent-data/S01")
+    assert summary_path(outside, tmp_path / "out") == str(outside)
+    assert summary_path(Path("c100/S01"), None) == "c100/S01"
+    assert summary_path(None, Path("out")) is None

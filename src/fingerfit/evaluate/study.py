@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import pickle
 import tempfile
 import warnings
@@ -557,11 +558,27 @@ class StudyTables:
         return out
 
 
+def summary_path(session: Path | None, out_dir: Path | None) -> str | None:
+    """How ``summary.json`` names a session folder: relative to the study's output folder
+    when both lie in one folder (``../sessions/S01`` for ``fingerfit demo``, whose folder
+    is renamed into place; ``../c100/S01`` for ``fingerfit study c100/* --out OUT``),
+    otherwise absolute; as given without ``out_dir``."""
+    if session is None:
+        return None
+    if out_dir is None:
+        return str(session)
+    folder, out = Path(os.path.abspath(session)), Path(os.path.abspath(out_dir))
+    if folder.is_relative_to(out.parent):
+        return os.path.relpath(folder, out)
+    return str(folder)
+
+
 def summarize_study(
     subjects: Sequence[SubjectResult],
     options: FitOptions,
     failures: list[SessionFailure] | None = None,
     gathered: StudyTables | None = None,
+    out_dir: Path | None = None,
 ) -> tuple[dict, dict[str, pd.DataFrame]]:
     """Statistics and headline of the study, plus its tables.
 
@@ -576,6 +593,9 @@ def summarize_study(
     gathered : StudyTables, optional
         The subjects' tables, already taken out of ``subjects`` (whose table fields
         are then None), as :func:`run_study` does; by default they are gathered here.
+    out_dir : Path, optional
+        The study's output folder (its final name): each session's ``path`` is written
+        relative to it (:func:`summary_path`).
 
     Returns
     -------
@@ -607,7 +627,7 @@ def summarize_study(
         "subjects": [s.subject for s in subjects],
         "sessions": {
             s.subject: {
-                "path": None if s.session.path is None else str(s.session.path),
+                "path": summary_path(s.session.path, out_dir),
                 "fingers": list(s.model.fingers),
                 "has_targets": s.subject in with_targets,
                 "has_truth": s.truth is not None,
@@ -1255,7 +1275,7 @@ def run_study(
             raise FingerfitError(f"no session could be fitted and evaluated: {detail}")
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            summary, tables = summarize_study(subjects, options, failures, gathered)
+            summary, tables = summarize_study(subjects, options, failures, gathered, out_dir)
             result = StudyResult(subjects, summary, tables, tmp, failures=failures)
             kept = {o.subject for o in ok if o.fit_error is None}
             drawn = dict(fig09[i] for i in sorted(fig09) if outcomes[i].subject in kept)
