@@ -43,3 +43,13 @@ def write_recording(path: Path, n: int = 240, holes: tuple[tuple[int, str], ...]
     """:func:`short_recording` as a pose CSV (missing samples are absent rows)."""
     write_pose_csv(path, short_recording(n, holes))
     return path
+
+
+def resolve_prefix(prefix: str, n: int, timeout: float = 20.0) -> dict:
+    """The LSL streams named ``<prefix>-*`` by name, once at least ``n`` are seen (or the
+    timeout). Find every stream before opening any: ``fingerfit stream --wait`` starts 1 s
+    after its first consumer, and a second search can take longer on a loaded machine."""
+    import pylsl
+
+    found = pylsl.resolve_bypred(f"starts-with(name,'{prefix}-')", minimum=n, timeout=timeout)
+    return {i.name(): i for i in found}

@@ -25,7 +25,7 @@ from fingerfit.kinematics import compute_kinematics, kinematics_table
 from fingerfit.live.stream import block_values, channels_of, hold, model_sensors
 from fingerfit.model import load_model
 
-from ._live import fitted, short_recording, write_recording
+from ._live import fitted, resolve_prefix, short_recording, write_recording
 from .bad_inputs._cli import run
 
 pylsl = pytest.importorskip("pylsl")
@@ -60,12 +60,6 @@ def _finish(proc: subprocess.Popen) -> tuple[int, str]:
     return proc.returncode, out + err
 
 
-def _resolve_prefix(pylsl, prefix: str, n: int, timeout: float = 20.0) -> list:
-    """The LSL streams named ``<prefix>-*``, once at least ``n`` are seen (or the timeout)."""
-    pred = f"starts-with(name,'{prefix}-')"
-    return pylsl.resolve_bypred(pred, minimum=n, timeout=timeout)
-
-
 def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     from cyclonedds.core import Policy, Qos
     from cyclonedds.domain import DomainParticipant
@@ -96,9 +90,7 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     inlets, data, stamps, received = {}, {}, {}, {}
     messages = []
     try:
-        # Both streams are found before either is opened: `--wait` starts the stream 1 s
-        # after the first consumer, and a second search can take longer on a loaded machine.
-        found = {i.name(): i for i in _resolve_prefix(pylsl, prefix, 2)}
+        found = resolve_prefix(prefix, 2)  # both found before either is opened
         for kind in ("angles", "tips"):
             assert f"{prefix}-{kind}" in found, f"no LSL stream {prefix}-{kind}"
             inlets[kind] = pylsl.StreamInlet(
@@ -309,7 +301,7 @@ def test_lsl_consumer_receives_the_frames_pushed_just_before_close() -> None:
     prefix, n = f"ffclose{os.getpid()}", 400
     proc = subprocess.Popen([sys.executable, "-c", _BURST_THEN_CLOSE, prefix, str(n)])
     try:
-        found = {i.name(): i for i in _resolve_prefix(pylsl, prefix, 2)}
+        found = resolve_prefix(prefix, 2)
         assert len(found) == 2, f"LSL streams {prefix}-*: {sorted(found)}"
         inlets = {k: pylsl.StreamInlet(i, processing_flags=0) for k, i in found.items()}
         for inlet in inlets.values():

@@ -24,6 +24,7 @@ import pytest
 from fingerfit.io import write_pose_csv
 from fingerfit.session import PoseSeries, Recording
 
+from ._live import resolve_prefix
 from .bad_inputs._cli import run
 from .conftest import subject
 
@@ -137,12 +138,15 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
     )  # fmt: skip
     inlets, data, messages = {}, {}, []
     try:
+        found = resolve_prefix(prefix, 3)  # angles, tips, robot: found before any is opened
         for kind in ("robot", "angles"):
-            found = pylsl.resolve_byprop("name", f"{prefix}-{kind}", timeout=20)
-            assert found, f"no LSL stream {prefix}-{kind}"
-            inlets[kind] = pylsl.StreamInlet(found[0], max_buflen=60, processing_flags=0)
-            inlets[kind].open_stream(timeout=10)
+            assert f"{prefix}-{kind}" in found, f"no LSL stream {prefix}-{kind}"
+            inlets[kind] = pylsl.StreamInlet(
+                found[f"{prefix}-{kind}"], max_buflen=60, processing_flags=0
+            )
             data[kind] = []
+        for inlet in inlets.values():
+            inlet.open_stream(timeout=10)
         t_end = time.monotonic() + DEADLINE
         while time.monotonic() < t_end and not (
             all(len(v) >= N for v in data.values()) and len(messages) >= N
