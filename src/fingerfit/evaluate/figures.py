@@ -22,6 +22,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from ..io.atomic import atomic_write
+from .pinch import pinch_labels
 
 COLORS = {"reference": "#2ca02c", "user_axis": "#1f77b4", "orthogonal": "#d62728"}
 LABELS = {
@@ -360,9 +361,8 @@ def make_pinch(pinches: pd.DataFrame) -> Figure:
     ``pinches`` has the columns of :data:`fingerfit.evaluate.pinch.PINCH_COLUMNS` (mm).
     """
     # Two-line labels (kind, digits), 1.4 in per group: side by side without rotation.
-    groups = sorted({f"{k}\n{a}-{b}" for k, a, b in pinches[["kind", "finger", "target"]].values})
-    text = pinches[["kind", "finger", "target"]].astype(str)  # categorical in a study
-    label = text["kind"] + "\n" + text["finger"] + "-" + text["target"]
+    label = pinch_labels(pinches, sep="\n")
+    groups = sorted(set(label))
     truth = bool(np.isfinite(pinches["tip_distance_error_mm"]).any())
     first = "tip_distance_error_mm" if truth else "tip_distance_mm"
     width_in = max(8.0, 1.4 * len(groups) + 3)

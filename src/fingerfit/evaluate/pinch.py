@@ -182,3 +182,10 @@ def evaluate_pinches(
                 )
             )
     return pd.DataFrame(rows, columns=PINCH_COLUMNS)
+
+
+def pinch_labels(pinches: pd.DataFrame, sep: str = " ") -> pd.Series:
+    """``<kind><sep><finger>-<target>`` for each row of a table with the columns
+    :data:`PINCH_COLUMNS` (text or, in a study's table, categorical columns)."""
+    text = pinches[["kind", "finger", "target"]].astype(str)
+    return text["kind"] + sep + text["finger"] + "-" + text["target"]

@@ -29,6 +29,7 @@ import pandas as pd
 from ..digits import DIGITS, FINGERS
 from ..estimate.fit import ANGLE_SUMMARY, METHOD_SUMMARY
 from ..io.atomic import atomic_write
+from .pinch import pinch_labels
 
 if TYPE_CHECKING:
     from .study import StudyResult
@@ -767,11 +768,7 @@ def _whole_hand(result: StudyResult) -> list[str]:
             _table(
                 pd.DataFrame(
                     {
-                        "pinch": per["kind"].astype(str)
-                        + " "
-                        + per["finger"].astype(str)
-                        + "-"
-                        + per["target"].astype(str),
+                        "pinch": pinch_labels(per),
                         "source": per["source"].map(_model_name),
                         "tip distance (mm)": per["tip_distance_mm"].map(_fmt),
                         "true tip distance (mm)": per["true_tip_distance_mm"].map(_fmt),
