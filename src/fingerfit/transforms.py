@@ -389,6 +389,22 @@ def relative_pose(
     return r, apply_inverse_pose(parent_rotation, parent_position, child_position)
 
 
+def rotation_angle(matrix: FloatArray) -> FloatArray:
+    """Rotation angles ``(n,)`` (rad, in [0, pi]) of rotation matrices ``(n, 3, 3)``; NaN-safe.
+
+    The norm of :func:`rotation_vector`, from the matrix directly:
+    ``atan2(|axial(R)|, (trace(R) - 1) / 2)`` with ``axial(R)`` the sine-scaled axis
+    ``(R32 - R23, R13 - R31, R21 - R12) / 2`` (accurate near 0 and near pi, unlike the
+    arccosine of the trace alone). A matrix with a NaN gives NaN.
+    """
+    m = np.asarray(matrix, dtype=float)
+    axial = np.stack(
+        [m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]], axis=1
+    )
+    cos = 0.5 * (m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2] - 1.0)
+    return np.arctan2(0.5 * np.sqrt(np.einsum("ij,ij->i", axial, axial)), cos)
+
+
 def rotation_vector(matrix: FloatArray) -> FloatArray:
     """Rotation vectors ``(n, 3)`` (axis times angle, rad) of matrices ``(n, 3, 3)``; NaN-safe."""
     m = np.asarray(matrix, dtype=float)

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from ..session import true_runs
-from ..transforms import FloatArray, rotation_vector
+from ..transforms import FloatArray, rotation_angle
 
 SMOOTH_S = 0.1  # Savitzky-Golay window (s)
 MIN_SPEED_DEG_S = 10.0  # a joint slower than this is static
@@ -55,7 +55,7 @@ class Cycles:
 
 def geodesic_angle(rotation: FloatArray, reference: FloatArray) -> FloatArray:
     """Angle ``(n,)`` rad of ``rotation (n, 3, 3)`` away from ``reference (3, 3)``."""
-    return np.linalg.norm(rotation_vector(rotation @ reference.T), axis=1)
+    return rotation_angle(rotation @ reference.T)
 
 
 def extract_cycles(rotation: FloatArray, reference: FloatArray, rate_hz: float) -> Cycles:

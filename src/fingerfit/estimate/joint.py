@@ -39,6 +39,7 @@ from ..transforms import (
     axis_angle_matrix,
     matrix_from_quat_wxyz,
     relative_pose,
+    rotation_angle,
     rotation_vector,
 )
 from .axis import AxisFit, line_through_centres
@@ -344,20 +345,20 @@ def _motion(parent: object, child: object, units: str, rate_hz: float | None) ->
 def _reference(rotation: FloatArray) -> int:
     """Index of the frame nearest the chordal mean orientation."""
     mean = Rotation.from_matrix(rotation).mean().as_matrix()
-    return int(np.argmin(np.linalg.norm(rotation_vector(rotation @ mean.T), axis=1)))
+    return int(np.argmin(rotation_angle(rotation @ mean.T)))
 
 
 def _extreme(rotation: FloatArray, ref: int | None = None) -> int:
     """Index of a frame at one end of the motion: at the 99th percentile angle from the
     mean (from frame ``ref``, :func:`_reference` unless given)."""
     r0 = rotation[_reference(rotation) if ref is None else ref]
-    d = np.linalg.norm(rotation_vector(rotation @ r0.T), axis=1)
+    d = rotation_angle(rotation @ r0.T)
     return int(np.argmin(np.abs(d - np.percentile(d, 99))))
 
 
 def _rom(rotation: FloatArray, far: int) -> float:
     """99th percentile angle (deg) from frame ``far`` to all the others."""
-    d = np.linalg.norm(rotation_vector(rotation @ rotation[far].T), axis=1)
+    d = rotation_angle(rotation @ rotation[far].T)
     return float(np.degrees(np.percentile(d, 99)))
 
 

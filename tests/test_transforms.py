@@ -1,4 +1,5 @@
-"""Quaternions from rotation matrices against scipy's ``Rotation.from_matrix``."""
+"""Rotation conversions against scipy's ``Rotation``: quaternions from matrices, rotation
+angles."""
 
 from __future__ import annotations
 
@@ -6,7 +7,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fingerfit.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from fingerfit.transforms import (
+    matrix_from_quat_wxyz,
+    quat_wxyz_from_matrix,
+    rotation_angle,
+    rotation_vector,
+)
 
 
 def _scipy_wxyz(matrix: np.ndarray) -> np.ndarray:
@@ -49,3 +55,25 @@ def test_quat_from_matrix_nan_rows_single_and_reflections():
     assert np.array_equal(quat_wxyz_from_matrix(np.eye(3)), [1.0, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match=r"non-positive determinant .* rotation matrix 1"):
         quat_wxyz_from_matrix(np.stack([np.eye(3), np.diag([1.0, 1.0, -1.0])]))
+
+
+def test_rotation_angle_is_the_rotation_vectors_norm_from_0_to_pi_and_nan_safe():
+    rng = np.random.default_rng(11)
+    axes = rng.normal(size=(300, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate(
+        [
+            rng.uniform(0, np.pi, 100),
+            rng.uniform(0, 1e-8, 100),  # near identity
+            np.pi - rng.uniform(0, 1e-8, 100),  # near a half turn: the trace alone loses it
+        ]
+    )
+    m = Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
+    got = rotation_angle(m)
+    assert np.abs(got - angles).max() <= 2e-15
+    rv = np.linalg.norm(rotation_vector(m[:100]), axis=1)
+    assert np.abs(got[:100] - rv).max() <= 2e-15
+    m[[3, 150], [1, 2], [2, 0]] = np.nan  # one NaN element in two matrices
+    got = rotation_angle(m)
+    assert np.isnan(got[[3, 150]]).all()
+    assert np.isfinite(np.delete(got, [3, 150])).all()
