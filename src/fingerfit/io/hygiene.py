@@ -421,6 +421,7 @@ def find_jumps(
     relative: float = JUMP_RELATIVE,
     window: int = JUMP_WINDOW,
     merge_frames: int = 5,
+    valid: dict[str, np.ndarray] | None = None,
 ) -> list[Jump]:
     """Flag position and orientation jumps between consecutive valid samples.
 
@@ -442,6 +443,9 @@ def find_jumps(
         Steps in the centred window of the local median.
     merge_frames : int
         Flagged steps at most this many frames apart form one jump.
+    valid : dict of str to ndarray, shape (n_frames,), optional
+        Each sensor's :attr:`~fingerfit.session.PoseSeries.valid` mask, when the caller
+        has it already (:func:`check_recording`).
 
     Returns
     -------
@@ -451,11 +455,11 @@ def find_jumps(
     out: list[Jump] = []
     t = recording.time
     for name, pose in recording.poses.items():
-        valid = pose.valid
-        idx = np.flatnonzero(valid)
+        ok = pose.valid if valid is None else valid[name]
+        idx = np.flatnonzero(ok)
         if idx.size < 2:
             continue
-        sel = slice(None) if idx.size == valid.size else idx  # no gap: views, not copies
+        sel = slice(None) if idx.size == ok.size else idx  # no gap: views, not copies
         dt = np.diff(t[sel])
         pos = pose.position[sel]
         speed = row_norms(pos[1:] - pos[:-1])
@@ -531,7 +535,12 @@ def jump_notes(jumps: Sequence[Jump], *, max_speed_mm_s: float, max_turn_deg_s: 
     return notes
 
 
-def check_units(recording: Recording, path: str | Path | None = None) -> None:
+def check_units(
+    recording: Recording,
+    path: str | Path | None = None,
+    *,
+    valid: dict[str, np.ndarray] | None = None,
+) -> None:
     """Raise if sensor distances are implausible for a hand (a unit mistake).
 
     Checks the median distance between neighbouring hand sensors (``hand`` ->
@@ -545,6 +554,9 @@ def check_units(recording: Recording, path: str | Path | None = None) -> None:
         Positions in mm.
     path : str or Path, optional
         The source file, for the message.
+    valid : dict of str to ndarray, shape (n_frames,), optional
+        Each sensor's :attr:`~fingerfit.session.PoseSeries.valid` mask, when the caller
+        has it already (:func:`check_recording`).
 
     Raises
     ------
@@ -552,7 +564,8 @@ def check_units(recording: Recording, path: str | Path | None = None) -> None:
         ``field 'units'``: naming the sensors and the distance found.
     """
     poses = recording.poses
-    valid = {name: pose.valid for name, pose in poses.items()}
+    if valid is None:
+        valid = {name: pose.valid for name, pose in poses.items()}
 
     def where(name: str, ok: np.ndarray) -> np.ndarray:  # a view when every frame is valid
         return poses[name].position if ok.all() else poses[name].position[ok]
@@ -615,9 +628,12 @@ def check_recording(
     -------
     list of Jump
     """
+    valid = {name: pose.valid for name, pose in recording.poses.items()}  # once for both
     if units:
-        check_units(recording, path)
-    jumps = find_jumps(recording, max_speed_mm_s=max_speed_mm_s, max_turn_deg_s=max_turn_deg_s)
+        check_units(recording, path, valid=valid)
+    jumps = find_jumps(
+        recording, max_speed_mm_s=max_speed_mm_s, max_turn_deg_s=max_turn_deg_s, valid=valid
+    )
     recording.notes.extend(
         jump_notes(jumps, max_speed_mm_s=max_speed_mm_s, max_turn_deg_s=max_turn_deg_s)
     )
