@@ -33,8 +33,8 @@ from ..errors import FingerfitError
 from ..estimate import FitOptions, fit_session
 from ..io import load_session
 from ..io.atomic import atomic_write, staged_directory
-from ..io.fastcsv import release_freed_memory
 from ..kinematics import compute_kinematics
+from ..memory import release_freed_memory
 from ..model import VARIANTS, HandModel, save_model
 from ..session import HAND_SENSOR, JOINTS, PoseSeries, Recording, Session, check_subject_id
 from ..transforms import angle_between_axes, apply_inverse_pose, distance_between_lines

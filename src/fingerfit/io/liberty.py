@@ -41,6 +41,7 @@ import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError, shown
+from ..memory import release_freed_memory
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import row_norms
 from .atomic import atomic_write
@@ -513,7 +514,6 @@ def _parse_ascii_fast(path: Path, items: tuple[str, ...]) -> LibertyRecords:
         block_parser,
         estimate_rows,
         line_blocks,
-        release_freed_memory,
     )
 
     width = sum(ITEM_SIZE[i] for i in items)
