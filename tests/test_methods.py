@@ -79,6 +79,33 @@ def test_twist_angle_of_pure_and_swung_rotations() -> None:
     np.testing.assert_allclose(th, theta, atol=1e-12)
 
 
+def test_two_axis_residual_is_the_rotation_left_off_the_two_axis_motion() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from fingerfit.estimate.twoaxis import _skew_residual
+    from fingerfit.kinematics import two_axis_angles
+
+    rng = np.random.default_rng(3)
+    a = np.array([0.0, 0.6, 0.8])
+    b = np.array([0.96, 0.28, 0.0])  # not perpendicular to a
+    beta, theta = rng.uniform(-0.4, 0.4, 300), rng.uniform(-1.6, 0.3, 300)
+    off = Rotation.from_rotvec(rng.normal(0.0, 0.05, (300, 3))).as_matrix()
+    q = axis_angle_matrix(b, beta) @ axis_angle_matrix(a, theta) @ off
+    # The definition: vee(E - E^T) / 2 of E = Rot(a, -theta) Rot(b, -beta) Q.
+    bb, tt = two_axis_angles(q, a, b)
+    e = axis_angle_matrix(a, -tt) @ axis_angle_matrix(b, -bb) @ q
+    want = 0.5 * np.stack(
+        [e[:, 2, 1] - e[:, 1, 2], e[:, 0, 2] - e[:, 2, 0], e[:, 1, 0] - e[:, 0, 1]], 1
+    )
+    got = _skew_residual(q, a, b)
+    assert got.shape == (300, 3)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)
+    assert np.abs(got).max() > 0.01  # the rotation off the model is there to be found
+    # Exactly of the two-axis form: nothing left.
+    exact = axis_angle_matrix(b, beta) @ axis_angle_matrix(a, theta)
+    assert np.abs(_skew_residual(exact, a, b)).max() < 1e-14
+
+
 def test_two_axis_mp_recovers_both_axes(two_axis_subject) -> None:
     sim = two_axis_subject
     model = fit_session(sim.session, FitOptions(method="twoaxis"))
