@@ -9,7 +9,6 @@ session folders in ``SESSIONS_DIR`` (e.g. written by ``bench/study_speed.py``'s
 from __future__ import annotations
 
 import argparse
-import io
 import pickle
 import time
 from pathlib import Path
@@ -36,8 +35,8 @@ def main() -> None:
         res = study._subject(session, FitOptions())
         parts["fit and evaluate"] += time.perf_counter() - t
         t = time.perf_counter()
-        _name, build = study._trajectory_figure(res)
-        figures.save_to(build(), io.BytesIO(), tight=False)
+        _name, trajectory_time, tips, label = study._trajectory(res)
+        figures.trajectories_png(trajectory_time, tips, label)
         parts["Fig. 9 PNG"] += time.perf_counter() - t
         t = time.perf_counter()
         pickle.dumps(res.compact())

@@ -203,3 +203,32 @@ def test_viewer_json_is_made_one_subject_at_a_time_with_the_same_text() -> None:
     want = json.dumps(data).replace("<", "\\u003c").replace(">", "\\u003e")
     assert _json_script(data.items()) == want and "</script>" not in want
     assert _json_script({}.items()) == "{}"
+
+
+def test_fig9_drawn_on_the_kept_figure_is_the_fresh_figure_byte_for_byte() -> None:
+    import io
+
+    import numpy as np
+
+    from fingerfit.evaluate import figures
+
+    def tips(seed: int, n: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        rng = np.random.default_rng(seed)
+        ref = np.cumsum(rng.normal(0.0, 0.4, (n, 3)), axis=0) + np.array([80.0, -20.0, 10.0])
+        got = {"reference": ref}
+        for k, src in enumerate(("user_axis", "orthogonal")):
+            got[src] = ref + rng.normal(0.0, 1.0 + 3.0 * k, (n, 3))
+        got["user_axis"][5:9] = np.nan  # a gap in one line
+        return np.arange(n) / (60.0 + 60.0 * seed), got
+
+    subjects = [("S01 (index)", *tips(1, 600)), ("S02 (ring)", *tips(2, 900))]
+    fresh = []
+    for label, t, p in subjects:
+        png = io.BytesIO()
+        figures.save_to(figures.make_trajectories(t, p, label), png, tight=False)
+        fresh.append(png.getvalue())
+    assert fresh[0] != fresh[1]
+    # Kept figure: first made, then given the other subject's data, then the first's again.
+    for k in (0, 1, 0):
+        label, t, p = subjects[k]
+        assert figures.trajectories_png(t, p, label) == fresh[k]

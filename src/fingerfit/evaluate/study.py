@@ -1054,10 +1054,8 @@ def study_subject(
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             result = _subject(session, options)
-            name, build = _trajectory_figure(result)
-            png = io.BytesIO()
-            # Its fixed layout keeps every artist inside the canvas: drawn once.
-            figures.save_to(build(), png, tight=False)
+            name, time, tips, label = _trajectory(result)
+            png = figures.trajectories_png(time, tips, label)
     except Exception as exc:  # one bad session is named, never a traceback
         return SubjectOutcome(
             str(session.path or session.subject),
@@ -1065,9 +1063,7 @@ def study_subject(
             subject=session.subject,
             path=path,
         )
-    return SubjectOutcome(
-        source, result.compact(), (name, png.getvalue()), subject=session.subject, path=path
-    )
+    return SubjectOutcome(source, result.compact(), (name, png), subject=session.subject, path=path)
 
 
 class _InProcess(Executor):
@@ -1304,16 +1300,13 @@ def _json_safe(node):
     return node
 
 
-def _trajectory_figure(s: SubjectResult) -> tuple[str, Callable[[], Figure]]:
-    """Fig. 9 of one subject (its first finger, hand-sensor frame): file name and builder."""
+def _trajectory(s: SubjectResult) -> tuple[str, np.ndarray, dict[str, np.ndarray], str]:
+    """Fig. 9 of one subject (its first finger, hand-sensor frame): file name, time (s),
+    fingertips ``(n, 3)`` mm in the hand sensor's frame, and the subject's label."""
     f, ev = next(iter(s.grasp.items()))
     hand = s.session.grasp[0].pose(HAND_SENSOR)
     in_hand = {k: apply_inverse_pose(hand.rotation, hand.position, v) for k, v in ev.tips.items()}
-    label = f"{s.subject} ({f})"
-    return (
-        f"fig09_trajectories_{s.subject}.png",
-        lambda: figures.make_trajectories(ev.time, in_hand, label),
-    )
+    return f"fig09_trajectories_{s.subject}.png", ev.time, in_hand, f"{s.subject} ({f})"
 
 
 def _short_recording(names: pd.Series) -> pd.Series:
@@ -1339,7 +1332,11 @@ def figure_builders(
     }
     for s in subjects:
         if s.grasp:  # a compact result's Fig. 9 was drawn by its study task
-            out[f"fig09_{s.subject}"] = _trajectory_figure(s)
+            name, time, tips, label = _trajectory(s)
+            out[f"fig09_{s.subject}"] = (
+                name,
+                lambda t=time, p=tips, x=label: figures.make_trajectories(t, p, x),
+            )
     fingers_flex = tables["max_flexion"][tables["max_flexion"]["finger"].isin(FINGERS)]
     if not fingers_flex.empty:  # a thumb-only study has no Fig. 10 (the fingers')
         out["fig10"] = (
