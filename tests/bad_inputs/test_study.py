@@ -267,3 +267,21 @@ def test_broken_truth_file_is_named(sessions, tmp_path) -> None:
         "not valid JSON",
     )
     _no_leftovers(tmp_path, before)
+
+
+@pytest.mark.parametrize("damage", ["text", "column"])
+def test_broken_truth_table_is_named_with_its_line(sessions, tmp_path, damage) -> None:
+    src = shutil.copytree(sessions["P01"], tmp_path / "P01")
+    path = src / "truth" / "grasp.csv"
+    rows = [ln.split(",") for ln in path.read_text().splitlines()]
+    k = rows[0].index("index.tip.y")
+    if damage == "text":
+        rows[4][k] = "oops"  # line 5 of the file
+        expected = (f"{path}:5: ", "field 'index.tip.y': 'oops' is not a number")
+    else:
+        rows = [r[:k] + r[k + 1 :] for r in rows]
+        expected = (f"{path}:1: ", "missing column 'index.tip.y'")
+    path.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    before = listing(tmp_path)
+    refused(run("study", src, "--out", tmp_path / "out"), "P01: ", *expected)
+    _no_leftovers(tmp_path, before)

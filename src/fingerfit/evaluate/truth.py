@@ -69,31 +69,59 @@ def load_truth(session_dir: Path | None) -> Truth | None:
     angles: dict[str, dict[str, dict[str, FloatArray]]] = {}
     for f in sorted((session_dir / "truth").glob("*.csv")):
         try:
-            table = pd.read_csv(f)
+            # Blank lines kept (as empty rows), so a row's line in the file is its index + 2.
+            table = pd.read_csv(f, skip_blank_lines=False)
         except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
             raise FingerfitError(f"not a valid CSV ({str(exc).splitlines()[0]})", path=f) from None
+        names = [str(c) for c in table.columns]
+        at = {c: k for k, c in enumerate(names)}
         cols = [f"{finger}.tip.{c}" for finger in doc["fingers"] for c in "xyz"]
-        missing = [c for c in cols if c not in table.columns]
+        missing = [c for c in cols if c not in at]
         if missing:
             raise FingerfitError(f"missing column '{missing[0]}'", path=f, line=1)
-        tips[f.name] = {
-            finger: table[[f"{finger}.tip.{c}" for c in "xyz"]].to_numpy(dtype=float)
-            for finger in doc["fingers"]
-        }
+        # One float array, its columns picked by position (not one pandas selection each).
+        values = _numbers(table, f)
+
+        def xyz(finger: str, part: str, values=values, at=at) -> FloatArray:
+            return values[:, [at[f"{finger}.{part}.{c}"] for c in "xyz"]]
+
+        tips[f.name] = {finger: xyz(finger, "tip") for finger in doc["fingers"]}
         pads[f.name] = {
-            finger: table[[f"{finger}.pad.{c}" for c in "xyz"]].to_numpy(dtype=float)
-            for finger in doc["fingers"]
-            if f"{finger}.pad.x" in table.columns
+            finger: xyz(finger, "pad") for finger in doc["fingers"] if f"{finger}.pad.x" in at
         }
         angles[f.name] = {
             finger: {
-                c.split(".", 1)[1]: np.radians(table[c].to_numpy(dtype=float))
-                for c in table.columns
+                c.split(".", 1)[1]: np.radians(values[:, k])
+                for k, c in enumerate(names)
                 if c.startswith(f"{finger}.") and c.count(".") == 1 and "distance" not in c
             }
             for finger in doc["fingers"]
         }
     return Truth(doc, tips, pads, angles)
+
+
+def _numbers(table: pd.DataFrame, path: Path) -> FloatArray:
+    """The table as one float array ``(n_rows, n_columns)``; a value that is not a number
+    is refused naming its column and line (header line 1)."""
+    for c, dtype in table.dtypes.items():
+        if pd.api.types.is_numeric_dtype(dtype):
+            continue
+        bad = np.flatnonzero(
+            (pd.to_numeric(table[c], errors="coerce").isna() & table[c].notna()).to_numpy()
+        )
+        if not bad.size:
+            continue
+        row = int(bad[0])
+        raise FingerfitError(
+            f"'{table[c].iloc[row]}' is not a number",
+            path=path,
+            line=row + 2,
+            field=str(c),
+        )
+    try:
+        return table.to_numpy(dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise FingerfitError(f"holds values that are not numbers ({exc})", path=path) from None
 
 
 def axis_errors(model: HandModel, truth: Truth, finger: str) -> pd.DataFrame:
