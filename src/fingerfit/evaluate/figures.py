@@ -197,6 +197,9 @@ def make_axis_quality(distances: pd.DataFrame) -> Figure:
     return fig
 
 
+_TRAJECTORY_PLANES = ((0, 1), (2, 1), (2, 0))  # Fig. 9's panels: (x, y), (z, y), (z, x)
+
+
 def _trajectory_panels(
     time: np.ndarray, tips: dict[str, np.ndarray]
 ) -> list[list[tuple[np.ndarray, np.ndarray]]]:
@@ -210,9 +213,6 @@ def _trajectory_panels(
     lines = [tips[src] - centre for src in ("user_axis", "orthogonal")]
     r = ref[::step] - centre
     return [[(p[:, i], p[:, j]) for p in (*lines, r)] for i, j in _TRAJECTORY_PLANES]
-
-
-_TRAJECTORY_PLANES = ((0, 1), (2, 1), (2, 0))
 
 
 def _trajectory_title(subject: str) -> str:

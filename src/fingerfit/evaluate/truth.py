@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import FingerfitError
+from ..errors import FingerfitError, shown
 from ..model import HandModel
 from ..session import Session
 from ..transforms import FloatArray, angle_between_axes, distance_point_to_line
@@ -113,7 +113,7 @@ def _numbers(table: pd.DataFrame, path: Path) -> FloatArray:
             continue
         row = int(bad[0])
         raise FingerfitError(
-            f"'{table[c].iloc[row]}' is not a number",
+            f"'{shown(table[c].iloc[row])}' is not a number",
             path=path,
             line=row + 2,
             field=str(c),
