@@ -239,12 +239,10 @@ def _ratio_units(ratio: float) -> list[tuple[str, str]]:
     return out
 
 
-def unit_cause(value: float, bound: Bound, declared: str, *, every: bool = False) -> str:
-    """The likely cause of a length ``value`` (mm) outside ``bound`` when the data declare
-    ``declared`` units: the actual units that bring it nearest the middle of the range (the
-    upper end of a range from 0)
-    (``every``: all units that bring it into range, nearest the middle first -- for wide
-    bounds that cannot tell them apart)."""
+def explaining_units(value: float, bound: Bound, declared: str) -> list[str]:
+    """The units (keys of ``UNITS_TO_MM``) that bring a length ``value`` (mm, read as
+    ``declared``) into ``bound``, nearest the middle of the range first (in log; the upper
+    end of a range from 0)."""
     fits: list[tuple[float, str]] = []
     # The range's middle in log; a bound with no lower end: its upper end (least change).
     mid = math.sqrt(bound.lo * bound.hi) if bound.lo > 0 else bound.hi
@@ -254,9 +252,18 @@ def unit_cause(value: float, bound: Bound, declared: str, *, every: bool = False
         v = value * mm / UNITS_TO_MM[declared]
         if bound.contains(v):
             fits.append((abs(math.log(v / mid)), actual))
+    return [u for _, u in sorted(fits)]
+
+
+def unit_cause(value: float, bound: Bound, declared: str, *, every: bool = False) -> str:
+    """The likely cause of a length ``value`` (mm) outside ``bound`` when the data declare
+    ``declared`` units: the actual units that bring it nearest the middle of the range
+    (:func:`explaining_units`; ``every``: all of them, nearest the middle first -- for wide
+    bounds that cannot tell them apart)."""
+    fits = explaining_units(value, bound, declared)
     if not fits:
         return "no unit mistake explains it; check the sensor names and the data"
-    names = [UNIT_NAMES[u] for _, u in sorted(fits)]
+    names = [UNIT_NAMES[u] for u in fits]
     look = " or ".join(names if every else names[:1])
     return f"coordinates look like {look} declared as {UNIT_NAMES[declared]}"
 
@@ -535,9 +542,10 @@ def _landmark_to_centre_problems(
         "on this joint, and the joint's axis quality"
     )
     if len(out) > 1 and len(out) == len(dist):
-        causes = {unit_cause(d, b, units) for d in out.values()}
-        if len(causes) == 1 and "look like" in (shared := causes.pop()):
-            cause = shared
+        # The unit each distance would name; one unit for all of them is a unit mistake.
+        named = {tuple(explaining_units(d, b, units)[:1]) for d in out.values()}
+        if len(named) == 1 and named != {()}:
+            cause = unit_cause(next(iter(out.values())), b, units)
     return [
         Problem(
             f"{digit} {j} landmark-to-centre distance {fmt_mm(d)} mm (plausible < "
