@@ -34,7 +34,7 @@ _OUTCOMES: list | None = None
 
 def _outcome(folder: str) -> bytes:
     from fingerfit.estimate import FitOptions
-    from fingerfit.evaluate.study import study_subject
+    from fingerfit.evaluate.study import study_subject  # (also in its older home)
 
     return pickle.dumps(study_subject(Path(folder), FitOptions()))
 
@@ -42,7 +42,7 @@ def _outcome(folder: str) -> bytes:
 def renamed(item: str, _options) -> object:
     """A stored outcome as the outcome of subject ``item`` (a study task in a worker)."""
     try:
-        from fingerfit.evaluate.study import _SUBJECT_TABLES as tables_of
+        from fingerfit.evaluate.subject import SUBJECT_TABLES as tables_of
     except ImportError:  # older code (``PYTHONPATH=<its src>``, to compare)
         tables_of = ("max_flexion", "distances", "targets", "truth_axes", "truth_tips")
         tables_of += ("truth_angles", "pinches")

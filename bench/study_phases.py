@@ -3,7 +3,7 @@
 ``python bench/study_phases.py SESSIONS_DIR [--n 6]``: the mean over ``n`` simulated
 session folders in ``SESSIONS_DIR`` (e.g. written by ``bench/study_speed.py``'s
 ``simulate``), one core, after one warm-up task; the parts of
-:func:`fingerfit.evaluate.study.study_subject` timed one after another.
+:func:`fingerfit.evaluate.subject.study_subject` timed one after another.
 
 ``--before SRC`` (the ``src`` folder of older code, e.g. from ``git worktree add
 /tmp/before <commit>``) times that code beside this one in one run: ``--rounds`` rounds,
@@ -28,7 +28,10 @@ PARTS = ("read", "fit and evaluate", "Fig. 9 PNG", "compact + pickle")
 
 def _fig9(study, figures, result) -> None:
     """Draw a subject's Fig. 9 as the study task does (or did, in older code)."""
-    if hasattr(study, "_trajectory"):
+    if hasattr(study, "fig09_data"):
+        _name, t, tips, label = study.fig09_data(result)
+        figures.trajectories_png(t, tips, label)
+    elif hasattr(study, "_trajectory"):  # evaluate/study.py before it was split (2026-11-26)
         _name, t, tips, label = study._trajectory(result)
         figures.trajectories_png(t, tips, label)
     else:  # before the kept figure (2026-11-26)
@@ -41,8 +44,14 @@ def _fig9(study, figures, result) -> None:
 def measure(sessions: Path, n: int) -> dict[str, float]:
     """Mean seconds per subject of each part, over ``n`` sessions after a warm-up one."""
     from fingerfit.estimate import FitOptions
-    from fingerfit.evaluate import figures, study
+    from fingerfit.evaluate import figures
     from fingerfit.io import load_session
+
+    try:
+        from fingerfit.evaluate import subject as study  # the study task's module
+    except ImportError:  # older code: all in evaluate/study.py
+        from fingerfit.evaluate import study
+    evaluate = getattr(study, "evaluate_subject", None) or study._subject
 
     dirs = sorted(p for p in sessions.iterdir() if p.is_dir())
     study.study_subject(dirs[0], FitOptions())  # imports, caches
@@ -53,7 +62,7 @@ def measure(sessions: Path, n: int) -> dict[str, float]:
         session = load_session(d)
         parts["read"] += time.perf_counter() - t
         t = time.perf_counter()
-        res = study._subject(session, FitOptions())
+        res = evaluate(session, FitOptions())
         parts["fit and evaluate"] += time.perf_counter() - t
         t = time.perf_counter()
         _fig9(study, figures, res)

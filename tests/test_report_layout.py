@@ -17,7 +17,9 @@ from matplotlib.transforms import Bbox
 from fingerfit.estimate import FitOptions
 from fingerfit.evaluate import run_study
 from fingerfit.evaluate.report import _p, _pct, _ttest
-from fingerfit.evaluate.study import _subject, figure_builders, summarize_study
+from fingerfit.evaluate.study import figure_builders
+from fingerfit.evaluate.subject import evaluate_subject
+from fingerfit.evaluate.summary import summarize_study
 from fingerfit.io.sessiondir import load_session, save_session
 from fingerfit.simulate import write_subject
 
@@ -40,7 +42,7 @@ def mixed(tmp_path_factory):
 def _full(study) -> list:
     """The study's subjects with their per-frame arrays (the study keeps compact ones)."""
     opts = FitOptions(method="tang2018")
-    return [_subject(load_session(s.session.path), opts) for s in study.subjects]
+    return [evaluate_subject(load_session(s.session.path), opts) for s in study.subjects]
 
 
 def _texts(fig: Figure) -> list[Text]:
@@ -154,7 +156,9 @@ def whole(tmp_path_factory):
 
 
 def test_whole_hand_figures_have_no_overlapping_labels(whole) -> None:
-    subjects = [_subject(load_session(s.session.path), FitOptions()) for s in whole.subjects]
+    subjects = [
+        evaluate_subject(load_session(s.session.path), FitOptions()) for s in whole.subjects
+    ]
     keys = _check_figures(subjects, whole.tables)
     assert {"thumb", "pinch", "fig10", "truth"} <= keys
     fig = figure_builders(subjects, whole.tables)["fig08"][1]()

@@ -180,7 +180,7 @@ def test_cli_demo(tmp_path) -> None:
 
 
 def test_summary_names_sessions_from_the_study_folder(tmp_path, monkeypatch) -> None:
-    from fingerfit.evaluate.study import summary_path
+    from fingerfit.evaluate.summary import summary_path
 
     monkeypatch.chdir(tmp_path)
     assert summary_path(Path("c100/S01"), Path("out")) == "../c100/S01"

@@ -19,15 +19,13 @@ from fingerfit.errors import FingerfitError
 from fingerfit.estimate import FitOptions
 from fingerfit.evaluate import figures as figs
 from fingerfit.evaluate import run_study
-from fingerfit.evaluate.study import (
-    _SUBJECT_TABLES,
+from fingerfit.evaluate.gather import (
     PackedSubjects,
     StudyTables,
-    SubjectResult,
     _categorical,
-    _concat,
     _join_categorical,
 )
+from fingerfit.evaluate.subject import SUBJECT_TABLES, SubjectResult, concat_tables
 from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.simulate.source import simulated_cohort
 
@@ -46,10 +44,10 @@ def _fake(subject: str, rng: np.random.Generator, truth: bool) -> SubjectResult:
             "orthogonal": rng.normal(size=n),
         }
     )
-    empty_targets = pd.DataFrame(columns=_SUBJECT_TABLES["targets"])
+    empty_targets = pd.DataFrame(columns=SUBJECT_TABLES["targets"])
     tips = pd.DataFrame(
         [(subject, "index", "test.csv", "user_axis", rng.normal(), rng.normal())],
-        columns=_SUBJECT_TABLES["truth_tips"],
+        columns=SUBJECT_TABLES["truth_tips"],
     )
     return SubjectResult(
         subject,
@@ -71,14 +69,14 @@ def test_tables_in_the_order_given_whatever_the_arrival() -> None:
     gathered = StudyTables(chunk=8)  # several joins on the way
     for i in arrival:
         light = gathered.add(int(i), results[i])
-        assert all(getattr(light, k) is None for k in _SUBJECT_TABLES)
+        assert all(getattr(light, k) is None for k in SUBJECT_TABLES)
     got = gathered.tables()
-    for key, columns in _SUBJECT_TABLES.items():
+    for key, columns in SUBJECT_TABLES.items():
         present = [getattr(r, key) for r in results if getattr(r, key) is not None]
         if not present:
             assert got[key] is None, key
             continue
-        want = _concat(present, columns)
+        want = concat_tables(present, columns)
         text = {c: t for c, t in want.dtypes.items() if isinstance(t, pd.StringDtype)}
         assert text or want.empty, key
         for c in text:  # categorical, categories sorted as text sorts
@@ -183,7 +181,7 @@ def test_a_study_keeps_tens_of_kb_per_subject(tmp_path) -> None:
     the landmarks and names (measured: 6.8 KB pickled here, 21 KB with 4 fingers)."""
     res = run_study(simulated_cohort(CONFIG, 2, 9), tmp_path / "o", FitOptions())
     for s in res.subjects:
-        assert all(getattr(s, k) is None for k in _SUBJECT_TABLES)
+        assert all(getattr(s, k) is None for k in SUBJECT_TABLES)
         assert s.grasp == {} and all(r.n_frames == 0 for r in s.session.recordings())
         assert len(pickle.dumps(s)) < 15_000
         assert set(s.truth.document["fingers"]["index"]) <= {"axis_offset_mm", "axes_angle_deg"}

@@ -18,7 +18,8 @@ import pytest
 from fingerfit.estimate import FitOptions, fit_session
 from fingerfit.evaluate.fingertip import evaluate_targets, skipped_events
 from fingerfit.evaluate.pinch import PINCH_COLUMNS, evaluate_pinches
-from fingerfit.evaluate.study import _angle_errors, _subject, summarize_study, thumb_geometry
+from fingerfit.evaluate.subject import _angle_errors, evaluate_subject, thumb_geometry
+from fingerfit.evaluate.summary import summarize_study
 from fingerfit.evaluate.truth import axis_errors, load_truth
 from fingerfit.io.sessiondir import load_session
 from fingerfit.kinematics import compute_kinematics
@@ -38,7 +39,7 @@ def _written(kind: str, seed: int, root: str):
     path = write_subject(subject(kind, seed, HAND), Path(root) / f"{kind}{seed}")
     session = load_session(path)
     if kind == "exact":
-        res = _subject(session, FitOptions())
+        res = evaluate_subject(session, FitOptions())
         return session, res.model, res.truth, res
     return session, fit_session(session), load_truth(path), None
 
