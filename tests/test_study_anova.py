@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import tracemalloc
 
 import numpy as np
@@ -9,7 +10,15 @@ import pandas as pd
 import pytest
 
 from fingerfit.errors import FingerfitError
-from fingerfit.evaluate.stats import two_way_anova, two_way_anova_or_skip
+from fingerfit.evaluate.stats import (
+    independent_ttest_or_skip,
+    merge_moments,
+    moments_at,
+    paired_ttest_or_skip,
+    table_moments,
+    two_way_anova,
+    two_way_anova_or_skip,
+)
 
 
 def _statsmodels_anova(data: pd.DataFrame, value: str, a: str, b: str) -> pd.DataFrame:
@@ -94,6 +103,61 @@ def test_empty_cell_is_refused_not_solved() -> None:
     data = pd.DataFrame(
         {"y": [1.0, 2.0, 3.0, 4.0], "a": ["x", "x", "y", "y"], "b": ["p", "q", "p", "p"]}
     )
-    with pytest.raises(FingerfitError, match="every cell"):
+    with pytest.raises(
+        FingerfitError, match="ANOVA is not computed: 1 of the 4 a x b cells are empty"
+    ):
         two_way_anova(data, "y", "a", "b")
     assert "cells are empty" in two_way_anova_or_skip(data, "y", "a", "b").reason
+
+
+def _values(rng: np.random.Generator, n: int) -> np.ndarray:
+    v = rng.normal(3.0, 2.0, n)
+    v[rng.random(n) < 0.1] = np.nan
+    v[rng.random(n) < 0.03] = np.inf  # not counted either
+    return v
+
+
+def test_moments_of_chunks_merge_to_the_moments_of_the_whole() -> None:
+    rng = np.random.default_rng(7)
+    n = 400
+    table = pd.DataFrame(
+        {
+            "g": rng.choice(["c", "a", "b", "d"], n, p=[0.5, 0.3, 0.19, 0.01]),
+            "x": _values(rng, n),
+            "y": _values(rng, n) * 1e3 + 1e6,  # a large offset: the merge must not lose it
+        }
+    )
+    whole = table_moments(table, ["g"], ["x", "y"])
+    cuts = np.sort(rng.choice(np.arange(1, n), 9, replace=False))
+    bounds = [0, *cuts, n]
+    parts = [
+        table_moments(table.iloc[i:j], ["g"], ["x", "y"]) for i, j in itertools.pairwise(bounds)
+    ]
+    merged = merge_moments(pd.concat(parts))
+    assert list(merged.index) == list(dict.fromkeys(table["g"]))  # order of first appearance
+    pd.testing.assert_frame_equal(merged, whole.loc[merged.index], rtol=1e-12, check_dtype=False)
+    for g, rows in table.groupby("g"):  # against the definition
+        for v in ("x", "y"):
+            m, finite = moments_at(merged, v, g), rows[v][np.isfinite(rows[v])]
+            assert (m.n, m.rows) == (len(finite), len(rows))
+            assert m.mean == pytest.approx(finite.mean(), rel=1e-13)
+            assert m.m2 == pytest.approx(((finite - finite.mean()) ** 2).sum(), rel=1e-9)
+            assert (m.min, m.max) == (finite.min(), finite.max())
+    everything = moments_at(merge_moments(merged, levels=[]), "x")
+    assert everything.n == np.isfinite(table["x"]).sum()
+    assert moments_at(merged, "x", "absent").n == 0
+
+
+def test_t_tests_from_moments_are_scipys() -> None:
+    from scipy import stats
+
+    rng = np.random.default_rng(8)
+    a, b = _values(rng, 60), _values(rng, 60) + 0.4
+    ok = np.isfinite(a) & np.isfinite(b)
+    ours, ref = paired_ttest_or_skip(a, b), stats.ttest_rel(a[ok], b[ok])
+    assert (ours.t, ours.p, ours.df) == pytest.approx((ref.statistic, ref.pvalue, ok.sum() - 1))
+    ours = independent_ttest_or_skip(a, b)
+    ref = stats.ttest_ind(a[np.isfinite(a)], b[np.isfinite(b)])
+    assert (ours.t, ours.p) == pytest.approx((ref.statistic, ref.pvalue), rel=1e-12)
+    assert paired_ttest_or_skip([1.0, 2.0], [0.0, 1.0]).reason.startswith("all differences")
+    assert independent_ttest_or_skip([1.0], [2.0, 3.0]).reason.endswith("has 1 and 2")

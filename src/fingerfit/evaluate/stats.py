@@ -34,12 +34,149 @@ class Summary:
 
 def summarize(values) -> Summary:
     """Mean, sample SD and count of the finite values (NaN mean with none, NaN SD with one)."""
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
+    return summary_of(Moments.of(values))
+
+
+def summary_of(m: Moments) -> Summary:
+    """:class:`Summary` of values given by their moments."""
     return Summary(
-        float(v.mean()) if v.size else float("nan"),
-        float(v.std(ddof=1)) if v.size > 1 else float("nan"),
-        int(v.size),
+        m.mean if m.n else float("nan"),
+        float(np.sqrt(m.m2 / (m.n - 1))) if m.n > 1 else float("nan"),
+        m.n,
+    )
+
+
+@dataclass(frozen=True)
+class Moments:
+    """Count, mean, sum of squared deviations from the mean, min and max of the finite
+    values of a set, and how many values (finite or not) it has (``rows``).
+
+    Enough for means, SDs, t-tests and ANOVA cells; two sets' moments merge into those
+    of their union (:func:`merge_moments`), so statistics can be gathered chunk by chunk.
+    """
+
+    n: int
+    mean: float
+    m2: float
+    min: float
+    max: float
+    rows: int
+
+    @classmethod
+    def of(cls, values) -> Moments:
+        """The moments of an array of values (any shape; NaN and inf not counted)."""
+        v = np.asarray(values, dtype=float).ravel()
+        rows = v.size
+        v = v[np.isfinite(v)]
+        if not v.size:
+            return cls(0, float("nan"), 0.0, float("nan"), float("nan"), rows)
+        mean = float(v.mean())
+        return cls(
+            v.size, mean, float(((v - mean) ** 2).sum()), float(v.min()), float(v.max()), rows
+        )
+
+
+MOMENT_FIELDS = ("n", "mean", "m2", "min", "max", "rows")
+
+
+def table_moments(table: pd.DataFrame, keys: list[str], values: list[str]) -> pd.DataFrame:
+    """:class:`Moments` of columns of ``table`` per group of rows.
+
+    Parameters
+    ----------
+    table : DataFrame
+    keys : list of str
+        Grouping columns (groups in order of first appearance); ``[]``: one group, key 0.
+    values : list of str
+        Numeric columns (NaN and inf not counted).
+
+    Returns
+    -------
+    DataFrame
+        Index: the groups' keys; columns ``(value, field)`` with ``field`` in
+        :data:`MOMENT_FIELDS`. Merge several with :func:`merge_moments`.
+    """
+    x = table[values].astype(float)
+    x = x.where(np.isfinite(x.to_numpy()))
+    by = [table[k] for k in keys] if keys else np.zeros(len(table), dtype=int)
+    g = x.groupby(by, sort=False, observed=True, dropna=False)
+    n = g.count()
+    parts = {
+        "n": n,
+        "mean": g.mean(),
+        "m2": (g.var(ddof=0) * n).fillna(0.0),
+        "min": g.min(),
+        "max": g.max(),
+        "rows": pd.DataFrame({v: g.size() for v in values}),
+    }
+    out = pd.concat(parts, axis=1).swaplevel(axis=1)
+    return out[[(v, f) for v in values for f in MOMENT_FIELDS]]
+
+
+def merge_moments(m: pd.DataFrame, levels: list[str] | None = None) -> pd.DataFrame:
+    """Merge rows of a moments table (:func:`table_moments`) into the moments of their union.
+
+    Parameters
+    ----------
+    m : DataFrame
+        Moments, e.g. the tables of several chunks concatenated.
+    levels : list of str, optional
+        Index levels that name the merged groups (order of first appearance); default
+        all of them (the same key in several chunks). ``[]``: everything, key 0.
+
+    Returns
+    -------
+    DataFrame
+        The same columns, one row per merged group (Chan, Golub and LeVeque's pairwise
+        update: ``m2 = sum(m2_i + n_i (mean_i - mean)^2)``).
+    """
+    if levels is None:
+        levels = list(m.index.names)
+    by = [m.index.get_level_values(k) for k in levels] if levels else np.zeros(len(m), int)
+    out = {}
+    for v in dict.fromkeys(c[0] for c in m.columns):
+        n, mean = m[(v, "n")].astype(float), m[(v, "mean")]
+        weighted = (n * mean).where(n > 0, 0.0)
+        total = n.groupby(by, sort=False).transform("sum")
+        grand = weighted.groupby(by, sort=False).transform("sum") / total.where(total > 0)
+        dev = (n * (mean - grand) ** 2).where(n > 0, 0.0)
+        g = lambda s: s.groupby(by, sort=False)  # noqa: E731
+        merged = {
+            "n": g(n).sum().astype(int),
+            "mean": g(grand).first(),
+            "m2": g(m[(v, "m2")] + dev).sum(),
+            "min": g(m[(v, "min")]).min(),
+            "max": g(m[(v, "max")]).max(),
+            "rows": g(m[(v, "rows")]).sum().astype(int),
+        }
+        for f, col in merged.items():
+            out[(v, f)] = col
+    result = pd.DataFrame(out)
+    result.columns = pd.MultiIndex.from_tuples(result.columns)
+    if levels:
+        result.index.names = levels
+    return result
+
+
+def moments_at(m: pd.DataFrame, value: str, key=None) -> Moments:
+    """The :class:`Moments` of column ``value`` of one row of a moments table (``key``:
+    its index; default the only row). A missing key: the moments of no values."""
+    if key is None:
+        if len(m) != 1:
+            return Moments(0, float("nan"), 0.0, float("nan"), float("nan"), 0)
+        row = m.iloc[0]
+    elif key in m.index:
+        row = m.loc[key]
+    else:
+        return Moments(0, float("nan"), 0.0, float("nan"), float("nan"), 0)
+    n = int(row[(value, "n")])
+    return Moments(
+        n,
+        float(row[(value, "mean")]) if n else float("nan"),
+        float(row[(value, "m2")]),
+        float(row[(value, "min")]),
+        float(row[(value, "max")]),
+        int(row[(value, "rows")]),
     )
 
 
@@ -74,71 +211,78 @@ class TTest:
     kind: str
 
 
-def paired_ttest(a, b) -> TTest:
-    """Paired two-sided t-test of ``a - b`` (same subjects/cycles)."""
-    res = stats.ttest_rel(np.asarray(a, float), np.asarray(b, float))
-    return TTest(float(res.statistic), float(res.pvalue), float(len(a) - 1), "paired")
+def _two_sided(t: float, df: float) -> float:
+    return float(2 * stats.t.sf(abs(t), df))
 
 
-def independent_ttest(a, b) -> TTest:
-    """Student's two-sample two-sided t-test (equal variances, as the paper)."""
-    res = stats.ttest_ind(np.asarray(a, float), np.asarray(b, float))
-    return TTest(float(res.statistic), float(res.pvalue), float(len(a) + len(b) - 2), "independent")
+def paired_ttest_of(d: Moments) -> TTest | Skipped:
+    """Paired two-sided t-test from the moments of the differences ``a - b``, or why not
+    (fewer than 2 pairs; all differences equal)."""
+    if d.n < 2:
+        return Skipped(f"needs at least 2 pairs, has {d.n}")
+    if d.max == d.min:
+        return Skipped("all differences are equal, so t is undefined")
+    t = d.mean / np.sqrt(d.m2 / (d.n - 1) / d.n)
+    return TTest(float(t), _two_sided(t, d.n - 1), float(d.n - 1), "paired")
 
 
-def _finite(values) -> np.ndarray:
-    v = np.asarray(values, dtype=float)
-    return v[np.isfinite(v)]
+def independent_ttest_of(a: Moments, b: Moments) -> TTest | Skipped:
+    """Student's two-sample two-sided t-test (equal variances, as the paper) from the two
+    groups' moments, or why not (fewer than 2 values per group; no spread in either)."""
+    if min(a.n, b.n) < 2:
+        return Skipped(f"needs at least 2 values per group, has {a.n} and {b.n}")
+    if a.max == a.min and b.max == b.min:
+        return Skipped("no spread within either group, so t is undefined")
+    df = a.n + b.n - 2
+    t = (a.mean - b.mean) / np.sqrt((a.m2 + b.m2) / df * (1 / a.n + 1 / b.n))
+    return TTest(float(t), _two_sided(t, df), float(df), "independent")
+
+
+def _pairs(a, b) -> np.ndarray:
+    """``a - b`` where both are finite, shape ``(n,)``."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    return a[ok] - b[ok]
 
 
 def paired_ttest_or_skip(a, b) -> TTest | Skipped:
-    """:func:`paired_ttest` over the pairs where both values are finite, or why not.
+    """Paired two-sided t-test of ``a - b`` over the pairs where both values are finite,
+    or why not (:func:`paired_ttest_of`).
 
     Parameters
     ----------
     a, b : array_like, shape (n,)
         Paired values (e.g. user-axis and orthogonal error of one cycle, mm).
     """
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    ok = np.isfinite(a) & np.isfinite(b)
-    n = int(ok.sum())
-    if n < 2:
-        return Skipped(f"needs at least 2 pairs, has {n}")
-    d = a[ok] - b[ok]
-    if np.ptp(d) == 0:
-        return Skipped("all differences are equal, so t is undefined")
-    return paired_ttest(a[ok], b[ok])
+    return paired_ttest_of(Moments.of(_pairs(a, b)))
+
+
+def paired_ttest(a, b) -> TTest:
+    """:func:`paired_ttest_or_skip` for data that supports it (else FingerfitError)."""
+    return _or_raise(paired_ttest_or_skip(a, b))
 
 
 def independent_ttest_or_skip(a, b) -> TTest | Skipped:
-    """:func:`independent_ttest` over the finite values, or why not (fewer than 2 per group)."""
-    a, b = _finite(a), _finite(b)
-    if min(a.size, b.size) < 2:
-        return Skipped(f"needs at least 2 values per group, has {a.size} and {b.size}")
-    if np.ptp(a) == 0 and np.ptp(b) == 0:
-        return Skipped("no spread within either group, so t is undefined")
-    return independent_ttest(a, b)
+    """Student's two-sample t-test over the finite values, or why not
+    (:func:`independent_ttest_of`)."""
+    return independent_ttest_of(Moments.of(a), Moments.of(b))
+
+
+def independent_ttest(a, b) -> TTest:
+    """:func:`independent_ttest_or_skip` for data that supports it (else FingerfitError)."""
+    return _or_raise(independent_ttest_or_skip(a, b))
+
+
+def _or_raise(result: TTest | Skipped) -> TTest:
+    if isinstance(result, Skipped):
+        raise FingerfitError(f"t-test not computed: {result.reason}")
+    return result
 
 
 def two_way_anova_or_skip(data: pd.DataFrame, value: str, a: str, b: str) -> pd.DataFrame | Skipped:
-    """:func:`two_way_anova` over the rows with a finite ``value``, or why not.
-
-    Skipped when a factor has fewer than two levels, a combination of levels has no
-    observation, or no cell has a replicate (no residual degrees of freedom).
-    """
-    df = data[[value, a, b]]
-    df = df[np.isfinite(df[value].to_numpy(dtype=float))].astype({value: float})
-    for f in (a, b):
-        n = df[f].nunique()
-        if n < 2:
-            return Skipped(f"needs at least 2 levels of {f}, has {n}")
-    cells = df.groupby([a, b]).size()
-    n_cells = df[a].nunique() * df[b].nunique()
-    if len(cells) < n_cells:
-        return Skipped(f"{n_cells - len(cells)} of the {n_cells} {a} x {b} cells are empty")
-    if len(df) <= n_cells:
-        return Skipped(f"no repeated observations within the {a} x {b} cells")
-    return two_way_anova(df, value, a, b)
+    """:func:`two_way_anova` over the rows with a finite ``value``, or why not
+    (:func:`two_way_anova_of_cells`)."""
+    return two_way_anova_of_cells(table_moments(data, [a, b], [value]), value, a, b)
 
 
 def two_way_anova(data: pd.DataFrame, value: str, a: str, b: str) -> pd.DataFrame:
@@ -172,20 +316,52 @@ def two_way_anova(data: pd.DataFrame, value: str, a: str, b: str) -> pd.DataFram
     FingerfitError
         An empty cell or no residual degrees of freedom.
     """
-    y = data[value].to_numpy(dtype=float)
-    y = y - y.mean()  # sums of squares do not change; sums stay small
-    codes_a, levels_a = pd.factorize(data[a], sort=True)
-    codes_b, levels_b = pd.factorize(data[b], sort=True)
-    na, nb, n = len(levels_a), len(levels_b), len(y)
+    result = two_way_anova_or_skip(data, value, a, b)
+    if isinstance(result, Skipped):
+        raise FingerfitError(f"the {a} x {b} ANOVA is not computed: {result.reason}")
+    return result
+
+
+def two_way_anova_of_cells(
+    cells: pd.DataFrame, value: str, a: str, b: str
+) -> pd.DataFrame | Skipped:
+    """:func:`two_way_anova` from the moments of ``value`` in each cell, or why not.
+
+    Parameters
+    ----------
+    cells : DataFrame
+        Moments (:func:`table_moments` by ``[a, b]``, possibly several chunks' merged by
+        :func:`merge_moments`); index levels: the levels of ``a`` and ``b``.
+    value, a, b : str
+        The value's and the factors' names.
+
+    Returns
+    -------
+    DataFrame or Skipped
+        The ANOVA table; skipped when a factor has fewer than two levels, a combination
+        of levels has no observation, or no cell has a replicate (no residual degrees
+        of freedom).
+    """
+    cells = cells[cells[(value, "n")] > 0]
+    codes_a, levels_a = pd.factorize(cells.index.get_level_values(0), sort=True)
+    codes_b, levels_b = pd.factorize(cells.index.get_level_values(1), sort=True)
+    na, nb = len(levels_a), len(levels_b)
+    for f, k in ((a, na), (b, nb)):
+        if k < 2:
+            return Skipped(f"needs at least 2 levels of {f}, has {k}")
+    if len(cells) < na * nb:
+        return Skipped(f"{na * nb - len(cells)} of the {na * nb} {a} x {b} cells are empty")
     cell = codes_a * nb + codes_b
-    count = np.bincount(cell, minlength=na * nb).astype(float)
-    if (count == 0).any() or n <= na * nb:
-        raise FingerfitError(
-            f"the {a} x {b} ANOVA needs every cell filled and a repeated observation"
-        )
-    mean = (np.bincount(cell, weights=y, minlength=na * nb) / count).reshape(na, nb)
+    count = np.zeros(na * nb)
+    count[cell] = cells[(value, "n")].to_numpy(dtype=float)
+    n = int(count.sum())
+    if n <= na * nb:
+        return Skipped(f"no repeated observations within the {a} x {b} cells")
+    mean = np.zeros(na * nb)
+    mean[cell] = cells[(value, "mean")].to_numpy(dtype=float)
+    mean = (mean - count @ mean / n).reshape(na, nb)  # centred: sums of squares stay small
     count = count.reshape(na, nb)
-    within = float(np.sum((y - mean.ravel()[cell]) ** 2))  # residual of the full model
+    within = float(cells[(value, "m2")].sum())  # residual of the full model
     n_a, n_b = count.sum(axis=1), count.sum(axis=0)
     mean_a = (count * mean).sum(axis=1) / n_a
     mean_b = (count * mean).sum(axis=0) / n_b

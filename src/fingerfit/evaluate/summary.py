@@ -8,8 +8,9 @@ thumb and pinches. Lengths mm, angles deg.
 
 from __future__ import annotations
 
+import itertools
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -24,12 +25,17 @@ from ..session import JOINTS
 from ..transforms import angle_between_axes
 from .gather import StudyTables
 from .stats import (
+    MOMENT_FIELDS,
+    Moments,
     Skipped,
-    independent_ttest_or_skip,
-    paired_ttest_or_skip,
+    independent_ttest_of,
+    merge_moments,
+    moments_at,
+    paired_ttest_of,
     reduction_percent,
-    summarize,
-    two_way_anova_or_skip,
+    summary_of,
+    table_moments,
+    two_way_anova_of_cells,
 )
 from .subject import (
     SUBJECT_TABLES,
@@ -58,14 +64,24 @@ def _num(v: float) -> float | None:
     return v if np.isfinite(v) else None
 
 
-def _headline(table: pd.DataFrame, user: str = "user_axis", ortho: str = "orthogonal") -> dict:
-    u, o = summarize(table[user]), summarize(table[ortho])
+def _mean_sd(m: Moments) -> dict:
+    sm = summary_of(m)
+    return {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
+
+
+def _headline(u: Moments, o: Moments) -> dict:
+    """User-axis and orthogonal error (mean, SD, n; mm) and the reductions in %."""
+    su, so = summary_of(u), summary_of(o)
     return {
-        "user_axis": {"mean_mm": _num(u.mean), "sd_mm": _num(u.sd), "n": u.n},
-        "orthogonal": {"mean_mm": _num(o.mean), "sd_mm": _num(o.sd), "n": o.n},
-        "reduction_percent": _num(reduction_percent(u.mean, o.mean)),
-        "sd_reduction_percent": _num(reduction_percent(u.sd, o.sd)),
+        "user_axis": {"mean_mm": _num(su.mean), "sd_mm": _num(su.sd), "n": su.n},
+        "orthogonal": {"mean_mm": _num(so.mean), "sd_mm": _num(so.sd), "n": so.n},
+        "reduction_percent": _num(reduction_percent(su.mean, so.mean)),
+        "sd_reduction_percent": _num(reduction_percent(su.sd, so.sd)),
     }
+
+
+def _mean_max(m: Moments) -> dict:
+    return {"mean": _num(m.mean), "max": _num(m.max)}
 
 
 def _anova_dict(table: pd.DataFrame | Skipped) -> dict:
@@ -75,6 +91,98 @@ def _anova_dict(table: pd.DataFrame | Skipped) -> dict:
         idx: {"F": _num(r["F"]), "p": _num(r["PR(>F)"]), "df": float(r["df"])}
         for idx, r in table.iterrows()
     }
+
+
+SUBJECTS_PER_CHUNK = 32
+
+
+def subject_chunks(table: pd.DataFrame, size: int | None = None) -> Iterator[pd.DataFrame]:
+    """Slices of a study table holding ``size`` whole subjects each (default
+    :data:`SUBJECTS_PER_CHUNK`; rows in the subjects' order, as :meth:`StudyTables.tables`
+    gives them; views, not copies)."""
+    if table.empty:
+        return
+    size = size or SUBJECTS_PER_CHUNK
+    codes = pd.factorize(table["subject"])[0]
+    starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
+    bounds = [*starts[::size], len(table)]
+    for a, b in itertools.pairwise(bounds):
+        yield table.iloc[a:b]
+
+
+def _moments(
+    table: pd.DataFrame,
+    keys: list[str],
+    values: list[str],
+    prepare: Callable[[pd.DataFrame], pd.DataFrame] | None = None,
+) -> pd.DataFrame:
+    """:func:`~.stats.table_moments` of a study table, gathered over its chunks of whole
+    subjects (:func:`subject_chunks`), so no copy of the whole table is made.
+
+    ``prepare``: applied to each chunk first (a filter, a new column, or a pivot whose
+    rows lie within one subject).
+    """
+    parts = []
+    for chunk in subject_chunks(table):
+        c = chunk if prepare is None else prepare(chunk)
+        if len(c):
+            parts.append(table_moments(c, keys, values))
+    return merge_moments(pd.concat(parts)) if parts else _no_moments(keys, values)
+
+
+def _no_moments(keys: list[str], values: list[str]) -> pd.DataFrame:
+    """A moments table without groups."""
+    columns = pd.MultiIndex.from_tuples([(v, f) for v in values for f in MOMENT_FIELDS])
+    if len(keys) > 1:
+        index = pd.MultiIndex.from_tuples([], names=keys)
+    else:
+        index = pd.Index([], name=keys[0] if keys else None)
+    return pd.DataFrame(index=index, columns=columns, dtype=float)
+
+
+def _total(m: pd.DataFrame, value: str, rows=None) -> Moments:
+    """The moments of ``value`` over all groups of ``m`` (or those where ``rows``)."""
+    sel = m if rows is None else m[np.asarray(rows, dtype=bool)]
+    if sel.empty:
+        return Moments.of([])
+    return moments_at(merge_moments(sel[[value]], levels=[]), value)
+
+
+def _by(m: pd.DataFrame, levels: list[str], rows=None) -> pd.DataFrame:
+    """``m`` merged by some of its index levels (groups in order of first appearance)."""
+    sel = m if rows is None else m[np.asarray(rows, dtype=bool)]
+    if sel.empty:
+        return _no_moments(levels, list(dict.fromkeys(c[0] for c in m.columns)))
+    return merge_moments(sel, levels=levels)
+
+
+def _level(m: pd.DataFrame, name: str) -> np.ndarray:
+    """The values of index level ``name`` of ``m``, as text."""
+    return m.index.get_level_values(name).astype(str).to_numpy()
+
+
+def _paired(d: Moments) -> dict:
+    return _stat(paired_ttest_of(d))
+
+
+def _with_difference(chunk: pd.DataFrame) -> pd.DataFrame:
+    """A chunk with ``d = user_axis - orthogonal`` (the paired t-tests' differences)."""
+    return chunk.assign(d=chunk["user_axis"].astype(float) - chunk["orthogonal"].astype(float))
+
+
+def _wide(index: list[str], value: str):
+    """A ``prepare`` for :func:`_moments`: the chunk pivoted to one column per
+    ``source``/``variant`` (``reference``, ``user_axis``, ``orthogonal``; the mean of
+    duplicates, NaN where missing), with ``d`` (user_axis - orthogonal)."""
+
+    def prepare(chunk: pd.DataFrame) -> pd.DataFrame:
+        col = "source" if "source" in chunk.columns else "variant"
+        w = chunk.pivot_table(index=index, columns=col, values=value, observed=True, sort=False)
+        w.columns = w.columns.astype(str)
+        w = w.reindex(columns=["reference", *VARIANTS]).reset_index()
+        return _with_difference(w)
+
+    return prepare
 
 
 def _skips(node, where: str = "") -> list[dict]:
@@ -145,12 +253,10 @@ def summarize_study(
             gathered.add(i, s)
     study_rows = gathered.tables()
     flex_all = _or_empty(study_rows, "max_flexion")
-    # The paper's figures (headline, Fig. 10) are the four fingers'; the thumb's own section.
-    flex = flex_all[flex_all["finger"].isin(FINGERS)]
     dist = _or_empty(study_rows, "distances")
     targets = _or_empty(study_rows, "targets")
-    with_targets = set(targets["subject"])
     tables = {"max_flexion": flex_all, "axis_quality": dist, "targets": targets}
+    with_targets = {str(x) for c in subject_chunks(targets) for x in c["subject"].unique()}
     summary: dict = {
         "format": "fingerfit.study/1",
         "fingerfit_version": __version__,
@@ -173,94 +279,96 @@ def summarize_study(
         "units": "mm",
         "paper": PAPER,
     }
+    # Every statistic from moments gathered over chunks of whole subjects (no copy of a
+    # whole table; the two-way ANOVAs from the moments of their cells).
     # Axis quality (Fig. 8) and the paper's t-tests between joints.
-    aq = {}
-    for j in [j for j in (*JOINTS, *THUMB_JOINTS) if (dist["joint"] == j).any()]:
-        sm = summarize(dist.loc[dist["joint"] == j, "distance_mm"])
-        aq[j] = {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
-    tests = {}
-    for a, b in (("dip", "pip"), ("mp", "dip"), ("mp", "pip")):
-        t = independent_ttest_or_skip(
-            dist.loc[dist.joint == a, "distance_mm"], dist.loc[dist.joint == b, "distance_mm"]
-        )
-        tests[f"{a}_vs_{b}"] = _stat(t)
+    by_joint = _moments(dist, ["joint"], ["distance_mm"])
+    joint = lambda j: moments_at(by_joint, "distance_mm", j)  # noqa: E731
+    aq = {
+        j: _mean_sd(joint(j))
+        for j in (*JOINTS, *THUMB_JOINTS)
+        if j in by_joint.index and joint(j).rows
+    }
+    tests = {
+        f"{a}_vs_{b}": _stat(independent_ttest_of(joint(a), joint(b)))
+        for a, b in (("dip", "pip"), ("mp", "dip"), ("mp", "pip"))
+    }
     summary["axis_quality"] = {"per_joint": aq, "t_tests": tests}
-    # Maximal flexion (Fig. 10).
-    mf = _headline(flex)
-    mf["paired_t_test"] = _stat(paired_ttest_or_skip(flex["user_axis"], flex["orthogonal"]))
+    # Maximal flexion (Fig. 10): the paper's figures are the four fingers'.
+    flex_m = _moments(flex_all, ["subject", "finger"], list(_PAIR), _with_difference)
+    fingers = np.isin(_level(flex_m, "finger"), FINGERS)
+    mf = _headline(_total(flex_m, "user_axis", fingers), _total(flex_m, "orthogonal", fingers))
+    mf["paired_t_test"] = _paired(_total(flex_m, "d", fingers))
+    per_subject = _by(flex_m, ["subject"], fingers)
     mf["per_subject"] = {}
-    rows_of = flex.groupby("subject", sort=False).indices  # one pass, not one per subject
     for s in subjects:
-        g = flex.iloc[rows_of.get(s.subject, [])]
-        u, o = summarize(g["user_axis"]), summarize(g["orthogonal"])
+        u, o = (moments_at(per_subject, v, s.subject) for v in ("user_axis", "orthogonal"))
         mf["per_subject"][s.subject] = {
             "n": u.n,
             "user_axis_mean_mm": _num(u.mean),
             "orthogonal_mean_mm": _num(o.mean),
             "reduction_percent": _num(reduction_percent(u.mean, o.mean)),
-            "paired_t_test": _stat(paired_ttest_or_skip(g["user_axis"], g["orthogonal"])),
+            "paired_t_test": _paired(moments_at(per_subject, "d", s.subject)),
         }
-    long = flex.melt(
-        id_vars=["subject", "cycle"],
-        value_vars=list(VARIANTS),
-        var_name="model",
-        value_name="error",
-    )
     mf["anova_model_x_subject"] = _anova_dict(
-        two_way_anova_or_skip(long, "error", "model", "subject")
+        two_way_anova_of_cells(_model_cells(per_subject, "subject"), "error", "model", "subject")
     )
     summary["max_flexion"] = mf
     # Targets (Figs. 11-12): only the sessions with target recordings.
     if not targets.empty:
-        wide = targets.pivot_table(
-            index=["subject", "finger", "target"], columns="source", values="error_mm"
-        ).reset_index()
-        tg = _headline(wide)
-        ref = summarize(wide["reference"])
-        tg["subjects"] = sorted(targets["subject"].unique())
-        tg["reference"] = {"mean_mm": _num(ref.mean), "sd_mm": _num(ref.sd), "n": ref.n}
-        tg["paired_t_test"] = _stat(paired_ttest_or_skip(wide["user_axis"], wide["orthogonal"]))
+        wide = _moments(
+            targets,
+            ["target"],
+            ["reference", *_PAIR],
+            _wide(["subject", "finger", "target"], "error_mm"),
+        )
+        tg = _headline(_total(wide, "user_axis"), _total(wide, "orthogonal"))
+        tg["subjects"] = sorted(with_targets)
+        tg["reference"] = _mean_sd(_total(wide, "reference"))
+        tg["paired_t_test"] = _paired(_total(wide, "d"))
         tg["per_target"] = {}
-        for t, g in wide.groupby("target"):
-            tg["per_target"][t] = {"n": len(g)}
+        for t in sorted(wide.index, key=str):
+            tg["per_target"][str(t)] = {"n": moments_at(wide, "reference", t).rows}
             for src in ("reference", *VARIANTS):
-                sm = summarize(g[src])
-                tg["per_target"][t][src] = {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd)}
-        tl = targets[targets["source"].isin(VARIANTS)].rename(columns={"source": "model"})
-        tg["anova_model_x_target"] = _anova_dict(
-            two_way_anova_or_skip(tl, "error_mm", "model", "target")
-        )
-        tg["anova_model_x_subject"] = _anova_dict(
-            two_way_anova_or_skip(tl, "error_mm", "model", "subject")
-        )
+                sm = summary_of(moments_at(wide, src, t))
+                tg["per_target"][str(t)][src] = {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd)}
+        models = lambda c: c[c["source"].isin(VARIANTS)]  # noqa: E731
+        for factor in ("target", "subject"):
+            cells = _renamed(_moments(targets, ["source", factor], ["error_mm"], models), "error")
+            tg[f"anova_model_x_{factor}"] = _anova_dict(
+                two_way_anova_of_cells(cells, "error", "model", factor)
+            )
         summary["targets"] = tg
     # Ground truth (simulated sessions only).
+    axes_m = tips_m = None
     if study_rows["truth_axes"] is not None:
         ta = study_rows["truth_axes"]
         tt = _or_empty(study_rows, "truth_tips")
         tables["truth_axes"], tables["truth_fingertip"] = ta, tt
+        axes_m = _moments(ta, ["finger", "joint"], ["axis_error_deg", "centre_to_axis_mm"])
+        tips_m = _moments(tt, ["finger", "recording", "variant"], ["mean_mm", "p95_mm"])
+        per_joint = _by(axes_m, ["joint"])
+        joints = sorted(per_joint.index, key=str)
+        tip_fingers = _by(
+            tips_m, ["recording", "variant"], np.isin(_level(tips_m, "finger"), FINGERS)
+        )
         summary["truth"] = {
-            "subjects": sorted(ta["subject"].unique()),
+            "subjects": sorted({str(x) for c in subject_chunks(ta) for x in c["subject"].unique()}),
             "axis_error_deg": {
-                j: {
-                    "mean": _num(g["axis_error_deg"].mean()),
-                    "max": _num(g["axis_error_deg"].max()),
-                }
-                for j, g in ta.groupby("joint")
+                str(j): _mean_max(moments_at(per_joint, "axis_error_deg", j)) for j in joints
             },
             "centre_to_axis_mm": {
-                j: {
-                    "mean": _num(g["centre_to_axis_mm"].mean()),
-                    "max": _num(g["centre_to_axis_mm"].max()),
-                }
-                for j, g in ta.groupby("joint")
+                str(j): _mean_max(moments_at(per_joint, "centre_to_axis_mm", j)) for j in joints
             },
             "fingertip_mm": {
-                f"{r}/{v}": {"mean": _num(g["mean_mm"].mean()), "p95": _num(g["p95_mm"].mean())}
-                for (r, v), g in tt[tt["finger"].isin(FINGERS)].groupby(["recording", "variant"])
+                f"{r}/{v}": {
+                    "mean": _num(moments_at(tip_fingers, "mean_mm", (r, v)).mean),
+                    "p95": _num(moments_at(tip_fingers, "p95_mm", (r, v)).mean),
+                }
+                for r, v in sorted(tip_fingers.index, key=lambda k: (str(k[0]), str(k[1])))
             },
         }
-        _whole_hand_truth(_or_empty(study_rows, "truth_angles"), summary, tables, tt)
+        _whole_hand_truth(_or_empty(study_rows, "truth_angles"), summary, tables, tips_m)
     # Model geometry per subject: how far the fitted axes are from perpendicular.
     rows = []
     for s in subjects:
@@ -294,7 +402,8 @@ def summarize_study(
             "segment_length_mm",
         ],
     )
-    _thumb_and_pinch(subjects, summary, tables, flex_all, _or_empty(study_rows, "pinches"))
+    _thumb(subjects, summary, tables, flex_m, axes_m, tips_m)
+    _pinch(summary, tables, _or_empty(study_rows, "pinches"))
     summary["skipped"] = _skips(
         {
             k: summary[k]
@@ -313,20 +422,24 @@ def summarize_study(
     return summary, tables
 
 
-def _mean_sd(x: pd.Series) -> dict:
-    sm = summarize(x)
-    return {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd), "n": sm.n}
+_PAIR = ("user_axis", "orthogonal", "d")  # d: user_axis - orthogonal, per row
 
 
-def _group_means(table: pd.DataFrame, keys: list[str], values: list[str]) -> dict[tuple, list]:
-    """Means of ``values`` for each combination of ``keys`` (NaN skipped), in order of first
-    appearance: one grouping pass instead of one sub-table per level (a thousand
-    subjects' truth tables are tens of MB as nested groups)."""
-    agg = table.groupby(keys, sort=False)[values].mean()
-    return dict(zip(agg.index, agg.to_numpy().tolist(), strict=True))
+def _model_cells(m: pd.DataFrame, factor: str) -> pd.DataFrame:
+    """The cells (model, ``factor``) of a model x ``factor`` ANOVA of the error, from
+    moments by ``factor`` of the user-axis and orthogonal errors (a long table's cells)."""
+    cells = {model: _renamed(m[[model]], "error") for model in VARIANTS}
+    return pd.concat(cells, names=["model", factor])
 
 
-def _whole_hand_truth(ang: pd.DataFrame, summary: dict, tables: dict, tt: pd.DataFrame) -> None:
+def _renamed(m: pd.DataFrame, value: str) -> pd.DataFrame:
+    """A moments table of one value, the value renamed."""
+    out = m.copy(deep=False)
+    out.columns = pd.MultiIndex.from_tuples([(value, f) for _v, f in m.columns])
+    return out
+
+
+def _whole_hand_truth(ang: pd.DataFrame, summary: dict, tables: dict, tips_m: pd.DataFrame) -> None:
     """Every digit's tip and every joint angle against truth: ``summary["truth"]`` keys
     ``tip_mm_per_digit`` (digit -> ``recording/variant`` -> mean, p95 mm) and
     ``angle_error_deg`` (digit -> angle -> variant -> mean |error| deg), table
@@ -334,111 +447,126 @@ def _whole_hand_truth(ang: pd.DataFrame, summary: dict, tables: dict, tt: pd.Dat
     variants sorted."""
     tables["truth_angles"] = ang
     tips: dict = {}
-    means = _group_means(tt, ["finger", "recording", "variant"], ["mean_mm", "p95_mm"])
-    for (f, r, v), (mean, p95) in sorted(means.items(), key=lambda kv: kv[0][1:]):
-        tips.setdefault(f, {})[f"{r}/{v}"] = {"mean": _num(mean), "p95": _num(p95)}
-    order = list(dict.fromkeys(f for f, _r, _v in means))
+    keys = sorted(tips_m.index, key=lambda k: (str(k[1]), str(k[2])))
+    for f, r, v in keys:
+        tips.setdefault(str(f), {})[f"{r}/{v}"] = {
+            "mean": _num(moments_at(tips_m, "mean_mm", (f, r, v)).mean),
+            "p95": _num(moments_at(tips_m, "p95_mm", (f, r, v)).mean),
+        }
+    order = list(dict.fromkeys(str(f) for f, _r, _v in tips_m.index))
     summary["truth"]["tip_mm_per_digit"] = {f: tips[f] for f in order}
     angles: dict = {}
-    means = _group_means(ang, ["finger", "joint", "variant"], ["mean_abs_deg", "p95_abs_deg"])
-    for (f, j, v), (mean, p95) in means.items():
-        angles.setdefault(f, {}).setdefault(j, {})[v] = {"mean": _num(mean), "p95": _num(p95)}
+    ang_m = _moments(ang, ["finger", "joint", "variant"], ["mean_abs_deg", "p95_abs_deg"])
+    for key in ang_m.index:
+        f, j, v = (str(k) for k in key)
+        angles.setdefault(f, {}).setdefault(j, {})[v] = {
+            "mean": _num(moments_at(ang_m, "mean_abs_deg", key).mean),
+            "p95": _num(moments_at(ang_m, "p95_abs_deg", key).mean),
+        }
     summary["truth"]["angle_error_deg"] = {
         f: {j: dict(sorted(by_variant.items())) for j, by_variant in by_joint.items()}
         for f, by_joint in angles.items()
     }
 
 
-def _thumb_and_pinch(
-    subjects: list[SubjectResult],
+def _thumb(
+    subjects: Sequence[SubjectResult],
     summary: dict,
     tables: dict,
-    flex_all: pd.DataFrame,
-    pin: pd.DataFrame,
+    flex_m: pd.DataFrame,
+    axes_m: pd.DataFrame | None,
+    tips_m: pd.DataFrame | None,
 ) -> None:
-    """``summary["thumb"]`` (the thumb's fingertip at maximal flexion, axes and tip against
-    truth, CMC/MCP geometry) and ``summary["pinch"]`` (tip distances and pad gaps during
-    pinch events), with their tables, for studies with a thumb or pinch events."""
+    """``summary["thumb"]``: the thumb's fingertip at maximal flexion, axes and tip against
+    truth, CMC/MCP geometry (table ``thumb_geometry``), for studies with a thumb."""
     # One subject at a time (a study's subjects may be packed, one made per access).
     with_thumb = [s.subject for s in subjects if "thumb" in s.model.fingers]
-    if with_thumb:
-        th: dict = {"subjects": with_thumb}
-        tf = flex_all[flex_all["finger"] == "thumb"]
-        if not tf.empty:
-            mf = _headline(tf)
-            mf["paired_t_test"] = _stat(paired_ttest_or_skip(tf["user_axis"], tf["orthogonal"]))
-            th["max_flexion"] = mf
-        geo = concat_tables(
-            [thumb_geometry(s) for s in subjects if "thumb" in s.model.fingers],
-            THUMB_GEOMETRY_COLUMNS,
-        )
-        tables["thumb_geometry"] = geo
-        th["geometry"] = {
-            j: {
-                "axis_offset_mm": _num(g["axis_offset_mm"].mean()),
-                "true_axis_offset_mm": _num(g["true_axis_offset_mm"].mean()),
-                "axes_angle_deg": _num(g["axes_angle_deg"].mean()),
-                "true_axes_angle_deg": _num(g["true_axes_angle_deg"].mean()),
-                "n": len(g),
-            }
-            for j, g in geo.groupby("joint", sort=False)
+    if not with_thumb:
+        return
+    th: dict = {"subjects": with_thumb}
+    thumb = _level(flex_m, "finger") == "thumb"
+    if thumb.any():
+        mf = _headline(_total(flex_m, "user_axis", thumb), _total(flex_m, "orthogonal", thumb))
+        mf["paired_t_test"] = _paired(_total(flex_m, "d", thumb))
+        th["max_flexion"] = mf
+    geo = concat_tables(
+        [thumb_geometry(s) for s in subjects if "thumb" in s.model.fingers],
+        THUMB_GEOMETRY_COLUMNS,
+    )
+    tables["thumb_geometry"] = geo
+    th["geometry"] = {
+        j: {
+            "axis_offset_mm": _num(g["axis_offset_mm"].mean()),
+            "true_axis_offset_mm": _num(g["true_axis_offset_mm"].mean()),
+            "axes_angle_deg": _num(g["axes_angle_deg"].mean()),
+            "true_axes_angle_deg": _num(g["true_axes_angle_deg"].mean()),
+            "n": len(g),
         }
-        if "truth_axes" in tables:
-            ta = tables["truth_axes"]
-            ta = ta[ta["finger"] == "thumb"]
-            th["truth_axes"] = {
-                j: {
-                    "axis_error_deg": {
-                        "mean": _num(g["axis_error_deg"].mean()),
-                        "max": _num(g["axis_error_deg"].max()),
-                    },
-                    "centre_to_axis_mm": {
-                        "mean": _num(g["centre_to_axis_mm"].mean()),
-                        "max": _num(g["centre_to_axis_mm"].max()),
-                    },
-                    "n": len(g),
-                }
-                for j, g in ta.groupby("joint", sort=False)
+        for j, g in geo.groupby("joint", sort=False)
+    }
+    if "truth_axes" in tables:
+        thumb_axes = axes_m[_level(axes_m, "finger") == "thumb"]
+        th["truth_axes"] = {
+            str(j): {
+                "axis_error_deg": _mean_max(moments_at(thumb_axes, "axis_error_deg", ("thumb", j))),
+                "centre_to_axis_mm": _mean_max(
+                    moments_at(thumb_axes, "centre_to_axis_mm", ("thumb", j))
+                ),
+                "n": moments_at(thumb_axes, "axis_error_deg", ("thumb", j)).rows,
             }
-            tt = tables["truth_fingertip"]
-            tt = tt[tt["finger"] == "thumb"]
-            tips = {}
-            for r, g in tt.groupby("recording", sort=False):
-                w = g.pivot_table(index="subject", columns="variant", values="mean_mm")
-                if not set(VARIANTS) <= set(w.columns):
-                    continue
-                h = _headline(w)
-                h["orthogonal_ratio"] = _num(w["user_axis"].mean() / w["orthogonal"].mean())
-                h["paired_t_test"] = _stat(paired_ttest_or_skip(w["user_axis"], w["orthogonal"]))
-                tips[r] = h
-            th["truth_tip"] = tips
-        summary["thumb"] = th
+            for _f, j in thumb_axes.index
+        }
+        # Per recording, one row per subject: the mean of its thumb's tip errors.
+        per_subject = _wide(["recording", "subject"], "mean_mm")
+        by_recording = _moments(
+            tables["truth_fingertip"],
+            ["recording"],
+            list(_PAIR),
+            lambda c: per_subject(c[c["finger"] == "thumb"]),
+        )
+        tips = {}
+        for r in by_recording.index:
+            u, o = (moments_at(by_recording, v, r) for v in VARIANTS)
+            if u.n and o.n:  # both models' errors known for this recording
+                h = _headline(u, o)
+                h["orthogonal_ratio"] = _num(u.mean / o.mean)
+                h["paired_t_test"] = _paired(moments_at(by_recording, "d", r))
+                tips[str(r)] = h
+        th["truth_tip"] = tips
+    summary["thumb"] = th
+
+
+def _pinch(summary: dict, tables: dict, pin: pd.DataFrame) -> None:
+    """``summary["pinch"]`` (tip distances and pad gaps during pinch events) and table
+    ``pinch``, for studies with pinch events."""
     if pin.empty:
         return
     tables["pinch"] = pin
-    pn: dict = {"subjects": sorted(pin["subject"].unique()), "per_source": {}, "per_kind": {}}
-    for src, g in pin.groupby("source", sort=False):
-        pn["per_source"][src] = {
-            "tip_distance_error": _mean_sd(g["tip_distance_error_mm"]),
-            "tip_distance_bias": _mean_sd(g["tip_distance_bias_mm"]),
-            "pad_gap": _mean_sd(g["pad_gap_mm"]),
-            "true_pad_gap": _mean_sd(g["true_pad_gap_mm"]),
+    columns = ["tip_distance_error_mm", "tip_distance_bias_mm", "pad_gap_mm", "true_pad_gap_mm"]
+    per_source = _moments(pin, ["source"], columns)
+    per_kind = _moments(pin, ["kind", "target", "source"], columns[:1] + columns[2:3])
+    pn: dict = {
+        "subjects": sorted({str(x) for c in subject_chunks(pin) for x in c["subject"].unique()}),
+        "per_source": {},
+        "per_kind": {},
+    }
+    for src in per_source.index:
+        pn["per_source"][str(src)] = {
+            "tip_distance_error": _mean_sd(moments_at(per_source, columns[0], src)),
+            "tip_distance_bias": _mean_sd(moments_at(per_source, columns[1], src)),
+            "pad_gap": _mean_sd(moments_at(per_source, columns[2], src)),
+            "true_pad_gap": _mean_sd(moments_at(per_source, columns[3], src)),
         }
-    for (kind, tgt), g in pin.groupby(["kind", "target"], sort=False):
-        pn["per_kind"][f"{kind}/{tgt}"] = {
-            src: {
-                "tip_distance_error": _mean_sd(gs["tip_distance_error_mm"]),
-                "pad_gap": _mean_sd(gs["pad_gap_mm"]),
-            }
-            for src, gs in g.groupby("source", sort=False)
+    for kind, tgt, src in per_kind.index:
+        pn["per_kind"].setdefault(f"{kind}/{tgt}", {})[str(src)] = {
+            "tip_distance_error": _mean_sd(moments_at(per_kind, columns[0], (kind, tgt, src))),
+            "pad_gap": _mean_sd(moments_at(per_kind, columns[2], (kind, tgt, src))),
         }
-    wide = pin.pivot_table(
-        index=["subject", "recording", "target", "start"],
-        columns="source",
-        values="tip_distance_error_mm",
+    pairs = _moments(
+        pin, [], list(_PAIR), _wide(["subject", "recording", "target", "start"], columns[0])
     )
-    if set(VARIANTS) <= set(wide.columns):
-        pn["paired_t_test"] = _stat(paired_ttest_or_skip(wide["user_axis"], wide["orthogonal"]))
+    if all(_total(pairs, v).n for v in VARIANTS):  # some pinch has both models' errors
+        pn["paired_t_test"] = _paired(_total(pairs, "d"))
     else:
         pn["paired_t_test"] = {"skipped": "no pinch with ground truth (true tip distances)"}
     summary["pinch"] = pn
