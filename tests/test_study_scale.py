@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import pickle
 import sys
@@ -16,7 +17,7 @@ import pandas as pd
 import pytest
 
 from fingerfit.errors import FingerfitError
-from fingerfit.estimate import FitOptions
+from fingerfit.estimate import FitOptions, fit_session
 from fingerfit.evaluate import figures as figs
 from fingerfit.evaluate import run_study
 from fingerfit.evaluate.gather import (
@@ -25,15 +26,28 @@ from fingerfit.evaluate.gather import (
     _categorical,
     _join_categorical,
 )
-from fingerfit.evaluate.subject import SUBJECT_TABLES, SubjectResult, concat_tables
+from fingerfit.evaluate.subject import (
+    MODEL_COLUMNS,
+    SUBJECT_TABLES,
+    SubjectResult,
+    concat_tables,
+    model_geometry,
+)
+from fingerfit.model import HandModel
 from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.simulate.source import simulated_cohort
 
 CONFIG = SimConfig.exact(fingers=("index",))
 
 
+@functools.cache
+def _model() -> HandModel:
+    """A fitted one-finger model (the fake results' tables come with a real model)."""
+    return fit_session(simulate_subject(CONFIG, 1).session, FitOptions(method="tang2018"))
+
+
 def _fake(subject: str, rng: np.random.Generator, truth: bool) -> SubjectResult:
-    """A SubjectResult whose tables hold random rows (only the tables are read)."""
+    """A SubjectResult whose tables hold random rows (only the tables and model are read)."""
     n = int(rng.integers(1, 6))
     flex = pd.DataFrame(
         {
@@ -52,7 +66,7 @@ def _fake(subject: str, rng: np.random.Generator, truth: bool) -> SubjectResult:
     return SubjectResult(
         subject,
         None,  # type: ignore[arg-type]
-        None,  # type: ignore[arg-type]
+        replace(_model(), subject=subject),
         {},
         flex,
         empty_targets,
@@ -62,40 +76,47 @@ def _fake(subject: str, rng: np.random.Generator, truth: bool) -> SubjectResult:
     )
 
 
-def test_tables_in_the_order_given_whatever_the_arrival() -> None:
+def test_study_tables_are_the_subjects_rows_in_order_on_disk_in_chunks(tmp_path) -> None:
     rng = np.random.default_rng(3)
     results = [_fake(f"S{i:02d}", rng, truth=i % 3 == 0) for i in range(75)]
-    arrival = rng.permutation(len(results))
-    gathered = StudyTables(chunk=8)  # several joins on the way
-    for i in arrival:
-        light = gathered.add(int(i), results[i])
+    tables = StudyTables(folder=tmp_path, chunk=8)
+    for i in rng.permutation(len(results)):  # arriving in any order
+        light = tables.add(int(i), results[i])
         assert all(getattr(light, k) is None for k in SUBJECT_TABLES)
-    got = gathered.tables()
-    for key, columns in SUBJECT_TABLES.items():
-        present = [getattr(r, key) for r in results if getattr(r, key) is not None]
-        if not present:
-            assert got[key] is None, key
-            continue
-        want = concat_tables(present, columns)
-        text = {c: t for c, t in want.dtypes.items() if isinstance(t, pd.StringDtype)}
-        assert text or want.empty, key
-        for c in text:  # categorical, categories sorted as text sorts
-            cats = list(got[key][c].cat.categories)
-            assert cats == sorted(cats) == sorted(set(want[c])), (key, c)
-        pd.testing.assert_frame_equal(got[key].astype(text), want, check_exact=True)
-        # Text as categories: a fraction of the memory of Arrow text (measured 0.35x on
-        # a 100-subject study's tables).
-        if text:
-            used = got[key].memory_usage(deep=True).sum()
-            assert used < 0.8 * want.memory_usage(deep=True).sum(), key
-    assert got["targets"].empty and got["truth_axes"] is None
-    assert list(got["max_flexion"]["subject"].unique()) == [r.subject for r in results]
-    again = gathered.tables()  # asked again: the same tables
-    for key, table in got.items():
-        if table is None:
-            assert again[key] is None
+    assert tables.finish(range(len(results))) is tables  # joined in the order given
+    # Only the tables that apply: no truth axes, angles, thumb or pinch here.
+    assert list(tables) == ["max_flexion", "axis_quality", "targets", "truth_fingertip", "models"]
+    fields = {"axis_quality": "distances", "truth_fingertip": "truth_tips"}
+    for name in tables:
+        if name == "models":
+            want = concat_tables([model_geometry(r) for r in results], MODEL_COLUMNS)
         else:
-            pd.testing.assert_frame_equal(again[key], table, check_exact=True)
+            field = fields.get(name, name)
+            rows = [getattr(r, field) for r in results if getattr(r, field) is not None]
+            want = concat_tables(rows, SUBJECT_TABLES[field])
+        got = tables[name]
+        text = {c: t for c, t in want.dtypes.items() if isinstance(t, pd.StringDtype)}
+        assert text or want.empty, name
+        for c in text:  # categorical, categories sorted as text sorts
+            cats = list(got[c].cat.categories)
+            assert cats == sorted(cats) == sorted(set(want[c])), (name, c)
+        pd.testing.assert_frame_equal(got.astype(text), want, check_exact=True)
+        if text:  # a fraction of the memory of Arrow text (0.35x on 100 subjects' tables)
+            used = got[list(text)].memory_usage(deep=True).sum()
+            assert used < 0.8 * want[list(text)].memory_usage(deep=True).sum(), name
+        # Chunks of up to 8 whole subjects, in order.
+        chunks = [list(dict.fromkeys(c["subject"].astype(str))) for c in tables.chunks(name)]
+        assert all(0 < len(c) <= 8 for c in chunks), name
+        assert [s for c in chunks for s in c] == list(dict.fromkeys(want["subject"])), name
+    assert tables["targets"].empty and list(tables.empty("targets")) == SUBJECT_TABLES["targets"]
+    assert len(list(tables.chunks("max_flexion"))) == 10  # 75 subjects, 8 per chunk
+    assert "truth_axes" not in tables and list(tables.chunks("truth_axes")) == []
+    with pytest.raises(KeyError):
+        tables["pinch"]
+    if sys.platform == "linux":  # O_TMPFILE: never a name in the folder
+        assert list(tmp_path.iterdir()) == []
+    with pytest.raises(TypeError, match="cannot be pickled"):
+        pickle.dumps(tables)
 
 
 def test_packed_subjects_live_in_an_unnamed_file(tmp_path) -> None:
@@ -176,16 +197,18 @@ def test_a_source_that_cannot_be_made_is_named(tmp_path) -> None:
     assert "\n" not in str(err.value) and not (tmp_path / "p").exists()
 
 
-def test_a_study_keeps_tens_of_kb_per_subject(tmp_path) -> None:
-    """What the study process holds per subject after the tables moved out: the model,
-    the landmarks and names (measured: 6.8 KB pickled here, 21 KB with 4 fingers)."""
+def test_a_study_keeps_its_subjects_compact_and_on_disk(tmp_path) -> None:
+    """What the study keeps per subject, pickled on disk: the model, the landmarks and
+    names (measured: 6.8 KB pickled here, 21 KB with 4 fingers); its rows are in the
+    study's tables, also on disk."""
     res = run_study(simulated_cohort(CONFIG, 2, 9), tmp_path / "o", FitOptions())
+    assert isinstance(res.subjects, PackedSubjects) and isinstance(res.tables, StudyTables)
     for s in res.subjects:
         assert all(getattr(s, k) is None for k in SUBJECT_TABLES)
         assert s.grasp == {} and all(r.n_frames == 0 for r in s.session.recordings())
         assert len(pickle.dumps(s)) < 15_000
         assert set(s.truth.document["fingers"]["index"]) <= {"axis_offset_mm", "axes_angle_deg"}
-    assert len(res.tables["max_flexion"]) == 20  # 2 subjects x 10 cycles, kept in the tables
+    assert len(res.tables["max_flexion"]) == 20  # 2 subjects x 10 cycles
 
 
 def test_one_box_per_subject_stops_widening() -> None:
@@ -206,14 +229,6 @@ def test_one_box_per_subject_stops_widening() -> None:
         assert few.get_size_inches()[0] == pytest.approx(1.2 * 10 + 3)  # unchanged
     finally:
         plt.close(few)
-
-
-def test_study_tables_of_light_results_are_not_gathered_twice() -> None:
-    rng = np.random.default_rng(1)
-    light = StudyTables().add(0, _fake("S01", rng, truth=True))
-    again = StudyTables()
-    again.add(0, replace(light))
-    assert all(v is None for v in again.tables().values())
 
 
 def test_a_dask_worker_does_not_keep_the_results_read(tmp_path) -> None:

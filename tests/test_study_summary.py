@@ -12,7 +12,7 @@ from scipy import stats
 
 from fingerfit.digits import FINGERS
 from fingerfit.estimate import FitOptions
-from fingerfit.evaluate import summary as summary_module
+from fingerfit.evaluate.gather import StudyTables
 from fingerfit.evaluate.subject import evaluate_subject
 from fingerfit.evaluate.summary import summarize_study
 from fingerfit.io.sessiondir import load_session
@@ -49,10 +49,12 @@ def _numbers(node, where=""):
         yield where, node
 
 
-def test_statistics_do_not_depend_on_the_chunks(results, monkeypatch) -> None:
-    whole, _ = summarize_study(results, FitOptions())
-    monkeypatch.setattr(summary_module, "SUBJECTS_PER_CHUNK", 1)
-    chunked, _ = summarize_study(results, FitOptions())
+def test_statistics_do_not_depend_on_the_chunks(results) -> None:
+    whole, _ = summarize_study(results, FitOptions())  # one chunk
+    tables = StudyTables(chunk=1)  # a chunk per subject, arriving in another order
+    for i in (2, 0, 1):
+        tables.add(i, results[i])
+    chunked, _ = summarize_study(results, FitOptions(), tables=tables.finish(range(3)))
     a, b = dict(_numbers(whole)), dict(_numbers(chunked))
     assert list(a) == list(b)  # the same statistics, keys in the same order
     for key, v in a.items():

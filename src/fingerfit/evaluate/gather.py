@@ -1,7 +1,8 @@
-"""What the study process keeps of its subjects while they arrive, in any order.
+"""What the study process keeps of its subjects, on disk rather than in memory.
 
 :class:`PackedSubjects`: each compact result as one pickle in an unnamed temporary
-file; :class:`StudyTables`: their rows of the study's tables, joined as they come.
+file, as the subjects arrive in any order; :class:`StudyTables`: the study's tables,
+made from them in the study's order, in chunks of whole subjects in another.
 """
 
 from __future__ import annotations
@@ -9,15 +10,23 @@ from __future__ import annotations
 import pickle
 import tempfile
 import weakref
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from ..memory import release_freed_memory
-from .subject import SUBJECT_TABLES, SubjectResult, concat_tables
+from .stats import empty_moments, merge_moments, table_moments
+from .subject import (
+    MODEL_COLUMNS,
+    SUBJECT_TABLES,
+    THUMB_GEOMETRY_COLUMNS,
+    SubjectResult,
+    concat_tables,
+    model_geometry,
+    thumb_geometry,
+)
 
 
 class PackedSubjects(Sequence):
@@ -121,75 +130,174 @@ def _join_categorical(frames: list[pd.DataFrame], columns: list[str]) -> pd.Data
     return concat_tables(frames, columns)
 
 
-class StudyTables:
-    """The per-subject rows of a study, gathered as the subjects arrive, in any order.
+# The study's tables, in the order they are written: name -> the SubjectResult field
+# holding a subject's rows (None: made from the subject's model, MODEL_COLUMNS or
+# THUMB_GEOMETRY_COLUMNS).
+STUDY_TABLES = {
+    "max_flexion": "max_flexion",
+    "axis_quality": "distances",
+    "targets": "targets",
+    "truth_axes": "truth_axes",
+    "truth_fingertip": "truth_tips",
+    "truth_angles": "truth_angles",
+    "models": None,
+    "thumb_geometry": None,
+    "pinch": "pinches",
+}
+_ALWAYS = {"max_flexion", "axis_quality", "targets", "models"}  # even without rows
 
-    A subject's tables (one small DataFrame each, a few KB of rows but tens of KB of
-    pandas overhead) are taken out of its result; every ``chunk`` subjects the ones
-    held are joined into one DataFrame per table, so memory grows by the rows alone,
-    and each row is copied twice in all (into its chunk, then into the study's table).
-    :meth:`tables` gives the same tables as concatenating every subject's, in the
-    subjects' order.
+
+def _columns(name: str) -> list[str]:
+    field = STUDY_TABLES[name]
+    if field is not None:
+        return SUBJECT_TABLES[field]
+    return MODEL_COLUMNS if name == "models" else THUMB_GEOMETRY_COLUMNS
+
+
+def _rows(subject: SubjectResult, name: str) -> pd.DataFrame | None:
+    """A subject's rows of table ``name`` (None: the table does not apply to it)."""
+    field = STUDY_TABLES[name]
+    if field is not None:
+        return getattr(subject, field)
+    if name == "models":
+        return model_geometry(subject)
+    return thumb_geometry(subject) if "thumb" in subject.model.fingers else None
+
+
+class StudyTables(Mapping):
+    """The study's tables, kept in an unnamed temporary file in chunks of whole subjects.
+
+    As each subject arrives (:meth:`add`, in any order) its rows of every table are
+    pickled to the file and taken out of its result. Once all have
+    arrived, :meth:`finish` joins them in the study's order into chunks of ``chunk``
+    whole subjects, text columns categorical (categories sorted as text sorts), each
+    chunk pickled to the file. This process keeps file offsets, not rows: the
+    statistics read the chunks one at a time (:meth:`chunks`), the CSV files are
+    written chunk by chunk, and a whole table is made only when asked for
+    (``tables[name]``, e.g. to draw a figure).
+
+    A mapping (after :meth:`finish`): name -> the whole table, rows in the subjects'
+    order, text columns categorical (``str`` operations need ``.astype(str)``). Its
+    names: those of :data:`STUDY_TABLES` that apply (the truth tables when a subject has
+    ground truth, ``thumb_geometry`` with a thumb, ``pinch`` when there are pinch rows).
 
     Parameters
     ----------
+    folder : Path, optional
+        Where the temporary file is made (default: the system's temporary folder).
     chunk : int
-        Subjects whose tables are held as separate DataFrames before they are joined.
+        Subjects per chunk.
     """
 
-    def __init__(self, chunk: int = 32) -> None:
+    def __init__(self, folder: Path | None = None, chunk: int = 32) -> None:
+        self._file = tempfile.TemporaryFile(prefix=".fingerfit-tables-", dir=folder)
+        weakref.finalize(self, self._file.close)
         self._chunk = chunk
-        self._pending: dict[str, list[pd.DataFrame]] = {k: [] for k in SUBJECT_TABLES}
-        self._joined: dict[str, list[pd.DataFrame]] = {k: [] for k in SUBJECT_TABLES}
-        self._rows: dict[str, list[tuple[int, int]]] = {k: [] for k in SUBJECT_TABLES}
-        self._present: set[str] = set()  # tables some subject has (not None)
+        self._subjects: dict[int, tuple[int, int]] = {}  # order -> span of its rows
+        self._spans: dict[str, list[tuple[int, int]]] = {k: [] for k in STUDY_TABLES}
+        self._applies = set(_ALWAYS)
+        self._names: list[str] = []
+
+    def _write(self, data: bytes) -> tuple[int, int]:
+        end = self._file.seek(0, 2)
+        self._file.write(data)
+        return end, len(data)
+
+    def _read(self, span: tuple[int, int]) -> object:
+        self._file.seek(span[0])
+        return pickle.loads(self._file.read(span[1]))
 
     def add(self, order: int, result: SubjectResult) -> SubjectResult:
-        """Take a subject's tables; the result without them (its table fields None).
+        """Take a subject's rows; its result without them (its table fields None).
 
-        ``order``: the subject's place in the study (its rows come out in this order).
+        ``order``: the subject's place in the study (see :meth:`finish`).
         """
-        for key, columns in SUBJECT_TABLES.items():
-            table = getattr(result, key)
+        rows = {}
+        for name in STUDY_TABLES:
+            table = _rows(result, name)
             if table is None:
                 continue
-            self._present.add(key)
-            if table.empty:
-                continue
-            self._pending[key].append(table[columns])
-            self._rows[key].append((order, len(table)))
-            if len(self._pending[key]) >= self._chunk:
-                self._join(key)
+            if name != "pinch":  # a pinch table only with pinch rows
+                self._applies.add(name)
+            if not table.empty:
+                self._applies.add(name)
+                rows[name] = table
+        self._subjects[order] = self._write(pickle.dumps(rows, pickle.HIGHEST_PROTOCOL))
         return replace(result, **dict.fromkeys(SUBJECT_TABLES))
 
-    def _join(self, key: str) -> None:
-        if self._pending[key]:
-            joined = concat_tables(self._pending[key], SUBJECT_TABLES[key])
-            self._joined[key].append(_categorical(joined))
-            self._pending[key] = []
+    def finish(self, orders: Iterable[int]) -> StudyTables:
+        """Join the rows of the subjects at ``orders`` (given to :meth:`add`), in that
+        order, into the study's tables; returns ``self``."""
+        pending: list[dict] = []
+        for order in orders:
+            pending.append(self._read(self._subjects[order]))
+            if len(pending) == self._chunk:
+                self._store(pending)
+        self._store(pending)
+        self._names = [k for k in STUDY_TABLES if k in self._applies]
+        release_freed_memory()
+        return self
 
-    def tables(self) -> dict[str, pd.DataFrame | None]:
-        """SubjectResult field -> the study's table, rows in the subjects' order
-        (None: no subject has the table). Its text columns are categorical, categories
-        sorted (``str`` operations need ``.astype(str)``; grouping, sorting, comparing
-        and writing give what text columns give)."""
-        out: dict[str, pd.DataFrame | None] = {}
-        for key, columns in SUBJECT_TABLES.items():
-            if key not in self._present:
-                out[key] = None
-                continue
-            self._join(key)
-            joined = _join_categorical(self._joined[key], columns)
-            self._joined[key] = [joined]  # the chunks go before the reordering's copy
-            rows = self._rows[key]
-            given = [o for o, _n in rows]
-            if given != sorted(given):  # arrived in another order
-                starts = np.cumsum([0] + [n for _o, n in rows])
-                order = np.argsort(given, kind="stable")
-                take = np.concatenate([np.arange(starts[i], starts[i] + rows[i][1]) for i in order])
-                joined = joined.take(take).reset_index(drop=True)
-                self._joined[key] = [joined]
-                self._rows[key] = [rows[i] for i in order]
-            out[key] = joined
-        release_freed_memory()  # the chunks' and the reordering's copies
-        return out
+    def _store(self, pending: list[dict]) -> None:
+        for name in STUDY_TABLES:
+            parts = [rows[name] for rows in pending if name in rows]
+            if parts:
+                chunk = _categorical(concat_tables(parts, _columns(name)))
+                self._spans[name].append(self._write(pickle.dumps(chunk, pickle.HIGHEST_PROTOCOL)))
+        pending.clear()
+
+    def chunks(self, name: str) -> Iterator[pd.DataFrame]:
+        """The chunks of table ``name`` in order (none when it has no rows or does not
+        apply), one at a time: each a table of up to ``chunk`` whole subjects."""
+        for span in self._spans.get(name, []):
+            yield self._read(span)  # type: ignore[misc]
+
+    def moments(
+        self,
+        name: str,
+        keys: list[str],
+        values: list[str],
+        prepare: Callable[[pd.DataFrame], pd.DataFrame] | None = None,
+    ) -> pd.DataFrame:
+        """:func:`~.stats.table_moments` of table ``name`` (count, mean, sum of squared
+        deviations, min, max of ``values`` per group of ``keys``), gathered chunk by chunk:
+        the whole table is never made.
+
+        ``prepare``: applied to each chunk first (a filter, a new column, or a pivot whose
+        rows lie within one subject).
+        """
+        parts = []
+        for chunk in self.chunks(name):
+            c = chunk if prepare is None else prepare(chunk)
+            if len(c):
+                parts.append(table_moments(c, keys, values))
+        return merge_moments(pd.concat(parts)) if parts else empty_moments(keys, values)
+
+    def empty(self, name: str) -> pd.DataFrame:
+        """Table ``name`` without rows (its columns, with their types when it has rows)."""
+        for chunk in self.chunks(name):
+            return chunk.iloc[:0]
+        return concat_tables([], _columns(name))
+
+    def __getitem__(self, name: str) -> pd.DataFrame:
+        if name not in self._names:
+            raise KeyError(name)
+        return _join_categorical(list(self.chunks(name)), _columns(name))
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __getstate__(self) -> dict:
+        raise TypeError("StudyTables holds an open temporary file and cannot be pickled")
+
+
+def study_tables(subjects: Iterable[SubjectResult], folder: Path | None = None) -> StudyTables:
+    """The :class:`StudyTables` of results at hand, in their order."""
+    tables = StudyTables(folder)
+    n = 0
+    for n, s in enumerate(subjects, 1):
+        tables.add(n - 1, s)
+    return tables.finish(range(n))

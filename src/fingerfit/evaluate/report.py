@@ -30,8 +30,10 @@ from ..digits import DIGITS, FINGERS
 from ..estimate.fit import ANGLE_SUMMARY, METHOD_SUMMARY
 from ..io.atomic import atomic_write
 from .pinch import pinch_labels
+from .stats import moments_at
 
 if TYPE_CHECKING:
+    from .gather import StudyTables
     from .study import StudyResult
 
 CSS = """
@@ -138,19 +140,36 @@ def _linked_img(path: Path, report: Path, alt: str) -> str:
 _NUMERIC = re.compile(r"^[-−+]?\d|^—$")
 
 
+def _cell(v: object, tag: str) -> str:
+    text = "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else str(v)
+    cls = " class=num" if tag == "td" and _NUMERIC.match(text) else ""
+    return f"<{tag}{cls}>{html.escape(text)}</{tag}>"
+
+
+def _rows(df: pd.DataFrame) -> str:
+    return "".join(
+        "<tr>" + "".join(_cell(v, "td") for v in row) + "</tr>"
+        for row in df.itertuples(index=False)
+    )
+
+
 def _table(df: pd.DataFrame) -> str:
     """An HTML table of pre-formatted cells: numbers right-aligned, text left-aligned."""
+    return "".join(_table_parts([df]))
 
-    def cell(v: object, tag: str) -> str:
-        text = "—" if v is None or (isinstance(v, float) and not np.isfinite(v)) else str(v)
-        cls = " class=num" if tag == "td" and _NUMERIC.match(text) else ""
-        return f"<{tag}{cls}>{html.escape(text)}</{tag}>"
 
-    head = "".join(cell(c, "th") for c in df.columns)
-    body = "".join(
-        "<tr>" + "".join(cell(v, "td") for v in row) + "</tr>" for row in df.itertuples(index=False)
-    )
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+def _table_parts(frames: Iterable[pd.DataFrame]) -> Iterator[str]:
+    """:func:`_table` of the rows of several tables with the same columns (at least one),
+    piece by piece (a table of every subject is never one string)."""
+    k = -1
+    for k, df in enumerate(frames):
+        if k == 0:
+            head = "".join(_cell(c, "th") for c in df.columns)
+            yield f"<table><thead><tr>{head}</tr></thead><tbody>"
+        yield _rows(df)
+    if k < 0:
+        yield "<table><thead><tr></tr></thead><tbody>"
+    yield "</tbody></table>"
 
 
 def _fmt(v: float | None, digits: int = 1, unit: str = "") -> str:
@@ -479,20 +498,21 @@ def write_report(result: StudyResult, path: Path) -> Path:
         parts += _thumb(result)
     if "thumb" in sm or "pinch" in sm:
         parts += _whole_hand(result)
-    models = tables["models"]
+    models = (
+        pd.DataFrame(
+            {
+                "subject": m["subject"],
+                "finger": m["finger"],
+                "joint": m["joint"].astype(str).str.upper(),
+                "axis tilt from orthogonal (deg)": m["tilt_from_orthogonal_deg"].map(_fmt),
+                "segment length (mm)": m["segment_length_mm"].map(_fmt),
+            }
+        )
+        for m in tables.chunks("models")
+    )
     parts += [
         "<h2>Fitted models</h2>",
-        _table(
-            pd.DataFrame(
-                {
-                    "subject": models["subject"],
-                    "finger": models["finger"],
-                    "joint": models["joint"].str.upper(),
-                    "axis tilt from orthogonal (deg)": models["tilt_from_orthogonal_deg"].map(_fmt),
-                    "segment length (mm)": models["segment_length_mm"].map(_fmt),
-                }
-            )
-        ),
+        _table_parts(models),
         "<h2 id=skipped>Statistics not computed</h2>",
         _list([f"{_statistic_name(d['statistic'])}: {d['reason']}" for d in sm["skipped"]])
         if sm["skipped"]
@@ -507,7 +527,8 @@ def write_report(result: StudyResult, path: Path) -> Path:
         "the triad bottom left); the bar bottom right is 10 mm at the current zoom. "
         "Double-click to re-frame.</p>",
         "<p>subject <select id=subject></select></p><canvas id=view width=900 height=560></canvas>",
-        f"<script type='application/json' id='model-data'>{_json_script(_viewer_data(result))}"
+        "<script type='application/json' id='model-data'>",
+        _json_script(_viewer_data(result)),
         "</script>",
         f"<script>{VIEWER_JS}</script>",
     ]
@@ -516,24 +537,29 @@ def write_report(result: StudyResult, path: Path) -> Path:
             "<!DOCTYPE html><html lang=en><head><meta charset=utf-8><title>fingerfit study"
             f"</title><style>{CSS}</style></head><body>"
         )
-        for part in parts:  # not joined into one more copy of the page
-            fh.write(part)
+        for part in parts:  # written as made: the page is never one string
+            fh.writelines([part] if isinstance(part, str) else part)
         fh.write("</body></html>")
     return path
 
 
-def _json_script(items: Iterable[tuple[str, object]]) -> str:
+def _json_script(items: Iterable[tuple[str, object]]) -> Iterator[str]:
     """The JSON object of ``items`` (key, value), safe inside a ``<script>`` element (no
-    ``</script>`` in subject names): the text of ``json.dumps(dict(items))``, made one item
-    at a time (a thousand subjects' viewer data are never Python objects all at once)."""
-    body = ", ".join(f"{json.dumps(k)}: {json.dumps(v)}" for k, v in items)
-    return ("{" + body + "}").replace("<", "\\u003c").replace(">", "\\u003e")
+    ``</script>`` in subject names): the text of ``json.dumps(dict(items))``, piece by
+    piece, made one item at a time (a thousand subjects' viewer data are never Python
+    objects, nor one string, all at once)."""
+    yield "{"
+    for k, (key, value) in enumerate(items):
+        piece = f"{', ' if k else ''}{json.dumps(key)}: {json.dumps(value)}"
+        yield piece.replace("<", "\\u003c").replace(">", "\\u003e")
+    yield "}"
 
 
 def _subjects_table(result: StudyResult) -> str:
     sm = result.summary
-    tg = result.tables["targets"]
-    touches = tg.loc[tg["source"] == "reference", "subject"].value_counts()
+    touches = result.tables.moments(  # one row per touch: the distal sensor's
+        "targets", ["subject"], ["error_mm"], lambda c: c[c["source"] == "reference"]
+    )
     rows = [
         {
             "subject": s.subject,
@@ -541,7 +567,7 @@ def _subjects_table(result: StudyResult) -> str:
             "grasp cycles at max. flexion (n)": str(
                 sm["max_flexion"]["per_subject"][s.subject]["n"]
             ),
-            "target touches (n)": str(int(touches.get(s.subject, 0))),
+            "target touches (n)": str(moments_at(touches, "error_mm", s.subject).rows),
             "ground truth": "yes" if s.truth is not None else "no",
             "warnings (n)": str(len(s.warnings)),
         }
@@ -552,33 +578,32 @@ def _subjects_table(result: StudyResult) -> str:
 
 def _truth(result: StudyResult) -> list[str]:
     sm, fig, tables = result.summary, result.figures, result.tables
-    ta, tt = tables["truth_axes"], tables["truth_fingertip"]
-    axes = (
-        ta.groupby("joint", sort=False)[["axis_error_deg", "centre_to_axis_mm"]]
-        .agg(["mean", "max"])
-        .reset_index()
-    )
+    values = ["axis_error_deg", "centre_to_axis_mm"]
+    axes = tables.moments("truth_axes", ["joint"], values)  # every digit's
     axes_t = pd.DataFrame(
-        {
-            "joint": axes["joint"].str.upper(),
-            "axis error, mean (deg)": axes[("axis_error_deg", "mean")].map(_fmt),
-            "axis error, max (deg)": axes[("axis_error_deg", "max")].map(_fmt),
-            "centre to true axis, mean (mm)": axes[("centre_to_axis_mm", "mean")].map(_fmt),
-            "centre to true axis, max (mm)": axes[("centre_to_axis_mm", "max")].map(_fmt),
-        }
+        [
+            {
+                "joint": str(j).upper(),
+                "axis error, mean (deg)": _fmt(moments_at(axes, values[0], j).mean),
+                "axis error, max (deg)": _fmt(moments_at(axes, values[0], j).max),
+                "centre to true axis, mean (mm)": _fmt(moments_at(axes, values[1], j).mean),
+                "centre to true axis, max (mm)": _fmt(moments_at(axes, values[1], j).max),
+            }
+            for j in axes.index
+        ]
     )
-    tips = tt.groupby(["recording", "variant"])[["mean_mm", "p95_mm"]].mean().reset_index()
+    tips = tables.moments("truth_fingertip", ["recording", "variant"], ["mean_mm", "p95_mm"])
     rank = {"user_axis": "0", "orthogonal": "1"}
-    tips = tips.sort_values(
-        ["recording", "variant"], key=lambda c: c.astype(str).map(lambda v: rank.get(v, v))
-    )
     tips_t = pd.DataFrame(
-        {
-            "recording": tips["recording"],
-            "model": tips["variant"].map(lambda v: v.replace("_", "-") + " model"),
-            "fingertip error, mean (mm)": tips["mean_mm"].map(_fmt),
-            "95th percentile (mm)": tips["p95_mm"].map(_fmt),
-        }
+        [
+            {
+                "recording": str(r),
+                "model": str(v).replace("_", "-") + " model",
+                "fingertip error, mean (mm)": _fmt(moments_at(tips, "mean_mm", (r, v)).mean),
+                "95th percentile (mm)": _fmt(moments_at(tips, "p95_mm", (r, v)).mean),
+            }
+            for r, v in sorted(tips.index, key=lambda k: (str(k[0]), rank.get(k[1], str(k[1]))))
+        ]
     )
     subj = sm["truth"]["subjects"]
     parts = [
@@ -682,6 +707,24 @@ def _thumb(result: StudyResult) -> list[str]:
     return parts
 
 
+def _means(tables: StudyTables, name: str, keys: list[str], value: str) -> pd.DataFrame:
+    """Mean of ``value`` per group of ``keys``, read chunk by chunk: one row per group of
+    all keys but the last, one column per level of the last, as
+    ``table.groupby(keys, sort=False)[value].mean().unstack(keys[-1])`` (rows ordered by
+    each key's order of first appearance, the first key first)."""
+    m = tables.moments(name, keys, [value])
+    rows: dict[tuple, dict] = {}
+    for k in m.index:
+        *row, column = (str(x) for x in k)
+        rows.setdefault(tuple(row), {})[column] = moments_at(m, value, k).mean
+    rank = [
+        {x: i for i, x in enumerate(dict.fromkeys(r[j] for r in rows))}
+        for j in range(len(keys) - 1)
+    ]
+    order = sorted(rows, key=lambda r: [rank[j][x] for j, x in enumerate(r)])
+    return pd.DataFrame([{**dict(zip(keys, r, strict=False)), **rows[r]} for r in order])
+
+
 def _whole_hand(result: StudyResult) -> list[str]:
     """The whole hand: every digit's tip and every joint angle against truth, and pinches."""
     sm, fig, tables = result.summary, result.figures, result.tables
@@ -690,29 +733,24 @@ def _whole_hand(result: StudyResult) -> list[str]:
         "<p class=note>The 3D view of the whole hand (every digit, its second axes and pad "
         "points) is <a href='#view3d'>below</a>.</p>",
     ]
-    tt = tables.get("truth_fingertip")
-    if tt is not None and not tt.empty:
-        g = tt.groupby(["finger", "recording", "variant"], sort=False)["mean_mm"].mean()
-        w = g.unstack("variant").reset_index()
-        if set(("user_axis", "orthogonal")) <= set(w.columns):
-            parts += [
-                "<p>Tip error of every digit against ground truth (mean over subjects of each "
-                "recording's mean):</p>",
-                _table(
-                    pd.DataFrame(
-                        {
-                            "digit": w["finger"],
-                            "recording": w["recording"],
-                            "user-axis model (mm)": w["user_axis"].map(_fmt),
-                            "orthogonal model (mm)": w["orthogonal"].map(_fmt),
-                        }
-                    )
-                ),
-            ]
-    ang = tables.get("truth_angles")
-    if ang is not None and not ang.empty:
-        g = ang.groupby(["finger", "joint", "variant"], sort=False)["mean_abs_deg"].mean()
-        w = g.unstack("variant").reset_index()
+    w = _means(tables, "truth_fingertip", ["finger", "recording", "variant"], "mean_mm")
+    if set(("user_axis", "orthogonal")) <= set(w.columns):
+        parts += [
+            "<p>Tip error of every digit against ground truth (mean over subjects of each "
+            "recording's mean):</p>",
+            _table(
+                pd.DataFrame(
+                    {
+                        "digit": w["finger"],
+                        "recording": w["recording"],
+                        "user-axis model (mm)": w["user_axis"].map(_fmt),
+                        "orthogonal model (mm)": w["orthogonal"].map(_fmt),
+                    }
+                )
+            ),
+        ]
+    w = _means(tables, "truth_angles", ["finger", "joint", "variant"], "mean_abs_deg")
+    if not w.empty:
         parts += [
             "<p>Every joint angle against the true angle (mean |error| over all recordings "
             "with ground truth and subjects):</p>",
@@ -732,7 +770,7 @@ def _whole_hand(result: StudyResult) -> list[str]:
             ),
         ]
     if "pinch" in sm:
-        pn, pin = sm["pinch"], tables["pinch"]
+        pn = sm["pinch"]
         parts += [
             "<h3 id=pinch>Pinches</h3>",
             "<p>During each pinch event (<code>events.csv</code> rows whose target is a digit) "
@@ -760,10 +798,12 @@ def _whole_hand(result: StudyResult) -> list[str]:
                 )
             )
         )
-        per = pin.groupby(["kind", "finger", "target", "source"], sort=False)[
-            ["tip_distance_mm", "true_tip_distance_mm", "tip_distance_error_mm", "pad_gap_mm"]
-        ].mean()
-        per = per.reset_index()
+        values = ["tip_distance_mm", "true_tip_distance_mm", "tip_distance_error_mm", "pad_gap_mm"]
+        per = tables.moments("pinch", ["kind", "finger", "target", "source"], values)
+        per = pd.DataFrame(
+            {v: [moments_at(per, v, k).mean for k in per.index] for v in values},
+            index=per.index,
+        ).reset_index()
         parts += [
             _table(
                 pd.DataFrame(

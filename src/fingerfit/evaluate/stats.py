@@ -96,21 +96,45 @@ def table_moments(table: pd.DataFrame, keys: list[str], values: list[str]) -> pd
         Index: the groups' keys; columns ``(value, field)`` with ``field`` in
         :data:`MOMENT_FIELDS`. Merge several with :func:`merge_moments`.
     """
-    x = table[values].astype(float)
-    x = x.where(np.isfinite(x.to_numpy()))
-    by = [table[k] for k in keys] if keys else np.zeros(len(table), dtype=int)
-    g = x.groupby(by, sort=False, observed=True, dropna=False)
-    n = g.count()
-    parts = {
-        "n": n,
-        "mean": g.mean(),
-        "m2": (g.var(ddof=0) * n).fillna(0.0),
-        "min": g.min(),
-        "max": g.max(),
-        "rows": pd.DataFrame({v: g.size() for v in values}),
-    }
-    out = pd.concat(parts, axis=1).swaplevel(axis=1)
-    return out[[(v, f) for v in values for f in MOMENT_FIELDS]]
+    if keys:
+        groups = table.groupby(keys, sort=False, observed=True, dropna=False)
+        ids, index = groups.ngroup().to_numpy(), groups.size().index
+    else:
+        ids, index = np.zeros(len(table), dtype=np.intp), pd.Index([0])
+    k = len(index)
+    x = table[values].to_numpy(dtype=float).T  # (values, rows)
+    finite = np.isfinite(x)
+    x = np.where(finite, x, 0.0)
+    n = np.stack([np.bincount(ids, w, k) for w in finite.astype(float)])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.stack([np.bincount(ids, w, k) for w in x]) / n
+    dev = np.where(finite, x - mean[:, ids], 0.0)
+    m2 = np.stack([np.bincount(ids, w * w, k) for w in dev])
+    lo, hi = np.full((len(values), k), np.inf), np.full((len(values), k), -np.inf)
+    for v in range(len(values)):
+        np.minimum.at(lo[v], ids[finite[v]], x[v, finite[v]])
+        np.maximum.at(hi[v], ids[finite[v]], x[v, finite[v]])
+    empty = n == 0
+    lo[empty], hi[empty] = np.nan, np.nan
+    rows = np.bincount(ids, minlength=k).astype(float)
+    fields = {"n": n, "mean": mean, "m2": m2, "min": lo, "max": hi}
+    columns = {}
+    for i, v in enumerate(values):
+        for f in MOMENT_FIELDS:
+            columns[(v, f)] = rows if f == "rows" else fields[f][i]
+    out = pd.DataFrame(columns, index=index)
+    out.columns = pd.MultiIndex.from_tuples(out.columns)
+    return out
+
+
+def empty_moments(keys: list[str], values: list[str]) -> pd.DataFrame:
+    """A moments table (:func:`table_moments`) without groups."""
+    columns = pd.MultiIndex.from_tuples([(v, f) for v in values for f in MOMENT_FIELDS])
+    if len(keys) > 1:
+        index = pd.MultiIndex.from_tuples([], names=keys)
+    else:
+        index = pd.Index([], name=keys[0] if keys else None)
+    return pd.DataFrame(index=index, columns=columns, dtype=float)
 
 
 def merge_moments(m: pd.DataFrame, levels: list[str] | None = None) -> pd.DataFrame:
@@ -142,12 +166,12 @@ def merge_moments(m: pd.DataFrame, levels: list[str] | None = None) -> pd.DataFr
         dev = (n * (mean - grand) ** 2).where(n > 0, 0.0)
         g = lambda s: s.groupby(by, sort=False)  # noqa: E731
         merged = {
-            "n": g(n).sum().astype(int),
+            "n": g(n).sum(),
             "mean": g(grand).first(),
             "m2": g(m[(v, "m2")] + dev).sum(),
             "min": g(m[(v, "min")]).min(),
             "max": g(m[(v, "max")]).max(),
-            "rows": g(m[(v, "rows")]).sum().astype(int),
+            "rows": g(m[(v, "rows")]).sum(),
         }
         for f, col in merged.items():
             out[(v, f)] = col
@@ -162,22 +186,18 @@ def moments_at(m: pd.DataFrame, value: str, key=None) -> Moments:
     """The :class:`Moments` of column ``value`` of one row of a moments table (``key``:
     its index; default the only row). A missing key: the moments of no values."""
     if key is None:
-        if len(m) != 1:
-            return Moments(0, float("nan"), 0.0, float("nan"), float("nan"), 0)
-        row = m.iloc[0]
-    elif key in m.index:
-        row = m.loc[key]
+        pos = 0 if len(m) == 1 else None
     else:
+        try:
+            pos = m.index.get_loc(key)
+        except KeyError:
+            pos = None
+    if pos is None:
         return Moments(0, float("nan"), 0.0, float("nan"), float("nan"), 0)
-    n = int(row[(value, "n")])
-    return Moments(
-        n,
-        float(row[(value, "mean")]) if n else float("nan"),
-        float(row[(value, "m2")]),
-        float(row[(value, "min")]),
-        float(row[(value, "max")]),
-        int(row[(value, "rows")]),
-    )
+    first = m.columns.get_loc((value, MOMENT_FIELDS[0]))  # the fields side by side
+    n, mean, m2, lo, hi, rows = m.to_numpy(dtype=float)[pos, first : first + len(MOMENT_FIELDS)]
+    nan = float("nan")
+    return Moments(int(n), float(mean) if n else nan, float(m2), float(lo), float(hi), int(rows))
 
 
 def reduction_percent(new: float, old: float) -> float:

@@ -12,7 +12,7 @@ import contextlib
 import io
 import json
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,13 +46,14 @@ from .summary import summarize_study
 class StudyResult:
     """The study's tables, statistics and output paths.
 
-    ``subjects``: from :func:`run_study` a :class:`PackedSubjects` (compact results
-    without their tables, which are in ``tables``).
+    ``subjects``: from :func:`run_study` a :class:`PackedSubjects` (compact results);
+    ``tables``: a :class:`StudyTables` (kept on disk; ``tables[name]`` makes the whole
+    table).
     """
 
     subjects: Sequence[SubjectResult]
     summary: dict
-    tables: dict[str, pd.DataFrame]
+    tables: Mapping[str, pd.DataFrame]
     out_dir: Path
     figures: dict[str, Path] = field(default_factory=dict)
     report: Path | None = None
@@ -219,7 +220,7 @@ def run_study(
     with staged_directory(out_dir, overwrite=overwrite) as tmp, contextlib.ExitStack() as stack:
         outcomes: list[SubjectOutcome | None] = [None] * len(sessions)
         fig09: dict[int, tuple[str, Path]] = {}
-        gathered = StudyTables()
+        gathered = StudyTables(folder=tmp.parent)
         subjects = PackedSubjects(folder=tmp.parent)  # as they arrive; selected below
         stored: dict[int, int] = {}  # session -> its place in ``subjects``
         pool = stack.enter_context(study_executor(jobs, scheduler))
@@ -242,8 +243,8 @@ def run_study(
                 fig09[i] = (f"fig09_{got.subject}", tmp / name)
                 got.figure = None
             if got.result is not None:
-                # Its rows join the study's tables and its model is written now; the
-                # rest (model, landmarks, names) is kept as one pickle.
+                # Its rows go to the study's tables and its model is written now; the
+                # rest (model, landmarks, names) is kept as one pickle. All on disk.
                 light = gathered.add(i, got.result)
                 save_model(light.model, tmp / "models" / f"{light.subject}.json")
                 stored[i] = len(subjects)
@@ -276,7 +277,7 @@ def run_study(
             if not is_source(x)  # made and removed on the worker
         ]
         _check_not_input(out_dir, [p for p in given if p is not None])
-        keep = []
+        keep, orders = [], []
         for i, o in enumerate(outcomes):
             if o is None or o.read_error is not None:
                 continue
@@ -284,13 +285,15 @@ def run_study(
                 failed(o.source, o.subject, o.fit_error)
                 continue
             keep.append(stored[i])
+            orders.append(i)
         subjects.select(keep)
         if not subjects:
             detail = "; ".join(f.message for f in failures) or "no sessions given"
             raise FingerfitError(f"no session could be fitted and evaluated: {detail}")
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            summary, tables = summarize_study(subjects, options, failures, gathered, out_dir)
+            tables = gathered.finish(orders)  # in the order given
+            summary, tables = summarize_study(subjects, options, failures, tables, out_dir)
             result = StudyResult(subjects, summary, tables, tmp, failures=failures)
             kept = {o.subject for o in ok if o.fit_error is None}
             drawn = dict(fig09[i] for i in sorted(fig09) if outcomes[i].subject in kept)
@@ -421,11 +424,11 @@ _FIGURE_TABLE = {
 }
 
 
-def figure_tables(key: str, tables: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
+def figure_tables(key: str, tables: StudyTables) -> dict[str, pd.DataFrame]:
     """What a study task drawing figure ``key`` needs of the study's tables: its own table,
     and ``max_flexion`` and ``targets`` without rows (:func:`figure_builders` looks at
     them), so each task is sent one table rather than all of them."""
-    out = {k: tables[k].iloc[:0] for k in ("max_flexion", "targets")}
+    out = {k: tables.empty(k) for k in ("max_flexion", "targets")}
     out[_FIGURE_TABLE[key]] = tables[_FIGURE_TABLE[key]]
     return out
 
@@ -448,43 +451,71 @@ def draw_study_figure(key: str, tables: dict[str, pd.DataFrame]) -> bytes:
     return png.getvalue()
 
 
+_FIGURES_AT_ONCE = 3  # study-wide figures sent to the executor at a time (each with a table)
+
+
 def _write_outputs(
-    result: StudyResult,
-    out_dir: Path,
-    drawn: dict[str, Path] | None = None,
-    pool: Executor | None = None,
+    result: StudyResult, out_dir: Path, drawn: dict[str, Path], pool: Executor
 ) -> None:
     """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``.
 
     ``drawn``: figures already written (key -> path), the per-subject Fig. 9 drawn by
     the study tasks; listed after Fig. 8 in the order given. ``pool``: the study's
-    executor; the study-wide figures are drawn there side by side
-    (:func:`draw_study_figure`) while this process writes the tables, and written here.
+    executor, where the study-wide figures are drawn (:func:`draw_study_figure`), each
+    sent its own table, a few at a time, while this process writes the tables chunk by
+    chunk (:meth:`StudyTables.chunks`).
     """
-    built = figure_builders(result.subjects, result.tables)
-    pending = {}
-    if pool is not None:
-        pending = {
-            key: pool.submit(draw_study_figure, key, figure_tables(key, result.tables))
-            for key in built
-            if not key.startswith("fig09")
-        }
-    for name, table in result.tables.items():
-        with atomic_write(out_dir / f"{name}.csv", newline="") as fh:
-            table.to_csv(fh, index=False, lineterminator="\n", float_format="%.6g")
-    for key, (filename, build) in built.items():
-        if key in pending:
-            try:
-                png = pending[key].result()
-            except Exception as exc:  # a lost worker: named, never a traceback
-                raise FingerfitError(
-                    f"a study worker failed drawing {filename} "
-                    f"({type(exc).__name__}: {one_line(exc)})"
-                ) from None
-            with atomic_write(out_dir / filename, "wb") as fh:
-                fh.write(png)
-            result.figures[key] = out_dir / filename
-        else:
-            result.figures[key] = figures.save(build(), out_dir / filename)
+    tables = result.tables
+    sending: dict[str, tuple[str, Future]] = {}  # figure -> (file name, PNG bytes to come)
+    written: dict[str, Path] = {}
+
+    def receive(key: str) -> None:
+        filename, future = sending.pop(key)
+        try:
+            png = future.result()
+        except Exception as exc:  # a lost worker: named, never a traceback
+            raise FingerfitError(
+                f"a study worker failed drawing {filename} ({type(exc).__name__}: {one_line(exc)})"
+            ) from None
+        with atomic_write(out_dir / filename, "wb") as fh:
+            fh.write(png)
+        written[key] = out_dir / filename
+
+    tables_written = False
+    for key, name in _FIGURE_TABLE.items():
+        if name not in tables:
+            continue
+        sent = figure_tables(key, tables)
+        made = figure_builders([], sent)
+        if key not in made:  # e.g. no Fig. 10 in a thumb-only study
+            continue
+        if len(sending) == _FIGURES_AT_ONCE:
+            receive(next(iter(sending)))
+        sending[key] = (made[key][0], pool.submit(draw_study_figure, key, sent))
+        del sent, made
+        if len(sending) == _FIGURES_AT_ONCE and not tables_written:
+            _write_tables(tables, out_dir)  # while the first figures are drawn
+            tables_written = True
+    if not tables_written:
+        _write_tables(tables, out_dir)
+    for key in list(sending):
+        receive(key)
+    for key in _FIGURE_TABLE:
+        if key in written:
+            result.figures[key] = written[key]
         if key == "fig08":
-            result.figures.update(drawn or {})
+            result.figures.update(drawn)
+
+
+def _write_tables(tables: StudyTables, out_dir: Path) -> None:
+    """Each table as ``<name>.csv``, written chunk by chunk (6 significant digits)."""
+    for name in tables:
+        with atomic_write(out_dir / f"{name}.csv", newline="") as fh:
+            header = True
+            for chunk in tables.chunks(name):
+                chunk.to_csv(
+                    fh, index=False, header=header, lineterminator="\n", float_format="%.6g"
+                )
+                header = False
+            if header:  # no rows
+                tables.empty(name).to_csv(fh, index=False, lineterminator="\n")

@@ -77,10 +77,8 @@ def concat_tables(frames: list[pd.DataFrame], columns: list[str]) -> pd.DataFram
 class SubjectResult:
     """Everything the study computed for one session.
 
-    The tables (``max_flexion`` ... ``truth_angles``) are the subject's rows of the
-    study's tables. In :attr:`StudyResult.subjects` of :func:`run_study` they are None:
-    the study moved them into :attr:`StudyResult.tables` as each subject arrived
-    (:class:`StudyTables`), so it keeps a few KB per subject, not a DataFrame each.
+    The tables (``max_flexion`` ... ``pinches``, :data:`SUBJECT_TABLES`) are the
+    subject's rows of the study's tables (:class:`~.gather.StudyTables`).
     """
 
     subject: str
@@ -268,6 +266,43 @@ def _angle_errors(
                 )
             )
     return rows
+
+
+MODEL_COLUMNS = [
+    "subject",
+    "finger",
+    "joint",
+    "center_x",
+    "center_y",
+    "center_z",
+    "axis_x",
+    "axis_y",
+    "axis_z",
+    "tilt_from_orthogonal_deg",
+    "segment_length_mm",
+]
+
+
+def model_geometry(subject: SubjectResult) -> pd.DataFrame:
+    """Per joint of the subject's model: its centre (mm) and flexion axis (unit) in the
+    parent sensor's frame, how far the axis is from the orthogonal one (deg), and the
+    length of the segment it moves (mm); ``MODEL_COLUMNS``."""
+    rows = []
+    for f, fm in subject.model.fingers.items():
+        for k, (j, jm) in enumerate(fm.joints.items()):
+            tilt = np.degrees(angle_between_axes(jm.axis, jm.orthogonal_axis))
+            rows.append(
+                (
+                    subject.subject,
+                    f,
+                    j,
+                    *jm.center,
+                    *jm.axis,
+                    float(tilt),
+                    fm.segment_lengths[fm.segments[k]],
+                )
+            )
+    return pd.DataFrame(rows, columns=MODEL_COLUMNS)
 
 
 def thumb_geometry(subject: SubjectResult) -> pd.DataFrame:

@@ -8,9 +8,8 @@ thumb and pinches. Lengths mm, angles deg.
 
 from __future__ import annotations
 
-import itertools
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -22,28 +21,23 @@ from ..digits import FINGERS, THUMB_JOINTS
 from ..estimate import FitOptions
 from ..model import VARIANTS
 from ..session import JOINTS
-from ..transforms import angle_between_axes
-from .gather import StudyTables
+from .gather import StudyTables, study_tables
 from .stats import (
-    MOMENT_FIELDS,
     Moments,
     Skipped,
+    empty_moments,
     independent_ttest_of,
     merge_moments,
     moments_at,
     paired_ttest_of,
     reduction_percent,
     summary_of,
-    table_moments,
     two_way_anova_of_cells,
 )
 from .subject import (
-    SUBJECT_TABLES,
     THUMB_GEOMETRY_COLUMNS,
     SessionFailure,
     SubjectResult,
-    concat_tables,
-    thumb_geometry,
 )
 
 PAPER = {
@@ -93,51 +87,9 @@ def _anova_dict(table: pd.DataFrame | Skipped) -> dict:
     }
 
 
-SUBJECTS_PER_CHUNK = 32
-
-
-def subject_chunks(table: pd.DataFrame, size: int | None = None) -> Iterator[pd.DataFrame]:
-    """Slices of a study table holding ``size`` whole subjects each (default
-    :data:`SUBJECTS_PER_CHUNK`; rows in the subjects' order, as :meth:`StudyTables.tables`
-    gives them; views, not copies)."""
-    if table.empty:
-        return
-    size = size or SUBJECTS_PER_CHUNK
-    codes = pd.factorize(table["subject"])[0]
-    starts = np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])
-    bounds = [*starts[::size], len(table)]
-    for a, b in itertools.pairwise(bounds):
-        yield table.iloc[a:b]
-
-
-def _moments(
-    table: pd.DataFrame,
-    keys: list[str],
-    values: list[str],
-    prepare: Callable[[pd.DataFrame], pd.DataFrame] | None = None,
-) -> pd.DataFrame:
-    """:func:`~.stats.table_moments` of a study table, gathered over its chunks of whole
-    subjects (:func:`subject_chunks`), so no copy of the whole table is made.
-
-    ``prepare``: applied to each chunk first (a filter, a new column, or a pivot whose
-    rows lie within one subject).
-    """
-    parts = []
-    for chunk in subject_chunks(table):
-        c = chunk if prepare is None else prepare(chunk)
-        if len(c):
-            parts.append(table_moments(c, keys, values))
-    return merge_moments(pd.concat(parts)) if parts else _no_moments(keys, values)
-
-
-def _no_moments(keys: list[str], values: list[str]) -> pd.DataFrame:
-    """A moments table without groups."""
-    columns = pd.MultiIndex.from_tuples([(v, f) for v in values for f in MOMENT_FIELDS])
-    if len(keys) > 1:
-        index = pd.MultiIndex.from_tuples([], names=keys)
-    else:
-        index = pd.Index([], name=keys[0] if keys else None)
-    return pd.DataFrame(index=index, columns=columns, dtype=float)
+def _subjects_in(tables: StudyTables, name: str) -> set[str]:
+    """The subjects with rows in table ``name``."""
+    return {str(x) for chunk in tables.chunks(name) for x in chunk["subject"].unique()}
 
 
 def _total(m: pd.DataFrame, value: str, rows=None) -> Moments:
@@ -152,7 +104,7 @@ def _by(m: pd.DataFrame, levels: list[str], rows=None) -> pd.DataFrame:
     """``m`` merged by some of its index levels (groups in order of first appearance)."""
     sel = m if rows is None else m[np.asarray(rows, dtype=bool)]
     if sel.empty:
-        return _no_moments(levels, list(dict.fromkeys(c[0] for c in m.columns)))
+        return empty_moments(levels, list(dict.fromkeys(c[0] for c in m.columns)))
     return merge_moments(sel, levels=levels)
 
 
@@ -194,12 +146,6 @@ def _skips(node, where: str = "") -> list[dict]:
     return []
 
 
-def _or_empty(tables: dict[str, pd.DataFrame | None], key: str) -> pd.DataFrame:
-    """The study's table ``key`` (a field of SubjectResult), or an empty one."""
-    table = tables[key]
-    return concat_tables([], SUBJECT_TABLES[key]) if table is None else table
-
-
 def summary_path(session: Path | None, out_dir: Path | None) -> str | None:
     """How ``summary.json`` names a session folder: relative to the study's output folder
     when both lie in one folder (``../sessions/S01`` for ``fingerfit demo``, whose folder
@@ -219,22 +165,22 @@ def summarize_study(
     subjects: Sequence[SubjectResult],
     options: FitOptions,
     failures: list[SessionFailure] | None = None,
-    gathered: StudyTables | None = None,
+    tables: StudyTables | None = None,
     out_dir: Path | None = None,
-) -> tuple[dict, dict[str, pd.DataFrame]]:
+) -> tuple[dict, StudyTables]:
     """Statistics and headline of the study, plus its tables.
 
     Parameters
     ----------
     subjects : sequence of SubjectResult
         At least one; any mix of sessions with or without targets, test recordings,
-        ground truth, and different fingers (read one at a time, a few passes).
+        ground truth, and different fingers (read one at a time).
     options : FitOptions
     failures : list of SessionFailure, optional
         Sessions that could not be fitted (``--keep-going``), listed in the summary.
-    gathered : StudyTables, optional
-        The subjects' tables, already taken out of ``subjects`` (whose table fields
-        are then None), as :func:`run_study` does; by default they are gathered here.
+    tables : StudyTables, optional
+        The study's tables, made from ``subjects`` (as :func:`run_study` does); by
+        default made here, in the system's temporary folder.
     out_dir : Path, optional
         The study's output folder (its final name): each session's ``path`` is written
         relative to it (:func:`summary_path`).
@@ -245,44 +191,53 @@ def summarize_study(
         The ``summary.json`` document (lengths mm, angles deg; NaN stored as null).
         A statistic the data cannot support is ``{"skipped": reason}`` and listed
         under ``"skipped"``.
-    tables : dict of str to DataFrame
+    tables : StudyTables
+        The tables the statistics were computed from.
     """
-    if gathered is None:
-        gathered = StudyTables()
-        for i, s in enumerate(subjects):
-            gathered.add(i, s)
-    study_rows = gathered.tables()
-    flex_all = _or_empty(study_rows, "max_flexion")
-    dist = _or_empty(study_rows, "distances")
-    targets = _or_empty(study_rows, "targets")
-    tables = {"max_flexion": flex_all, "axis_quality": dist, "targets": targets}
-    with_targets = {str(x) for c in subject_chunks(targets) for x in c["subject"].unique()}
+    if tables is None:
+        tables = study_tables(subjects)
+    with_targets = _subjects_in(tables, "targets")
+    # What the summary needs of each subject's result, in one pass (each may be made
+    # from its pickle on access).
+    digests = [
+        (
+            s.subject,
+            s.session.path,
+            list(s.model.fingers),
+            s.truth is not None,
+            list(s.warnings),
+            s.model.angle_method,
+            s.skipped_events,
+        )
+        for s in subjects
+    ]
+    names = [d[0] for d in digests]
     summary: dict = {
         "format": "fingerfit.study/1",
         "fingerfit_version": __version__,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "method": options.method,
         "forced": bool(options.force),
-        "angle_methods": sorted({s.model.angle_method for s in subjects}),
-        "subjects": [s.subject for s in subjects],
+        "angle_methods": sorted({method for *_, method, _events in digests}),
+        "subjects": names,
         "sessions": {
-            s.subject: {
-                "path": summary_path(s.session.path, out_dir),
-                "fingers": list(s.model.fingers),
-                "has_targets": s.subject in with_targets,
-                "has_truth": s.truth is not None,
+            name: {
+                "path": summary_path(path, out_dir),
+                "fingers": fingers,
+                "has_targets": name in with_targets,
+                "has_truth": has_truth,
             }
-            for s in subjects
+            for name, path, fingers, has_truth, *_ in digests
         },
         "failed": [f.as_dict() for f in failures or []],
-        "warnings": {s.subject: list(s.warnings) for s in subjects if s.warnings},
+        "warnings": {name: warned for name, _p, _f, _t, warned, *_ in digests if warned},
         "units": "mm",
         "paper": PAPER,
     }
     # Every statistic from moments gathered over chunks of whole subjects (no copy of a
     # whole table; the two-way ANOVAs from the moments of their cells).
     # Axis quality (Fig. 8) and the paper's t-tests between joints.
-    by_joint = _moments(dist, ["joint"], ["distance_mm"])
+    by_joint = tables.moments("axis_quality", ["joint"], ["distance_mm"])
     joint = lambda j: moments_at(by_joint, "distance_mm", j)  # noqa: E731
     aq = {
         j: _mean_sd(joint(j))
@@ -295,29 +250,30 @@ def summarize_study(
     }
     summary["axis_quality"] = {"per_joint": aq, "t_tests": tests}
     # Maximal flexion (Fig. 10): the paper's figures are the four fingers'.
-    flex_m = _moments(flex_all, ["subject", "finger"], list(_PAIR), _with_difference)
+    keys = ["subject", "finger"]
+    flex_m = tables.moments("max_flexion", keys, list(_PAIR), _with_difference)
     fingers = np.isin(_level(flex_m, "finger"), FINGERS)
     mf = _headline(_total(flex_m, "user_axis", fingers), _total(flex_m, "orthogonal", fingers))
     mf["paired_t_test"] = _paired(_total(flex_m, "d", fingers))
     per_subject = _by(flex_m, ["subject"], fingers)
     mf["per_subject"] = {}
-    for s in subjects:
-        u, o = (moments_at(per_subject, v, s.subject) for v in ("user_axis", "orthogonal"))
-        mf["per_subject"][s.subject] = {
+    for name in names:
+        u, o = (moments_at(per_subject, v, name) for v in ("user_axis", "orthogonal"))
+        mf["per_subject"][name] = {
             "n": u.n,
             "user_axis_mean_mm": _num(u.mean),
             "orthogonal_mean_mm": _num(o.mean),
             "reduction_percent": _num(reduction_percent(u.mean, o.mean)),
-            "paired_t_test": _paired(moments_at(per_subject, "d", s.subject)),
+            "paired_t_test": _paired(moments_at(per_subject, "d", name)),
         }
     mf["anova_model_x_subject"] = _anova_dict(
         two_way_anova_of_cells(_model_cells(per_subject, "subject"), "error", "model", "subject")
     )
     summary["max_flexion"] = mf
     # Targets (Figs. 11-12): only the sessions with target recordings.
-    if not targets.empty:
-        wide = _moments(
-            targets,
+    if with_targets:
+        wide = tables.moments(
+            "targets",
             ["target"],
             ["reference", *_PAIR],
             _wide(["subject", "finger", "target"], "error_mm"),
@@ -334,26 +290,26 @@ def summarize_study(
                 tg["per_target"][str(t)][src] = {"mean_mm": _num(sm.mean), "sd_mm": _num(sm.sd)}
         models = lambda c: c[c["source"].isin(VARIANTS)]  # noqa: E731
         for factor in ("target", "subject"):
-            cells = _renamed(_moments(targets, ["source", factor], ["error_mm"], models), "error")
+            cells = tables.moments("targets", ["source", factor], ["error_mm"], models)
+            cells = _renamed(cells, "error")
             tg[f"anova_model_x_{factor}"] = _anova_dict(
                 two_way_anova_of_cells(cells, "error", "model", factor)
             )
         summary["targets"] = tg
     # Ground truth (simulated sessions only).
     axes_m = tips_m = None
-    if study_rows["truth_axes"] is not None:
-        ta = study_rows["truth_axes"]
-        tt = _or_empty(study_rows, "truth_tips")
-        tables["truth_axes"], tables["truth_fingertip"] = ta, tt
-        axes_m = _moments(ta, ["finger", "joint"], ["axis_error_deg", "centre_to_axis_mm"])
-        tips_m = _moments(tt, ["finger", "recording", "variant"], ["mean_mm", "p95_mm"])
+    if "truth_axes" in tables:
+        values = ["axis_error_deg", "centre_to_axis_mm"]
+        axes_m = tables.moments("truth_axes", ["finger", "joint"], values)
+        values = ["mean_mm", "p95_mm"]
+        tips_m = tables.moments("truth_fingertip", ["finger", "recording", "variant"], values)
         per_joint = _by(axes_m, ["joint"])
         joints = sorted(per_joint.index, key=str)
         tip_fingers = _by(
             tips_m, ["recording", "variant"], np.isin(_level(tips_m, "finger"), FINGERS)
         )
         summary["truth"] = {
-            "subjects": sorted({str(x) for c in subject_chunks(ta) for x in c["subject"].unique()}),
+            "subjects": sorted(_subjects_in(tables, "truth_axes")),
             "axis_error_deg": {
                 str(j): _mean_max(moments_at(per_joint, "axis_error_deg", j)) for j in joints
             },
@@ -368,42 +324,10 @@ def summarize_study(
                 for r, v in sorted(tip_fingers.index, key=lambda k: (str(k[0]), str(k[1])))
             },
         }
-        _whole_hand_truth(_or_empty(study_rows, "truth_angles"), summary, tables, tips_m)
-    # Model geometry per subject: how far the fitted axes are from perpendicular.
-    rows = []
-    for s in subjects:
-        for f, fm in s.model.fingers.items():
-            for j, jm in fm.joints.items():
-                tilt = np.degrees(angle_between_axes(jm.axis, jm.orthogonal_axis))
-                rows.append(
-                    (
-                        s.subject,
-                        f,
-                        j,
-                        *jm.center,
-                        *jm.axis,
-                        float(tilt),
-                        fm.segment_lengths[fm.segments[list(fm.joints).index(j)]],
-                    )
-                )
-    tables["models"] = pd.DataFrame(
-        rows,
-        columns=[
-            "subject",
-            "finger",
-            "joint",
-            "center_x",
-            "center_y",
-            "center_z",
-            "axis_x",
-            "axis_y",
-            "axis_z",
-            "tilt_from_orthogonal_deg",
-            "segment_length_mm",
-        ],
-    )
-    _thumb(subjects, summary, tables, flex_m, axes_m, tips_m)
-    _pinch(summary, tables, _or_empty(study_rows, "pinches"))
+        _whole_hand_truth(tables, summary, tips_m)
+    with_thumb = [name for name, _p, fingers, *_ in digests if "thumb" in fingers]
+    _thumb(with_thumb, summary, tables, flex_m, axes_m, tips_m)
+    _pinch(summary, tables)
     summary["skipped"] = _skips(
         {
             k: summary[k]
@@ -413,11 +337,11 @@ def summarize_study(
     )
     summary["skipped"] += [
         {
-            "statistic": f"events.{s.subject}.{e['recording']}.{e['finger']}->{e['target']}",
+            "statistic": f"events.{name}.{e['recording']}.{e['finger']}->{e['target']}",
             "reason": e["reason"],
         }
-        for s in subjects
-        for e in s.skipped_events
+        for name, *_, events in digests
+        for e in events
     ]
     return summary, tables
 
@@ -439,13 +363,11 @@ def _renamed(m: pd.DataFrame, value: str) -> pd.DataFrame:
     return out
 
 
-def _whole_hand_truth(ang: pd.DataFrame, summary: dict, tables: dict, tips_m: pd.DataFrame) -> None:
+def _whole_hand_truth(tables: StudyTables, summary: dict, tips_m: pd.DataFrame) -> None:
     """Every digit's tip and every joint angle against truth: ``summary["truth"]`` keys
     ``tip_mm_per_digit`` (digit -> ``recording/variant`` -> mean, p95 mm) and
-    ``angle_error_deg`` (digit -> angle -> variant -> mean |error| deg), table
-    ``truth_angles`` (``ang``). Digits and angles in order of appearance, recordings and
-    variants sorted."""
-    tables["truth_angles"] = ang
+    ``angle_error_deg`` (digit -> angle -> variant -> mean |error| deg). Digits and
+    angles in order of appearance, recordings and variants sorted."""
     tips: dict = {}
     keys = sorted(tips_m.index, key=lambda k: (str(k[1]), str(k[2])))
     for f, r, v in keys:
@@ -456,7 +378,8 @@ def _whole_hand_truth(ang: pd.DataFrame, summary: dict, tables: dict, tips_m: pd
     order = list(dict.fromkeys(str(f) for f, _r, _v in tips_m.index))
     summary["truth"]["tip_mm_per_digit"] = {f: tips[f] for f in order}
     angles: dict = {}
-    ang_m = _moments(ang, ["finger", "joint", "variant"], ["mean_abs_deg", "p95_abs_deg"])
+    keys, values = ["finger", "joint", "variant"], ["mean_abs_deg", "p95_abs_deg"]
+    ang_m = tables.moments("truth_angles", keys, values)
     for key in ang_m.index:
         f, j, v = (str(k) for k in key)
         angles.setdefault(f, {}).setdefault(j, {})[v] = {
@@ -470,17 +393,15 @@ def _whole_hand_truth(ang: pd.DataFrame, summary: dict, tables: dict, tips_m: pd
 
 
 def _thumb(
-    subjects: Sequence[SubjectResult],
+    with_thumb: list[str],
     summary: dict,
-    tables: dict,
+    tables: StudyTables,
     flex_m: pd.DataFrame,
     axes_m: pd.DataFrame | None,
     tips_m: pd.DataFrame | None,
 ) -> None:
     """``summary["thumb"]``: the thumb's fingertip at maximal flexion, axes and tip against
-    truth, CMC/MCP geometry (table ``thumb_geometry``), for studies with a thumb."""
-    # One subject at a time (a study's subjects may be packed, one made per access).
-    with_thumb = [s.subject for s in subjects if "thumb" in s.model.fingers]
+    truth, CMC/MCP geometry, for studies with a thumb (``with_thumb``: their subjects)."""
     if not with_thumb:
         return
     th: dict = {"subjects": with_thumb}
@@ -489,20 +410,14 @@ def _thumb(
         mf = _headline(_total(flex_m, "user_axis", thumb), _total(flex_m, "orthogonal", thumb))
         mf["paired_t_test"] = _paired(_total(flex_m, "d", thumb))
         th["max_flexion"] = mf
-    geo = concat_tables(
-        [thumb_geometry(s) for s in subjects if "thumb" in s.model.fingers],
-        THUMB_GEOMETRY_COLUMNS,
-    )
-    tables["thumb_geometry"] = geo
+    values = THUMB_GEOMETRY_COLUMNS[2:]
+    geo = tables.moments("thumb_geometry", ["joint"], values)
     th["geometry"] = {
-        j: {
-            "axis_offset_mm": _num(g["axis_offset_mm"].mean()),
-            "true_axis_offset_mm": _num(g["true_axis_offset_mm"].mean()),
-            "axes_angle_deg": _num(g["axes_angle_deg"].mean()),
-            "true_axes_angle_deg": _num(g["true_axes_angle_deg"].mean()),
-            "n": len(g),
+        str(j): {
+            **{v: _num(moments_at(geo, v, j).mean) for v in values},
+            "n": moments_at(geo, values[0], j).rows,
         }
-        for j, g in geo.groupby("joint", sort=False)
+        for j in geo.index
     }
     if "truth_axes" in tables:
         thumb_axes = axes_m[_level(axes_m, "finger") == "thumb"]
@@ -518,8 +433,8 @@ def _thumb(
         }
         # Per recording, one row per subject: the mean of its thumb's tip errors.
         per_subject = _wide(["recording", "subject"], "mean_mm")
-        by_recording = _moments(
-            tables["truth_fingertip"],
+        by_recording = tables.moments(
+            "truth_fingertip",
             ["recording"],
             list(_PAIR),
             lambda c: per_subject(c[c["finger"] == "thumb"]),
@@ -536,17 +451,16 @@ def _thumb(
     summary["thumb"] = th
 
 
-def _pinch(summary: dict, tables: dict, pin: pd.DataFrame) -> None:
-    """``summary["pinch"]`` (tip distances and pad gaps during pinch events) and table
-    ``pinch``, for studies with pinch events."""
-    if pin.empty:
+def _pinch(summary: dict, tables: StudyTables) -> None:
+    """``summary["pinch"]`` (tip distances and pad gaps during pinch events), for studies
+    with pinch events."""
+    if "pinch" not in tables:
         return
-    tables["pinch"] = pin
     columns = ["tip_distance_error_mm", "tip_distance_bias_mm", "pad_gap_mm", "true_pad_gap_mm"]
-    per_source = _moments(pin, ["source"], columns)
-    per_kind = _moments(pin, ["kind", "target", "source"], columns[:1] + columns[2:3])
+    per_source = tables.moments("pinch", ["source"], columns)
+    per_kind = tables.moments("pinch", ["kind", "target", "source"], [columns[0], columns[2]])
     pn: dict = {
-        "subjects": sorted({str(x) for c in subject_chunks(pin) for x in c["subject"].unique()}),
+        "subjects": sorted(_subjects_in(tables, "pinch")),
         "per_source": {},
         "per_kind": {},
     }
@@ -562,8 +476,11 @@ def _pinch(summary: dict, tables: dict, pin: pd.DataFrame) -> None:
             "tip_distance_error": _mean_sd(moments_at(per_kind, columns[0], (kind, tgt, src))),
             "pad_gap": _mean_sd(moments_at(per_kind, columns[2], (kind, tgt, src))),
         }
-    pairs = _moments(
-        pin, [], list(_PAIR), _wide(["subject", "recording", "target", "start"], columns[0])
+    pairs = tables.moments(
+        "pinch",
+        [],
+        list(_PAIR),
+        _wide(["subject", "recording", "target", "start"], columns[0]),
     )
     if all(_total(pairs, v).n for v in VARIANTS):  # some pinch has both models' errors
         pn["paired_t_test"] = _paired(_total(pairs, "d"))
