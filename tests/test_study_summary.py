@@ -5,6 +5,8 @@ Three realistic whole-hand subjects (thumb, index, middle: targets, pinches, gro
 
 from __future__ import annotations
 
+from unittest import mock
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -12,7 +14,7 @@ from scipy import stats
 
 from fingerfit.digits import FINGERS
 from fingerfit.estimate import FitOptions
-from fingerfit.evaluate.gather import StudyTables
+from fingerfit.evaluate.gather import StudyTables, study_tables
 from fingerfit.evaluate.subject import evaluate_subject
 from fingerfit.evaluate.summary import summarize_study
 from fingerfit.io.sessiondir import load_session
@@ -139,3 +141,14 @@ def test_statistics_are_scipys_on_the_whole_tables(results) -> None:
     g = ta[ta["joint"] == "pip"]["axis_error_deg"]
     assert sm["truth"]["axis_error_deg"]["pip"]["mean"] == pytest.approx(g.mean(), rel=1e-12)
     assert sm["truth"]["axis_error_deg"]["pip"]["max"] == g.max()
+
+
+def test_statistics_never_make_a_whole_table(results) -> None:
+    """Every statistic reads the tables chunk by chunk: the study process never holds a
+    whole table for them (a thousand subjects' tables are tens of MB as DataFrames)."""
+    tables = study_tables(results)
+    made = AssertionError("a whole table was made")
+    with mock.patch.object(StudyTables, "__getitem__", side_effect=made):
+        summary, _ = summarize_study(results, FitOptions(), tables=tables)
+        assert {"truth_axes", "pinch", "thumb_geometry"} <= set(tables)
+    assert {"truth", "thumb", "pinch", "targets"} <= set(summary)

@@ -284,6 +284,9 @@ class StudyTables(Mapping):
             raise KeyError(name)
         return _join_categorical(list(self.chunks(name)), _columns(name))
 
+    def __contains__(self, name: object) -> bool:  # without making the table
+        return name in self._names
+
     def __iter__(self) -> Iterator[str]:
         return iter(self._names)
 
