@@ -12,7 +12,7 @@ import contextlib
 import io
 import json
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,7 +53,7 @@ class StudyResult:
 
     subjects: Sequence[SubjectResult]
     summary: dict
-    tables: Mapping[str, pd.DataFrame]
+    tables: StudyTables
     out_dir: Path
     figures: dict[str, Path] = field(default_factory=dict)
     report: Path | None = None
