@@ -1,8 +1,9 @@
 """Statistics of the study, as the paper reports them.
 
-Student t-tests (scipy.stats), two-factor ANOVA with interaction (type-II table from
-the cells' sufficient statistics, equal to statsmodels' OLS + ``anova_lm``), mean (SD)
-and % reduction.
+Student t-tests (equal to scipy.stats' ``ttest_rel`` / ``ttest_ind``), two-factor ANOVA
+with interaction (type-II table, equal to statsmodels' OLS + ``anova_lm``), mean (SD) and
+% reduction — all from :class:`Moments` (count, mean, sum of squared deviations, min, max),
+which merge (:func:`merge_moments`), so a study gathers them chunk by chunk.
 
 A statistic the data cannot support (a t-test with fewer than two values, an
 ANOVA with one level of a factor or no replicates in its cells) is not computed:

@@ -123,7 +123,7 @@ def _with_difference(chunk: pd.DataFrame) -> pd.DataFrame:
 
 
 def _wide(index: list[str], value: str):
-    """A ``prepare`` for :func:`_moments`: the chunk pivoted to one column per
+    """A ``prepare`` for :meth:`StudyTables.moments`: the chunk pivoted to one column per
     ``source``/``variant`` (``reference``, ``user_axis``, ``orthogonal``; the mean of
     duplicates, NaN where missing), with ``d`` (user_axis - orthogonal)."""
 
