@@ -78,7 +78,9 @@ class SubjectResult:
     """Everything the study computed for one session.
 
     The tables (``max_flexion`` ... ``pinches``, :data:`SUBJECT_TABLES`) are the
-    subject's rows of the study's tables (:class:`~.gather.StudyTables`).
+    subject's rows of the study's tables. In :attr:`StudyResult.subjects` of
+    :func:`run_study` they are None: the study took them into :attr:`StudyResult.tables`
+    (:class:`~.gather.StudyTables`, on disk) as the subject arrived.
     """
 
     subject: str
