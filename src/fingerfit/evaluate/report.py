@@ -159,8 +159,8 @@ def _table(df: pd.DataFrame) -> str:
 
 
 def _table_parts(frames: Iterable[pd.DataFrame]) -> Iterator[str]:
-    """:func:`_table` of the rows of several tables with the same columns (at least one),
-    piece by piece (a table of every subject is never one string)."""
+    """:func:`_table` of the rows of several tables with the same columns, piece by piece
+    (a table of every subject is never one string; no tables: an empty table)."""
     k = -1
     for k, df in enumerate(frames):
         if k == 0:
