@@ -65,16 +65,10 @@ class Moments:
 
     @classmethod
     def of(cls, values) -> Moments:
-        """The moments of an array of values (any shape; NaN and inf not counted)."""
-        v = np.asarray(values, dtype=float).ravel()
-        rows = v.size
-        v = v[np.isfinite(v)]
-        if not v.size:
-            return cls(0, float("nan"), 0.0, float("nan"), float("nan"), rows)
-        mean = float(v.mean())
-        return cls(
-            v.size, mean, float(((v - mean) ** 2).sum()), float(v.min()), float(v.max()), rows
-        )
+        """The moments of an array of values (any shape; NaN and inf not counted): the
+        one group of :func:`table_moments` over them."""
+        table = pd.DataFrame({"v": np.asarray(values, dtype=float).ravel()})
+        return moments_at(table_moments(table, [], ["v"]), "v")
 
 
 MOMENT_FIELDS = ("n", "mean", "m2", "min", "max", "rows")
