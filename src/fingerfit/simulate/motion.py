@@ -89,6 +89,7 @@ def grasp(
     rom_scale: float = 1.0,
     abduction_coupling: FloatArray | None = None,
     abduction: bool = True,
+    abduction_wander: tuple[float, float] = (np.radians(1.0), 0.3),
     pivot: FloatArray | None = None,
 ) -> Motion:
     """Cylinder-grasp cycles: open hold, flex, closed hold, extend.
@@ -110,7 +111,10 @@ def grasp(
     abduction_coupling : ndarray, shape (n_fingers,), optional
         rad of ab/adduction per rad of MP flexion per finger.
     abduction : bool
-        MP ab/adduction at all (the coupling plus a slow wander of ~1 deg).
+        MP ab/adduction at all (the coupling plus a slow wander).
+    abduction_wander : (float, float)
+        SD (rad) and highest frequency (Hz) of the MP ab/adduction's wander independent of
+        flexion (:func:`smooth_noise`; default about 1 deg below 0.3 Hz).
     pivot : ndarray, shape (3,), optional
         Point the hand turns about (mm); without it the hand does not move.
     """
@@ -141,7 +145,7 @@ def grasp(
             theta = amp[cyc] * (up - down)
             tremor = smooth_noise(rng, time, np.radians(0.15), 2.0)
             out[j] = np.maximum(theta + tremor, 0.0)
-        abd_rest = smooth_noise(rng, time, np.radians(1.0), 0.3)
+        abd_rest = smooth_noise(rng, time, *abduction_wander)
         out["mp_abduction"] = (abduction_coupling[fi] * out["mp"] + abd_rest) * float(abduction)
         angles[finger] = out
     if pivot is not None:

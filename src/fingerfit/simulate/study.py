@@ -78,6 +78,15 @@ class SimConfig:
     abduction : bool
         MP ab/adduction axis moving during grasp and free motion (the thumb's MCP
         ab/adduction likewise; its CMC always has two axes).
+    abduction_coupling : tuple of float
+        MP ab/adduction per radian of MP flexion (rad/rad): mean and SD over subjects and
+        fingers (drawn per finger).
+    abduction_wander_deg, abduction_wander_hz : float
+        The MP ab/adduction independent of flexion during the grasp cycles: SD (deg) and
+        the highest frequency (Hz) of its slow wander (frequencies from 0.05 Hz up).
+    thumb_mcp_abduction : {"every", "contact"}
+        Recordings in which the thumb's MCP ab/adducts (with ``abduction``): ``every``
+        one, or only the opposition and pinch recordings (and free motion).
     rom_scale : float
         Grasp range-of-motion scale.
     cycles : int
@@ -96,6 +105,10 @@ class SimConfig:
     tilt_scale: float = 1.0
     rolling: bool = True
     abduction: bool = True
+    abduction_coupling: tuple[float, float] = (-0.07, 0.04)
+    abduction_wander_deg: float = 1.0
+    abduction_wander_hz: float = 0.3
+    thumb_mcp_abduction: str = "every"
     rom_scale: float = 1.0
     cycles: int = 10
     targets: bool = True
@@ -340,7 +353,7 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
     tracker = TrackerErrors.sample(rng, config.noise, config.distortion)
     # MP ab/adduction per radian of flexion (fingers converge in a fist): about -4 deg over a
     # full grasp, varying between subjects.
-    coupling = rng.normal(-0.07, 0.04, len(fingers)) if config.abduction else None
+    coupling = rng.normal(*config.abduction_coupling, len(fingers)) if config.abduction else None
     flist = list(fingers)
     ts = wh.setup(
         seed,
@@ -370,20 +383,21 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
         rom_scale=config.rom_scale,
         abduction_coupling=coupling,
         abduction=config.abduction,
+        abduction_wander=(np.radians(config.abduction_wander_deg), config.abduction_wander_hz),
         pivot=hand_origin,
     )
+    # The thumb's MCP ab/adducts in the grasp and circumduction only with "every".
+    thumb_mcp = config.abduction and config.thumb_mcp_abduction == "every"
     if flist:
         grasp_motion = mo.grasp(rng, flist, config.rate_hz, **grasp_kw)
         if with_thumb:
-            grasp_motion.angles["thumb"] = wh.grasp_angles(
-                ts, grasp_motion, flist, config.abduction
-            )
+            grasp_motion.angles["thumb"] = wh.grasp_angles(ts, grasp_motion, flist, thumb_mcp)
     else:
         # A thumb alone still grasps on the clock of a grasp cycle (from its own stream).
         clock = mo.grasp(
             trng, ["index"], config.rate_hz, **{**grasp_kw, "abduction_coupling": None}
         )
-        clock.angles["thumb"] = wh.grasp_angles(ts, clock, ["index"], config.abduction)
+        clock.angles["thumb"] = wh.grasp_angles(ts, clock, ["index"], thumb_mcp)
         del clock.angles["index"]
         grasp_motion = clock
     grasp, truth.frames["grasp.csv"] = run(grasp_motion, "grasp.csv")
@@ -391,7 +405,12 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
     events: list[TargetEvent] = []
     if with_thumb:
         for name, m, contacts in wh.protocols(
-            ts, fingers, config.rate_hz, abduction=config.abduction, pivot=hand_origin
+            ts,
+            fingers,
+            config.rate_hz,
+            abduction=config.abduction,
+            circumduction_mcp_abduction=thumb_mcp,
+            pivot=hand_origin,
         ):
             # Recordings only the thumb brings: every sensor's noise from its stream.
             rec, truth.frames[name] = run(m, name, trng)

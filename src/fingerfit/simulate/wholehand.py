@@ -179,8 +179,12 @@ def protocols(
     *,
     abduction: bool,
     pivot: FloatArray,
+    circumduction_mcp_abduction: bool | None = None,
 ) -> list[tuple[str, mo.Motion, list[ct.Contact]]]:
     """The thumb's calibration recordings: circumduction, opposition, pinches.
+
+    ``circumduction_mcp_abduction`` (default: ``abduction``) switches the MCP's
+    ab/adduction in circumduction alone (opposition and pinches follow ``abduction``).
 
     Returns
     -------
@@ -195,7 +199,9 @@ def protocols(
                 ts.rng,
                 list(fingers),
                 rate,
-                mcp_abduction=abduction,
+                mcp_abduction=abduction
+                if circumduction_mcp_abduction is None
+                else circumduction_mcp_abduction,
                 abduction=abduction,
                 pivot=pivot,
             ),
