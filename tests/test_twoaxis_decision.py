@@ -1,4 +1,5 @@
-"""The one-axis/two-axis MP decision: ab/adduction must vary independently of flexion."""
+"""The rest ab/adduction test (a two-axis diagnostic: ab/adduction varying independently of
+flexion between cycles). The hinge/two-axis choice itself: ``tests/test_model_choice.py``."""
 
 from __future__ import annotations
 
@@ -6,11 +7,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from fingerfit.estimate import FitOptions, fit_session
 from fingerfit.estimate.twoaxis import REST_SPREAD_CONFIDENCE, rest_abduction_test
-from fingerfit.simulate import SimConfig, simulate_subject
-
-from .conftest import subject
 
 CYCLES, PER_CYCLE = 10, 150
 
@@ -57,13 +54,3 @@ def test_fewer_than_two_usable_cycles_fail() -> None:
     # A cycle without flexion has no intercept: it is left out.
     flat = np.where(groups == 1, 0.0, theta)
     assert rest_abduction_test(beta, flat, groups, 1e-3).cycles == CYCLES - 1
-
-
-def test_default_fit_rejects_soft_tissue_second_axis_and_keeps_real_one() -> None:
-    # Seed of the benchmark's 'MP ab/adduction off' subject 1 (bench/twoaxis_decision.py):
-    # before this test the soft-tissue artefact passed the other three conditions there.
-    sim = simulate_subject(SimConfig(abduction=False), 1618992604)
-    model = fit_session(sim.session, FitOptions(force=True))
-    assert model.fingers["index"].second_axes.get("mp") is None
-    real = fit_session(subject("realistic", 2).session, FitOptions(force=True))
-    assert real.fingers["index"].second_axes.get("mp") is not None

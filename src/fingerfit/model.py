@@ -63,6 +63,12 @@ class JointQuality:
         Movement frames rejected as outliers (robust methods).
     rejected_cycles : list of int
         Indices (0-based, in extraction order) of cycles rejected as inconsistent.
+    model_choice : dict or None
+        A joint that may have a second axis (a finger's MP, the thumb's MCP): the choice
+        between one and two axes by held-out prediction
+        (:meth:`fingerfit.estimate.choice.ModelChoice.summary`: ``chosen``,
+        ``held_out_hinge_mm``, ``held_out_two_axis_mm``, ``folds``,
+        ``two_axis_candidate``).
     """
 
     cycles: int
@@ -76,6 +82,7 @@ class JointQuality:
     pooled_conditioning: float | None = None
     rejected_frames: int = 0
     rejected_cycles: list[int] = field(default_factory=list)
+    model_choice: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -574,11 +581,31 @@ def _quality(r: _Reader, q: Any, where: str) -> JointQuality:
             if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
                 raise r.err(w, "must be a list of strings")
             out[key] = list(v)
-        elif key == "pooled_conditioning" and v is None:
+        elif key in ("pooled_conditioning", "model_choice") and v is None:
             out[key] = None
+        elif key == "model_choice":
+            out[key] = _model_choice(r, v, w)
         else:
             out[key] = r.number(v, w)
     return JointQuality(**out)
+
+
+def _model_choice(r: _Reader, v: Any, where: str) -> dict:
+    """A joint's ``model_choice`` record, type-checked."""
+    if not isinstance(v, dict):
+        raise r.err(where, "must be an object")
+    chosen = v.get("chosen")
+    if chosen not in ("hinge", "two_axis"):
+        raise r.err(f"{where}.chosen", "must be 'hinge' or 'two_axis'")
+    out: dict[str, Any] = {"chosen": chosen}
+    for key in ("held_out_hinge_mm", "held_out_two_axis_mm"):
+        out[key] = r.number(r.get(v, key, where), f"{where}.{key}")
+    out["folds"] = r.count(r.get(v, "folds", where), f"{where}.folds")
+    candidate = v.get("two_axis_candidate", True)
+    if not isinstance(candidate, bool):
+        raise r.err(f"{where}.two_axis_candidate", "must be true or false")
+    out["two_axis_candidate"] = candidate
+    return out
 
 
 def _load_joint(r: _Reader, jd: Any, name: str, wj: str, poses: dict) -> JointModel:

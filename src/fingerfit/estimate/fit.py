@@ -50,8 +50,9 @@ from ..session import HAND_SENSOR, JOINTS, Session
 from ..transforms import FloatArray, angle_between_axes, relative_pose, rotation_vector
 from .axis import AxisFit, mean_null_axis, orient_flexion
 from .centre import CentreFit, centre_of_rotation
+from .choice import TWO_AXIS, ModelChoice, choose_joint_model
 from .cycles import extract_cycles
-from .joint import HingeEstimate, estimate_hinge, estimate_two_axis
+from .joint import estimate_hinge, estimate_two_axis
 from .migration import fit_axis_points
 from .plausibility import check_model, check_session, enforce
 from .saddle import SaddleFit, fit_saddle
@@ -188,6 +189,9 @@ class AxisEstimate:
     rejected_cycles : list of int
     notes : list of str
         Facts worth keeping in the joint's quality notes.
+    choice : ModelChoice, optional
+        Hinge vs two axes by held-out prediction (joints that may have a second axis,
+        ``twoaxis`` and ``rolling``).
     """
 
     axis: AxisFit
@@ -198,6 +202,7 @@ class AxisEstimate:
     rejected_frames: int = 0
     rejected_cycles: list[int] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    choice: ModelChoice | None = None
 
 
 def tang2018(data: JointData) -> AxisEstimate:
@@ -280,10 +285,11 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
     if rh.rejected_frames:
         notes.append(f"{rh.rejected_frames} outlier frame(s) rejected")
     abduction = None
+    choice = None
     name = data.joint.upper() or "joint"
     if two_axis and data.second_axis is not None:
-        tf = _second_axis(data, est)
-        if tf.accepted:
+        tf, choice = _second_axis(data)
+        if choice.chosen == TWO_AXIS:
             abduction = tf
             point, direction = tf.flexion_point, tf.flexion_axis
             notes.append(
@@ -292,14 +298,7 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
                 f"{np.degrees(tf.rms_two_axis_rad):.2f} deg RMS"
             )
             notes.extend(tf.stability_notes())
-        else:
-            notes.append(
-                f"one-axis {name}: a second axis would explain too little (ab/adduction span "
-                f"{tf.abduction_range_deg:.1f} deg, rotation off the model "
-                f"{np.degrees(tf.rms_hinge_rad):.2f} -> {np.degrees(tf.rms_two_axis_rad):.2f} deg, "
-                f"ab/adduction at rest varying between cycles by >= "
-                f"{tf.rest_spread_low_deg:.2f} deg SD (95 %; need more than the two-axis RMS))"
-            )
+        notes.append(f"{name}: {choice.note}")
     mig = None
     if migration and not (abduction is not None and data.second_axis == FLEXION_FIRST):
         q = data.rotation[k] @ data.reference_rotation.T
@@ -332,33 +331,50 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
         rejected_frames=rh.rejected_frames,
         rejected_cycles=rh.rejected_cycles,
         notes=notes,
+        choice=choice,
     )
 
 
-def _second_axis(data: JointData, hinge: HingeEstimate) -> TwoAxisFit:
-    """The two-axis fit of a joint that may have a second axis, in its own order.
+def _second_axis(data: JointData) -> tuple[TwoAxisFit, ModelChoice]:
+    """The two-axis candidate of a joint that may have a second axis, and the choice.
+
+    The candidate is fitted to every movement frame of every cycle with uniform weights
+    (the hinge's outlier rules and cycle weights would discard or down-weight exactly the
+    cycles that carry the second degree of freedom), started from the SARA hinge axis, and
+    compared with the hinge by :func:`.choice.choose_joint_model`.
 
     ``estimate_two_axis`` fits ``Q = Rot(b, beta) Rot(a, theta)`` with the ab/adduction
     axis ``b`` proximal; a flexion-first joint is that form seen from the child
-    (:meth:`JointData.reversed`): fitted there and brought back to the parent frame.
+    (:meth:`JointData.reversed`): fitted (and compared) there and brought back to the
+    parent frame.
     """
-    if data.second_axis != FLEXION_FIRST:
-        return estimate_two_axis(
-            data.rotation, data.translation, data.reference_rotation, hinge, data.finger_direction
-        )
-    rev = data.reversed()
-    rh = estimate_hinge(rev.rotation, rev.translation, "robust", rev.periods)
+    flexion_first = data.second_axis == FLEXION_FIRST
+    d = data.reversed() if flexion_first else data
+    frames = np.concatenate(d.periods)
+    labels = np.concatenate([np.full(p.size, i) for i, p in enumerate(d.periods)])
+    start = replace(estimate_hinge(d.rotation, d.translation, "sara", d.periods), groups=labels)
     tf = estimate_two_axis(
-        rev.rotation, rev.translation, rev.reference_rotation, rh, rev.finger_direction
+        d.rotation, d.translation, d.reference_rotation, start, d.finger_direction
     )
+    choice = choose_joint_model(
+        d.rotation[frames],
+        d.translation[frames],
+        d.reference_rotation,
+        d.reference_offset,
+        labels,
+        tf,
+    )
+    if not flexion_first:
+        return tf, choice
     ref, off = data.reference_rotation, data.reference_offset
-    return replace(
+    back = replace(
         tf,
         flexion_axis=ref @ tf.flexion_axis,
         abduction_axis=ref @ tf.abduction_axis,
         flexion_point=ref @ tf.flexion_point + off,
         abduction_point=ref @ tf.abduction_point + off,
     )
+    return back, choice
 
 
 METHODS: dict[str, Callable[[JointData], AxisEstimate]] = {
@@ -482,6 +498,7 @@ def _quality(data: JointData, est: AxisEstimate, notes: list[str]) -> JointQuali
         pooled_conditioning=None if pc is None else min(pc, 1e12),
         rejected_frames=est.rejected_frames,
         rejected_cycles=list(est.rejected_cycles),
+        model_choice=None if est.choice is None else est.choice.summary(),
     )
 
 

@@ -287,7 +287,7 @@ def _tangent_coords(v: FloatArray, v0: FloatArray, basis: FloatArray) -> FloatAr
     return np.array([v @ basis[0], v @ basis[1]]) / (v @ v0)
 
 
-def _local_jacobian(
+def direction_jacobian(
     q: FloatArray, a: FloatArray, b: FloatArray, sw: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Weighted residual ``(3n,)`` and its Jacobian ``(3n, 4)`` in tangent coordinates.
@@ -476,7 +476,7 @@ def fit_two_axis_directions(
         # leads to (at the perpendicular one a real tilt shows up as misfit).
         a, b = a1, b1
         for _ in range(2):
-            r, jac, basis = _local_jacobian(q, a, b, sw)
+            r, jac, basis = direction_jacobian(q, a, b, sw)
             cov, h_inv = _cluster_covariance(jac, r, groups)
             e = np.concatenate([[0.0, 0.0], unit(basis[2:] @ a)])  # tilt of b towards a
             var_tilt = max(float(e @ cov @ e), 0.0)
@@ -509,7 +509,7 @@ def fit_two_axis_directions(
             phi = np.concatenate([[0.0, 0.0], unit(basis[2:] @ np.cross(a, b))])
             best = (a, b, cost, interior, var_tilt, cov, share, float(phi @ cov @ phi))
     a, b, cost, interior, var_tilt, cov1, share, var_phi = best
-    _, jac, _ = _local_jacobian(q, a, b, sw)
+    _, jac, _ = direction_jacobian(q, a, b, sw)
     sv = np.linalg.svd(jac, compute_uv=False)
     tilt_sd = float(np.degrees(np.sqrt(var_tilt))) if var_tilt > 0 else 0.0
     return TwoAxisDirections(
