@@ -42,7 +42,9 @@ axis tilted by the coupled ab/adduction) and the ab/adduction axis within
 the bounds, data with no ab/adduction let the "second axis" take over the
 flexion (``b`` turning onto ``a``).
 
-**Is there a second axis?** The two-axis model replaces the hinge only if (1) the
+**Is there a second axis?** (``TwoAxisFit.accepted``, the rule of
+:func:`.joint.fit_joint`; the finger and thumb pipeline chooses by held-out prediction
+instead, :mod:`.choice`.) Accepted only if (1) the
 optimum is inside the bounds, (2) it halves the RMS rotation off the model
 (``MAX_RESIDUAL_RATIO``), (3) the ab/adduction spans at least ``MIN_RANGE_DEG``
 (5th-95th percentile) and (4) the ab/adduction varies independently of flexion from
