@@ -391,9 +391,7 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
     def run(m: mo.Motion, name: str, noise: np.random.Generator = rng) -> tuple[Recording, dict]:
         return _run(m, name, fingers, mounts, tracker, noise, ts)
 
-    truth = SubjectTruth(
-        fingers, mounts, config=config, thumb=ts.thumb, pads=ts.pads, myohand=myo
-    )
+    truth = SubjectTruth(fingers, mounts, config=config, thumb=ts.thumb, pads=ts.pads, myohand=myo)
     static = mo.static(flist, config.rate_hz, 1.5)
     if with_thumb:
         static.angles["thumb"] = wh.static_angles(static.time.size)
