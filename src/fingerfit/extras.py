@@ -1,6 +1,7 @@
 """Optional dependencies: import one, or end in one line naming the extra that installs it.
 
-Extras (``pyproject.toml``): ``c3d`` (ezc3d), ``robot`` (yourdfpy, mujoco), ``live``
+Extras (``pyproject.toml``): ``c3d`` (ezc3d), ``robot`` (yourdfpy, mujoco), ``myohand``
+(myo-sim, mujoco: the MyoHand simulator world), ``live``
 (pylsl, cyclonedds, rosbags, pyserial), ``retarget`` (mujoco, pinocchio and the robot
 hands' wheels), ``stats``, ``cluster``. Each is imported only when a command needs it.
 """

@@ -77,6 +77,11 @@ class FingerAnatomy:
         True dorsal joint midpoints ``mp``, ``pip``, ``dip`` and ``tip``.
     frame : ndarray, shape (3, 3)
         Columns x (distal), y, z (dorsal) of the finger's anatomical frame.
+    order : tuple of str
+        The two MP axes, proximal first: ``("mp_abduction", "mp")`` (this world: the
+        ab/adduction is fixed in the hand and carries the flexion axis) or
+        ``("mp", "mp_abduction")`` (flexion proximal, the ab/adduction axis turning with
+        the flexion, as in MyoHand: :mod:`.myohand`).
     """
 
     name: str
@@ -88,6 +93,7 @@ class FingerAnatomy:
     tip: FloatArray
     landmarks: dict[str, FloatArray]
     frame: FloatArray
+    order: tuple[str, str] = ("mp_abduction", "mp")
 
     @property
     def lengths(self) -> FloatArray:
@@ -226,6 +232,9 @@ def segment_motions(
 ) -> dict[str, tuple[FloatArray, FloatArray]]:
     """Motion of each segment relative to the reference posture, per frame.
 
+    A product of exponentials about the reference-posture axes, the two MP axes in
+    ``finger.order`` (proximal first), then PIP and DIP.
+
     Parameters
     ----------
     finger : FingerAnatomy
@@ -241,11 +250,14 @@ def segment_motions(
         point at the reference posture to its position in each frame (mm).
     """
     ab = joint_transform(finger.abduction_point, finger.abduction_axis, angles["mp_abduction"])
-    prox = compose(hand_motion, ab)
+    abduction_first = finger.order[0] == "mp_abduction"
+    prox = compose(hand_motion, ab) if abduction_first else hand_motion
     out = {"hand": hand_motion}
     for i, (seg, j) in enumerate(zip(("proximal", "middle", "distal"), JOINTS, strict=True)):
         prox = compose(
             prox, joint_transform(finger.centre[i], finger.axis[i], angles[j], finger.rolling[i])
         )
+        if i == 0 and not abduction_first:
+            prox = compose(prox, ab)
         out[seg] = prox
     return out

@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from ..errors import FingerfitError
 from ..io.atomic import atomic_write
 from ..io.sessiondir import save_session
 from ..session import (
@@ -35,12 +36,15 @@ from ..session import (
 from ..transforms import FloatArray, apply_inverse_pose, quat_wxyz_from_matrix
 from . import contact as ct
 from . import motion as mo
+from . import myohand as mh
 from . import wholehand as wh
 from .anatomy import FingerAnatomy, sample_finger, segment_motions
 from .sensors import SensorMount, TrackerErrors, mount, sensor_poses
 from .thumb import THUMB_KEYS, Pad, ThumbAnatomy
 
 TRUTH_FORMAT = "fingerfit.truth/1"
+#: The true hands a session can be simulated from (``SimConfig.world``).
+WORLDS = ("default", "myohand")
 TARGET_SPACING_MM = 20.0
 N_TARGETS = 7
 SENSOR_HEIGHT = np.array([7.5, 6.5, 5.0])  # dorsal height of phalanx sensors (mm)
@@ -93,6 +97,11 @@ class SimConfig:
         Grasp cycles.
     targets, test : bool
         Include the target-reaching and free-motion recordings.
+    world : {"default", "myohand"}
+        The true hand: fingerfit's own anatomy (:mod:`.anatomy`, :mod:`.thumb`) or the
+        MyoHand model's fingers (:mod:`.myohand`: right hand, four fingers, fixed axes,
+        so ``rolling`` has no effect there; ``tilt_scale`` scales its per-subject axis
+        scatter).
     """
 
     fingers: tuple[str, ...] = ("index",)
@@ -113,6 +122,13 @@ class SimConfig:
     cycles: int = 10
     targets: bool = True
     test: bool = True
+    world: str = "default"
+
+    def __post_init__(self) -> None:
+        if self.world not in WORLDS:
+            raise FingerfitError(
+                f"must be one of {', '.join(WORLDS)}, not {self.world!r}", field="--world"
+            )
 
     @classmethod
     def exact(cls, **kw) -> SimConfig:
@@ -147,6 +163,8 @@ class SubjectTruth:
         Every digit's pad (pulp centre, half-thickness, skin point).
     contacts : list of dict
         Every touch of the thumb (:func:`.wholehand.contact_truth`).
+    myohand : MyoHandSubject or None
+        The subject's MyoHand parameters (``world="myohand"`` only).
     """
 
     fingers: dict[str, FingerAnatomy]
@@ -156,6 +174,7 @@ class SubjectTruth:
     thumb: ThumbAnatomy | None = None
     pads: dict[str, Pad] = field(default_factory=dict)
     contacts: list[dict] = field(default_factory=list)
+    myohand: mh.MyoHandSubject | None = None
 
 
 @dataclass
@@ -309,13 +328,25 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
         pad-to-pad touches are ``events`` (``finger`` = ``thumb``, ``target`` = the
         finger touched).
     """
+    if config.world == "myohand":
+        mh.check_config(config)
     rng = np.random.default_rng(seed)
     hand_rot, hand_origin = _hand_pose(rng)
     scale = rng.normal(1.0, 0.06)
     with_thumb = "thumb" in config.fingers
     fingers: dict[str, FingerAnatomy] = {}
+    myo = None
+    if config.world == "myohand":
+        fingers, myo = mh.sample_fingers(
+            rng,
+            list(config.fingers),
+            hand_scale=scale,
+            hand_rotation=hand_rot,
+            hand_origin=hand_origin,
+            tilt_scale=config.tilt_scale,
+        )
     for f in config.fingers:
-        if f == "thumb":
+        if f == "thumb" or myo is not None:
             continue
         fingers[f] = sample_finger(
             rng,
@@ -373,7 +404,7 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
     def run(m: mo.Motion, name: str, noise: np.random.Generator = rng) -> tuple[Recording, dict]:
         return _run(m, name, fingers, mounts, tracker, noise, ts)
 
-    truth = SubjectTruth(fingers, mounts, config=config, thumb=ts.thumb, pads=ts.pads)
+    truth = SubjectTruth(fingers, mounts, config=config, thumb=ts.thumb, pads=ts.pads, myohand=myo)
     static = mo.static(flist, config.rate_hz, 1.5)
     if with_thumb:
         static.angles["thumb"] = wh.static_angles(static.time.size)
@@ -506,18 +537,23 @@ def truth_document(sim: SimulatedSubject) -> dict:
             "tip": anat.tip.tolist(),
             "landmarks": {k: v.tolist() for k, v in anat.landmarks.items()},
         }
+        if anat.order != FingerAnatomy.order:
+            fingers[f]["axis_order"] = {"mp": list(anat.order)}
         if f in truth.pads:
             fingers[f].update(_pad_document(truth.pads[f]))
     if truth.thumb is not None:
         thumb = wh.thumb_document(truth.thumb, ref_sensor)
         thumb.update(_pad_document(truth.thumb.pad))
         fingers = {"thumb": thumb, **fingers}
-    return {
+    config = asdict(truth.config)
+    if config["world"] == "default":
+        del config["world"]  # truth.json of the default world as before the field existed
+    doc = {
         "format": TRUTH_FORMAT,
         "subject": sim.session.subject,
         "units": "mm",
         "frame": "tracker coordinates at the reference posture; *_in_parent: parent sensor frame",
-        "config": asdict(truth.config),
+        "config": config,
         "sensors": {
             name: {"position": p.tolist(), "quat_wxyz": quat_wxyz_from_matrix(r).tolist()}
             for name, (p, r) in ref_sensor.items()
@@ -525,6 +561,9 @@ def truth_document(sim: SimulatedSubject) -> dict:
         "fingers": fingers,
         "contacts": truth.contacts,
     }
+    if truth.myohand is not None:
+        doc["myohand"] = truth.myohand.document()
+    return doc
 
 
 def _pad_document(pad: Pad) -> dict:

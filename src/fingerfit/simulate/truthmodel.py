@@ -43,10 +43,16 @@ def truth_model(
         True joint centres, axes (tracker coordinates at the reference posture,
         mm), fingertip and, as reference sensor poses, the true sensor mountings
         (before artefact and tracker error), so that every joint is exact in its
-        parent sensor frame.
+        parent sensor frame. A MyoHand finger (MP flexion proximal to its ab/adduction)
+        is stored in the model's order (ab/adduction proximal), noted in each joint's
+        quality: inexact once the MP ab/adducts (``docs/simulator.md``).
     """
     truth = sim.truth
-    quality = JointQuality(0, [], [], [], 0.0, [], notes=["ground truth"])
+    notes = ["ground truth"]
+    if any(a.order[0] == "mp" for a in truth.fingers.values()):
+        # MyoHand world: the model format holds a finger's MP ab/adduction proximal.
+        notes.append("true MP order is flexion first; stored ab/adduction first (inexact)")
+    quality = JointQuality(0, [], [], [], 0.0, [], notes=notes)
     fingers = {}
     for f, anat in truth.fingers.items():
         joints = {
