@@ -118,7 +118,6 @@ def simulate(
     """Simulate sessions (reference, grasp, targets, free-motion test) with truth.json."""
     from ..digits import DIGIT_NAMES
     from ..simulate import SimConfig, simulate_cohort, write_subject
-    from ..simulate.study import WORLDS
     from ..simulate.trackerfiles import require_ezc3d, write_tracker_subject
 
     if hand not in ("left", "right"):
@@ -127,8 +126,6 @@ def simulate(
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise FingerfitError(f"names {', '.join(twice)} twice", field="--fingers")
-    if world not in WORLDS:
-        raise typer.BadParameter(f"must be one of {', '.join(WORLDS)}", param_hint="--world")
     kw = dict(fingers=names, hand=hand, rom_scale=rom, tilt_scale=tilt, world=world)
     if exact:
         config = SimConfig.exact(**kw)
@@ -142,10 +139,8 @@ def simulate(
             distortion=distortion,
             **kw,
         )
-    if world == "myohand":
-        from ..simulate.myohand import check_config
-
-        check_config(config)
+    # SimConfig refuses an unknown --world; simulate_subject what the world cannot simulate,
+    # before anything is written.
     if out_dir.exists() and not out_dir.is_dir():
         raise FingerfitError("exists and is not a folder", path=out_dir)
     if fmt is SimFormat.c3d:

@@ -53,6 +53,12 @@ class Cycles:
         return len(self.periods)
 
 
+def period_labels(periods: list[np.ndarray]) -> np.ndarray:
+    """Cycle index of every frame of ``periods`` in their concatenated order: ``(n,)`` int,
+    ``n`` the total length (``np.concatenate(periods)`` gives the frames themselves)."""
+    return np.concatenate([np.full(p.size, i) for i, p in enumerate(periods)])
+
+
 def geodesic_angle(rotation: FloatArray, reference: FloatArray) -> FloatArray:
     """Angle ``(n,)`` rad of ``rotation (n, 3, 3)`` away from ``reference (3, 3)``."""
     return rotation_angle(rotation @ reference.T)

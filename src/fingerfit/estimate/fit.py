@@ -51,7 +51,7 @@ from ..transforms import FloatArray, angle_between_axes, relative_pose, rotation
 from .axis import AxisFit, mean_null_axis, orient_flexion
 from .centre import CentreFit, centre_of_rotation
 from .choice import TWO_AXIS, ModelChoice, choose_joint_model
-from .cycles import extract_cycles
+from .cycles import extract_cycles, period_labels
 from .joint import estimate_hinge, estimate_two_axis
 from .migration import fit_axis_points
 from .plausibility import check_model, check_session, enforce
@@ -351,7 +351,7 @@ def _second_axis(data: JointData) -> tuple[TwoAxisFit, ModelChoice]:
     flexion_first = data.second_axis == FLEXION_FIRST
     d = data.reversed() if flexion_first else data
     frames = np.concatenate(d.periods)
-    labels = np.concatenate([np.full(p.size, i) for i, p in enumerate(d.periods)])
+    labels = period_labels(d.periods)
     start = replace(estimate_hinge(d.rotation, d.translation, "sara", d.periods), groups=labels)
     tf = estimate_two_axis(
         d.rotation, d.translation, d.reference_rotation, start, d.finger_direction

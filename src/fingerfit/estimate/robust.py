@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import FingerfitError
 from ..transforms import FloatArray
+from .cycles import period_labels
 from .pooled import PooledHinge, pooled_hinge
 
 FRAME_Z = 5.0
@@ -132,7 +133,7 @@ def robust_hinge(
     if not periods:
         raise FingerfitError("no movement periods to fit a hinge to")
     frames = np.concatenate(periods)
-    labels = np.concatenate([np.full(p.size, i) for i, p in enumerate(periods)])
+    labels = period_labels(periods)
     keep = np.ones(frames.size, bool)
     cycles = list(range(len(periods)))
     rejected: list[int] = []
