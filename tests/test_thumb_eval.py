@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from fingerfit.estimate import FitOptions, fit_session
-from fingerfit.evaluate.fingertip import evaluate_targets, skipped_events
+from fingerfit.evaluate.fingertip import evaluate_targets, sensor_carried, skipped_events
 from fingerfit.evaluate.pinch import PINCH_COLUMNS, evaluate_pinches
 from fingerfit.evaluate.subject import _angle_errors, evaluate_subject, thumb_geometry
 from fingerfit.evaluate.summary import summarize_study
@@ -100,7 +100,10 @@ def test_exact_thumb_tips_pads_and_angles_equal_truth(exact) -> None:
             checked.add((rec.name, d))
             m = kin.motions["user_axis"][d]
             assert np.abs(m.tip - truth.tips[rec.name][d]).max() < 1e-6, (rec.name, d)
-            assert np.abs(m.pad - truth.pads[rec.name][d]).max() < 1e-6, (rec.name, d)
+            # The pads come from the pinch holds, not the digitised skin point: the exact
+            # chain carries them as the distal sensor does.
+            carried = sensor_carried(model, d, rec, model.fingers[d].pad)
+            assert np.abs(m.pad - carried).max() < 1e-6, (rec.name, d)
             rows = _angle_errors(session.subject, d, rec.name, "user_axis", m.angles, truth)
             assert {r[3] for r in rows} == set(m.angles)  # every angle scored
             assert max(r[5] for r in rows) < 1e-6 and max(r[6] for r in rows) < 1e-6
@@ -124,7 +127,8 @@ def test_exact_pinch_distances_equal_truth(exact) -> None:
         g = pin[pin["source"] == src]
         assert g["tip_distance_error_mm"].max() < 1e-6
         assert (g["tip_distance_mm"] - g["true_tip_distance_mm"]).abs().max() < 1e-6
-        assert (g["pad_gap_mm"] - g["true_pad_gap_mm"]).abs().max() < 1e-6
+        # Pads fitted to the exact holds meet (the digitised skin points do not).
+        assert g["pad_gap_mm"].max() < 0.2 < g["true_pad_gap_mm"].min()
     # Nail-edge tips stay 12-18 mm apart while the pads touch.
     assert pin["true_tip_distance_mm"].between(10, 20).all()
     assert pin.loc[pin["source"] == "orthogonal", "tip_distance_error_mm"].mean() > 0.1

@@ -164,6 +164,11 @@ class DigitModel:
         Pad point: the centre of the pulp's contact area on the palmar skin
         (``docs/conventions.md``, "Pads"), carried by the distal segment; ``None`` in models
         written before pads existed.
+    pad_source : {"pinch", "landmark", "geometry"}, optional
+        Where :attr:`pad` comes from: the session's pinch holds
+        (:mod:`fingerfit.estimate.pads`), the digitised ``<digit>.pad`` landmark, or the
+        pulp geometry of :func:`estimated_pad`; ``None`` in models written before the
+        field existed.
     """
 
     name: str
@@ -173,6 +178,7 @@ class DigitModel:
     frames: dict[str, SegmentFrame]
     second_axes: dict[str, JointModel] = field(default_factory=dict)
     pad: FloatArray | None = None
+    pad_source: str | None = None
 
     @property
     def segments(self) -> tuple[str, str, str]:
@@ -203,6 +209,34 @@ class DigitModel:
         return DIGITS[self.name].angle_names(tuple(self.second_axes))
 
 
+#: Where a digit's pad point comes from (:attr:`DigitModel.pad_source`).
+PAD_SOURCES = ("pinch", "landmark", "geometry")
+
+
+@dataclass(frozen=True)
+class PinchContact:
+    """How close two digits' model pads come while they touch, from the person's own
+    pinch holds in the session the model was fitted from.
+
+    Attributes
+    ----------
+    digits : tuple of (str, str)
+        The two digits (``events.csv`` ``finger``, ``target``).
+    events, frames : int
+        Pinch events of the pair and their hold frames.
+    contact_mm : dict[str, float]
+        Variant (``user_axis``, ``orthogonal``) -> the 95th percentile over the hold
+        frames of the distance between the two digits' pads as the model computes them
+        (:mod:`fingerfit.kinematics`), mm: below it the person's pads touch
+        (``fingerfit retarget``'s pinch term).
+    """
+
+    digits: tuple[str, str]
+    events: int
+    frames: int
+    contact_mm: dict[str, float]
+
+
 @dataclass(frozen=True)
 class HandModel:
     """An individual hand model: what ``fingerfit fit`` writes.
@@ -227,6 +261,9 @@ class HandModel:
         Plausibility and quality warnings the fit was forced past (``--force``);
         stored in the model file (``"warnings"``, absent or empty when none) and shown
         in the report.
+    pinch_contacts : tuple of PinchContact
+        Per pair of digits that pinched in the session, how close their pads come while
+        touching (``"pinch_contacts"`` in the file; empty without pinch events).
     """
 
     subject: str
@@ -238,6 +275,11 @@ class HandModel:
     version: str = __version__
     angle_method: str = "projection"
     warnings: tuple[str, ...] = ()
+    pinch_contacts: tuple[PinchContact, ...] = ()
+
+    def pinch_contact(self, a: str, b: str) -> PinchContact | None:
+        """The :class:`PinchContact` of digits ``a`` and ``b`` (either order), or None."""
+        return next((c for c in self.pinch_contacts if set(c.digits) == {a, b}), None)
 
     def in_parent(
         self, finger: str, joint: str, variant: str = "user_axis"
@@ -451,6 +493,7 @@ def model_to_dict(model: HandModel) -> dict[str, Any]:
                 if f.pad is not None
                 else {}
             ),
+            **({"pad_source": f.pad_source} if f.pad_source is not None else {}),
             "segment_lengths": {k: float(v) for k, v in f.segment_lengths.items()},
             "frames": {
                 k: {
@@ -480,6 +523,21 @@ def model_to_dict(model: HandModel) -> dict[str, Any]:
         },
         "fingers": fingers,
         "warnings": list(model.warnings),
+        **(
+            {
+                "pinch_contacts": [
+                    {
+                        "digits": list(c.digits),
+                        "events": c.events,
+                        "frames": c.frames,
+                        "contact_mm": {k: float(v) for k, v in c.contact_mm.items()},
+                    }
+                    for c in model.pinch_contacts
+                ]
+            }
+            if model.pinch_contacts
+            else {}
+        ),
     }
 
 
@@ -704,6 +762,7 @@ def load_model(path: str | Path) -> HandModel:
             else "projection"
         ),
         warnings=_warnings(r, doc),
+        pinch_contacts=_pinch_contacts(r, doc, fingers),
     )
 
 
@@ -745,7 +804,10 @@ def _load_digit(r: _Reader, fd: Any, fname: str, poses: dict) -> DigitModel:
         rot = np.column_stack([r.vec(fr, k, w, unit=True) for k in "xyz"])
         frames[s] = SegmentFrame(r.vec(fr, "origin", w), rot)
     pad = r.vec(fd, "pad", wf) if "pad" in fd else None
-    model = DigitModel(fname, joints, r.vec(fd, "tip", wf), lengths, frames, seconds, pad)
+    source = r.str_(fd, "pad_source", wf, PAD_SOURCES) if "pad_source" in fd else None
+    if source is not None and pad is None:
+        raise r.err(f"{wf}.pad_source", "given without a pad")
+    model = DigitModel(fname, joints, r.vec(fd, "tip", wf), lengths, frames, seconds, pad, source)
     order = fd.get("axis_order", {})
     for j in seconds:
         want = [a.name for a in model.axes(j)]
@@ -754,6 +816,44 @@ def _load_digit(r: _Reader, fd: Any, fname: str, poses: dict) -> DigitModel:
                 f"{wf}.axis_order.{j}", f"must be {want} (proximal first; docs/conventions.md)"
             )
     return model
+
+
+def _pinch_contacts(
+    r: _Reader, doc: dict[str, Any], fingers: dict[str, DigitModel]
+) -> tuple[PinchContact, ...]:
+    """The optional ``pinch_contacts`` list (older files and sessions without pinches: none)."""
+    items = doc.get("pinch_contacts", [])
+    if not isinstance(items, list):
+        raise r.err("pinch_contacts", "must be a list")
+    out = []
+    for i, c in enumerate(items):
+        w = f"pinch_contacts[{i}]"
+        digits = r.get(c, "digits", w)
+        if not (
+            isinstance(digits, list)
+            and len(digits) == 2
+            and all(d in fingers and fingers[d].pad is not None for d in digits)
+            and digits[0] != digits[1]
+        ):
+            raise r.err(f"{w}.digits", "must be two different digits of the model with pads")
+        mm = r.get(c, "contact_mm", w)
+        if not isinstance(mm, dict) or set(mm) != set(VARIANTS):
+            raise r.err(f"{w}.contact_mm", f"must give {' and '.join(VARIANTS)}")
+        contact = {}
+        for k in VARIANTS:
+            v = r.number(mm[k], f"{w}.contact_mm.{k}")
+            if not (math.isfinite(v) and 0 <= v <= MAX_MODEL_MM):
+                raise r.err(f"{w}.contact_mm.{k}", "must be a finite distance >= 0 (mm)")
+            contact[k] = v
+        out.append(
+            PinchContact(
+                (digits[0], digits[1]),
+                r.count(r.get(c, "events", w), f"{w}.events"),
+                r.count(r.get(c, "frames", w), f"{w}.frames"),
+                contact,
+            )
+        )
+    return tuple(out)
 
 
 def _warnings(r: _Reader, doc: dict[str, Any]) -> tuple[str, ...]:

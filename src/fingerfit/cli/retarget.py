@@ -33,19 +33,22 @@ OrthogonalOption = Annotated[
         "to the bones) instead of the fitted axes.",
     ),
 ]
-#: :data:`fingerfit.retarget.CONTACT_MM` (without importing NumPy at start-up).
-DEFAULT_CONTACT_MM = 8.0
+#: No ``--contact-mm``: each pinch pair's contact distance comes from the model.
+DEFAULT_CONTACT_MM = None
 ContactOption = Annotated[
-    float,
+    float | None,
     typer.Option(
         "--contact-mm",
-        help="Person's pad-point distance (mm) that counts as touching (pinch term).",
+        help="Person's pad-point distance (mm) that counts as touching (pinch term) for "
+        "every pair. Default: per pair, how close the person's pads came in their pinch "
+        "holds (the model), else 8 mm.",
+        show_default=False,
     ),
 ]
 
 
 def check_robot_options(
-    robot: str, map_path: Path | None, method: str, contact_mm: float
+    robot: str, map_path: Path | None, method: str, contact_mm: float | None
 ) -> list[Path]:
     """Check ``--method`` and ``--contact-mm``; return the robot's input files.
 
@@ -55,8 +58,8 @@ def check_robot_options(
         A built-in robot name or a ``.urdf``/``.xml`` file.
     map_path : Path, optional
     method : str
-    contact_mm : float
-        mm.
+    contact_mm : float, optional
+        mm; ``None``: from the model.
 
     Returns
     -------
@@ -72,7 +75,7 @@ def check_robot_options(
 
     if method not in RETARGET_METHODS:
         raise FingerfitError(f"must be one of {', '.join(RETARGET_METHODS)}", field="--method")
-    if not (math.isfinite(contact_mm) and contact_mm >= 0):
+    if contact_mm is not None and not (math.isfinite(contact_mm) and contact_mm >= 0):
         raise FingerfitError("must be a finite number >= 0", field="--contact-mm")
     inputs = [map_path] if map_path is not None else []
     if robot.lower().endswith((".urdf", ".xml")):

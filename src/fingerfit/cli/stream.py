@@ -155,7 +155,7 @@ def stream(
             (map_path is not None, "--map"),
             (method != "tip", "--method"),
             (orthogonal, "--orthogonal"),
-            (contact_mm != DEFAULT_CONTACT_MM, "--contact-mm"),
+            (contact_mm is not None, "--contact-mm"),
         ]
         for given, name in alone:
             if given:

@@ -54,6 +54,7 @@ from .choice import TWO_AXIS, ModelChoice, choose_joint_model
 from .cycles import extract_cycles, period_labels
 from .joint import estimate_hinge, estimate_two_axis
 from .migration import fit_axis_points
+from .pads import pinch_pads
 from .plausibility import check_model, check_session, enforce
 from .saddle import SaddleFit, fit_saddle
 from .sagittal import intersect, sagittal_plane
@@ -619,12 +620,12 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             joints[j][4],
         )  # fmt: skip
     model = assemble_digit(finger, joints, tip, second_axes, migration)
-    pad = session.landmarks.get(f"{finger}.pad")
+    pad, source = session.landmarks.get(f"{finger}.pad"), "landmark"
     if pad is None:
         last = digit.joints[-1]
         depth = float(np.linalg.norm(session.landmark(f"{finger}.{last}") - joints[last][2]))
-        pad = estimated_pad(model, 2.0 * depth)
-    return replace(model, pad=pad)
+        pad, source = estimated_pad(model, 2.0 * depth), "geometry"
+    return replace(model, pad=pad, pad_source=source)
 
 
 def fit_session(session: Session, options: FitOptions | None = None) -> HandModel:
@@ -687,6 +688,7 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
         fingers=model_fingers,
         angle_method=options.angle_method or METHOD_ANGLES[options.method],
     )
+    model = pinch_pads(session, model)
     forced += enforce(check_model(model, session), options.force)
     return replace(model, warnings=tuple(forced))
 

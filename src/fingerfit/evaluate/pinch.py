@@ -49,6 +49,7 @@ PINCH_COLUMNS = [
     "tip_distance_bias_mm",
     "pad_gap_mm",
     "true_pad_gap_mm",
+    "pad_contact_mm",
 ]
 
 
@@ -120,8 +121,10 @@ def evaluate_pinches(
         ``orthogonal``), columns :data:`PINCH_COLUMNS`: ``kind`` (the simulator's
         ``tip_pinch``/``opposition``, else ``pinch``), ``start``/``end`` (s), ``frames``
         in the event, means over those frames (mm) of the tip distance, the true tip
-        distance, ``|model - true|`` (error) and ``model - true`` (bias), the pad gap and
-        the true pad gap. NaN where there is no truth or the model has no pads.
+        distance, ``|model - true|`` (error) and ``model - true`` (bias), the pad gap, the
+        true pad gap and ``pad_contact_mm``, the mean distance of the two pad points from
+        the true point where the pulps touch (truth ``<a>.contact.<b>``). NaN where there
+        is no truth or the model has no pads.
 
     Raises
     ------
@@ -144,7 +147,7 @@ def evaluate_pinches(
         rec = session.recording(ev.recording)
         k = (rec.time >= ev.start) & (rec.time <= ev.end)
         has_truth = _truth_frames(truth, session, ev.recording, rec.time.size)
-        true_tip = true_gap = None
+        true_tip = true_gap = contact = None
         if has_truth:
             assert truth is not None
             tt = truth.tips[ev.recording]
@@ -152,6 +155,10 @@ def evaluate_pinches(
             tp = truth.pads.get(ev.recording, {})
             if a in tp and b in tp:
                 true_gap = np.linalg.norm(tp[a][k] - tp[b][k], axis=1)
+            tc = truth.contacts.get(ev.recording, {})
+            contact = tc.get((a, b), tc.get((b, a)))
+            if contact is not None:
+                contact = contact[k]
         kind = _kind(truth, ev.recording, b, ev.start)
         for src, pts in cache[ev.recording].items():
             (tip_a, pad_a), (tip_b, pad_b) = pts[a], pts[b]
@@ -163,6 +170,15 @@ def evaluate_pinches(
             )
             nan = np.full(d.shape, np.nan)
             diff = nan if true_tip is None else d - true_tip
+            off = (
+                nan
+                if contact is None or pad_a is None or pad_b is None
+                else 0.5
+                * (
+                    np.linalg.norm(pad_a[k] - contact, axis=1)
+                    + np.linalg.norm(pad_b[k] - contact, axis=1)
+                )
+            )
             rows.append(
                 (
                     ev.recording,
@@ -179,6 +195,7 @@ def evaluate_pinches(
                     _mean(diff),
                     _mean(gap),
                     _mean(nan if true_gap is None else true_gap),
+                    _mean(off),
                 )
             )
     return pd.DataFrame(rows, columns=PINCH_COLUMNS)

@@ -775,10 +775,12 @@ def _whole_hand(result: StudyResult) -> list[str]:
             "<h3 id=pinch>Pinches</h3>",
             "<p>During each pinch event (<code>events.csv</code> rows whose target is a digit) "
             "the distance between the two digits' tip points (nail edges, 12-18 mm apart when "
-            "the pads touch) and the gap between their pad points (pulp skin points; pads that "
+            "the pads touch) and the gap between their pad points (fitted to the session's "
+            "pinch holds where it has them, else the digitised pulp skin points; pads that "
             "touch have gap 0). Tip-distance error: mean over the event's frames of |model "
-            "distance - true distance| (simulated sessions only). Distal sensor: each digit's "
-            "distal sensor carrying the model's tip and pad points.</p>",
+            "distance - true distance|; pads to true contact: mean distance of the two pad "
+            "points from where the pulps truly touch (simulated sessions only). Distal "
+            "sensor: each digit's distal sensor carrying the model's tip and pad points.</p>",
         ]
         if "pinch" in fig:
             parts.append(_img(fig["pinch"], "pinch tip distance and pad gap"))
@@ -792,6 +794,7 @@ def _whole_hand(result: StudyResult) -> list[str]:
                             "tip-distance error, mean (SD) mm": _ms(v["tip_distance_error"]),
                             "pad gap, mean (SD) mm": _ms(v["pad_gap"]),
                             "true pad gap, mean (SD) mm": _ms(v["true_pad_gap"]),
+                            "pads to true contact, mean (SD) mm": _ms(v["pad_to_contact"]),
                         }
                         for src, v in pn["per_source"].items()
                     ]

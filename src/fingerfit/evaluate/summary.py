@@ -456,7 +456,13 @@ def _pinch(summary: dict, tables: StudyTables) -> None:
     with pinch events."""
     if "pinch" not in tables:
         return
-    columns = ["tip_distance_error_mm", "tip_distance_bias_mm", "pad_gap_mm", "true_pad_gap_mm"]
+    columns = [
+        "tip_distance_error_mm",
+        "tip_distance_bias_mm",
+        "pad_gap_mm",
+        "true_pad_gap_mm",
+        "pad_contact_mm",
+    ]
     per_source = tables.moments("pinch", ["source"], columns)
     per_kind = tables.moments("pinch", ["kind", "target", "source"], [columns[0], columns[2]])
     pn: dict = {
@@ -470,6 +476,7 @@ def _pinch(summary: dict, tables: StudyTables) -> None:
             "tip_distance_bias": _mean_sd(moments_at(per_source, columns[1], src)),
             "pad_gap": _mean_sd(moments_at(per_source, columns[2], src)),
             "true_pad_gap": _mean_sd(moments_at(per_source, columns[3], src)),
+            "pad_to_contact": _mean_sd(moments_at(per_source, columns[4], src)),
         }
     for kind, tgt, src in per_kind.index:
         pn["per_kind"].setdefault(f"{kind}/{tgt}", {})[str(src)] = {

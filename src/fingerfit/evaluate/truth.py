@@ -34,12 +34,17 @@ class Truth:
     angles : dict[str, dict[str, dict[str, ndarray]]]
         Recording -> digit -> angle name (``mp``, ``mp_abduction``, ..., the thumb's
         ``cmc``, ``cmc_abduction``, ...) -> true angle ``(n,)`` rad.
+    contacts : dict[str, dict[tuple[str, str], ndarray]]
+        Recording -> (digit, digit) -> where their pulps touch ``(n, 3)`` mm, tracker
+        frame (``<a>.contact.<b>.x|y|z`` columns; meaningful during the pair's pad-to-pad
+        events).
     """
 
     document: dict
     tips: dict[str, dict[str, FloatArray]]  # recording -> finger -> (n, 3)
     pads: dict[str, dict[str, FloatArray]] = field(default_factory=dict)
     angles: dict[str, dict[str, dict[str, FloatArray]]] = field(default_factory=dict)
+    contacts: dict[str, dict[tuple[str, str], FloatArray]] = field(default_factory=dict)
 
     def joint(self, finger: str, joint: str) -> tuple[FloatArray, FloatArray]:
         """True centre (mm) and axis in the parent sensor frame at the reference posture."""
@@ -67,6 +72,7 @@ def load_truth(session_dir: Path | None) -> Truth | None:
     tips: dict[str, dict[str, FloatArray]] = {}
     pads: dict[str, dict[str, FloatArray]] = {}
     angles: dict[str, dict[str, dict[str, FloatArray]]] = {}
+    contacts: dict[str, dict[tuple[str, str], FloatArray]] = {}
     for f in sorted((session_dir / "truth").glob("*.csv")):
         try:
             # Blank lines kept (as empty rows), so a row's line in the file is its index + 2.
@@ -89,6 +95,12 @@ def load_truth(session_dir: Path | None) -> Truth | None:
         pads[f.name] = {
             finger: xyz(finger, "pad") for finger in doc["fingers"] if f"{finger}.pad.x" in at
         }
+        contacts[f.name] = {
+            (a, b): xyz(a, f"contact.{b}")
+            for a in doc["fingers"]
+            for b in doc["fingers"]
+            if f"{a}.contact.{b}.x" in at
+        }
         angles[f.name] = {
             finger: {
                 c.split(".", 1)[1]: np.radians(values[:, k])
@@ -97,7 +109,7 @@ def load_truth(session_dir: Path | None) -> Truth | None:
             }
             for finger in doc["fingers"]
         }
-    return Truth(doc, tips, pads, angles)
+    return Truth(doc, tips, pads, angles, contacts)
 
 
 def _numbers(table: pd.DataFrame, path: Path) -> FloatArray:

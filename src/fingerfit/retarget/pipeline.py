@@ -36,8 +36,10 @@ from .solve import MM, TipOptions, TipProblem, TipSolver
 METHODS = ("tip", "joint")
 #: Person's pad distance (mm) below which the pinch term starts to weigh.
 PINCH_FAR_MM = 30.0
-#: Person's pad-point distance counted as touching (mm): pulp-centre pad points of touching
-#: pads lie 3.5-8 mm apart in the simulated whole-hand pinches (docs/retargeting.md).
+#: Person's pad-point distance counted as touching (mm) for a pair of digits the model has
+#: no pinch holds of (:class:`fingerfit.model.PinchContact`) and no ``--contact-mm``:
+#: digitised pulp skin points of touching pads lie 3.5-8 mm apart in the simulated
+#: whole-hand pinches (docs/retargeting.md).
 CONTACT_MM = 8.0
 
 
@@ -238,7 +240,7 @@ class Retargeting:
 
 
 def pinch_terms(
-    s: Setup, pads: dict[str, FloatArray], contact_mm: float = CONTACT_MM
+    s: Setup, pads: dict[str, FloatArray], contact_mm: float | FloatArray = CONTACT_MM
 ) -> tuple[list[tuple[str, str]], FloatArray, FloatArray, FloatArray]:
     """Pinch pairs, target vectors, weights and the person's pad distances.
 
@@ -246,8 +248,9 @@ def pinch_terms(
     ----------
     pads : dict[str, ndarray (n, 3)]
         Digit -> pad point in the person's palm frame (mm).
-    contact_mm : float
-        The person's pad-point distance that counts as touching (:data:`CONTACT_MM`).
+    contact_mm : float or ndarray, shape (p,)
+        The person's pad-point distance that counts as touching, one for every pair or
+        one per pair (mm; :meth:`Retargeter.contact`).
 
     Returns
     -------
@@ -268,6 +271,7 @@ def pinch_terms(
     v = (np.stack([pads[a] for a, _ in pairs], 1) - np.stack([pads[b] for _, b in pairs], 1)) * m
     dist = np.linalg.norm(v, axis=2)
     k = np.array([0.5 * (s.scale[a] + s.scale[b]) for a, b in pairs])
+    contact_mm = np.broadcast_to(np.asarray(contact_mm, dtype=float), (len(pairs),))
     with np.errstate(invalid="ignore", divide="ignore"):
         shrink = np.where(dist > 0, np.maximum(dist - contact_mm, 0.0) / dist, 0.0)
     vec = k[:, None] * v * shrink[:, :, None]
@@ -305,8 +309,11 @@ class Retargeter:
     variant : {"user_axis", "orthogonal"}
         The model variant whose kinematics drive the robot.
     options : TipOptions, optional
-    contact_mm : float
-        See :func:`pinch_terms`.
+    contact_mm : float, optional
+        The person's pad distance that counts as touching for every pinch pair (mm;
+        ``--contact-mm``). Default: per pair, the model's
+        :class:`~fingerfit.model.PinchContact` of the variant (how close the person's
+        pads came in their own pinch holds), else :data:`CONTACT_MM`.
 
     Attributes
     ----------
@@ -314,7 +321,10 @@ class Retargeter:
     frames : list of str
         The robot's tip frames of ``setup.digits``.
     notes : list of str
-        Mirroring, digits held or dropped, pinch term off.
+        Mirroring, digits held or dropped, pinch term off, each pinch pair's contact
+        distance and where it comes from.
+    contact : ndarray, shape (p,)
+        The contact distance of each pinch pair the ``tip`` method uses (mm).
     held, missing : int
         Frames so far where a missing angle kept its value (``joint``) and frames with a
         missing sensor whose digits kept their pose (``tip``).
@@ -328,12 +338,11 @@ class Retargeter:
         method: str = "tip",
         variant: str = "user_axis",
         options: TipOptions | None = None,
-        contact_mm: float = CONTACT_MM,
+        contact_mm: float | None = None,
     ) -> None:
         if method not in METHODS:
             raise FingerfitError(f"must be one of {', '.join(METHODS)}", field="--method")
         self.model, self.method, self.variant = model, method, variant
-        self.contact_mm = contact_mm
         self.setup = s = setup(model, robot, rmap)
         self.frames = [rmap.digits[d].tip for d in s.digits]
         self.notes = list(s.notes)
@@ -347,6 +356,7 @@ class Retargeter:
         )
         # Digits of the pinch pairs, whose pads the tip method needs (none: no pinch term).
         self._padded: list[str] = []
+        self.contact = np.zeros(0)
         self.solver: TipSolver | None = None
         if method == "tip":
             padded = {d for d in s.digits if model.fingers[d].pad is not None}
@@ -354,6 +364,7 @@ class Retargeter:
                 self.notes.append("the model has no pad points: pinch term off")
             # the pairs pinch_terms gives: both digits retargeted and with a pad point
             pairs = [(a, b) for a, b in rmap.pinch if a in padded and b in padded]
+            self.contact = np.array([self._contact(model, a, b, contact_mm) for a, b in pairs])
             self._padded = [d for d in s.digits if d in padded and any(d in p for p in pairs)]
             pad_frames = [rmap.digits[d].pad for pair in pairs for d in pair]
             frames = self.frames + [f for f in dict.fromkeys(pad_frames) if f not in self.frames]
@@ -363,6 +374,19 @@ class Retargeter:
             ]
             problem = TipProblem(robot, s.robot_palm, frames, s.free, s.hold, s.limits)
             self.solver = TipSolver(problem, pidx, options)
+
+    def _contact(self, model: HandModel, a: str, b: str, override: float | None) -> float:
+        """The contact distance of pinch pair ``a``-``b`` (mm), announced in :attr:`notes`."""
+        evidence = model.pinch_contact(a, b)
+        if override is not None:
+            mm, why = override, "--contact-mm"
+        elif evidence is not None:
+            mm = evidence.contact_mm[self.variant]
+            why = f"the person's {evidence.events} pinch hold(s) in the model"
+        else:
+            mm, why = CONTACT_MM, "no pinch holds of the pair in the model: the default"
+        self.notes.append(f"pinch {a}-{b}: the pads touch below {mm:.1f} mm ({why})")
+        return float(mm)
 
     def kinematics(self, recording: Recording) -> Kinematics:
         """The person's kinematics :meth:`step` needs (the retargeted digits, one variant)."""
@@ -414,7 +438,7 @@ class Retargeter:
         vec = w = None
         if self._padded:
             pads = {d: palm[:, k + i] for i, d in enumerate(self._padded)}
-            _, vec, w, _ = pinch_terms(s, pads, self.contact_mm)
+            _, vec, w, _ = pinch_terms(s, pads, self.contact)
         res = self.solver.solve(tgt, None, vec, w, prior=q_joint)
         return res.q, tgt, res.seconds
 
@@ -427,7 +451,7 @@ def retarget(
     method: str = "tip",
     variant: str = "user_axis",
     options: TipOptions | None = None,
-    contact_mm: float = CONTACT_MM,
+    contact_mm: float | None = None,
     kin: Kinematics | None = None,
 ) -> Retargeting:
     """Retarget a recording of the person's hand onto a robot hand.
@@ -443,8 +467,8 @@ def retarget(
     variant : {"user_axis", "orthogonal"}
         The model variant whose kinematics drive the robot.
     options : TipOptions, optional
-    contact_mm : float
-        See :func:`pinch_terms`.
+    contact_mm : float, optional
+        See :class:`Retargeter`.
     kin : Kinematics, optional
         Precomputed :func:`fingerfit.kinematics.compute_kinematics` of ``recording``.
 

@@ -582,7 +582,9 @@ def truth_table(frames: dict, pads: dict[str, Pad] | None = None) -> pd.DataFram
     and ``<digit>.tip.x|y|z``; with ``pads``, ``<digit>.pad.x|y|z`` (the pulp's skin
     point, as the ``<digit>.pad`` landmark) and, with the thumb,
     ``thumb.pad_distance.<finger>``: thumb to finger pulp centre (pads touch at the sum
-    of the half-thicknesses).
+    of the half-thicknesses) and ``thumb.contact.<finger>.x|y|z``: the point of the thumb's
+    pulp surface on the line between the two pulp centres, where the pulps touch during
+    that finger's pad-to-pad events (every frame; meaningful while they touch).
     """
     cols: dict[str, FloatArray] = {"time": frames["time"]}
     for f, ang in frames["angles"].items():
@@ -600,9 +602,14 @@ def truth_table(frames: dict, pads: dict[str, Pad] | None = None) -> pd.DataFram
     if "thumb" in frames["angles"] and pads:
         for f in frames["angles"]:
             if f != "thumb" and f in frames.get("pad", {}):
-                cols[f"thumb.pad_distance.{f}"] = np.linalg.norm(
-                    frames["pad"]["thumb"] - frames["pad"][f], axis=1
+                line = frames["pad"][f] - frames["pad"]["thumb"]
+                dist = np.linalg.norm(line, axis=1)
+                cols[f"thumb.pad_distance.{f}"] = dist
+                contact = frames["pad"]["thumb"] + pads["thumb"].half_thickness * (
+                    line / dist[:, None]
                 )
+                for i, c in enumerate("xyz"):
+                    cols[f"thumb.contact.{f}.{c}"] = contact[:, i]
     return pd.DataFrame(cols)
 
 
