@@ -150,6 +150,7 @@ def retarget(
     from ..io.atomic import check_target, refuse_writing_inputs, write_files
     from ..model import load_model
     from ..retarget import retarget as run
+    from ..retarget.palm import palm_in_hand_sensor, person_palm
     from ..session import UNITS_TO_MM
 
     robot_files = check_robot_options(robot, map_path, method, contact_mm)
@@ -195,6 +196,14 @@ def retarget(
         bar.advance(task)
     for note in res.notes:
         notice("note", note)
+    palm = person_palm(model)
+    angle, euler = palm_in_hand_sensor(model, palm)
+    say(
+        "palm frame {} deg from the hand sensor's (x-y-z angles {} deg); {}",
+        f"{angle:.1f}",
+        ", ".join(f"{v:.1f}" for v in euler),
+        palm.evidence,
+    )
     if res.violations:  # projection makes this impossible; never write a violating file
         raise FingerfitError(f"{res.violations} joint-limit violations", path=output)
     files: dict[Path, str | bytes] = {

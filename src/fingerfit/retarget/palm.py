@@ -1,9 +1,17 @@
 """Palm frames of the person and the robot, digit anchors and per-digit scales.
 
 **Person's palm frame** (fixed to the hand sensor, defined at the reference posture, the
-stretched hand): ``y`` = the mean MP flexion axis of the fingers (radial for a right hand,
-ulnar for a left one, ``docs/conventions.md``), ``x`` (distal) = the mean fingertip-minus-MP
-direction made perpendicular to ``y``, ``z = x × y`` (dorsal); origin = the mean MP centre.
+stretched hand; tracker coordinates, mm) from the hand's anatomy, never from one joint
+axis (:func:`person_palm`):
+
+* ``x`` (distal) = the mean direction of the finger lines: each finger's least-squares
+  line through its MP, PIP and DIP centres and its tip, pointing to the tip;
+* ``y`` = the normal of the fingers' sagittal planes: the mean flexion axis of every
+  joint of every finger (MP, PIP, DIP) made perpendicular to ``x`` (the planes the fit
+  put the joint centres on), so on the side the flexion axes point to: radial for a
+  right hand, ulnar for a left one (``docs/conventions.md``);
+* ``z = x × y`` (dorsal); origin = the mean MP centre.
+
 A frame moves with the hand sensor, so fingertips are expressed in it by undoing the hand
 sensor's motion since the reference posture.
 
@@ -23,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError
 from ..model import HandModel
@@ -34,18 +43,54 @@ from .robots import Robot
 
 @dataclass(frozen=True)
 class Frame:
-    """A palm frame: ``origin (3,)`` and ``rotation (3, 3)`` (columns x distal, y, z dorsal)."""
+    """A palm frame: ``origin (3,)`` and ``rotation (3, 3)`` (columns x distal, y, z dorsal).
+
+    ``evidence`` says what defined it (shown by ``fingerfit retarget``).
+    """
 
     origin: FloatArray
     rotation: FloatArray
+    evidence: str = ""
 
 
 def _unit(v: FloatArray) -> FloatArray:
-    return v / np.linalg.norm(v)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _lines(points: FloatArray) -> FloatArray:
+    """Unit directions ``(k, 3)`` of the least-squares lines through ``points (k, m, 3)``,
+    each pointing from its first point towards its last."""
+    centred = points - points.mean(axis=1, keepdims=True)
+    d = np.linalg.svd(centred)[2][:, 0]
+    sign = np.sign(np.einsum("ki,ki->k", d, points[:, -1] - points[:, 0]))
+    return d * sign[:, None]
+
+
+def _across(v: FloatArray, x: FloatArray) -> FloatArray:
+    """``v (3,)`` made perpendicular to the unit ``x (3,)`` (not normalised)."""
+    return v - (v @ x) * x
 
 
 def person_palm(model: HandModel) -> Frame:
     """The person's palm frame at the reference posture (tracker coordinates, mm).
+
+    Built from the fingers' anatomy (module docstring, ``docs/retargeting.md``): ``x`` =
+    the mean finger line (least-squares line through the MP, PIP, DIP centres and the
+    tip of each finger), ``y`` = the fingers' sagittal-plane normal (the mean flexion
+    axis of all their joints made perpendicular to ``x``), ``z = x × y``. ``x`` fixes
+    all but the roll about it, which ``y`` gives. An axis tilted about the dorsal axis
+    (gaining a component along the finger) loses its tilt to the projection; one tilted
+    about the finger line weighs ``1 / (3 k)`` (``k`` fingers). The MP centres' row is not
+    used: its dorsal-palmar slope is the fitted centres' least certain coordinate and
+    the metacarpal arch's (in simulated four-finger subjects it rolled the frame 2-6 deg,
+    the flexion axes 0.5-0.7 deg). Nor is the thumb, which rests pronated beside the
+    palm.
+
+    Returns
+    -------
+    Frame
+        ``origin (3,)`` = the mean MP centre (mm), ``rotation (3, 3)`` columns x, y, z,
+        ``evidence`` naming the digits and the rule used.
 
     Raises
     ------
@@ -54,13 +99,45 @@ def person_palm(model: HandModel) -> Frame:
     """
     fingers = [f for f in model.fingers.values() if "mp" in f.joints]
     if not fingers:
-        raise FingerfitError("the model has no finger with an MP joint to define the palm frame")
-    y = _unit(np.mean([f.joints["mp"].axis for f in fingers], axis=0))
-    centres = np.array([f.joints["mp"].center for f in fingers])
-    distal = np.mean([_unit(f.tip - f.joints["mp"].center) for f in fingers], axis=0)
-    x = _unit(distal - (distal @ y) * y)
-    z = np.cross(x, y)
-    return Frame(centres.mean(axis=0), np.column_stack([x, y, z]))
+        raise FingerfitError(
+            "the model has no finger (a digit with an MP joint): the palm frame is defined "
+            "by the fingers' lines and MP centres"
+        )
+    names = ", ".join(f.name for f in fingers)
+    plural = "s" if len(fingers) > 1 else ""
+    chains = np.array([[j.center for j in f.joints.values()] + [f.tip] for f in fingers])
+    x = _unit(_lines(chains).mean(axis=0))
+    flexion = np.mean([j.axis for f in fingers for j in f.joints.values()], axis=0)
+    sagittal = _across(flexion, x)
+    if np.linalg.norm(sagittal) < 0.1 * np.linalg.norm(flexion):
+        raise FingerfitError(f"the flexion axes of {names} run along the fingers: no palm frame")
+    y = _unit(sagittal)
+    evidence = f"x: finger line{plural} ({names}); y: sagittal plane{plural} ({names})"
+    centre = chains[:, 0].mean(axis=0)
+    return Frame(centre, np.column_stack([x, y, np.cross(x, y)]), evidence)
+
+
+def palm_in_hand_sensor(model: HandModel, palm: Frame) -> tuple[float, FloatArray]:
+    """The person's palm frame seen from the hand sensor at the reference posture.
+
+    Parameters
+    ----------
+    model : HandModel
+        Holds the hand sensor's reference pose.
+    palm : Frame
+        From :func:`person_palm` (tracker coordinates).
+
+    Returns
+    -------
+    angle : float
+        Rotation angle (deg, 0-180) of ``R = R_hand^T R_palm``, the palm frame's axes in
+        hand-sensor coordinates.
+    euler : ndarray, shape (3,)
+        ``(a, b, c)`` deg with ``R = Rz(c) Ry(b) Rx(a)`` (fixed axes x, y, z of the hand
+        sensor).
+    """
+    r = Rotation.from_matrix(model.reference_poses[HAND_SENSOR][1].T @ palm.rotation)
+    return float(np.degrees(r.magnitude())), r.as_euler("xyz", degrees=True)
 
 
 def digit_base(model: HandModel, digit: str) -> FloatArray:
@@ -104,8 +181,10 @@ def robot_palm(robot: Robot, rmap: RobotMap, q: FloatArray) -> Frame:
     """The robot's palm frame (robot world coordinates, m) at configuration ``q (nq,)``."""
     o, r = robot.pose(q, rmap.palm)
     x = rmap.distal
-    z = _unit(rmap.dorsal - (rmap.dorsal @ x) * x)
-    return Frame(o, r @ np.column_stack([x, np.cross(z, x), z]))
+    z = _unit(_across(rmap.dorsal, x))
+    return Frame(
+        o, r @ np.column_stack([x, np.cross(z, x), z]), f"map: '{rmap.palm}' distal, dorsal"
+    )
 
 
 def robot_digit(

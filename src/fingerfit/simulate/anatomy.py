@@ -118,6 +118,7 @@ def sample_finger(
     tilt_sd_deg: float = 4.0,
     rolling: bool = True,
     abduction: bool = True,
+    mp_tilt_deg: float | None = None,
 ) -> FingerAnatomy:
     """Draw one finger's anatomy for one subject.
 
@@ -139,6 +140,10 @@ def sample_finger(
         Between-subject SD of each axis obliquity (deg).
     rolling, abduction : bool
         Centre migration with flexion; a distinct MP ab/adduction axis.
+    mp_tilt_deg : float, optional
+        The MP axis obliquity about ``z`` (deg, positive: the axis's +y end turned
+        distally) in place of the drawn one (drawn all the same, so the random stream and
+        every other draw are unchanged).
     """
     side = 1.0 if hand == "right" else -1.0
     ratio = BUCHHOLZ[name] / BUCHHOLZ["index"]
@@ -163,6 +168,8 @@ def sample_finger(
         tilt_scale
         * (rng.choice([-1.0, 1.0]) * MYOHAND_TILT_DEG[name] + rng.normal(0, tilt_sd_deg, 3))
     )
+    if mp_tilt_deg is not None:
+        alpha[0] = np.radians(mp_tilt_deg)
     beta = np.radians(tilt_scale * rng.normal(0, 2.0, 3))
     axis = unit(
         np.cos(alpha)[:, None] * (np.cos(beta)[:, None] * y + np.sin(beta)[:, None] * z)

@@ -102,6 +102,12 @@ class SimConfig:
         MyoHand model's fingers (:mod:`.myohand`: right hand, four fingers, fixed axes,
         so ``rolling`` has no effect there; ``tilt_scale`` scales its per-subject axis
         scatter).
+    mp_axis_tilt_deg : float, optional
+        Sets every finger's MP flexion-axis obliquity off perpendicular to the bone (deg,
+        about the finger's dorsal axis z: positive turns the axis's +y end distally) in
+        place of the drawn one; the dorsal tilt and everything else are drawn as usual.
+        ``None`` (default): the drawn obliquity, every output as without the field.
+        Default world only; ``|value| < 60``.
     """
 
     fingers: tuple[str, ...] = ("index",)
@@ -123,12 +129,25 @@ class SimConfig:
     targets: bool = True
     test: bool = True
     world: str = "default"
+    mp_axis_tilt_deg: float | None = None
 
     def __post_init__(self) -> None:
         if self.world not in WORLDS:
             raise FingerfitError(
                 f"must be one of {', '.join(WORLDS)}, not {self.world!r}", field="--world"
             )
+        tilt = self.mp_axis_tilt_deg
+        if tilt is not None:
+            if not (np.isfinite(tilt) and abs(tilt) < 60.0):
+                raise FingerfitError(
+                    f"must be a finite angle below 60 deg in magnitude, not {tilt!r}",
+                    field="mp_axis_tilt_deg",
+                )
+            if self.world != "default":
+                raise FingerfitError(
+                    "the MP axis tilt is an option of the default world only",
+                    field="mp_axis_tilt_deg",
+                )
 
     @classmethod
     def exact(cls, **kw) -> SimConfig:
@@ -358,6 +377,7 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
             tilt_scale=config.tilt_scale,
             rolling=config.rolling,
             abduction=config.abduction,
+            mp_tilt_deg=config.mp_axis_tilt_deg,
         )
     mounts: dict[str, SensorMount] = {}
     hand_site = hand_origin + hand_rot @ np.array([-45.0, 0.0, 18.0])
@@ -548,6 +568,8 @@ def truth_document(sim: SimulatedSubject) -> dict:
     config = asdict(truth.config)
     if config["world"] == "default":
         del config["world"]  # truth.json of the default world as before the field existed
+    if config["mp_axis_tilt_deg"] is None:
+        del config["mp_axis_tilt_deg"]  # likewise
     doc = {
         "format": TRUTH_FORMAT,
         "subject": sim.session.subject,
