@@ -34,7 +34,7 @@ from .stats import moments_at
 
 if TYPE_CHECKING:
     from .gather import StudyTables
-    from .study import StudyResult
+    from .results import StudyResult
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;

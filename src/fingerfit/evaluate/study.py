@@ -12,9 +12,8 @@ import contextlib
 import io
 import json
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +28,8 @@ from ..model import save_model
 from ..session import Session
 from . import figures
 from .gather import PackedSubjects, StudyTables
+from .report import write_report
+from .results import StudyResult
 from .subject import (
     SessionFailure,
     SessionSource,
@@ -40,25 +41,6 @@ from .subject import (
     study_subject,
 )
 from .summary import summarize_study
-
-
-@dataclass
-class StudyResult:
-    """The study's tables, statistics and output paths.
-
-    ``subjects``: from :func:`run_study` a :class:`PackedSubjects` (compact results);
-    ``tables``: a :class:`StudyTables` (kept on disk; ``tables[name]`` makes the whole
-    table).
-    """
-
-    subjects: Sequence[SubjectResult]
-    summary: dict
-    tables: StudyTables
-    out_dir: Path
-    figures: dict[str, Path] = field(default_factory=dict)
-    report: Path | None = None
-    failures: list[SessionFailure] = field(default_factory=list)
-
 
 _SESSION_FILES = {"session.toml", "landmarks.csv", "events.csv", "truth.json", "truth"}
 
@@ -205,8 +187,6 @@ def run_study(
         unusable output folder. Read errors come before the subject-ID and output
         checks, which come before fit errors, each in the order the sessions were given.
     """
-    from .report import write_report
-
     options = options or FitOptions()
     step = progress or (lambda _msg: None)
     out_dir = Path(out_dir)
