@@ -83,6 +83,13 @@ def _run(
         )
     for f in result.failures:
         notice("warning", f"skipped {f.message}")
+    not_evaluated = result.summary.get("events_not_evaluated", {}).get("per_subject", {})
+    for subject, n in not_evaluated.items():
+        notice(
+            "warning",
+            f"{subject}: {n['target_touches']} target touch(es) and {n['pinches']} pinch(es) "
+            "not evaluated: the model lacks their digit (listed in the report)",
+        )
     for subject, warned in result.summary.get("warnings", {}).items():
         for w in warned:
             notice("warning", f"{subject}: {w}")
