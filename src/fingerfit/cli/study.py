@@ -11,7 +11,7 @@ from rich.table import Table
 if TYPE_CHECKING:
     from ..evaluate import StudyResult
 from ._names import DEFAULT_METHOD, METHODS
-from .app import Quiet, app, notice, out, progress, say, user_errors
+from .app import Quiet, app, debugging, notice, out, progress, say, user_errors
 
 
 def _cell(d: dict) -> str:
@@ -80,6 +80,7 @@ def _run(
             overwrite=overwrite,
             jobs=jobs,
             scheduler=scheduler,
+            debug=debugging(),
         )
     for f in result.failures:
         notice("warning", f"skipped {f.message}")
