@@ -1,6 +1,9 @@
 """dex-retargeting as a peer of ``bench/retarget.py`` (run in its own venv, not fingerfit's).
 
-    /work/dexenv/bin/python bench/dex_peer.py IN.npz OUT.npz
+    $FINGERFIT_DEX_PYTHON bench/dex_peer.py IN.npz OUT.npz
+
+``FINGERFIT_DEX_PYTHON``: the python of a venv with dex-retargeting and torch
+(docs/retargeting.md, section *dex-retargeting*).
 
 Builds dex-retargeting's own optimisers from its ``RetargetingConfig`` (the package's
 documented entry point) on a URDF and runs them frame by frame with the package's own

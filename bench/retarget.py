@@ -1,7 +1,7 @@
 """Retargeting benchmark: tip vs joint method vs the orthogonal model as source, one run.
 
     python bench/retarget.py [--subjects 1] [--frames 3000] [--out bench/retarget.json]
-                             [--dex-python /work/dexenv/bin/python]
+                             [--dex-python "$FINGERFIT_DEX_PYTHON"]
 
 Simulated subjects (four fingers, ``fingerfit.simulate``), model fitted by
 ``fit_session``, the grasp recording retargeted onto Shadow (MJCF, MuJoCo) and Allegro
@@ -16,7 +16,7 @@ against the hand's anatomy or a target out of reach costs). Then whole-hand subj
 points closer than ``CONTACT_MM``), per thumb-finger pair the map names.
 
 ``--dex-python`` adds dex-retargeting (``pip install dex-retargeting torch`` in a venv of
-its own, docs/retargeting.md) on the Allegro URDF, the robot file fingerfit loads (it
+its own, docs/retargeting.md; that venv's python is ``FINGERFIT_DEX_PYTHON`` there) on the Allegro URDF, the robot file fingerfit loads (it
 reads URDF only, not Shadow's MJCF): ``bench/dex_peer.py`` runs under that interpreter on
 exactly the frames and the scaled fingertip targets fingerfit's ``tip`` method gets
 (its ``PositionOptimizer`` on the tips; on the pinch recording also its
@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -249,6 +250,14 @@ def person_agreement(s: Setup, model, sub, rec: Recording, q: np.ndarray, cut: s
     return float(np.mean(rms))
 
 
+def _command() -> str:
+    """This run's command line, the dex-retargeting python written as
+    ``$FINGERFIT_DEX_PYTHON`` when it is that variable's value (no machine path)."""
+    dex = os.environ.get("FINGERFIT_DEX_PYTHON")
+    args = ["$FINGERFIT_DEX_PYTHON" if dex and a == dex else a for a in sys.argv]
+    return " ".join(["python", *args])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--subjects", type=int, default=1)
@@ -417,7 +426,7 @@ def main() -> None:
     a.out.write_text(
         json.dumps(
             {
-                "command": " ".join(["python", *sys.argv]),
+                "command": _command(),
                 "python": platform.python_version(),
                 "dex_retargeting": dex_version,
                 "rows": rows,

@@ -2,13 +2,13 @@
 
 The false-positive guard: realistic simulated subjects (all four fingers, several seeds)
 and the real Polhemus Liberty recordings are not refused, with the margins quoted in
-``docs/plausibility.md``. ``python -m tests.test_plausibility`` prints those numbers.
+``docs/plausibility.md``; ``bench/plausibility_conventions.py``, ``bench/plausibility_ranges.py``
+and ``bench/plausibility_cost.py`` print those numbers.
 """
 
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,14 +31,13 @@ from fingerfit.estimate.plausibility import (
     segment_bound,
     unit_cause,
 )
-from fingerfit.session import PoseSeries
-from fingerfit.transforms import matrix_from_quat_wxyz, quat_wxyz_from_matrix
+from fingerfit.transforms import matrix_from_quat_wxyz
 
+from ._conventions import as_written
+from ._shared_recordings import LIBERTY, LIBERTY_FILES, liberty_pivot_residuals
 from .conftest import subject
 
 ALL = ("index", "middle", "ring", "little")
-LIBERTY = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "polhemus-liberty"
-LIBERTY_FILES = ("rotate-90deg-x.csv", "rotate-90deg-y.csv", "rotate-90deg-z.csv")
 
 
 def test_bounds_from_buchholz_fractions() -> None:
@@ -145,16 +144,6 @@ def test_landmark_to_centre_one_joint_is_a_fit_not_a_unit_mistake() -> None:
     assert all(p.message.endswith("millimetres declared as centimetres") for p in problems)
 
 
-def _rewrite(series: PoseSeries, kind: str) -> PoseSeries:
-    """The series as read from a file written in another quaternion convention."""
-    q = quat_wxyz_from_matrix(series.rotation)
-    if kind == "conjugated":
-        q = q * np.array([1.0, -1, -1, -1])
-    elif kind == "xyzw":
-        q = q[:, [1, 2, 3, 0]]
-    return PoseSeries(series.position, matrix_from_quat_wxyz(q))
-
-
 @pytest.mark.parametrize(("kind", "named"), [("conjugated", "conjugated"), ("xyzw", "xyzw")])
 def test_wrong_convention_named_for_every_joint(kind: str, named: str) -> None:
     s = subject("realistic", 2).session
@@ -163,7 +152,7 @@ def test_wrong_convention_named_for_every_joint(kind: str, named: str) -> None:
         "dip": ("index.middle", "index.distal"),
     }.items():
         res, _ = pivot_residuals(
-            _rewrite(s.grasp[0].pose(p), kind), _rewrite(s.grasp[0].pose(c), kind)
+            as_written(s.grasp[0].pose(p), kind), as_written(s.grasp[0].pose(c), kind)
         )
         assert min(res, key=res.get) == named, (j, res)
         assert res[named] < CONVENTION_RATIO * res["as read"]
@@ -173,7 +162,7 @@ def test_forced_model_keeps_the_warning() -> None:
     s = subject("realistic", 2).session
 
     def broken(rec):
-        poses = {k: _rewrite(v, "conjugated") for k, v in rec.poses.items()}
+        poses = {k: as_written(v, "conjugated") for k, v in rec.poses.items()}
         return type(rec)(rec.name, rec.time, poses)
 
     bad = type(s)(
@@ -189,19 +178,6 @@ def test_forced_model_keeps_the_warning() -> None:
     assert any("conjugated" in w for w in model.warnings)
 
 
-def liberty_checks() -> dict[str, dict[str, float]]:
-    """Pivot residual (mm) per quaternion reading of each real Liberty recording."""
-    from fingerfit.io.widecsv import read_wide_csv
-
-    out = {}
-    for name in LIBERTY_FILES:
-        rec = read_wide_csv(
-            LIBERTY / name, units="cm", rate_hz=120.0, sensors={1: "hand", 2: "index.proximal"}
-        )
-        out[name] = pivot_residuals(rec.poses["hand"], rec.poses["index.proximal"])[0]
-    return out
-
-
 @pytest.mark.skipif(
     not (LIBERTY / LIBERTY_FILES[0]).is_file(), reason=f"no Liberty data in {LIBERTY}"
 )
@@ -209,136 +185,12 @@ def test_real_liberty_recordings_read_as_declared() -> None:
     """No other quaternion reading explains the real recordings better (no refusal)."""
     from fingerfit.estimate.plausibility import PivotCheck
 
-    for name, res in liberty_checks().items():
+    for name, res in liberty_pivot_residuals().items():
         assert min(res, key=res.get) == "as read", (name, res)
         # Pooled rule of convention_problems: no alternative below half the as-read residual.
         check = PivotCheck("index", "mp", res, float("nan"), 1)
         problems = convention_problems([check])
         assert all("look" not in p.message for p in problems), problems
-
-
-def geometry() -> None:  # pragma: no cover - ranges and cost quoted in docs/plausibility.md
-    import time
-
-    from fingerfit.session import SEGMENTS
-
-    stats: dict[str, list[float]] = {}
-    rec_res, scales = [], []
-    for seed in range(10):
-        s = subject("realistic", seed, ALL).session
-        ref = reference_poses(s)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            m = fit_session(s)
-        ends = ("mp", "pip", "dip", "tip")
-        for f in ALL:
-            lm = {k: s.landmark(f"{f}.{k}") for k in ends}
-            fm = m.fingers[f]
-            for i, seg in enumerate(SEGMENTS):
-                stats.setdefault(f"landmarks {ends[i]}-{ends[i + 1]}", []).append(
-                    float(np.linalg.norm(lm[ends[i + 1]] - lm[ends[i]]))
-                )
-                mid = 0.5 * (lm[ends[i]] + lm[ends[i + 1]])
-                stats.setdefault("sensor to landmark midpoint", []).append(
-                    float(np.linalg.norm(ref[f"{f}.{seg}"][0] - mid))
-                )
-                stats.setdefault(f"segment {seg}", []).append(fm.segment_lengths[seg])
-            stats.setdefault("finger length", []).append(sum(fm.segment_lengths.values()))
-            for j, jm in fm.joints.items():
-                stats.setdefault("landmark to centre", []).append(
-                    float(np.linalg.norm(lm[j] - jm.center))
-                )
-                for sensor in (jm.parent, jm.child):
-                    stats.setdefault("sensor to centre", []).append(
-                        float(np.linalg.norm(ref[sensor][0] - jm.center))
-                    )
-        for rec in [*s.grasp, *s.targets, *s.test]:
-            for c in recording_checks(m, rec):
-                rec_res.append(c.residual_mm["as read"])
-                scales.append(c.scale)
-    for k, v in stats.items():
-        print(f"{k}: {min(v):.1f}-{max(v):.1f} mm")
-    print(
-        f"recordings vs model: residual <= {max(rec_res):.2f} mm, "
-        f"scale {min(scales):.3f}-{max(scales):.3f}"
-    )
-    s = subject("realistic", 2).session
-    ref = reference_poses(s)
-
-    def median_ms(f) -> float:
-        ts = []
-        for _ in range(15):
-            t0 = time.perf_counter()
-            f()
-            ts.append(time.perf_counter() - t0)
-        return 1000 * float(np.median(ts))
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        fit_ms = median_ms(lambda: fit_session(s))
-    print(
-        f"one finger, 10 cycles: fit_session {fit_ms:.1f} ms (checks included), "
-        f"check_session {median_ms(lambda: check_session(s, ['index'], ref)):.1f} ms"
-    )
-
-
-def main() -> None:  # pragma: no cover - prints the numbers quoted in docs/plausibility.md
-    rows = []
-    for seed in range(10):
-        s = subject("realistic", seed, ALL).session
-        for c in convention_checks(s, ALL):
-            r = c.residual_mm
-            rows.append((r["as read"], min(v for k, v in r.items() if k != "as read"), c.noise_mm))
-    a = np.array(rows)
-    print(
-        f"realistic seeds 0-9, 4 fingers, 120 joints: as read {a[:, 0].min():.2f}-{a[:, 0].max():.2f} mm; "
-        f"best other reading {a[:, 1].min():.2f}-{a[:, 1].max():.2f} mm; ratio >= {np.min(a[:, 1] / a[:, 0]):.1f}; "
-        f"reference noise {a[:, 2].min():.2f}-{a[:, 2].max():.2f} mm"
-    )
-    for kind in ("conjugated", "xyzw"):
-        vals = []
-        for seed in range(10):
-            s = subject("realistic", seed, ALL).session
-            for f in ALL:
-                for p, c in (
-                    ("hand", f"{f}.proximal"),
-                    (f"{f}.proximal", f"{f}.middle"),
-                    (f"{f}.middle", f"{f}.distal"),
-                ):
-                    res, _ = pivot_residuals(
-                        _rewrite(
-                            PoseSeries(
-                                *[
-                                    np.concatenate([getattr(g.pose(p), k) for g in s.grasp])
-                                    for k in ("position", "rotation")
-                                ]
-                            ),
-                            kind,
-                        ),
-                        _rewrite(
-                            PoseSeries(
-                                *[
-                                    np.concatenate([getattr(g.pose(c), k) for g in s.grasp])
-                                    for k in ("position", "rotation")
-                                ]
-                            ),
-                            kind,
-                        ),
-                    )
-                    vals.append((res["as read"], res[kind]))
-        v = np.array(vals)
-        print(
-            f"written {kind}: as read {v[:, 0].min():.2f}-{v[:, 0].max():.2f} mm (median {np.median(v[:, 0]):.1f}); "
-            f"read the right way {v[:, 1].min():.2f}-{v[:, 1].max():.2f} mm"
-        )
-    geometry()
-    if (LIBERTY / LIBERTY_FILES[0]).is_file():
-        for name, res in liberty_checks().items():
-            print(name, {k: round(v, 2) for k, v in res.items()})
-
-
-if __name__ == "__main__":  # pragma: no cover
-    main()
 
 
 @pytest.mark.parametrize(

@@ -4,16 +4,14 @@ For each tracker format the subject is simulated through the CLI, the printed
 ``fingerfit convert`` / ``session`` / ``fit`` commands are run exactly as printed, and the
 fitted model is compared with the one fitted from the CSV session of the same seed.
 
-``python -m tests.test_simulate_formats [N_SUBJECTS]`` prints the largest differences per
-format, method and joint over N subjects (the table in ``docs/simulator.md``).
+``bench/simulate_round_trip.py [N_SUBJECTS]`` prints the largest differences per format,
+method and joint over N subjects (the table in ``docs/simulator.md``); both use
+``tests/_round_trip.py``.
 """
 
 from __future__ import annotations
 
-import contextlib
 import re
-import shlex
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,19 +20,16 @@ import pytest
 from fingerfit.errors import FingerfitError
 from fingerfit.io import load_session
 from fingerfit.io.liberty import parse_liberty_ascii, parse_liberty_binary
-from fingerfit.model import HandModel, load_model
-from fingerfit.session import JOINTS, SEGMENTS
+from fingerfit.model import HandModel
 from fingerfit.simulate.trackerfiles import (
     LIBERTY_ITEM_CODES,
     c3d_label,
     station_map,
 )
 
+from ._round_trip import FORMATS, METHODS, model_differences, printed_commands, simulate_and_fit
 from .bad_inputs._cli import listing, run
 
-SEED = 4
-FORMATS = ("liberty-ascii", "liberty-binary", "c3d")
-METHODS = ("twoaxis", "robust")
 #: Tight tolerances of the round trip (every format): axis deg, centre mm, length mm.
 AXIS_DEG, CENTRE_MM, LENGTH_MM = 0.2, 0.2, 0.2
 _EXT = {"liberty-ascii": "txt", "liberty-binary": "bin", "c3d": "c3d"}
@@ -43,83 +38,6 @@ _EXT = {"liberty-ascii": "txt", "liberty-binary": "bin", "c3d": "c3d"}
 def _needs(fmt: str) -> None:
     if fmt == "c3d":
         pytest.importorskip("ezc3d", reason="the c3d extra (ezc3d) is not installed")
-
-
-def printed_commands(output: str) -> list[str]:
-    """The ``fingerfit ...`` command lines of ``simulate``'s output, in order."""
-    return [ln for ln in output.splitlines() if ln.startswith("fingerfit ")]
-
-
-def run_printed(commands: list[str], cwd: Path) -> list[str]:
-    """Run each printed command exactly (shell-split, in ``cwd``); return their outputs."""
-    outputs = []
-    for cmd in commands:
-        args = shlex.split(cmd)
-        assert args[0] == "fingerfit"
-        res = run(*args[1:], cwd=cwd)
-        assert res.exit_code == 0, f"{cmd}\n{res.output}"
-        outputs.append(res.output)
-    return outputs
-
-
-def simulate_and_fit(
-    work: Path, fmt: str, seed: int = SEED, subjects: int = 1
-) -> dict[str, list[HandModel]]:
-    """Simulate via the CLI in ``work/<fmt>``; fit every method; models per method, per subject.
-
-    ``csv``: ``fingerfit fit OUT/Sxx``; tracker formats: the printed commands, then
-    ``fingerfit fit`` again for the other methods.
-    """
-    res = run("simulate", fmt, "--subjects", subjects, "--seed", seed, "--format", fmt, cwd=work)
-    assert res.exit_code == 0, res.output
-    sessions = [Path(fmt) / f"S{i + 1:02d}" for i in range(subjects)]
-    if fmt != "csv":
-        commands = printed_commands(res.output)
-        assert len(commands) == subjects * 6  # 4 convert, session, fit
-        run_printed(commands, work)
-        sessions = [s / "session" for s in sessions]
-    models: dict[str, list[HandModel]] = {m: [] for m in METHODS}
-    for s in sessions:
-        for m in METHODS:
-            path = s / f"model-{m}.json"
-            if fmt != "csv" and m == "twoaxis":  # the printed `fingerfit fit` (default method)
-                path = s / "model.json"
-            else:
-                r = run("fit", s, "--method", m, "-o", path, cwd=work)
-                assert r.exit_code == 0, r.output
-            models[m].append(load_model(work / path))
-    return models
-
-
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip(abs(float(a @ b)), -1.0, 1.0))))
-
-
-def model_differences(a: HandModel, b: HandModel) -> dict[str, dict[str, float]]:
-    """Per joint (and ``mp_abduction``, two-axis models): axis deg, centre mm, segment mm."""
-    out: dict[str, dict[str, float]] = {}
-    for f, fa in a.fingers.items():
-        fb = b.fingers[f]
-        for j, seg in zip(JOINTS, SEGMENTS, strict=True):
-            ja, jb = fa.joints[j], fb.joints[j]
-            out[j] = {
-                "axis_deg": _angle_deg(ja.axis, jb.axis),
-                "centre_mm": float(np.linalg.norm(ja.center - jb.center)),
-                "length_mm": abs(fa.segment_lengths[seg] - fb.segment_lengths[seg]),
-            }
-        if fa.second_axes.get("mp") is not None and fb.second_axes.get("mp") is not None:
-            out["mp_abduction"] = {
-                "axis_deg": _angle_deg(
-                    fa.second_axes.get("mp").axis, fb.second_axes.get("mp").axis
-                ),
-                "centre_mm": float(
-                    np.linalg.norm(
-                        fa.second_axes.get("mp").center - fb.second_axes.get("mp").center
-                    )
-                ),
-                "length_mm": 0.0,
-            }
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -304,31 +222,3 @@ def test_nothing_outside_the_output_folder(tmp_path: Path) -> None:
     again = run("simulate", "out", "--subjects", 1, "--seed", 2, "--format", "c3d", cwd=tmp_path)
     assert again.exit_code == 2 and "pass --overwrite" in again.output
     assert listing(tmp_path) == after
-
-
-def _measure(n_subjects: int) -> None:  # pragma: no cover - documentation helper
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as d:
-        work = Path(d)
-        ref = simulate_and_fit(work, "csv", SEED, n_subjects)
-        print(f"max over {n_subjects} subjects (seed {SEED}) of |tracker path - CSV path|")
-        print("| format | method | joint | axis (deg) | centre (mm) | segment (mm) | worst axis |")
-        print("|---|---|---|---|---|---|---|")
-        for fmt in FORMATS:
-            got = simulate_and_fit(work, fmt, SEED, n_subjects)
-            for m in METHODS:
-                diffs = [model_differences(a, b) for a, b in zip(ref[m], got[m], strict=True)]
-                for j in diffs[0]:
-                    row = [max(d[j][k] for d in diffs) for k in ("axis_deg", "centre_mm")]
-                    row.append(max(d[j]["length_mm"] for d in diffs))
-                    worst = int(np.argmax([d[j]["axis_deg"] for d in diffs])) + 1
-                    cells = " | ".join(f"{v:.2g}" for v in row)
-                    print(f"| {fmt} | {m} | {j} | {cells} | S{worst:02d} |")
-
-
-if __name__ == "__main__":  # pragma: no cover
-    with contextlib.suppress(IndexError):
-        _measure(int(sys.argv[1]))
-        sys.exit(0)
-    _measure(5)

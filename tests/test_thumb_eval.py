@@ -16,7 +16,12 @@ import numpy as np
 import pytest
 
 from fingerfit.estimate import FitOptions, fit_session
-from fingerfit.evaluate.fingertip import evaluate_targets, sensor_carried, skipped_events
+from fingerfit.evaluate.fingertip import (
+    count_skipped,
+    evaluate_targets,
+    sensor_carried,
+    skipped_events,
+)
 from fingerfit.evaluate.pinch import PINCH_COLUMNS, evaluate_pinches
 from fingerfit.evaluate.subject import _angle_errors, evaluate_subject, thumb_geometry
 from fingerfit.evaluate.summary import summarize_study
@@ -198,6 +203,52 @@ def test_study_summary_has_thumb_pinch_and_skipped_events(exact) -> None:
     n_index = int((tables["max_flexion"]["finger"] == "index").sum())
     assert summary["max_flexion"]["user_axis"]["n"] == n_index
     assert summary["thumb"]["max_flexion"]["user_axis"]["n"] > 0
+
+
+def test_a_target_touch_of_a_missing_digit_is_counted(exact) -> None:
+    session, model, _truth, _res = exact
+    touch = next(e for e in session.events if not e.is_pinch)
+    lone = dataclasses.replace(session, events=[dataclasses.replace(touch, finger="middle")])
+    assert evaluate_targets(model, lone).empty
+    skipped = skipped_events(model, lone)
+    assert [s["kind"] for s in skipped] == ["target"]
+    assert "the model has no digit 'middle'" in skipped[0]["reason"]
+    assert count_skipped(skipped) == {"target_touches": 1, "pinches": 0}
+    assert count_skipped(skipped_events(model, session)) == {"target_touches": 0, "pinches": 0}
+
+
+def test_study_counts_and_reports_the_events_not_evaluated(exact, tmp_path, monkeypatch) -> None:
+    """A model without the index: its target touches and every pinch (thumb with index)
+    are counted in summary.json, the report and fingerfit study's warnings."""
+    from typer.testing import CliRunner
+
+    from fingerfit.cli import app
+    from fingerfit.evaluate import StudyResult
+    from fingerfit.evaluate.report import _problems
+
+    session, model, _truth, res = exact
+    fingers = {k: v for k, v in res.model.fingers.items() if k != "index"}
+    skipped = skipped_events(dataclasses.replace(model, fingers=fingers), session)
+    lacking = dataclasses.replace(res, subject="S99", skipped_events=tuple(skipped))
+    touches = sum(e.finger == "index" and not e.is_pinch for e in session.events)
+    pinches = sum(e.is_pinch for e in session.events)
+    assert touches > 1 and pinches > 1
+    counts = {"target_touches": touches, "pinches": pinches}
+    summary, tables = summarize_study([res, lacking], FitOptions())
+    assert summary["events_not_evaluated"] == {**counts, "per_subject": {"S99": counts}}
+    assert "events_not_evaluated" not in summarize_study([res], FitOptions())[0]
+    result = StudyResult([res, lacking], summary, tables, tmp_path, report=tmp_path / "r.html")
+    html = "".join(_problems(result))
+    assert f"{touches} target touches and {pinches} pinches were not evaluated" in html
+    assert f"<li>S99: {touches} target touches and {pinches} pinches</li>" in html
+    assert "not evaluated" not in "".join(_problems(dataclasses.replace(result, summary={})))
+    monkeypatch.setattr("fingerfit.evaluate.run_study", lambda *_a, **_k: result)
+    out = CliRunner().invoke(app, ["study", str(session.path), "--out", str(tmp_path / "o")])
+    assert out.exit_code == 0, out.output
+    assert (
+        f"warning: S99: {touches} target touch(es) and {pinches} pinch(es) not evaluated: "
+        "the model lacks their digit" in " ".join(out.output.split())
+    )
 
 
 def test_thumb_only_study(tmp_path) -> None:

@@ -2,7 +2,9 @@
 
 Every command module registers on :data:`app`. A :class:`FingerfitError`
 (bad input) is printed as one red line and exits with status 2 -- never a
-traceback.
+traceback. Where a command turns an unexpected exception (not fingerfit's) into one
+line too (``study``: a session's, a source's or a worker's), the global ``--debug``
+(:func:`debugging`) raises it instead, with its traceback.
 """
 
 from __future__ import annotations
@@ -34,6 +36,15 @@ console = Console(stderr=True, emoji=False, highlight=False)
 out = Console(emoji=False, highlight=False)
 
 F = TypeVar("F", bound=Callable)
+
+_debug = False  # the global --debug of this invocation (set by the app's callback)
+
+
+def debugging() -> bool:
+    """Whether this invocation has the global ``--debug``: an unexpected exception (not
+    a :class:`FingerfitError`) is raised with its traceback rather than shown as one
+    line, and an interrupt shows where it happened."""
+    return _debug
 
 
 #: The ``--quiet`` option of every command that shows a progress bar.
@@ -96,6 +107,8 @@ def user_errors(func: F) -> F:
         except FingerfitError as exc:
             raise fail(str(exc)) from None
         except KeyboardInterrupt:
+            if _debug:
+                raise
             raise fail("interrupted") from None
 
     return wrapper  # type: ignore[return-value]
@@ -144,5 +157,13 @@ def _root(
     version: bool = typer.Option(
         False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
     ),
+    debug: bool = typer.Option(
+        False,
+        "--debug",
+        help="Show the traceback of an unexpected error (a bug, not bad input) instead of "
+        "one line; give it before the command: fingerfit --debug study ...",
+    ),
 ) -> None:
     """Individual skeletal finger models (joint centres and tilted axes) from 6-DOF motion capture."""
+    global _debug
+    _debug = debug

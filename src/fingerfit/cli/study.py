@@ -11,7 +11,7 @@ from rich.table import Table
 if TYPE_CHECKING:
     from ..evaluate import StudyResult
 from ._names import DEFAULT_METHOD, METHODS
-from .app import Quiet, app, notice, out, progress, say, user_errors
+from .app import Quiet, app, debugging, notice, out, progress, say, user_errors
 
 
 def _cell(d: dict) -> str:
@@ -80,9 +80,17 @@ def _run(
             overwrite=overwrite,
             jobs=jobs,
             scheduler=scheduler,
+            debug=debugging(),
         )
     for f in result.failures:
         notice("warning", f"skipped {f.message}")
+    not_evaluated = result.summary.get("events_not_evaluated", {}).get("per_subject", {})
+    for subject, n in not_evaluated.items():
+        notice(
+            "warning",
+            f"{subject}: {n['target_touches']} target touch(es) and {n['pinches']} pinch(es) "
+            "not evaluated: the model lacks their digit (listed in the report)",
+        )
     for subject, warned in result.summary.get("warnings", {}).items():
         for w in warned:
             notice("warning", f"{subject}: {w}")

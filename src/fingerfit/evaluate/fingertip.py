@@ -14,6 +14,7 @@ Lengths mm, tracker coordinates.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,7 +118,9 @@ def skipped_events(model: HandModel, session: Session) -> list[dict]:
     Returns
     -------
     list of dict
-        ``recording``, ``finger``, ``target``, ``start``, ``end`` (s) and ``reason``.
+        ``recording``, ``finger``, ``target``, ``start``, ``end`` (s), ``kind``
+        (``"target"`` for a target touch, ``"pinch"``; :func:`count_skipped` counts them)
+        and ``reason``.
     """
     out = []
     for ev in session.events:
@@ -132,6 +135,7 @@ def skipped_events(model: HandModel, session: Session) -> list[dict]:
                     "target": ev.target,
                     "start": float(ev.start),
                     "end": float(ev.end),
+                    "kind": "pinch" if ev.is_pinch else "target",
                     "reason": f"{kind} {ev.finger} -> {ev.target} in {ev.recording} at "
                     f"{ev.start:g}-{ev.end:g} s not evaluated: the model has no digit "
                     f"'{missing[0]}'",
@@ -140,12 +144,31 @@ def skipped_events(model: HandModel, session: Session) -> list[dict]:
     return out
 
 
+def count_skipped(skipped: Iterable[dict]) -> dict[str, int]:
+    """How many events of each kind were not evaluated.
+
+    Parameters
+    ----------
+    skipped : iterable of dict
+        Events as :func:`skipped_events` lists them (of one session or several).
+
+    Returns
+    -------
+    dict of str to int
+        ``target_touches`` and ``pinches``: the number of each.
+    """
+    kinds = [e["kind"] for e in skipped]
+    return {"target_touches": kinds.count("target"), "pinches": kinds.count("pinch")}
+
+
 def evaluate_targets(model: HandModel, session: Session) -> pd.DataFrame:
     """Target-reaching errors (Figs. 11-12).
 
     Pinch events (``target`` a digit) are not target touches: see
     :func:`fingerfit.evaluate.pinch.evaluate_pinches`. Touches by a digit the model
-    lacks are not evaluated; :func:`skipped_events` lists them with the reason.
+    lacks are not evaluated: :func:`skipped_events` lists them with the reason,
+    :func:`count_skipped` counts them, and the study reports the count
+    (``summary.json → events_not_evaluated``, the report, ``fingerfit study``).
 
     Returns
     -------

@@ -34,7 +34,7 @@ from .stats import moments_at
 
 if TYPE_CHECKING:
     from .gather import StudyTables
-    from .study import StudyResult
+    from .results import StudyResult
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;
@@ -332,8 +332,31 @@ def _headline(sm: dict) -> str:
     )
 
 
+def _count(n: int, one: str, many: str) -> str:
+    return f"{n} {one if n == 1 else many}"
+
+
+def _not_evaluated(sm: dict) -> str:
+    """The touch events of a digit the model lacks: how many, and whose."""
+    ne = sm["events_not_evaluated"]
+
+    def counts(d: dict) -> str:
+        return (
+            f"{_count(d['target_touches'], 'target touch', 'target touches')} and "
+            f"{_count(d['pinches'], 'pinch', 'pinches')}"
+        )
+
+    return (
+        f"<p class=warn>{counts(ne)} were not evaluated: the model lacks their digit. They "
+        "are in no number of this report; each is listed under <a href='#skipped'>Statistics "
+        "not computed</a>.</p>"
+        + _list([f"{subject}: {counts(d)}" for subject, d in ne["per_subject"].items()])
+    )
+
+
 def _problems(result: StudyResult) -> list[str]:
-    """Failed sessions and forced-fit warnings, each naming the subject."""
+    """Failed sessions, events not evaluated and forced-fit warnings, each naming the
+    subject."""
     sm = result.summary
     parts = []
     if result.failures:
@@ -343,6 +366,8 @@ def _problems(result: StudyResult) -> list[str]:
             "in any number of this report (<code>--keep-going</code>):</p>",
             _list([f.message for f in result.failures]),
         ]
+    if sm.get("events_not_evaluated"):
+        parts += ["<h2 id=not-evaluated>Events not evaluated</h2>", _not_evaluated(sm)]
     if sm.get("warnings"):
         parts += [
             "<h2 id=warnings>Warnings</h2>",

@@ -9,12 +9,12 @@ Statistics and the headline as in the paper; outputs written to one folder.
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import json
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +29,8 @@ from ..model import save_model
 from ..session import Session
 from . import figures
 from .gather import PackedSubjects, StudyTables
+from .report import write_report
+from .results import StudyResult
 from .subject import (
     SessionFailure,
     SessionSource,
@@ -40,25 +42,6 @@ from .subject import (
     study_subject,
 )
 from .summary import summarize_study
-
-
-@dataclass
-class StudyResult:
-    """The study's tables, statistics and output paths.
-
-    ``subjects``: from :func:`run_study` a :class:`PackedSubjects` (compact results);
-    ``tables``: a :class:`StudyTables` (kept on disk; ``tables[name]`` makes the whole
-    table).
-    """
-
-    subjects: Sequence[SubjectResult]
-    summary: dict
-    tables: StudyTables
-    out_dir: Path
-    figures: dict[str, Path] = field(default_factory=dict)
-    report: Path | None = None
-    failures: list[SessionFailure] = field(default_factory=list)
-
 
 _SESSION_FILES = {"session.toml", "landmarks.csv", "events.csv", "truth.json", "truth"}
 
@@ -157,6 +140,7 @@ def run_study(
     overwrite: bool = False,
     jobs: int = 1,
     scheduler: str | None = None,
+    debug: bool = False,
 ) -> StudyResult:
     """Fit and evaluate sessions; write tables, figures, ``summary.json`` and ``report.html``.
 
@@ -190,6 +174,11 @@ def run_study(
         Worker processes (1: in this process).
     scheduler : str, optional
         Dask distributed scheduler address; see :func:`study_executor`.
+    debug : bool
+        An unexpected exception (not a :class:`FingerfitError`) of a session, a source
+        or a study worker is raised as it is, with its traceback (a worker's traceback
+        as its ``__cause__``), instead of becoming one line; ``keep_going`` does not
+        skip it.
 
     Returns
     -------
@@ -205,8 +194,6 @@ def run_study(
         unusable output folder. Read errors come before the subject-ID and output
         checks, which come before fit errors, each in the order the sessions were given.
     """
-    from .report import write_report
-
     options = options or FitOptions()
     step = progress or (lambda _msg: None)
     out_dir = Path(out_dir)
@@ -224,13 +211,16 @@ def run_study(
         subjects = PackedSubjects(folder=tmp.parent)  # as they arrive; selected below
         stored: dict[int, int] = {}  # session -> its place in ``subjects``
         pool = stack.enter_context(study_executor(jobs, scheduler))
-        futures = {pool.submit(study_subject, s, options): i for i, s in enumerate(sessions)}
+        task = functools.partial(study_subject, debug=True) if debug else study_subject
+        futures = {pool.submit(task, s, options): i for i, s in enumerate(sessions)}
         for future in as_completed(futures):
             # Dropped once read: a Dask worker keeps a task's result while its future lives.
             i = futures.pop(future)
             try:
                 got = outcomes[i] = future.result()
             except Exception as exc:  # a lost worker, not a bad session
+                if debug:
+                    raise
                 raise FingerfitError(
                     f"a study worker failed on '{sessions[i]}' "
                     f"({type(exc).__name__}: {one_line(exc)})"
@@ -297,7 +287,7 @@ def run_study(
             result = StudyResult(subjects, summary, tables, tmp, failures=failures)
             kept = {o.subject for o in ok if o.fit_error is None}
             drawn = dict(fig09[i] for i in sorted(fig09) if outcomes[i].subject in kept)
-            _write_outputs(result, tmp, drawn, pool)
+            _write_outputs(result, tmp, drawn, pool, debug=debug)
         step("figures")
         with atomic_write(tmp / "summary.json") as fh:
             json.dump(_json_safe(summary), fh, indent=1, allow_nan=False)
@@ -455,7 +445,12 @@ _FIGURES_AT_ONCE = 3  # study-wide figures sent to the executor at a time (each 
 
 
 def _write_outputs(
-    result: StudyResult, out_dir: Path, drawn: dict[str, Path], pool: Executor
+    result: StudyResult,
+    out_dir: Path,
+    drawn: dict[str, Path],
+    pool: Executor,
+    *,
+    debug: bool = False,
 ) -> None:
     """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``.
 
@@ -463,7 +458,8 @@ def _write_outputs(
     the study tasks; listed after Fig. 8 in the order given. ``pool``: the study's
     executor, where the study-wide figures are drawn (:func:`draw_study_figure`), each
     sent its own table, a few at a time, while this process writes the tables chunk by
-    chunk (:meth:`StudyTables.chunks`).
+    chunk (:meth:`StudyTables.chunks`). ``debug``: a worker's exception is raised as it
+    is rather than as one line.
     """
     tables = result.tables
     sending: dict[str, tuple[str, Future]] = {}  # figure -> (file name, PNG bytes to come)
@@ -473,7 +469,9 @@ def _write_outputs(
         filename, future = sending.pop(key)
         try:
             png = future.result()
-        except Exception as exc:  # a lost worker: named, never a traceback
+        except Exception as exc:  # a lost worker: named, never a traceback (but debug)
+            if debug:
+                raise
             raise FingerfitError(
                 f"a study worker failed drawing {filename} ({type(exc).__name__}: {one_line(exc)})"
             ) from None

@@ -388,7 +388,7 @@ def is_source(item: object) -> bool:
 
 
 def study_subject(
-    item: Path | str | Session | SessionSource, options: FitOptions
+    item: Path | str | Session | SessionSource, options: FitOptions, *, debug: bool = False
 ) -> SubjectOutcome:
     """Read, fit and evaluate one session; render its Fig. 9 (one study task).
 
@@ -402,17 +402,23 @@ def study_subject(
         Session folder (or an in-memory session, or a source that makes the folder
         here: the outcome then names the source, and its session has no path).
     options : FitOptions
+    debug : bool
+        Raise an unexpected exception (not a :class:`FingerfitError`) as it is, with its
+        traceback, instead of returning it as one line.
 
     Returns
     -------
     SubjectOutcome
-        Never raises for a bad session: its error comes back as one line.
+        Never raises for a bad session: its error comes back as one line (unless
+        ``debug`` and the error is not fingerfit's).
     """
     if is_source(item):
         try:
             with item.open() as folder:
-                got = study_subject(folder, options)
+                got = study_subject(folder, options, debug=debug)
         except Exception as exc:  # the source could not make its session: named
+            if debug and not isinstance(exc, FingerfitError):
+                raise
             return SubjectOutcome(
                 str(item), read_error=f"{item}: could not be made ({one_line(exc)})"
             )
@@ -445,7 +451,9 @@ def study_subject(
             result = evaluate_subject(session, options)
             name, time, tips, label = fig09_data(result)
             png = figures.trajectories_png(time, tips, label)
-    except Exception as exc:  # one bad session is named, never a traceback
+    except Exception as exc:  # one bad session is named, never a traceback (but --debug)
+        if debug and not isinstance(exc, FingerfitError):
+            raise
         return SubjectOutcome(
             str(session.path or session.subject),
             fit_error=_session_error(session.subject, exc),

@@ -21,6 +21,7 @@ from ..digits import FINGERS, THUMB_JOINTS
 from ..estimate import FitOptions
 from ..model import VARIANTS
 from ..session import JOINTS
+from .fingertip import count_skipped
 from .gather import StudyTables, study_tables
 from .stats import (
     Moments,
@@ -190,7 +191,9 @@ def summarize_study(
     summary : dict
         The ``summary.json`` document (lengths mm, angles deg; NaN stored as null).
         A statistic the data cannot support is ``{"skipped": reason}`` and listed
-        under ``"skipped"``.
+        under ``"skipped"``; so is each touch event the model cannot evaluate, and
+        ``"events_not_evaluated"`` (only when there is one) counts them
+        (:func:`~.fingertip.count_skipped`: in all and per subject).
     tables : StudyTables
         The tables the statistics were computed from.
     """
@@ -343,6 +346,12 @@ def summarize_study(
         for name, *_, events in digests
         for e in events
     ]
+    not_evaluated = {name: count_skipped(events) for name, *_, events in digests if events}
+    if not_evaluated:  # absent when every event was evaluated
+        summary["events_not_evaluated"] = {
+            **count_skipped(e for _name, *_, events in digests for e in events),
+            "per_subject": not_evaluated,
+        }
     return summary, tables
 
 

@@ -5,7 +5,8 @@ motion as a joint-angle trajectory with the robot joint names.
   shared by both writers;
 * :mod:`.urdf` -- URDF via yourdfpy;
 * :mod:`.mjcf` -- MJCF via ``mujoco.MjSpec``;
-* :mod:`.trajectory` -- joint angles (rad) per frame, columns named like the joints.
+* :mod:`.trajectory` -- joint angles (rad) per frame, columns named like the joints;
+* :mod:`.files` -- the text files written all-or-nothing.
 
 yourdfpy and mujoco are the optional extra ``robot`` (``pip install fingerfit[robot]``);
 they are imported only when a file is written. See ``docs/export.md``.
@@ -13,37 +14,11 @@ they are imported only when a file is written. See ``docs/export.md``.
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from ..io.atomic import write_files
-
-
-def write_text(files: dict[Path, str], *, overwrite: bool = True) -> list[Path]:
-    """Write several text files all-or-nothing (:func:`fingerfit.io.atomic.write_files`).
-
-    Parameters
-    ----------
-    files : dict[Path, str]
-        Path -> complete text (written UTF-8 with ``\n`` line ends).
-    overwrite : bool
-        Whether existing files may be replaced (``--overwrite``).
-
-    Returns
-    -------
-    list of Path
-
-    Raises
-    ------
-    FingerfitError
-        Naming the path that could not or must not be written.
-    """
-    return write_files(files, overwrite=overwrite)
-
-
-from .geometry import RobotHand, joint_names, robot_hand  # noqa: E402
-from .mjcf import mjcf_string, write_mjcf  # noqa: E402
-from .trajectory import trajectory_table, write_trajectory  # noqa: E402
-from .urdf import urdf_string, write_urdf  # noqa: E402
+from .files import write_text
+from .geometry import RobotHand, joint_names, robot_hand
+from .mjcf import mjcf_string, write_mjcf
+from .trajectory import trajectory_table, write_trajectory
+from .urdf import urdf_string, write_urdf
 
 __all__ = [
     "RobotHand",
@@ -53,6 +28,7 @@ __all__ = [
     "trajectory_table",
     "urdf_string",
     "write_mjcf",
+    "write_text",
     "write_trajectory",
     "write_urdf",
 ]

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..extras import require
 from ..model import HandModel
-from . import write_text
+from .files import write_text
 from .geometry import DEFAULT_MARGIN_DEG, HAND_LINK, RobotHand, robot_hand
 
 FINGER_RGBA = (0.87, 0.72, 0.62, 1.0)

@@ -21,7 +21,7 @@ import numpy as np
 from ..extras import require
 from ..model import HandModel
 from ..transforms import orthonormal_basis
-from . import write_text
+from .files import write_text
 from .geometry import (
     DEFAULT_MARGIN_DEG,
     EFFORT_NM,
