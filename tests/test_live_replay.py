@@ -343,3 +343,16 @@ def test_lsl_consumer_receives_the_frames_pushed_just_before_close() -> None:
     # Both outlets (without the linger the one destroyed first lost the burst).
     for k, rows in got.items():
         np.testing.assert_array_equal(np.asarray(rows)[:, 0], np.arange(n), err_msg=k)
+
+
+@pytest.mark.parametrize("verbose", [False, True])
+def test_liblsl_log_lines_only_with_verbose(tmp_path: Path, verbose: bool) -> None:
+    _, model_path = fitted()
+    csv = write_recording(tmp_path / "rec.csv", 24)
+    proc = subprocess.run(
+        [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@10", "--lsl",
+         "--lsl-name", f"fflog{os.getpid()}", "-q", *(["--verbose"] if verbose else [])],
+        capture_output=True, text=True, timeout=DEADLINE, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert ("INFO|" in proc.stderr) == verbose, proc.stderr

@@ -397,7 +397,7 @@ def summary_line(
     if counts:
         text += ": " + ", ".join(counts)
     text += f" ({s.lost} lost, {s.invalid} with a missing sensor held"
-    text += f", {s.silences} silences)" if s.silences else ")"
+    text += f", {s.silences} silence{'s' * (s.silences > 1)})" if s.silences else ")"
     lat, age, comp = s.latency_ms(), s.age_ms(), s.compute_ms_per_frame()
     if lat.size:
         text += (
