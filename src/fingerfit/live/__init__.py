@@ -7,8 +7,10 @@
 * :mod:`.outputs` -- LSL outlets, a ROS 2 ``JointState`` publisher over DDS, a rosbag2
   writer and the angles CSV;
 * :mod:`.stream` -- the loop: source -> :func:`fingerfit.kinematics.compute_kinematics`
-  (-> :class:`fingerfit.retarget.Retargeter` with ``--retarget ROBOT``) -> outputs, with
-  missing-sensor hold, the ``valid`` channel and the status line.
+  (-> :class:`fingerfit.retarget.Retargeter` with ``--retarget ROBOT``) -> outputs, in two
+  lanes (the live outputs latest-wins and never older than ``--max-age``; the files every
+  frame), with missing-sensor hold, the ``valid`` channel, the silence watchdog and the
+  status line.
 
 pylsl, cyclonedds, rosbags and pyserial are the optional extra ``live``
 (``pip install fingerfit[live]``). See ``docs/streaming.md``.
