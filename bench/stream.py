@@ -21,14 +21,23 @@ keep the figures). Two parts, in one run:
    each consumer missed, and the stream process's CPU time over the streaming period
    (``/proc/PID/stat``) as a share of one core. With ``--retarget`` the LSL consumer
    reads the ``PREFIX-robot`` outlet and the DDS reader the robot's ``JointState``.
+3. **Overload** (``--overload SPEED,...``, default 4): the whole hand with ``--retarget
+   shadow``, ``--lsl --ros2 --record``, replayed ``SPEED`` times faster than real time,
+   so frames come faster than one core computes them. The robot lane sends the newest
+   frame and none older than ``--max-age`` (20 ms); measured: the age of what the
+   consumers receive (arrival at fingerfit -> receipt) against ``--max-age``, the
+   stream's own counts (sent, skipped, stale, recorded) and age at send, and whether
+   the record holds every frame.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 import tempfile
@@ -120,9 +129,30 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def end_to_end(model_path: Path, csv: Path, n: int, tag: str, retarget: str | None = None) -> dict:
-    """Stream ``csv`` in real time to LSL and DDS; measure latency, losses and CPU
-    (``retarget``: ``--retarget ROBOT``, the robot's outlet and JointState)."""
+def stream_counts(line: str) -> dict[str, float]:
+    """The counts and the age at send of ``fingerfit stream``'s last line."""
+    out: dict[str, float] = {
+        k.split()[-1]: int(n)
+        for n, k in re.findall(r"(\d+) (frames received|sent|skipped|stale|recorded)\b", line)
+    }
+    age = re.search(r"age at send max ([0-9.]+) ms", line)
+    if age:
+        out["age_at_send_max_ms"] = float(age.group(1))
+    return out
+
+
+def end_to_end(
+    model_path: Path,
+    csv: Path,
+    n: int,
+    tag: str,
+    retarget: str | None = None,
+    speed: float = 1.0,
+    record: Path | None = None,
+) -> dict:
+    """Stream ``csv`` (``speed`` times real time) to LSL and DDS; measure latency, losses
+    and CPU (``retarget``: ``--retarget ROBOT``, the robot's outlet and JointState;
+    ``record``: ``--record`` too, whose rows are counted)."""
     import pylsl
     from cyclonedds.core import Policy, Qos
     from cyclonedds.domain import DomainParticipant
@@ -139,16 +169,18 @@ def end_to_end(model_path: Path, csv: Path, n: int, tag: str, retarget: str | No
     reader = DataReader(participant, Topic(participant, "rt" + topic, JointState, qos=qos), qos=qos)
     name = f"bench{tag}{os.getpid()}"
     proc = subprocess.Popen(
-        [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}", "--lsl",
+        [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@{speed:g}", "--lsl",
          "--lsl-name", name, "--ros2", topic, "--wait", "--wait-timeout", "60", "-q",
-         *(["--retarget", retarget] if retarget else [])],
+         *(["--retarget", retarget] if retarget else []),
+         *(["--record", str(record)] if record else [])],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
     )  # fmt: skip
     lsl_lat: list[float] = []
     dds_lat: list[float] = []
     marks: dict[str, float] = {}
-    deadline = time.monotonic() + n / 240.0 + 90
+    seconds = n / 240.0 / speed
+    deadline = time.monotonic() + seconds + 90
 
     def lsl_consumer() -> None:
         outlet = "robot" if retarget else "angles"
@@ -164,25 +196,29 @@ def end_to_end(model_path: Path, csv: Path, n: int, tag: str, retarget: str | No
             lsl_lat.append(pylsl.local_clock() - ts)
             if len(lsl_lat) == 1:
                 marks["cpu0"], marks["t0"] = cpu_seconds(proc.pid), time.monotonic()
-            if len(lsl_lat) == n - 1:
-                marks["cpu1"], marks["t1"] = cpu_seconds(proc.pid), time.monotonic()
+            elif len(lsl_lat) % 64 == 0 or len(lsl_lat) == n - 1:  # the last before the end
+                with contextlib.suppress(OSError):
+                    marks["cpu1"], marks["t1"] = cpu_seconds(proc.pid), time.monotonic()
 
     def dds_consumer() -> None:
         while len(dds_lat) < n and time.monotonic() < deadline:
+            ended = proc.poll() is not None  # before the take: nothing comes after it
+            got = 0
             for m in reader.take_iter(timeout=duration(seconds=1)):
                 if isinstance(m, JointState):
                     s = m.header.stamp
                     dds_lat.append(time.time() - (s.sec + 1e-9 * s.nanosec))
-            if proc.poll() is not None and not reader.read(N=1):
+                    got += 1
+            if ended and not got:  # the writer's last messages are acknowledged by now
                 return
 
     threads = [threading.Thread(target=lsl_consumer), threading.Thread(target=dds_consumer)]
     for t in threads:
         t.start()
     for t in threads:
-        t.join(timeout=n / 240.0 + 120)
+        t.join(timeout=seconds + 120)
     out, err = proc.communicate(timeout=60)
-    summary = [ln for ln in out.splitlines() if "frames streamed" in ln]
+    summary = [ln for ln in out.splitlines() if "frames received" in ln]
     lsl_ms, dds_ms = 1e3 * np.array(lsl_lat), 1e3 * np.array(dds_lat)
     cpu = (marks["cpu1"] - marks["cpu0"]) / (marks["t1"] - marks["t0"]) if "t1" in marks else None
 
@@ -193,13 +229,37 @@ def end_to_end(model_path: Path, csv: Path, n: int, tag: str, retarget: str | No
             "max_ms": float(x.max())
         }
 
-    return {
-        "frames_sent": n,
-        "lsl": stats(lsl_ms) | {"received": int(lsl_ms.size), "lost": n - int(lsl_ms.size)},
-        "dds": stats(dds_ms) | {"received": int(dds_ms.size), "lost": n - int(dds_ms.size)},
+    counts = stream_counts(summary[0]) if summary else {}
+    sent = int(counts.get("sent", n))  # the robot lane's frames: what the consumers can get
+    result = {
+        "frames": n,
+        "speed": speed,
+        "counts": counts,
+        "lsl": stats(lsl_ms) | {"received": int(lsl_ms.size), "lost": sent - int(lsl_ms.size)},
+        "dds": stats(dds_ms) | {"received": int(dds_ms.size), "lost": sent - int(dds_ms.size)},
         "cpu_share_of_one_core": cpu,
         "stream_summary": summary[0] if summary else (out + err)[-500:],
     }
+    if record is not None:
+        with record.open() as fh:
+            result["record_rows"] = sum(1 for _ in fh) - 1
+    return result
+
+
+def print_overload(speed: float, e2e: dict) -> None:
+    """One Markdown table row of the overload case."""
+    c, lsl, dds = e2e["counts"], e2e["lsl"], e2e["dds"]
+
+    def pq(x: dict) -> str:
+        return f"{x.get('p50_ms', float('nan')):.2f} / {x.get('p99_ms', float('nan')):.2f} / {x.get('max_ms', float('nan')):.1f} ms"
+
+    n = e2e["frames"]
+    print(
+        f"| @{speed:g} ({240 * speed:g} frames/s) | {c.get('received', 0):,} | {c.get('sent', 0):,} "
+        f"| {c.get('skipped', 0):,} | {c.get('stale', 0):,} | {c.get('age_at_send_max_ms', float('nan')):.2f} ms "
+        f"| {pq(lsl)} | {pq(dds)} | {c.get('recorded', 0):,} of {n:,} (CSV rows {e2e.get('record_rows')}) |",
+        flush=True,
+    )
 
 
 def main() -> None:
@@ -209,9 +269,18 @@ def main() -> None:
     ap.add_argument(
         "--models",
         default="index,hand4,hand5,hand5-shadow",
-        help="which models to run (hand5-shadow: the whole hand with --retarget shadow)",
+        help="which models to run (hand5-shadow: the whole hand with --retarget shadow; "
+        "'none': only the overload case)",
+    )
+    ap.add_argument(
+        "--overload",
+        default="4",
+        help="replay speeds of the overload case (whole hand, --retarget shadow); '' for none",
     )
     args = ap.parse_args()
+    from fingerfit.live import quiet_lsl
+
+    quiet_lsl()  # this process's consumers: no liblsl log lines in the report
     wanted = {
         "index": ("index",),
         "hand4": ("index", "middle", "ring", "little"),
@@ -225,7 +294,7 @@ def main() -> None:
         "models": {},
     }
     with tempfile.TemporaryDirectory() as tmp:
-        for key in args.models.split(","):
+        for key in [k for k in args.models.split(",") if k and k != "none"]:
             sim = subject_for(wanted[key])
             if sim is None:
                 results["models"][key] = "not available (the simulator has no such digit yet)"
@@ -247,6 +316,23 @@ def main() -> None:
             e2e = end_to_end(model_path, csv, long.n_frames, key.replace("-", ""), robot)
             print(f"{key}: end to end {json.dumps(e2e)}", flush=True)
             results["models"][key] = {"per_frame_compute": compute, "end_to_end": e2e}
+        speeds = [float(x) for x in args.overload.split(",") if x.strip()]
+        if speeds:
+            sim = subject_for(HAND)
+            model_path = save_model(fit_session(sim.session), Path(tmp) / "overload.json")
+            long = long_recording(sim.session.test[0], args.seconds)
+            csv = write_pose_csv(Path(tmp) / "overload.csv", long)
+            results["overload"] = {}
+            for speed in speeds:
+                record = Path(tmp) / f"overload@{speed:g}.csv"
+                load0 = os.getloadavg()
+                e2e = end_to_end(
+                    model_path, csv, long.n_frames, f"over{round(speed)}", "shadow", speed, record
+                )
+                e2e["load_average"] = [load0, os.getloadavg()]
+                print(f"overload @{speed:g}: {json.dumps(e2e)}", flush=True)
+                results["overload"][f"@{speed:g}"] = e2e
+                print_overload(speed, e2e)
     results["load_average_at_end"] = os.getloadavg()
     if args.json:
         args.json.write_text(json.dumps(results, indent=1) + "\n")

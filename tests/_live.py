@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import re
 import tempfile
 from pathlib import Path
 
@@ -53,3 +54,55 @@ def resolve_prefix(prefix: str, n: int, timeout: float = 20.0) -> dict:
 
     found = pylsl.resolve_bypred(f"starts-with(name,'{prefix}-')", minimum=n, timeout=timeout)
     return {i.name(): i for i in found}
+
+
+_COUNT = re.compile(r"(\d+) (frames received|sent|skipped|stale|recorded)\b")
+
+
+def stream_counts(output: str) -> dict[str, int]:
+    """The counts of ``fingerfit stream``'s last line: ``received``, and ``sent``,
+    ``skipped``, ``stale`` (a robot lane) and ``recorded`` (a data lane) when there."""
+    line = next(ln for ln in output.splitlines() if "frames received" in ln)
+    return {k.split()[-1]: int(n) for n, k in _COUNT.findall(line)}
+
+
+def max_age_ms(output: str) -> float:
+    """``age at send max X ms`` of the last line: the oldest frame the robot lane sent."""
+    return float(re.search(r"age at send max ([0-9.]+) ms", output).group(1))
+
+
+def sent_frames(
+    stamps: np.ndarray, t_rec: np.ndarray, speed: float, got: np.ndarray, want: np.ndarray
+) -> np.ndarray:
+    """Which frames of a replay a consumer received (the robot lane sends a subset).
+
+    A replayed frame's timestamp is its due time, start + recording time / ``speed``, so
+    the received stamps fix the frames up to the first one; that one is the shift under
+    which every received row of a frame with all values finite equals the recording's.
+
+    Parameters
+    ----------
+    stamps : ndarray, shape (m,)
+        Received timestamps (s), any clock.
+    t_rec : ndarray, shape (n,)
+        Recording time of every frame (s).
+    speed : float
+    got, want : ndarray, shape (m, k) and (n, k)
+        Received values and the recording's (e.g. `fingerfit angles`' columns).
+
+    Returns
+    -------
+    ndarray of int, shape (m,)
+        Frame index of each received row.
+    """
+    rel = (stamps - stamps[0]) * speed
+    tr = t_rec - t_rec[0]
+    for k0 in range(len(tr)):
+        target = tr[k0] + rel
+        idx = np.clip(np.searchsorted(tr, target - 1e-4), 0, len(tr) - 1)
+        if np.abs(tr[idx] - target).max() > 1e-4:
+            continue
+        full = np.isfinite(want[idx]).all(axis=1)  # frames with a missing sensor are held
+        if full.any() and np.allclose(got[full], want[idx][full], rtol=0, atol=1e-9):
+            return idx
+    raise AssertionError("the received rows are no subset of the recording's frames")

@@ -24,7 +24,7 @@ import pytest
 from fingerfit.io import write_pose_csv
 from fingerfit.session import PoseSeries, Recording
 
-from ._live import resolve_prefix
+from ._live import max_age_ms, resolve_prefix, sent_frames, stream_counts
 from .bad_inputs._cli import run
 from .conftest import subject
 
@@ -136,7 +136,7 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
          "--record", str(record), "--wait", "--wait-timeout", "30", "-q"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
-    inlets, data, messages = {}, {}, []
+    inlets, data, stamps, messages = {}, {}, {}, []
     try:
         found = resolve_prefix(prefix, 3)  # angles, tips, robot: found before any is opened
         for kind in ("robot", "angles"):
@@ -144,17 +144,25 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
             inlets[kind] = pylsl.StreamInlet(
                 found[f"{prefix}-{kind}"], max_buflen=60, processing_flags=0
             )
-            data[kind] = []
+            data[kind], stamps[kind] = [], []
         for inlet in inlets.values():
             inlet.open_stream(timeout=10)
         t_end = time.monotonic() + DEADLINE
-        while time.monotonic() < t_end and not (
-            all(len(v) >= N for v in data.values()) and len(messages) >= N
-        ):
+        quiet_since = None  # the stream has ended: drain until nothing comes for 1 s
+        while time.monotonic() < t_end:
+            got_any = False
             for kind, inlet in inlets.items():
-                x, _ = inlet.pull_chunk(timeout=0.0)
+                x, ts = inlet.pull_chunk(timeout=0.0)
                 data[kind] += x
-            messages += [m for m in reader.take(N=1000) if isinstance(m, JointState)]
+                stamps[kind] += ts
+                got_any = got_any or bool(ts)
+            new = [m for m in reader.take(N=1000) if isinstance(m, JointState)]
+            messages += new
+            if proc.poll() is not None:
+                if got_any or new or quiet_since is None:
+                    quiet_since = time.monotonic()
+                elif time.monotonic() - quiet_since > 1.0:
+                    break
             time.sleep(0.005)
         info = inlets["robot"].info(timeout=5)
     finally:
@@ -164,36 +172,83 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
             proc.kill()
             out, err = proc.communicate()
     assert proc.returncode == 0, out + err
-    assert f"{N} frames streamed" in out and "Traceback" not in err
+    assert "Traceback" not in err
+    counts = stream_counts(out)
+    assert counts["received"] == N == counts["recorded"]
+    assert counts["sent"] + counts["skipped"] + counts["stale"] == N
+    sent = counts["sent"]
     assert "compute per frame (retargeting included) p50" in out
 
-    # --- LSL PREFIX-robot: channels, units, every frame, the offline joints ------------
-    assert info.type() == "JointAngles" and info.channel_format() == pylsl.cf_double64
-    chans = ET.fromstring(info.as_xml()).find("desc/channels").findall("channel")
-    assert [c.findtext("label") for c in chans] == [*names, "valid"]
-    assert {c.findtext("unit") for c in chans[:-1]} == {"radians"}
-    x = np.asarray(data["robot"])
-    assert x.shape == (N, len(names) + 1)  # no frame lost
-    np.testing.assert_allclose(x[:, :-1], q_want, rtol=0, atol=1e-9)
-    np.testing.assert_array_equal(x[:, -1], valid)
-    _limits_hold("shadow", model_path, x[:, :-1])
-    # The person's frames that lost a sensor keep the robot's pose (tip method).
-    np.testing.assert_array_equal(x[150, :-1], x[149, :-1])
-
-    # --- the person's outlets are unchanged ---------------------------------------------
+    # --- which frames the robot lane sent (the person's angles identify them) ------------
     live = pd.read_csv(record)
     labels = [c.findtext("label") for c in ET.fromstring(inlets["angles"].info(5).as_xml())
               .find("desc/channels").findall("channel")]  # fmt: skip
     assert labels[:-1] == [c for c in live.columns if c.count(".") == 1 and c != "time"]
     a = np.asarray(data["angles"])
-    np.testing.assert_allclose(a[:, :-1], live[labels[:-1]].ffill().to_numpy(), atol=1e-9)
+    assert a.shape == (sent, len(labels))  # every frame sent reaches the consumer
+    t_rec = live["time"].to_numpy()
+    idx = sent_frames(
+        np.asarray(stamps["angles"]), t_rec, 2.0, a[:, :-1], live[labels[:-1]].to_numpy()
+    )
+    np.testing.assert_allclose(a[:, :-1], live[labels[:-1]].iloc[idx].ffill().to_numpy(), atol=1e-9)
 
-    # --- ROS 2 over DDS and the rosbag2: the robot's JointState, the same values -----------
-    assert len(messages) == N and all(list(m.name) == names for m in messages)
+    # --- LSL PREFIX-robot: channels, units, the frames sent, the offline joints ----------
+    assert info.type() == "JointAngles" and info.channel_format() == pylsl.cf_double64
+    chans = ET.fromstring(info.as_xml()).find("desc/channels").findall("channel")
+    assert [c.findtext("label") for c in chans] == [*names, "valid"]
+    assert {c.findtext("unit") for c in chans[:-1]} == {"radians"}
+    x = np.asarray(data["robot"])
+    assert x.shape == (sent, len(names) + 1)
+    np.testing.assert_array_equal(np.asarray(stamps["robot"]), np.asarray(stamps["angles"]))
+    # Up to the first frame skipped, the tip solver's warm start is the offline one: the
+    # same joints. After a skip it starts from the last frame sent, not the one before.
+    run_ = (
+        int(np.argmax(idx != np.arange(len(idx)))) if np.any(idx != np.arange(len(idx))) else sent
+    )
+    np.testing.assert_allclose(x[:run_, :-1], q_want[idx[:run_]], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(x[:, -1], valid[idx])
+    _limits_hold("shadow", model_path, x[:, :-1])
+    # The person's frames that lost a sensor keep the robot's pose (tip method).
+    for k in np.flatnonzero(valid[idx] == 0):
+        if k > 0 and idx[k] == 150 and idx[k - 1] == 149:
+            np.testing.assert_array_equal(x[k, :-1], x[k - 1, :-1])
+
+    # --- ROS 2 over DDS: the robot's JointState of the frames sent; the bag: every frame ---
+    assert len(messages) == sent and all(list(m.name) == names for m in messages)
     np.testing.assert_array_equal(np.array([m.position for m in messages]), x[:, :-1])
     bag_names, pos, bag_topic = _bag(bag)
     assert bag_names == names and bag_topic == topic
-    np.testing.assert_array_equal(pos, x[:, :-1])
+    np.testing.assert_allclose(pos, q_want, rtol=0, atol=1e-9)  # `fingerfit retarget`'s
+
+
+def test_overload_robot_lane_sends_fresh_frames_files_keep_every_frame(
+    hand, tmp_path: Path
+) -> None:
+    """Frames arrive faster than the whole hand and the Shadow hand are computed (@8: one
+    every 0.52 ms): the robot lane skips frames and sends none older than --max-age; the
+    files still hold every frame, equal to `fingerfit angles` and `fingerfit retarget`."""
+    model_path, csv, _ = hand
+    want = _offline(tmp_path, model_path, csv, "--robot", "shadow")
+    names = [c for c in want.columns if c != "time"]
+    bag, record = tmp_path / "bag", tmp_path / "live.csv"
+    res = run(
+        "stream", model_path, "--source", f"replay:{csv}@8", "--retarget", "shadow", "--lsl",
+        "--lsl-name", f"ffover{os.getpid()}", "--ros2-bag", bag, "--record", record, "-q",
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    counts = stream_counts(res.output)
+    assert counts["received"] == N == counts["recorded"]
+    assert counts["sent"] + counts["skipped"] + counts["stale"] == N
+    assert counts["skipped"] > 0 and counts["sent"] > 0
+    assert max_age_ms(res.output) <= 20.0  # the default --max-age
+    bag_names, pos, _ = _bag(bag)
+    assert bag_names == names
+    np.testing.assert_allclose(pos, want[names].to_numpy(), rtol=0, atol=1e-9)
+    angles = tmp_path / "angles.csv"
+    assert run("angles", model_path, csv, "-o", angles, "-q").exit_code == 0
+    pd.testing.assert_frame_equal(
+        pd.read_csv(record), pd.read_csv(angles), check_exact=False, rtol=0, atol=1e-9
+    )
 
 
 def test_stream_retarget_allegro_joint_orthogonal_equals_retarget(hand, tmp_path: Path) -> None:
@@ -207,7 +262,7 @@ def test_stream_retarget_allegro_joint_orthogonal_equals_retarget(hand, tmp_path
         "--ros2-bag", bag, "--record", record, "-q",
     )  # fmt: skip
     assert res.exit_code == 0, res.output
-    assert f"{N} frames streamed" in res.output
+    assert stream_counts(res.output) == {"received": N, "recorded": N}
     bag_names, pos, _ = _bag(bag)
     assert bag_names == names and pos.shape == (N, 16)  # the Allegro hand's 16 joints
     np.testing.assert_allclose(pos, want[names].to_numpy(), rtol=0, atol=1e-9)

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from ..live.stream import DEFAULT_MAX_AGE_MS, DEFAULT_SILENCE_MS
 from .app import app, notice, say, user_errors
 from .retarget import (
     DEFAULT_CONTACT_MM,
@@ -114,6 +115,32 @@ def stream(
     method: MethodOption = "tip",
     orthogonal: OrthogonalOption = False,
     contact_mm: ContactOption = DEFAULT_CONTACT_MM,
+    max_age: Annotated[
+        float,
+        typer.Option(
+            "--max-age",
+            metavar="MS",
+            help="Robot lane (LSL, DDS): never send a frame older than this (ms); of "
+            "frames that wait, only the newest is sent.",
+        ),
+    ] = DEFAULT_MAX_AGE_MS,
+    silence_ms: Annotated[
+        float,
+        typer.Option(
+            "--silence-ms",
+            metavar="MS",
+            help="Watchdog: after this long without a frame (ms), valid = 0 on the live "
+            "outputs and one warning line.",
+        ),
+    ] = DEFAULT_SILENCE_MS,
+    on_silence: Annotated[
+        str,
+        typer.Option(
+            "--on-silence",
+            help="With --retarget, what the robot gets when the source falls silent: hold "
+            "(its last pose) or release (its rest pose).",
+        ),
+    ] = "hold",
     quiet: Annotated[
         bool,
         typer.Option(
@@ -122,12 +149,16 @@ def stream(
             help="No status line (there is none either when stderr is not a terminal).",
         ),
     ] = False,
+    verbose: Annotated[
+        bool, typer.Option("--verbose", help="Show liblsl's own log lines (INFO|) on stderr.")
+    ] = False,
 ) -> None:
     """Stream joint angles and fingertips of a live or replayed hand (Ctrl-C to stop).
 
     The values are those of `fingerfit angles` (same kinematics). A frame with a missing
     sensor holds the last values and has valid = 0. With --retarget ROBOT, the robot's
-    joints of `fingerfit retarget` go out too.
+    joints of `fingerfit retarget` go out too. LSL and DDS get the newest frame, never
+    one older than --max-age; --record and --ros2-bag get every frame.
     """
     import numpy as np
 
@@ -136,7 +167,16 @@ def stream(
     from ..kinematics import compute_kinematics
     from ..live import sources as src
     from ..live.outputs import BagOutput, LslOutput, RecordOutput, Ros2Output, dds_topic
-    from ..live.stream import Streamer, channels_of, empty_recording, model_sensors, run
+    from ..live.stream import (
+        SILENCE_POLICIES,
+        Streamer,
+        channels_of,
+        check_max_age,
+        check_silence,
+        empty_recording,
+        model_sensors,
+        run,
+    )
     from ..model import load_model
     from ..session import UNITS_TO_MM
 
@@ -150,8 +190,15 @@ def stream(
         raise FingerfitError("only a replay source waits for consumers", field="--wait")
     if stations is not None and kind != "liberty":
         raise FingerfitError("only a liberty source has stations", field="--stations")
+    max_age_s = check_max_age(max_age)
+    silence_s = check_silence(silence_ms)
+    if on_silence not in SILENCE_POLICIES:
+        raise FingerfitError(
+            f"'{on_silence}' is not one of {', '.join(SILENCE_POLICIES)}", field="--on-silence"
+        )
     if retarget is None:
         alone = [
+            (on_silence != "hold", "--on-silence"),
             (map_path is not None, "--map"),
             (method != "tip", "--method"),
             (orthogonal, "--orthogonal"),
@@ -179,7 +226,7 @@ def stream(
     if units not in UNITS_TO_MM:
         raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
     sensors = model_sensors(model)
-    retargeter = None
+    retargeter = bag_retargeter = None
     if retarget is not None:
         # The robot (MuJoCo / Pinocchio loaded here, not in the loop) and its map are
         # checked before the source opens: a bad map or robot leaves nothing behind.
@@ -191,6 +238,18 @@ def stream(
         retargeter = Retargeter(model, robot, rmap, method, variant, contact_mm=contact_mm)
         for note in retargeter.notes:
             notice("note", note)
+        bag_retargeter = None
+        if ros2_bag is not None and (lsl or ros2 is not None):
+            # The data lane steps through every frame on its own thread: a second robot
+            # (its own MuJoCo/Pinocchio data) and its own warm start.
+            robot2, rmap2 = resolve_robot(retarget, map_path, model.hand, "--retarget")
+            bag_retargeter = Retargeter(
+                model, robot2, rmap2, method, variant, contact_mm=contact_mm
+            )
+    if not verbose and (lsl or kind == "lsl"):
+        from ..live import quiet_lsl
+
+        quiet_lsl()  # before any other LSL call
 
     # The source first: a file that does not read, or a device that does not open, fails
     # before any output exists.
@@ -251,6 +310,9 @@ def stream(
             tips_frame=tips_frame,
             channels=ch,
             retargeter=retargeter,
+            bag_retargeter=bag_retargeter,
+            max_age=max_age_s,
+            on_silence=on_silence,
         )
     except BaseException:
         the_source.close()
@@ -268,6 +330,8 @@ def stream(
             wait=wait_timeout if wait else None,
             status=not quiet,
             duration=duration,
+            silence=silence_s,
+            warn=lambda text: notice("warning", text),
         )
     except FingerfitError as exc:
         if streamer.summary.frames:
@@ -275,23 +339,11 @@ def stream(
             extra = f"; kept {', '.join(kept)}" if kept else ""
             raise FingerfitError(f"{exc} (after {streamer.summary.frames} frames{extra})") from None
         raise
-    lat = summary.latency_ms()
-    comp = summary.compute_ms_per_frame()
-    lat_text = (
-        f"; arrival -> sent p50 {np.percentile(lat, 50):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms"
-        f"; compute per frame{' (retargeting included)' if retargeter is not None else ''} "
-        f"p50 {np.percentile(comp, 50):.2f} ms, p99 {np.percentile(comp, 99):.2f} ms"
-        if lat.size and comp.size
-        else ""
-    )
     say(
-        "{} frames streamed in {} s ({} lost, {} with a missing sensor held){}{}",
-        summary.frames,
-        f"{summary.seconds:.1f}",
-        summary.lost,
-        summary.invalid,
-        lat_text,
-        " -- stopped by Ctrl-C" if summary.interrupted else "",
+        "{}",
+        summary_line(
+            summary, streamer.live, streamer.data is not None, max_age, retargeter is not None
+        ),
     )
     if retargeter is not None and (retargeter.missing or retargeter.held):
         notice(
@@ -312,3 +364,53 @@ def stream(
     for p, what in ((record, "angles CSV"), (ros2_bag, "rosbag2")):
         if p is not None:
             say("{} -> [bold]{}[/]", what, p)
+
+
+def summary_line(
+    summary, live: bool, files: bool, max_age_ms: float, retargets: bool = False
+) -> str:
+    """The last line: the lanes' counts (which add up: received = sent + skipped +
+    stale with a live output, recorded = received with a file output), then the robot
+    lane's timings.
+
+    Parameters
+    ----------
+    summary : fingerfit.live.stream.Summary
+    live, files : bool
+        Whether the stream has a robot lane (LSL, DDS) and a data lane (files).
+    max_age_ms : float
+        ``--max-age`` (ms).
+    retargets : bool
+        The robot lane computes a robot's joints (``--retarget``).
+    """
+    import numpy as np
+
+    s = summary
+    counts = []
+    if live:
+        counts.append(
+            f"{s.sent} sent, {s.skipped} skipped, {s.stale} stale (--max-age {max_age_ms:g} ms)"
+        )
+    if files:
+        counts.append(f"{s.recorded} recorded")
+    text = f"{s.received} frames received in {s.seconds:.1f} s"
+    if counts:
+        text += ": " + ", ".join(counts)
+    text += f" ({s.lost} lost, {s.invalid} with a missing sensor held"
+    text += f", {s.silences} silence{'s' * (s.silences > 1)})" if s.silences else ")"
+    lat, age, comp = s.latency_ms(), s.age_ms(), s.compute_ms_per_frame()
+    if lat.size:
+        text += (
+            f"; arrival -> sent p50 {np.percentile(lat, 50):.2f} ms, p99 "
+            f"{np.percentile(lat, 99):.2f} ms; age at send max {age.max():.2f} ms"
+        )
+    if comp.size:
+        what = "compute per frame" + (" (retargeting included)" if retargets else "")
+        text += (
+            f"; {what} p50 {np.percentile(comp, 50):.2f} ms, p99 {np.percentile(comp, 99):.2f} ms"
+        )
+    if files and s.recorded:
+        text += f"; files up to {1e3 * s.data_lag:.0f} ms behind"
+    if s.interrupted:
+        text += " -- stopped by Ctrl-C"
+    return text

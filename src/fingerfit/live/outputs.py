@@ -342,7 +342,8 @@ class BagOutput:
     """The ``JointState`` messages in a rosbag2 folder (sqlite3), written all-or-nothing.
 
     The folder appears when :meth:`close` succeeds; an error before removes the partial
-    bag. Message timestamps are the frames' arrival on the system clock.
+    bag. Message timestamps are the frames' arrival on the system clock. The database is
+    opened by the first :meth:`push` (or :meth:`close`): push and close on one thread.
 
     Parameters
     ----------
@@ -372,10 +373,6 @@ class BagOutput:
                 self.writer = Writer(staging, version=8)
             except TypeError:  # rosbags < 0.10 has one bag version and no argument
                 self.writer = Writer(staging)
-            self.writer.open()
-            self.conn = self.writer.add_connection(
-                "/" + topic.lstrip("/"), "sensor_msgs/msg/JointState", typestore=self.store
-            )
         except BaseException as exc:
             with contextlib.suppress(FingerfitError):
                 self._stage.__exit__(type(exc), exc, exc.__traceback__)
@@ -383,13 +380,26 @@ class BagOutput:
             raise
         self.names = list(names)
         self.frame_id = frame_id
+        self.topic = "/" + topic.lstrip("/")
+        self.conn = None
         t = self.store.types
         self._msg = t["sensor_msgs/msg/JointState"]
         self._header = t["std_msgs/msg/Header"]
         self._time = t["builtin_interfaces/msg/Time"]
 
+    def _open(self) -> None:
+        """Open the bag's database: on the thread that then writes and closes it (SQLite
+        objects stay on the thread that made them; the stream's data lane is a thread of
+        its own)."""
+        if self.conn is None:
+            self.writer.open()
+            self.conn = self.writer.add_connection(
+                self.topic, "sensor_msgs/msg/JointState", typestore=self.store
+            )
+
     def push(self, positions: FloatArray, wall: FloatArray) -> None:
         """Write one message per frame (``positions (n, n_joints)`` rad, ``wall (n,)`` s)."""
+        self._open()
         empty = np.zeros(0)
         for p, w in zip(positions, wall.tolist(), strict=True):
             sec, nsec = stamp(w)
@@ -404,9 +414,13 @@ class BagOutput:
             self.writer.write(self.conn, sec * 1_000_000_000 + nsec, data)
 
     def close(self, ok: bool = True) -> None:
-        """Finish the bag and move it into place (``ok``) or remove it."""
+        """Finish the bag and move it into place (``ok``) or remove it; on the thread that
+        wrote it."""
         try:
-            self.writer.close()
+            if ok:
+                self._open()  # a bag of no message is still a bag
+            if self.conn is not None:
+                self.writer.close()
         except BaseException as exc:
             self._stage.__exit__(type(exc), exc, exc.__traceback__)
             raise

@@ -32,6 +32,9 @@ from .liberty_serial import SETUP_COMMANDS, START, STOP, parse_records
 MAX_BLOCK = 2048
 #: Seconds without a byte from a live device before the stream ends with an error.
 NO_DATA_SECONDS = 2.0
+#: Seconds a source waits for data before it yields None (the loop then checks its
+#: duration, Ctrl-C and the silence watchdog).
+POLL_S = 0.01
 #: Liberty frame rate (Hz): the device's default, one frame every 4.2 ms.
 LIBERTY_RATE_HZ = 240.0
 #: The Liberty sample rate after ``U1`` is in cm.
@@ -151,10 +154,11 @@ class ReplaySource:
         self.name = recording.name
         self.stats = SourceStats()
 
-    def blocks(self) -> Iterator[Block]:
+    def blocks(self) -> Iterator[Block | None]:
         """Frames as they fall due: each frame's arrival is its due time
         (``monotonic`` at the start + recording time / speed), so a late wake-up shows
-        as latency. Frames whose time is NaN are due with the previous frame."""
+        as latency; every frame due is in the block. Frames whose time is NaN are due
+        with the previous frame. While no frame is due, None every :data:`POLL_S`."""
         rec = self.recording
         n = rec.n_frames
         if n == 0:
@@ -167,7 +171,11 @@ class ReplaySource:
         while i < n:
             now = time.monotonic()
             if due[i] > now:
-                time.sleep(due[i] - now)
+                if due[i] - now > POLL_S:
+                    time.sleep(POLL_S)
+                    yield None  # nothing due yet: the loop can check its watchdog
+                else:
+                    time.sleep(due[i] - now)
                 continue
             j = min(n, i + MAX_BLOCK, int(np.searchsorted(due, now, side="right")))
             yield Block(rec.slice(slice(i, j)), due[i:j].copy())
@@ -244,7 +252,7 @@ class LibertySource:
         self._station_list = np.array(sorted(stations), dtype=np.int64)
         self._col = {s: k for k, s in enumerate(sorted(stations))}
         try:
-            self.serial = serial.Serial(port, baud, timeout=0.05)
+            self.serial = serial.Serial(port, baud, timeout=POLL_S)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise FingerfitError(f"cannot open the serial port: {exc}", path=port) from None
         try:
@@ -490,7 +498,7 @@ class LslSource:
         quiet_since = time.monotonic()
         t_first = None
         while True:
-            data, stamps = self.inlet.pull_chunk(timeout=0.05, max_samples=MAX_BLOCK)
+            data, stamps = self.inlet.pull_chunk(timeout=POLL_S, max_samples=MAX_BLOCK)
             now = time.monotonic()
             if not stamps:
                 if now - quiet_since > NO_DATA_SECONDS:

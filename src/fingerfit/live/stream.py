@@ -1,23 +1,39 @@
-"""The streaming loop: source -> kinematics -> outputs.
+"""The streaming loop: source -> kinematics -> outputs, in two lanes.
 
-Each block of frames that arrived together goes through
-:func:`fingerfit.kinematics.compute_kinematics` -- the function ``fingerfit angles`` uses,
-so the streamed numbers are the same -- and then to every output. Per output column, a
-frame whose value could not be computed (a sensor missing) holds the column's last value;
-the ``valid`` channel says whether every sensor the model uses was present in the frame.
-The angles CSV (``--record``) gets the frames as ``fingerfit angles`` writes them (empty
-fields where a sensor is missing), not the held values.
+Frames go through :func:`fingerfit.kinematics.compute_kinematics` -- the function
+``fingerfit angles`` uses, so the streamed numbers are the same -- in two lanes:
 
-With a :class:`fingerfit.retarget.Retargeter` (``--retarget ROBOT``), each block's
+* the **robot lane** (LSL, DDS: what a robot or a teleoperation consumer acts on) is
+  latest-wins: of the frames that arrived together only the newest is computed and sent,
+  the others are counted as skipped, and a frame older than ``max_age`` is never sent
+  (counted as stale);
+* the **data lane** (``--record``, ``--ros2-bag``) writes every frame, on its own thread
+  and in vectorised blocks, so a recording is complete whatever the robot lane skipped.
+
+Per output column, a frame whose value could not be computed (a sensor missing) holds the
+column's last value; the ``valid`` channel says whether every sensor the model uses was
+present in the frame. The angles CSV (``--record``) gets the frames as ``fingerfit
+angles`` writes them (empty fields where a sensor is missing), not the held values.
+
+With a :class:`fingerfit.retarget.Retargeter` (``--retarget ROBOT``), the sent frames'
 kinematics then go through :meth:`~fingerfit.retarget.Retargeter.step`, which keeps the
-solver's warm start across blocks (the offline ``fingerfit retarget`` joints); the ROS 2
-outputs carry the robot's joints and LSL gets a third outlet ``PREFIX-robot``.
+solver's warm start from frame to frame; the ROS 2 outputs carry the robot's joints and
+LSL gets a third outlet ``PREFIX-robot``. The bag's robot joints come from a second
+retargeter that steps through every frame (the offline ``fingerfit retarget`` joints).
+
+A watchdog marks a source that falls silent (``valid`` 0 on the live outputs and the
+robot's ``hold`` or ``release`` policy, :meth:`Streamer.silence`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import math
+import signal
 import sys
+import threading
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,10 +45,20 @@ from ..model import HandModel
 from ..session import HAND_SENSOR, PoseSeries, Recording
 from ..transforms import FloatArray
 from .outputs import BagOutput, LslOutput, RecordOutput, Ros2Output
-from .sources import Block
+from .sources import MAX_BLOCK, Block
 
 #: Seconds between status-line updates.
 STATUS_PERIOD = 0.5
+#: Default ``--max-age`` (ms): the robot lane sends no frame older than this.
+DEFAULT_MAX_AGE_MS = 20.0
+#: Default ``--silence-ms`` (ms): the watchdog fires after this long without a frame.
+DEFAULT_SILENCE_MS = 50.0
+#: ``--on-silence`` policies: the robot keeps its pose, or goes to its rest pose.
+SILENCE_POLICIES = ("hold", "release")
+#: Seconds between the data lane's passes over what is queued.
+DATA_PERIOD = 0.05
+#: Python's thread switch interval (s) while a data lane runs beside the robot lane.
+SWITCH_INTERVAL = 0.0005
 
 
 def model_sensors(model: HandModel) -> list[str]:
@@ -200,80 +226,309 @@ def hold(x: FloatArray, last: FloatArray) -> FloatArray:
     return full[idx, np.arange(full.shape[1])][1:]
 
 
+def concat_blocks(blocks: list[Block]) -> Block:
+    """Blocks that arrived one after the other, as one block (frames in order).
+
+    Parameters
+    ----------
+    blocks : list of Block
+        Non-empty; every recording with the same sensors.
+
+    Returns
+    -------
+    Block
+        Time ``(n,)`` s, poses per sensor ``(n, 3)`` mm and ``(n, 3, 3)``, arrival ``(n,)``
+        s, ``lost`` the sum.
+    """
+    if len(blocks) == 1:
+        return blocks[0]
+    recs = [b.recording for b in blocks]
+    poses = {
+        k: PoseSeries(
+            np.concatenate([r.poses[k].position for r in recs]),
+            np.concatenate([r.poses[k].rotation for r in recs]),
+        )
+        for k in recs[0].poses
+    }
+    rec = Recording(recs[0].name, np.concatenate([r.time for r in recs]), poses)
+    return Block(rec, np.concatenate([b.arrival for b in blocks]), sum(b.lost for b in blocks))
+
+
+def _join(parts: list) -> FloatArray:
+    return (
+        np.concatenate([np.atleast_1d(np.asarray(x, dtype=float)) for x in parts])
+        if parts
+        else np.zeros(0)
+    )
+
+
 @dataclass
 class Summary:
-    """What a stream did.
+    """What a stream did: the counts of both lanes and their timings.
+
+    Every frame the source hands over is *received*. The robot lane (live outputs: LSL,
+    DDS) then either *sends* it, *skips* it (a newer frame was waiting) or drops it as
+    *stale* (older than ``max_age``): ``received = sent + skipped + stale`` when there is
+    a live output. The data lane (``--record``, ``--ros2-bag``) writes every frame:
+    ``recorded = received`` when there is a file output, once the stream has ended.
 
     Attributes
     ----------
-    frames : int
-        Frames sent.
+    received, sent, skipped, stale, recorded : int
+        Frame counts, see above (0 for a lane the stream does not have).
     lost : int
-        Frames the source lost (device frame-count gaps).
+        Frames the source lost (device frame-count gaps); not received.
     invalid : int
-        Frames with a missing sensor (values held).
+        Received frames with a missing sensor (values held, ``valid`` 0).
+    silences : int
+        Times the source fell silent for ``silence`` s (the watchdog fired).
     latency : list of ndarray
-        Per block, per frame: arrival to the moment every network output had it (s);
+        Robot lane, per sent frame: arrival to the moment every live output had it (s);
         :meth:`latency_ms` joins them.
+    ages : list of ndarray
+        Robot lane, per sent frame: its age (s) when its push began, never above
+        ``max_age``; :meth:`age_ms` joins them.
     compute, sizes : list
-        Seconds of compute per block (kinematics, and the robot's joints when
-        retargeting), and the block sizes (frames).
+        Robot lane: seconds of compute per sent frame (kinematics, and the robot's joints
+        when retargeting) and the frames computed (1 each).
+    data_compute, data_sizes : list
+        Data lane: seconds of compute (kinematics, robot joints for the bag) per batch
+        and the batch sizes (frames).
+    data_lag : float
+        Data lane: the longest time (s) from a frame's arrival to its batch being written.
     window : list of ndarray
         Latencies since the status line last read them.
     compute_window : list of float
-        Per-frame compute (s: a block's compute / its frames) since the status line last
-        read it.
+        Per-frame compute (s) since the status line last read it.
     seconds : float
         Wall time from the first frame's arrival to the end.
     interrupted : bool
         Ended by Ctrl-C.
     """
 
-    frames: int = 0
+    received: int = 0
+    sent: int = 0
+    skipped: int = 0
+    stale: int = 0
+    recorded: int = 0
     lost: int = 0
     invalid: int = 0
+    silences: int = 0
     latency: list = field(default_factory=list)
+    ages: list = field(default_factory=list)
     compute: list = field(default_factory=list)
     sizes: list = field(default_factory=list)
+    data_compute: list = field(default_factory=list)
+    data_sizes: list = field(default_factory=list)
+    data_lag: float = 0.0
     seconds: float = 0.0
     interrupted: bool = False
     window: list = field(default_factory=list)
     compute_window: list = field(default_factory=list)
 
-    def add(self, latency: FloatArray, compute: float, size: int) -> None:
-        """Record one block; lists are merged into one array now and then (a long
-        stream keeps 8 bytes per frame, not a Python object)."""
+    @property
+    def frames(self) -> int:
+        """Frames received (handed over by the source)."""
+        return self.received
+
+    def add(self, latency: FloatArray, compute: float, size: int, age: float | None = None) -> None:
+        """Record one robot-lane send; lists are merged into one array now and then (a
+        long stream keeps 8 bytes per frame, not a Python object)."""
         self.latency.append(latency)
         self.window.append(latency)
         self.compute.append(compute)
         self.sizes.append(size)
+        if age is not None:
+            self.ages.append(age)
         if size:
             self.compute_window.append(compute / size)
         if len(self.window) > 4096:  # no status line reads it
             del self.window[:-64]
             del self.compute_window[:-64]
         if len(self.latency) >= 4096:
-            self.latency = [np.concatenate(self.latency)]
-            self.compute = [np.concatenate([np.atleast_1d(c) for c in self.compute])]
-            self.sizes = [np.concatenate([np.atleast_1d(c) for c in self.sizes])]
+            self.latency = [_join(self.latency)]
+            self.ages = [_join(self.ages)]
+            self.compute = [_join(self.compute)]
+            self.sizes = [_join(self.sizes)]
 
     def latency_ms(self) -> FloatArray:
-        """Arrival -> sent of every frame (ms), shape (frames,)."""
-        return 1e3 * (np.concatenate(self.latency) if self.latency else np.zeros(0))
+        """Arrival -> sent of every sent frame (ms), shape (sent,)."""
+        return 1e3 * _join(self.latency)
+
+    def age_ms(self) -> FloatArray:
+        """Age of every sent frame when its push began (ms), shape (sent,)."""
+        return 1e3 * _join(self.ages)
 
     def compute_ms_per_frame(self) -> FloatArray:
-        """Per-frame compute of every non-empty block (ms): the block's compute divided by
-        its frames, shape (blocks,)."""
-        if not self.compute:
-            return np.zeros(0)
-        c = np.concatenate([np.atleast_1d(x) for x in self.compute]).astype(float)
-        n = np.concatenate([np.atleast_1d(x) for x in self.sizes]).astype(float)
+        """Robot lane: per-frame compute of every send (ms), shape (sent,); without a
+        robot lane, the data lane's per batch (batch compute / its frames)."""
+        c, n = (self.compute, self.sizes) if self.compute else (self.data_compute, self.data_sizes)
+        c, n = _join(c), _join(n)
         keep = n > 0
         return 1e3 * c[keep] / n[keep]
 
 
+class DataLane:
+    """Every frame to the files (``--record``, ``--ros2-bag``), on a thread of its own.
+
+    Blocks are queued as they arrive (:meth:`put`); the thread takes everything queued
+    every :data:`DATA_PERIOD` s and computes it as one block (at most
+    :data:`~fingerfit.live.sources.MAX_BLOCK` frames at a time) -- so a backlog costs one
+    vectorised pass, not one per frame -- and writes it. :meth:`finish` writes what is
+    still queued and stops the thread: then ``summary.recorded`` = every frame put.
+
+    Parameters
+    ----------
+    model : HandModel
+    summary : Summary
+        Where ``recorded``, ``data_compute``, ``data_sizes`` and ``data_lag`` go.
+    record : RecordOutput, optional
+    bag : BagOutput, optional
+    record_units : str
+    channels : Channels
+    sensors : list of str
+    retargeter : fingerfit.retarget.Retargeter, optional
+        The bag's robot joints (its own instance: its warm start follows every frame).
+    wall_offset : float
+        System clock minus ``time.monotonic()`` (s), for the bag's stamps.
+    """
+
+    def __init__(
+        self,
+        model: HandModel,
+        summary: Summary,
+        *,
+        record: RecordOutput | None,
+        bag: BagOutput | None,
+        record_units: str,
+        channels: Channels,
+        sensors: list[str],
+        retargeter: Any = None,
+        wall_offset: float = 0.0,
+    ) -> None:
+        self.model, self.summary = model, summary
+        self.record, self.bag = record, bag
+        self.record_units = record_units
+        self.channels, self.sensors = channels, sensors
+        self.retargeter = retargeter if bag is not None else None
+        variants = ["user_axis"] + (["orthogonal"] if record is not None else [])
+        if self.retargeter is not None and self.retargeter.variant not in variants:
+            variants.append(self.retargeter.variant)
+        self.variants = tuple(variants)
+        self.plan = (
+            KinematicsPlan(model, self.variants) if model.angle_method == "swing_twist" else None
+        )
+        self.wall_offset = wall_offset
+        self._queue: list[Block] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._last: FloatArray | None = None
+        self.error: BaseException | None = None
+        self.ok = True
+        self._thread = threading.Thread(target=self._run, name="fingerfit-data-lane", daemon=True)
+        self._thread.start()
+
+    def put(self, block: Block) -> None:
+        """Queue a block (cheap: the thread computes it)."""
+        with self._lock:
+            self._queue.append(block)
+
+    def backlog(self) -> int:
+        """Frames queued and not yet written."""
+        with self._lock:
+            return sum(b.recording.n_frames for b in self._queue)
+
+    def _take(self) -> list[Block]:
+        with self._lock:
+            blocks, self._queue = self._queue, []
+        return blocks
+
+    def _run(self) -> None:
+        ok = False
+        try:
+            while not self._stop.wait(DATA_PERIOD):
+                self._write(self._take())
+            ok = self.ok
+            if ok:
+                self._write(self._take())  # what came before the stop
+                if self.record is not None and not self.record.started:
+                    # No frame at all: still a complete CSV (an empty recording's header).
+                    variants = ("user_axis", "orthogonal")
+                    kin = compute_kinematics(self.model, empty_recording(self.sensors), variants)
+                    self.record.push(kinematics_table(kin, units=self.record_units))
+        except BaseException as exc:  # handed to the loop, which raises it
+            self.error, ok = exc, False
+        # The files are closed on this thread (a bag's SQLite objects belong to it).
+        for o in (self.record, self.bag):
+            if o is not None:
+                try:
+                    o.close(ok)
+                except BaseException as exc:
+                    self.error = self.error or exc
+
+    def _write(self, blocks: list[Block]) -> None:
+        if not blocks:
+            return
+        block = concat_blocks(blocks)
+        n = block.recording.n_frames
+        for i in range(0, n, MAX_BLOCK):
+            part = Block(
+                block.recording.slice(slice(i, i + MAX_BLOCK)), block.arrival[i : i + MAX_BLOCK]
+            )
+            self._write_one(part)
+
+    def _write_one(self, block: Block) -> None:
+        rec, s = block.recording, self.summary
+        t = time.perf_counter()
+        if self.plan is not None and rec.n_frames:
+            kin = self.plan.run(rec)
+        else:
+            kin = compute_kinematics(self.model, rec, self.variants)
+        joints = None
+        if self.bag is not None:
+            if self.retargeter is not None:
+                joints = self.retargeter.step(rec, kin)[0]
+            else:
+                joints = block_values(kin, self.channels, rec, self.sensors, "tracker").joints
+        compute = time.perf_counter() - t
+        if self.record is not None:
+            self.record.push(kinematics_table(kin, units=self.record_units))
+        if joints is not None and self.bag is not None:
+            last = self._last if self._last is not None else np.full(joints.shape[1], np.nan)
+            if joints.size and not np.isfinite(joints).all():
+                joints = hold(joints, last)
+            if joints.shape[0]:
+                self._last = joints[-1]
+            self.bag.push(joints, block.arrival + self.wall_offset)
+        s.data_compute.append(compute)
+        s.data_sizes.append(rec.n_frames)
+        if len(s.data_compute) >= 4096:
+            s.data_compute = [_join(s.data_compute)]
+            s.data_sizes = [_join(s.data_sizes)]
+        if rec.n_frames:
+            s.data_lag = max(s.data_lag, time.monotonic() - float(block.arrival[0]))
+        s.recorded += rec.n_frames
+
+    def finish(self, ok: bool = True) -> None:
+        """Write every queued frame (``ok``; else discard them), close the files (kept
+        when ``ok``) and stop the thread; raise its error, if any (the files are then
+        removed)."""
+        self.ok = ok
+        self._stop.set()
+        self._thread.join()
+        if self.error is not None:
+            raise self.error
+
+
 class Streamer:
-    """Kinematics and outputs for one model.
+    """Kinematics and outputs for one model, in two lanes.
+
+    * The **robot lane** (live outputs: LSL, DDS; the robot's joints with
+      ``retargeter``) is latest-wins: of the frames that arrived together it computes and
+      sends only the newest, counts the others as skipped, and never sends a frame older
+      than ``max_age`` (counted as stale).
+    * The **data lane** (:class:`DataLane`: ``record``, ``bag``) writes every frame, on
+      its own thread, behind the robot lane.
 
     Parameters
     ----------
@@ -289,9 +544,17 @@ class Streamer:
     channels : Channels, optional
         The streamed names (default: from the model); the LSL outlets must use the same.
     retargeter : fingerfit.retarget.Retargeter, optional
-        Drives a robot hand: every block's kinematics go through its ``step``; the ROS 2
-        outputs then carry the robot's joints (``robot.joint_names``, rad) and the LSL
-        output its ``-robot`` outlet (built with ``robot_labels``).
+        Drives a robot hand: every sent frame's kinematics go through its ``step``; the
+        ROS 2 outputs then carry the robot's joints (``robot.joint_names``, rad) and the
+        LSL output its ``-robot`` outlet (built with ``robot_labels``).
+    bag_retargeter : fingerfit.retarget.Retargeter, optional
+        The bag's robot joints when there is also a live output (a second instance on a
+        robot of its own: the data lane steps through every frame on another thread).
+        Without a live output the bag uses ``retargeter``.
+    max_age : float
+        Seconds: a frame older than this when the robot lane would send it is not sent.
+    on_silence : {"hold", "release"}
+        What the robot outlet sends when the watchdog fires (:meth:`silence`).
     """
 
     def __init__(
@@ -306,15 +569,26 @@ class Streamer:
         tips_frame: str = "tracker",
         channels: Channels | None = None,
         retargeter: Any = None,
+        bag_retargeter: Any = None,
+        max_age: float = DEFAULT_MAX_AGE_MS / 1e3,
+        on_silence: str = "hold",
     ) -> None:
         if tips_frame not in ("tracker", "hand"):
             raise FingerfitError("must be tracker or hand", field="--tips-frame")
+        check_max_age(1e3 * max_age)
+        if on_silence not in SILENCE_POLICIES:
+            raise FingerfitError(
+                f"must be one of {', '.join(SILENCE_POLICIES)}", field="--on-silence"
+            )
         self.model = model
         self.lsl, self.ros2, self.bag, self.record = lsl, ros2, bag, record
         self.record_units = record_units
         self.tips_frame = tips_frame
+        self.max_age = max_age
+        self.on_silence = on_silence
         self.sensors = model_sensors(model)
-        variants = ["user_axis"] + (["orthogonal"] if record is not None else [])
+        self.live = lsl is not None or ros2 is not None
+        variants = ["user_axis"]
         if retargeter is not None and retargeter.variant not in variants:
             variants.append(retargeter.variant)  # --orthogonal: computed with the others
         self.variants = tuple(variants)
@@ -327,11 +601,28 @@ class Streamer:
         # The model's constants are prepared once (swing-twist models; the paper's
         # projection angles go through compute_kinematics on every block).
         self.plan = (
-            KinematicsPlan(model, self.variants) if model.angle_method == "swing_twist" else None
+            KinematicsPlan(model, self.variants)
+            if model.angle_method == "swing_twist" and self.live
+            else None
         )
         self.wall_offset = time.time() - time.monotonic()
         self.summary = Summary()
         self._last: dict[str, FloatArray] = {}
+        self.data: DataLane | None = None
+        if bag is not None and retargeter is not None and self.live and bag_retargeter is None:
+            raise ValueError("a bag of the robot's joints beside live outputs needs bag_retargeter")
+        if record is not None or bag is not None:
+            self.data = DataLane(
+                model,
+                self.summary,
+                record=record,
+                bag=bag,
+                record_units=record_units,
+                channels=self.channels,
+                sensors=self.sensors,
+                retargeter=bag_retargeter if self.live else retargeter,
+                wall_offset=self.wall_offset,
+            )
 
     def outputs(self) -> list:
         return [o for o in (self.lsl, self.ros2, self.bag, self.record) if o is not None]
@@ -341,68 +632,112 @@ class Streamer:
         return all(o.has_consumers() for o in (self.lsl, self.ros2) if o is not None)
 
     def process(self, block: Block) -> None:
-        """Compute and send one block; update the summary."""
+        """Hand one block to both lanes and update the summary: the robot lane sends its
+        newest frame (or none, all stale), the data lane queues every frame."""
+        n = block.recording.n_frames
+        if n == 0:
+            return
+        s = self.summary
+        if self.live:
+            self._send(block)
+        s.received += n
+        s.lost += block.lost
+        valid = np.ones(n, dtype=bool)
+        for k in self.sensors:
+            valid &= block.recording.poses[k].valid
+        s.invalid += int(n - valid.sum())
+        if self.data is not None:
+            if self.data.error is not None:
+                raise self.data.error
+            self.data.put(block)
+
+    def _send(self, block: Block) -> None:
+        """The robot lane: the newest frame of ``block`` if it is fresh enough."""
+        s = self.summary
+        n = block.recording.n_frames
+        age = time.monotonic() - block.arrival
+        old = age[:-1] > self.max_age
+        s.stale += int(old.sum())
+        s.skipped += int(n - 1 - old.sum())
+        if age[-1] > self.max_age:
+            s.stale += 1
+            return
+        rec = block.recording.slice(slice(n - 1, n))
+        arrival = block.arrival[n - 1 :]
         t = time.perf_counter()
-        rec = block.recording
-        if self.plan is not None and rec.n_frames:
-            kin = self.plan.run(rec)
-        else:
-            kin = compute_kinematics(self.model, rec, self.variants)
-        robot = None
-        if self.retargeter is not None:
-            # The block's kinematics hold every digit in the retargeter's variant.
-            robot = (
-                self.retargeter.step(rec, kin)[0]
-                if rec.n_frames
-                else np.zeros((0, self.retargeter.setup.robot.nq))
-            )
+        kin = (
+            self.plan.run(rec)
+            if self.plan is not None
+            else compute_kinematics(self.model, rec, self.variants)
+        )
+        robot = self.retargeter.step(rec, kin)[0] if self.retargeter is not None else None
         compute = time.perf_counter() - t
-        v = block_values(kin, self.channels, block.recording, self.sensors, self.tips_frame)
-        held = {}
+        v = block_values(kin, self.channels, rec, self.sensors, self.tips_frame)
         values = {"angles": v.angles, "tips": v.tips, "joints": v.joints}
         if robot is not None:
             values["robot"] = robot
+        held = {}
         for key, x in values.items():
             last = self._last.get(key, np.full(x.shape[1], np.nan))
-            held[key] = hold(x, last) if x.size and not np.isfinite(x).all() else x
-            if x.shape[0]:
-                self._last[key] = held[key][-1]
-        if self.lsl is not None:
-            self.lsl.push(held["angles"], held["tips"], v.valid, block.arrival, held.get("robot"))
-        if self.ros2 is not None or self.bag is not None:
-            wall = block.arrival + self.wall_offset
-            joints = held["robot"] if robot is not None else held["joints"]
-            if self.ros2 is not None:
-                self.ros2.push(joints, wall)
-            if self.bag is not None:
-                self.bag.push(joints, wall)
+            held[key] = hold(x, last) if not np.isfinite(x).all() else x
+            self._last[key] = held[key][-1]
+        sent_age = time.monotonic() - float(arrival[0])
+        if sent_age > self.max_age:  # the compute made it too old
+            s.stale += 1
+            return
+        self._push(held, v.valid, arrival, robot is not None)
         done = time.monotonic()
-        if self.record is not None:  # after the network outputs: not on the latency path
-            self.record.push(kinematics_table(kin, units=self.record_units))
-        s = self.summary
-        s.add(done - block.arrival, compute, block.recording.n_frames)
-        s.frames += block.recording.n_frames
-        s.lost += block.lost
-        s.invalid += int((v.valid == 0).sum())
+        s.sent += 1
+        s.add(done - arrival, compute, 1, sent_age)
+
+    def _push(self, held: dict, valid: FloatArray, arrival: FloatArray, robot: bool) -> None:
+        if self.lsl is not None:
+            self.lsl.push(held["angles"], held["tips"], valid, arrival, held.get("robot"))
+        if self.ros2 is not None:
+            self.ros2.push(held["robot"] if robot else held["joints"], arrival + self.wall_offset)
+
+    def silence(self, now: float) -> None:
+        """The watchdog: the source fell silent. One sample with ``valid`` 0 on every LSL
+        outlet at ``now`` (``time.monotonic()`` s): the held values, and on the robot
+        outlet the robot's last pose (``hold``) or its rest pose (``release``:
+        ``retargeter.setup.hold``, which DDS then also gets; under ``hold`` DDS, whose
+        ``JointState`` has no validity field, gets nothing)."""
+        self.summary.silences += 1
+        if not self.live or not self._last:
+            return
+        held = {k: v[None, :] for k, v in self._last.items()}
+        release = self.on_silence == "release" and self.retargeter is not None
+        if release:
+            rest = np.asarray(self.retargeter.setup.hold, dtype=float)
+            held["robot"] = rest[None, :]
+            self._last["robot"] = rest
+        arrival = np.array([now])
+        if self.lsl is not None:
+            self.lsl.push(held["angles"], held["tips"], np.zeros(1), arrival, held.get("robot"))
+        if self.ros2 is not None and release:
+            self.ros2.push(held["robot"], arrival + self.wall_offset)
 
     def close(self, ok: bool = True) -> None:
-        """Close every output; files are kept (``ok``) or removed."""
-        if self.record is not None and not self.record.started and ok:
-            # No frame at all: still a complete CSV (the header of an empty recording).
-            kin = compute_kinematics(self.model, empty_recording(self.sensors), self.variants)
-            self.record.push(kinematics_table(kin, units=self.record_units))
-        errors = []
-        for o in self.outputs():
+        """Write the data lane's backlog and close its files (kept when ``ok``), then
+        close the live outputs."""
+        errors: list[BaseException] = []
+        if self.data is not None:
             try:
-                o.close(ok) if isinstance(o, (BagOutput, RecordOutput)) else o.close()
-            except FingerfitError as exc:
+                self.data.finish(ok)
+            except BaseException as exc:
                 errors.append(exc)
+        for o in (self.lsl, self.ros2):
+            if o is not None:
+                try:
+                    o.close()
+                except FingerfitError as exc:
+                    errors.append(exc)
         if errors:
             raise errors[0]
 
 
 class StatusLine:
-    """One self-overwriting line on stderr: rate, latency, lost and held frames."""
+    """One self-overwriting line on stderr: rate, latency, the lanes' counts."""
 
     def __init__(self, enabled: bool) -> None:
         self.enabled = enabled and sys.stderr.isatty()
@@ -415,23 +750,57 @@ class StatusLine:
         now = time.monotonic()
         if now - self._t < STATUS_PERIOD and not force:
             return
-        rate = (s.frames - self._frames) / max(now - self._t, 1e-9)
+        rate = (s.received - self._frames) / max(now - self._t, 1e-9)
         lat = 1e3 * np.concatenate(s.window) if s.window else np.zeros(1)
         comp = 1e3 * np.array(s.compute_window) if s.compute_window else np.zeros(1)
         s.window.clear()
         s.compute_window.clear()
         sys.stderr.write(
             f"\r{rate:6.1f} frames/s  latency {np.median(lat):5.2f} ms (max {lat.max():5.2f})"
-            f"  compute {np.median(comp):5.2f} ms/frame"
-            f"  lost {s.lost}  held {s.invalid}  sent {s.frames}\x1b[K"
+            f"  compute {np.median(comp):5.2f} ms/frame  lost {s.lost}  held {s.invalid}"
+            f"  sent {s.sent}  skipped {s.skipped}  stale {s.stale}  recorded {s.recorded}"
+            "\x1b[K"
         )
         sys.stderr.flush()
-        self._t, self._frames = now, s.frames
+        self._t, self._frames = now, s.received
 
     def clear(self) -> None:
         if self.enabled:
             sys.stderr.write("\r\x1b[K")
             sys.stderr.flush()
+
+
+def check_max_age(ms: float) -> float:
+    """``--max-age`` in ms -> s; a clear error unless a positive number."""
+    if not (math.isfinite(ms) and ms > 0):
+        raise FingerfitError(f"must be a positive number of ms, not {ms:g}", field="--max-age")
+    return ms / 1e3
+
+
+def check_silence(ms: float) -> float:
+    """``--silence-ms`` in ms -> s; a clear error unless a positive number."""
+    if not (math.isfinite(ms) and ms > 0):
+        raise FingerfitError(f"must be a positive number of ms, not {ms:g}", field="--silence-ms")
+    return ms / 1e3
+
+
+@contextlib.contextmanager
+def _ctrl_c_sets(flag: threading.Event) -> Iterator[None]:
+    """Ctrl-C (SIGINT) sets ``flag`` instead of raising KeyboardInterrupt anywhere: the
+    loop stops between blocks, so both lanes have handled every frame received (only in
+    the main thread; elsewhere Python delivers no signal)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is signal.SIG_IGN:  # Ctrl-C ignored by whoever started us: keep it so
+        yield
+        return
+    signal.signal(signal.SIGINT, lambda *_: flag.set())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run(
@@ -441,6 +810,8 @@ def run(
     wait: float | None = None,
     status: bool = True,
     duration: float | None = None,
+    silence: float | None = DEFAULT_SILENCE_MS / 1e3,
+    warn: Callable[[str], None] | None = None,
 ) -> Summary:
     """Stream until the source ends, ``duration`` passes, or Ctrl-C.
 
@@ -457,32 +828,81 @@ def run(
         Show the status line (only on a terminal).
     duration : float, optional
         Seconds to stream, from the first frame's arrival.
+    silence : float, optional
+        The watchdog: seconds without a frame (after the first) before
+        :meth:`Streamer.silence` and one ``warn`` line; again after frames come back
+        and stop again. None: no watchdog.
+    warn : callable, optional
+        Called with the watchdog's one-line warning (default: printed on stderr).
 
     Returns
     -------
     Summary
-        ``interrupted`` when Ctrl-C ended it. Outputs are closed (files kept) in every
-        case; an error from the source (a device unplugged) is raised after that.
+        ``interrupted`` when Ctrl-C ended it. Outputs are closed (files kept, the data
+        lane's backlog written first) in every case; an error from the source (a device
+        unplugged) is raised after that.
     """
     line = StatusLine(status)
+    stop = threading.Event()
+    say = warn or (lambda text: print(f"warning: {text}", file=sys.stderr, flush=True))
+    # Installed until the outputs are closed: a Ctrl-C while the data lane writes its
+    # backlog lets it finish (the files complete).
+    with _ctrl_c_sets(stop):
+        _run(source, streamer, line, stop, wait, duration, silence, say)
+    return streamer.summary
+
+
+def _run(
+    source,
+    streamer: Streamer,
+    line: StatusLine,
+    stop: threading.Event,
+    wait: float | None,
+    duration: float | None,
+    silence: float | None,
+    say: Callable[[str], None],
+) -> None:
+    """:func:`run`'s loop, with Ctrl-C setting ``stop``."""
     s = streamer.summary
     ok = True
+    # The data lane's thread gives the GIL back every SWITCH_INTERVAL (Python's default
+    # is 5 ms, which the robot lane would wait on).
+    interval = sys.getswitchinterval()
+    if streamer.data is not None:
+        sys.setswitchinterval(min(interval, SWITCH_INTERVAL))
     try:
         if wait is not None:
             t_end = time.monotonic() + wait
             while not streamer.has_consumers():
+                if stop.is_set():
+                    raise KeyboardInterrupt
                 if time.monotonic() > t_end:
                     raise FingerfitError(
                         f"no consumer within {wait:g} s for every output", field="--wait"
                     )
                 time.sleep(0.01)
-        t0 = None
+        t0 = last = None
+        silent = False
         for block in source.blocks():
-            if block is not None:
+            if block is not None and block.recording.n_frames:
                 if t0 is None:
                     t0 = float(block.arrival[0])
                 streamer.process(block)
+                last, silent = float(block.arrival[-1]), False
+            elif silence is not None and last is not None and not silent:
+                now = time.monotonic()
+                if now - last > silence:
+                    silent = True
+                    streamer.silence(now)
+                    line.clear()
+                    say(
+                        f"no frame for {1e3 * silence:g} ms: valid = 0 on the live outputs, "
+                        f"robot: {streamer.on_silence}"
+                    )
             line.update(s)
+            if stop.is_set():
+                s.interrupted = True
+                break
             if duration is not None and t0 is not None and time.monotonic() - t0 >= duration:
                 break
         if t0 is not None:
@@ -490,7 +910,7 @@ def run(
     except KeyboardInterrupt:
         s.interrupted = True
     except FingerfitError:
-        ok = s.frames > 0  # a device lost mid-stream: keep what was streamed
+        ok = s.received > 0  # a device lost mid-stream: keep what was streamed
         raise
     except BaseException:
         ok = False
@@ -499,5 +919,7 @@ def run(
         line.update(s, force=True)  # the final figures, at least once
         line.clear()
         source.close()
-        streamer.close(ok)
-    return s
+        try:
+            streamer.close(ok)
+        finally:
+            sys.setswitchinterval(interval)

@@ -1,0 +1,216 @@
+"""The stream's two lanes and its watchdog, in-process and without a network.
+
+Stand-in live outputs keep what the robot lane pushes (and can be slow, which overloads
+the stream whatever the machine); a replayed recording is the source. The tests assert
+counts, order and values -- never a duration, which belongs in ``bench/stream.py``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fingerfit.io import write_pose_csv
+from fingerfit.kinematics import compute_kinematics, kinematics_table
+from fingerfit.live.outputs import RecordOutput
+from fingerfit.live.sources import ReplaySource
+from fingerfit.live.stream import Streamer, channels_of, run
+from fingerfit.model import load_model
+from fingerfit.session import PoseSeries, Recording
+
+from ._live import fitted, short_recording, stream_counts
+from .bad_inputs._cli import refused
+from .bad_inputs._cli import run as cli
+
+N = 480
+HOLES = ((50, "index.middle"), (51, "index.middle"), (120, "hand"), (300, "index.distal"))
+
+
+class FakeLsl:
+    """An LSL output that keeps every push; each takes ``delay`` s (a slow network)."""
+
+    def __init__(self, delay: float = 0.0) -> None:
+        self.delay = delay
+        self.angles: list[np.ndarray] = []
+        self.valid: list[np.ndarray] = []
+        self.arrival: list[np.ndarray] = []
+        self.robot: list[np.ndarray] = []
+
+    def push(self, angles, tips, valid, arrival, robot=None) -> None:
+        self.angles.append(angles.copy())
+        self.valid.append(valid.copy())
+        self.arrival.append(arrival.copy())
+        if robot is not None:
+            self.robot.append(robot.copy())
+        if self.delay:
+            time.sleep(self.delay)
+
+    def has_consumers(self) -> bool:
+        return True
+
+    def close(self) -> None:
+        pass
+
+
+class FakeRos2:
+    """A DDS output that keeps every message's positions."""
+
+    def __init__(self) -> None:
+        self.positions: list[np.ndarray] = []
+
+    def push(self, positions, wall) -> None:
+        self.positions.append(positions.copy())
+
+    def has_consumers(self) -> bool:
+        return True
+
+    def close(self) -> None:
+        pass
+
+
+class Logged:
+    """A source that notes every block it hands over (arrival times, sizes)."""
+
+    live = False
+
+    def __init__(self, source) -> None:
+        self.source = source
+        self.blocks_seen: list[np.ndarray] = []
+
+    def blocks(self):
+        for b in self.source.blocks():
+            if b is not None:
+                self.blocks_seen.append(b.arrival.copy())
+            yield b
+
+    def close(self) -> None:
+        self.source.close()
+
+
+def test_overload_sends_the_newest_fresh_frame_and_records_every_frame(tmp_path: Path) -> None:
+    model = load_model(fitted()[1])
+    rec = short_recording(N, HOLES)
+    # Frames every 0.52 ms (@8), a push takes 4 ms: frames wait on any machine.
+    lsl = FakeLsl(delay=0.004)
+    record = RecordOutput(tmp_path / "live.csv")
+    streamer = Streamer(model, lsl=lsl, record=record, record_units=model.session_units)
+    source = Logged(ReplaySource(rec, 8.0))
+    s = run(source, streamer, status=False)
+
+    # The counts add up, by construction.
+    assert s.received == N == s.sent + s.skipped + s.stale
+    assert s.recorded == N
+    assert s.skipped > 0 and s.sent == len(lsl.angles) > 0
+    # No frame sent older than --max-age (20 ms): the age the stream measured at each push.
+    ages = s.age_ms()
+    assert ages.size == s.sent and ages.max() <= 20.0
+    # Each frame sent is the newest of the frames handed over together, in order.
+    blocks = source.blocks_seen
+    arrivals = np.concatenate(blocks)
+    newest = {float(b[-1]) for b in blocks}
+    sent = np.concatenate(lsl.arrival)
+    assert all(float(t) in newest for t in sent)
+    idx = np.searchsorted(arrivals, sent)
+    np.testing.assert_array_equal(arrivals[idx], sent)
+    assert np.all(np.diff(idx) > 0)
+    # Its values: `fingerfit angles`' row, a missing sensor holding the last frame sent.
+    table = kinematics_table(compute_kinematics(model, rec), units=model.session_units)
+    ch = channels_of(model, compute_kinematics(model, rec.slice(slice(0, 2)), ("user_axis",)))
+    held = table[ch.angle_labels].iloc[idx].ffill().to_numpy()
+    np.testing.assert_allclose(np.vstack(lsl.angles), held, rtol=0, atol=1e-9)
+    # The record: every frame, `fingerfit angles`' numbers.
+    got = pd.read_csv(tmp_path / "live.csv")
+    pd.testing.assert_frame_equal(got, table, check_exact=False, rtol=0, atol=1e-9)
+
+
+def test_a_frame_older_than_max_age_is_never_sent(tmp_path: Path) -> None:
+    """A push that takes longer than --max-age: the frames that waited for it are stale."""
+    model = load_model(fitted()[1])
+    lsl = FakeLsl(delay=0.03)  # 30 ms per push, --max-age 10 ms
+    streamer = Streamer(model, lsl=lsl, max_age=0.010)
+    s = run(ReplaySource(short_recording(240), 1.0), streamer, status=False)
+    assert s.received == 240 == s.sent + s.skipped + s.stale
+    assert s.stale > 0 and s.age_ms().max() <= 10.0 and s.recorded == 0
+
+
+def _with_gap(n: int, at: int, gap_s: float) -> Recording:
+    """:func:`short_recording` with the frames from ``at`` on ``gap_s`` later: a source that
+    falls silent and comes back."""
+    rec = short_recording(n)
+    t = rec.time.copy()
+    t[at:] += gap_s
+    poses = {k: PoseSeries(v.position, v.rotation) for k, v in rec.poses.items()}
+    return Recording(rec.name, t, poses)
+
+
+@pytest.mark.parametrize("policy", ["hold", "release"])
+def test_watchdog_marks_silence_invalid_and_applies_the_robot_policy(policy: str) -> None:
+    pytest.importorskip("mujoco")
+    from fingerfit.retarget import Retargeter, resolve
+
+    model = load_model(fitted()[1])
+    retargeter = Retargeter(model, *resolve("shadow", None, model.hand), "tip")
+    lsl, ros2 = FakeLsl(), FakeRos2()
+    streamer = Streamer(model, lsl=lsl, ros2=ros2, retargeter=retargeter, on_silence=policy)
+    warnings: list[str] = []
+    # 0.4 s without a frame after frame 60, against a 50 ms watchdog: generous margins.
+    source = Logged(ReplaySource(_with_gap(120, 60, 0.4), 1.0))
+    s = run(source, streamer, status=False, silence=0.05, warn=warnings.append)
+
+    assert s.silences == 1 and len(warnings) == 1 and policy in warnings[0]
+    assert s.received == 120 == s.sent + s.skipped + s.stale
+    valid = np.concatenate(lsl.valid)
+    arrival = np.concatenate(lsl.arrival)
+    (k,) = np.flatnonzero(valid == 0)  # the one sample of the silence
+    assert np.all(np.diff(arrival) > 0)  # stamped between the frames around the gap
+    frames = np.concatenate(source.blocks_seen)
+    assert frames[59] < arrival[k] < frames[60]
+    assert k < len(valid) - 1  # frames came back, valid again
+    robot = np.vstack(lsl.robot)
+    rest = np.asarray(retargeter.setup.hold)
+    n_sent = s.sent
+    if policy == "release":
+        np.testing.assert_array_equal(robot[k], rest)  # the robot's rest pose
+        assert not np.allclose(robot[k - 1], rest)
+        assert len(ros2.positions) == n_sent + 1  # DDS gets the rest pose too
+        np.testing.assert_array_equal(ros2.positions[k][0], rest)
+    else:
+        np.testing.assert_array_equal(robot[k], robot[k - 1])  # the last pose, held
+        assert len(ros2.positions) == n_sent  # nothing on DDS: JointState has no valid
+    np.testing.assert_array_equal(np.vstack(lsl.angles)[k], np.vstack(lsl.angles)[k - 1])
+
+
+def test_cli_watchdog_warning_counts_and_complete_record(tmp_path: Path) -> None:
+    _, model_path = fitted()
+    csv = write_pose_csv(tmp_path / "gap.csv", _with_gap(120, 60, 0.4))
+    res = cli(
+        "stream", model_path, "--source", f"replay:{csv}", "--record", tmp_path / "live.csv",
+        "--silence-ms", "50", "-q",
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert res.output.count("no frame for 50 ms") == 1 and "1 silence)" in res.output
+    assert stream_counts(res.output) == {"received": 120, "recorded": 120}
+    assert len(pd.read_csv(tmp_path / "live.csv")) == 120
+
+
+@pytest.mark.parametrize(
+    ("args", "field", "text"),
+    [
+        (["--max-age", "0"], "--max-age", "positive"),
+        (["--max-age", "nan"], "--max-age", "positive"),
+        (["--silence-ms", "-5"], "--silence-ms", "positive"),
+        (["--on-silence", "drop"], "--on-silence", "hold, release"),
+        (["--on-silence", "release"], "--on-silence", "--retarget"),
+    ],
+)
+def test_bad_lane_options_are_refused_in_one_line(tmp_path: Path, args, field, text) -> None:
+    _, model_path = fitted()
+    csv = write_pose_csv(tmp_path / "rec.csv", short_recording(24))
+    out = tmp_path / "live.csv"
+    res = cli("stream", model_path, "--source", f"replay:{csv}", "--record", out, *args)
+    refused(res, field, text)
+    assert not out.exists()
