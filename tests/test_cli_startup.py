@@ -82,3 +82,7 @@ def test_signature_names_mirror_the_real_ones() -> None:
     assert FitOptions.method == _names.DEFAULT_METHOD
     assert _names.VARIANTS == VARIANTS
     assert _names.DEFAULT_MARGIN_DEG == DEFAULT_MARGIN_DEG
+    from fingerfit.live import stream
+
+    assert _names.DEFAULT_MAX_AGE_MS == stream.DEFAULT_MAX_AGE_MS
+    assert _names.DEFAULT_SILENCE_MS == stream.DEFAULT_SILENCE_MS

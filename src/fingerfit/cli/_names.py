@@ -19,3 +19,7 @@ DEFAULT_MARGIN_DEG = 10.0
 RETARGET_METHODS = ("tip", "joint")
 #: :data:`fingerfit.retarget.maps.BUILTIN` (its keys).
 RETARGET_ROBOTS = ("shadow", "allegro")
+#: :data:`fingerfit.live.stream.DEFAULT_MAX_AGE_MS` (ms).
+DEFAULT_MAX_AGE_MS = 20.0
+#: :data:`fingerfit.live.stream.DEFAULT_SILENCE_MS` (ms).
+DEFAULT_SILENCE_MS = 50.0

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from ..live.stream import DEFAULT_MAX_AGE_MS, DEFAULT_SILENCE_MS
+from ._names import DEFAULT_MAX_AGE_MS, DEFAULT_SILENCE_MS
 from .app import app, notice, say, user_errors
 from .retarget import (
     DEFAULT_CONTACT_MM,
