@@ -214,13 +214,15 @@ def _always_two_axes(*args, **kwargs):
     return replace(choice, chosen=TWO_AXIS if choice.candidate else HINGE)
 
 
-def run_subject(task: tuple[str, dict, int]) -> dict:
-    """All rows for one simulated subject of one condition."""
-    cond, overrides, seed = task
+def run_subject(task: tuple[str, dict, int, bool]) -> dict:
+    """All rows (``only_default``: the default method's and the floor) for one simulated
+    subject of one condition."""
+    cond, overrides, seed, only_default = task
     warnings.simplefilter("ignore")
     sim = simulate_subject(SimConfig(**overrides), seed)
     out: dict = {"condition": cond, "rows": {}}
-    for label, method, angles, variant in FIT_ROWS:
+    rows = [r for r in FIT_ROWS if r[0] == DEFAULT_METHOD] if only_default else FIT_ROWS
+    for label, method, angles, variant in rows:
         t0 = time.perf_counter()
         fit_module.choose_joint_model = (
             _always_two_axes if label.endswith("always two axes") else choose_joint_model
@@ -257,7 +259,7 @@ def run_subject(task: tuple[str, dict, int]) -> dict:
             "tip_mean": float(np.nanmean(err)),
             "fit_s": elapsed,
         }
-    if PEER_ROWS:
+    if PEER_ROWS and not only_default:
         models, elapsed = peer_models(sim)
         for label, model in models.items():
             deg, mm = geometry_errors(sim, model)
@@ -324,6 +326,8 @@ def summarise(results: list[dict], conditions: list[str]) -> dict:
                 for s in subj
                 if s["rows"].get(DEFAULT_METHOD) and s["rows"].get(peer)
             ]
+            if len(pairs) < 2:
+                continue
             diff = np.array([np.subtract(a, b) for a, b in pairs])
             half = stats.t.ppf(0.975, len(diff) - 1) * diff.std(axis=0, ddof=1) / np.sqrt(len(diff))
             paired[peer] = {
@@ -342,10 +346,93 @@ def summarise(results: list[dict], conditions: list[str]) -> dict:
     return summary
 
 
+#: Conditions whose subjects' MP does not ab/adduct (the MP axis target is for the others).
+NO_MP_ABDUCTION = {c for c, o in CONDITIONS.items() if o.get("abduction") is False}
+ALWAYS_TWO = "twoaxis, always two axes"
+
+
+def choice_targets(summary: dict) -> list[tuple[str, bool, str]]:
+    """No regret of the model choice, and the MP axis where the MP ab/adducts."""
+    out = []
+    regret = []
+    for c, rows in summary.items():
+        if not {DEFAULT_METHOD, "robust", ALWAYS_TWO} <= set(rows):
+            continue
+        best = min(rows[k]["tip_mm"]["mean"] for k in ("robust", ALWAYS_TWO))
+        ratio = rows[DEFAULT_METHOD]["tip_mm"]["mean"] / best
+        if ratio > 1.05:
+            regret.append(f"{c} ({ratio:.2f}x)")
+    out.append(
+        (
+            "default tip <= 1.05 x the better of always one / always two axes, every condition",
+            not regret,
+            "; ".join(regret) or "all",
+        )
+    )
+    far = [
+        f"{c} ({rows[DEFAULT_METHOD]['axis_deg']['mp']['mean']:.2f})"
+        for c, rows in summary.items()
+        if c not in NO_MP_ABDUCTION
+        and DEFAULT_METHOD in rows
+        and rows[DEFAULT_METHOD]["axis_deg"]["mp"]["mean"] > 1.0
+    ]
+    out.append(
+        (
+            "default MP axis <= 1.0 deg mean, every condition with MP ab/adduction",
+            not far,
+            "; ".join(far) or "all",
+        )
+    )
+    return out
+
+
+def before_after(before: dict, after: dict, rev: str) -> str:
+    """The default method before (``rev``) and after, per condition: MP axis and tip."""
+    lines = [
+        f"### {_label(DEFAULT_METHOD)} before ({rev}) and after, same subjects",
+        "",
+        "| condition | MP deg before | MP deg after | tip mm before | tip mm after | "
+        "tip after/before |",
+        "|---|---|---|---|---|---|",
+    ]
+    for c, rows in after.items():
+        a, b = rows.get(DEFAULT_METHOD), before.get(c, {}).get(DEFAULT_METHOD)
+        if a is None or b is None:
+            lines.append(f"| {c} | n/a | | | | |")
+            continue
+        ta, tb = a["tip_mm"]["mean"], b["tip_mm"]["mean"]
+        lines.append(
+            f"| {c} | {b['axis_deg']['mp']['mean']:.2f} | {a['axis_deg']['mp']['mean']:.2f} | "
+            f"{tb:.2f} | {ta:.2f} | {ta / tb:.2f} |"
+        )
+    return "\n".join(lines)
+
+
+def run_before(rev: str, args: argparse.Namespace) -> dict:
+    """The default method of revision ``rev`` on the same subjects: this script run on
+    that revision's ``src`` (``git archive``) in a subprocess."""
+    import subprocess
+    import tempfile
+
+    root = Path(__file__).resolve().parent.parent
+    with tempfile.TemporaryDirectory() as tmp:
+        archive = subprocess.run(
+            ["git", "-C", str(root), "archive", rev, "src"], check=True, capture_output=True
+        ).stdout
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        out = Path(tmp) / "before.json"
+        cmd = [sys.executable, __file__, "--only-default", "--json", str(out)]
+        cmd += ["--subjects", str(args.subjects), "--workers", str(args.workers)]
+        cmd += ["--seed", str(args.seed), "--conditions", args.conditions]
+        env = dict(os.environ, PYTHONPATH=str(Path(tmp) / "src"))
+        subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
+        return json.loads(out.read_text())["summary"]
+
+
 def targets(summary: dict) -> list[tuple[str, bool, str]]:
     """The issue's targets, checked on the summary."""
     t = "tang2018"
-    out = []
+    out = choice_targets(summary)
     real = summary["realistic"]
     ratio = real[DEFAULT_METHOD]["tip_mm"]["mean"] / real[t]["tip_mm"]["mean"]
     out.append(("default tip <= 0.75 x tang2018 (realistic)", ratio <= 0.75, f"{ratio:.2f}x"))
@@ -474,6 +561,12 @@ def main() -> None:
         default=",".join(CONDITIONS),
         help="comma-separated subset of the conditions",
     )
+    ap.add_argument(
+        "--before",
+        default=None,
+        help="a git revision: its default method on the same subjects, side by side",
+    )
+    ap.add_argument("--only-default", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     chosen = [c.strip() for c in args.conditions.split(",")]
     for c in chosen:
@@ -482,7 +575,9 @@ def main() -> None:
     tasks = []
     for ci, cond in enumerate(chosen):
         seeds = np.random.SeedSequence([args.seed, ci]).spawn(args.subjects)
-        tasks += [(cond, CONDITIONS[cond], int(s.generate_state(1)[0])) for s in seeds]
+        tasks += [
+            (cond, CONDITIONS[cond], int(s.generate_state(1)[0]), args.only_default) for s in seeds
+        ]
     t0 = time.perf_counter()
     results = []
     with mp.get_context("spawn").Pool(args.workers) as pool:
@@ -509,9 +604,22 @@ def main() -> None:
         "numpy": np.__version__,
         "conditions": {c: asdict(SimConfig(**CONDITIONS[c])) for c in chosen},
     }
-    meta["targets"] = targets(summary) if "realistic" in summary else []
+    if args.only_default:
+        meta["targets"] = []
+    elif "realistic" in summary:
+        meta["targets"] = targets(summary)
+    else:
+        meta["targets"] = choice_targets(summary)
     meta["failures"] = [f for r in results for f in r.get("failures", [])]
-    print(markdown(summary, meta))
+    if args.only_default:
+        args.json.write_text(json.dumps({"meta": meta, "summary": summary}, indent=1) + "\n")
+        return
+    text = markdown(summary, meta)
+    if args.before:
+        before = run_before(args.before, args)
+        meta["before"] = {"revision": args.before, "summary": before}
+        text += "\n\n" + before_after(before, summary, args.before)
+    print(text)
     if args.json:
         args.json.write_text(json.dumps({"meta": meta, "summary": summary}, indent=1) + "\n")
 

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .digits import DIGIT_NAMES, DIGITS, second_axis
+from .digits import ABDUCTION_FIRST, DIGIT_NAMES, DIGITS, FLEXION_FIRST, second_axis
 from .errors import FingerfitError
 from .io.atomic import atomic_write
 from .transforms import FloatArray, matrix_from_quat_wxyz, quat_wxyz_from_matrix
@@ -164,6 +164,10 @@ class DigitModel:
         Pad point: the centre of the pulp's contact area on the palmar skin
         (``docs/conventions.md``, "Pads"), carried by the distal segment; ``None`` in models
         written before pads existed.
+    axis_order : dict[str, str]
+        Two-axis joints whose axes the fit found in the other order than the digit's
+        usual one (:mod:`fingerfit.digits`): joint -> ``abduction_first`` or
+        ``flexion_first``. Empty for most models (:meth:`order`).
     pad_source : {"pinch", "landmark", "geometry"}, optional
         Where :attr:`pad` comes from: the session's pinch holds
         (:mod:`fingerfit.estimate.pads`), the digitised ``<digit>.pad`` landmark, or the
@@ -179,6 +183,7 @@ class DigitModel:
     second_axes: dict[str, JointModel] = field(default_factory=dict)
     pad: FloatArray | None = None
     pad_source: str | None = None
+    axis_order: dict[str, str] = field(default_factory=dict)
 
     @property
     def segments(self) -> tuple[str, str, str]:
@@ -186,8 +191,9 @@ class DigitModel:
         return DIGITS[self.name].segments
 
     def order(self, joint: str) -> str:
-        """``abduction_first`` or ``flexion_first``: which axis of a two-axis joint is proximal."""
-        return DIGITS[self.name].order[joint]
+        """``abduction_first`` or ``flexion_first``: which axis of a two-axis joint is
+        proximal (:attr:`axis_order` where the fit chose it, else the digit's)."""
+        return self.axis_order.get(joint) or DIGITS[self.name].order[joint]
 
     def axes(self, joint: str) -> list[JointModel]:
         """The axes of ``joint``, proximal first (one for a hinge, two for a two-axis joint)."""
@@ -663,6 +669,15 @@ def _model_choice(r: _Reader, v: Any, where: str) -> dict:
     if not isinstance(candidate, bool):
         raise r.err(f"{where}.two_axis_candidate", "must be true or false")
     out["two_axis_candidate"] = candidate
+    if "order" in v:  # files before the order was chosen have neither
+        out["order"] = r.str_(v, "order", where, (ABDUCTION_FIRST, FLEXION_FIRST))
+    for key in ("held_out_two_axis_by_order_mm", "held_out_orientation_by_order_deg"):
+        if key not in v:
+            continue
+        by = v[key]
+        if not isinstance(by, dict) or not set(by) <= {ABDUCTION_FIRST, FLEXION_FIRST}:
+            raise r.err(f"{where}.{key}", "must map abduction_first/flexion_first to numbers")
+        out[key] = {k: r.number(x, f"{where}.{key}.{k}") for k, x in by.items()}
     return out
 
 
@@ -809,13 +824,19 @@ def _load_digit(r: _Reader, fd: Any, fname: str, poses: dict) -> DigitModel:
         raise r.err(f"{wf}.pad_source", "given without a pad")
     model = DigitModel(fname, joints, r.vec(fd, "tip", wf), lengths, frames, seconds, pad, source)
     order = fd.get("axis_order", {})
+    chosen = {}
     for j in seconds:
-        want = [a.name for a in model.axes(j)]
-        if j in order and order[j] != want:
+        usual = [a.name for a in model.axes(j)]
+        if j not in order or order[j] == usual:
+            continue
+        if order[j] != usual[::-1] or j in digit.required_second:
+            either = "" if j in digit.required_second else f" or {usual[::-1]}"
             raise r.err(
-                f"{wf}.axis_order.{j}", f"must be {want} (proximal first; docs/conventions.md)"
+                f"{wf}.axis_order.{j}",
+                f"must be {usual}{either} (proximal first; docs/conventions.md)",
             )
-    return model
+        chosen[j] = FLEXION_FIRST if usual[0] == second_axis(j) else ABDUCTION_FIRST
+    return replace(model, axis_order=chosen) if chosen else model
 
 
 def _pinch_contacts(

@@ -1,19 +1,24 @@
-"""Hinge or two axes: the joint model chosen by how well each predicts held-out motion.
+"""Hinge or two axes, and which axis proximal: the joint model chosen by how well each
+predicts held-out motion.
 
-A finger's MP and the thumb's MCP may turn about one axis or two. Both candidates are
-fitted to every movement cycle -- the hinge by the robust rules of :mod:`.robust`, the
-two-axis joint by :mod:`.twoaxis` with uniform weights over every cycle, so that no
-outlier rule of one model removes the motion that carries the other's second degree of
-freedom (``docs/methods.md``, "Choosing the joint model") -- and compared by
-leave-one-cycle-out prediction:
+A finger's MP and the thumb's MCP may turn about one axis or two, and a two-axis joint's
+ab/adduction axis may lie proximal to its flexion axis (fixed in the parent, the usual
+finger MP model) or distal to it (fixed in the child: MyoHand's MP, the thumb's MCP after
+Hollister). The candidates -- a hinge and a two-axis joint in each order -- are fitted to
+every movement cycle -- the hinge by the robust rules of :mod:`.robust`, each two-axis
+joint by :mod:`.twoaxis` with uniform weights over every cycle, so that no outlier rule of
+one model removes the motion that carries the other's second degree of freedom
+(``docs/methods.md``, "Choosing the joint model") -- and compared by leave-one-cycle-out
+prediction:
 
 for each cycle ``f``, each model is refitted without it and predicts, in the frames of
 ``f``, where the child sensor's origin is in the parent frame, from the child's measured
 orientation alone: the model's angles (twist about the hinge axis; the two-axis angles)
 carried through the model's rotations about its axis line(s),
 
-    hinge:     p(k) = Rot(a, theta_k) (t_ref - c_a) + c_a,
-    two axes:  p(k) = Rot(b, beta_k) (Rot(a, theta_k) (t_ref - c_a) + c_a - c_b) + c_b,
+    hinge:                     p(k) = Rot(a, theta_k) (t_ref - c_a) + c_a,
+    two axes, ab/adduction 1st: p(k) = Rot(b, beta_k) (Rot(a, theta_k) (t_ref - c_a) + c_a - c_b) + c_b,
+    two axes, flexion 1st:      p(k) = Rot(a, theta_k) (Rot(b, beta_k) (t_ref - c_b) + c_b - c_a) + c_a,
 
 ``t_ref`` the child origin at the reference posture, ``c_a`` and ``c_b`` points of the
 two axis lines (which need not meet). That is the
@@ -25,18 +30,32 @@ it costs the two-axis model held-out error; a real second rotation moves both.
 Refits per fold: the hinge axis exactly (SARA's 3 x 3 sum less the fold's); the two-axis
 directions by one Gauss-Newton step from the fit to every cycle without the fold's rows
 (the held-out influence of the fold); the axis points exactly (linear least squares with
-the fold's directions: ``c_a`` perpendicular to ``a``, and ``c_b`` perpendicular to ``b``). The model with the lower held-out mean squared error over every
-frame of every cycle is chosen -- no threshold but rounding (:data:`ROUNDING_MM`: on exact
-data the two predict equally well, and the hinge is kept); a two-axis fit whose direction
-search ended on its bounds is not a candidate.
+the fold's directions: ``c_a`` perpendicular to ``a``, and ``c_b`` perpendicular to ``b``).
+A flexion-first joint is fitted, and its directions refitted, as the ab/adduction-first
+form seen from the child (:meth:`fingerfit.estimate.fit.JointData.reversed`) and brought
+back to the parent frame, so that every candidate predicts the same thing.
+
+The **order** is chosen first, by the held-out **orientations**: the two orders have the
+same number of parameters and differ only in how the two rotations compose, so each
+fold's refitted axes and angles rebuild the fold's relative orientations and the angle of
+what they leave is the order's held-out error. A joint leaves its digit's usual order only
+when the other explains the held-out orientations better in so many cycles that a
+one-sided sign test rejects "no better" at :data:`ORDER_SIGNIFICANCE`: ab/adduction that
+mostly follows flexion makes the two orders nearly the same motion, and their per-cycle
+differences noise. Then **hinge or two axes**: the hinge against the chosen order by the
+held-out position error over every frame of every cycle -- no threshold but rounding
+(:data:`ROUNDING_MM`: on exact data the models predict equally well and the hinge is
+kept); a two-axis fit whose direction search ended on its bounds is not a candidate.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import binomtest
 
+from ..digits import ABDUCTION_FIRST, FLEXION_FIRST
 from ..kinematics import twist_angle, two_axis_angles
 from ..transforms import FloatArray, axis_angle_matrix, orthonormal_basis, unit
 from .twoaxis import MAX_FRAMES, TwoAxisFit, direction_jacobian
@@ -45,27 +64,44 @@ HINGE = "hinge"
 TWO_AXIS = "two_axis"
 #: Held-out errors closer than this (mm) are equal: rounding, not evidence (exact data).
 ROUNDING_MM = 1e-9
+#: Level of the sign test over the cycles that must reject "the other order is no better"
+#: before a joint leaves its digit's usual axis order: the held-out cycles must agree.
+ORDER_SIGNIFICANCE = 0.01
 #: The tilt of ``b`` towards ``a`` held in the one-step refits when the fit held it.
 _HELD = 1e8
 
 
 @dataclass(frozen=True)
 class ModelChoice:
-    """Hinge vs two axes for one joint (:func:`choose_joint_model`).
+    """Hinge vs two axes, and the two axes' order, for one joint (:func:`choose_joint_model`).
 
     Attributes
     ----------
     chosen : {"hinge", "two_axis"}
     hinge_mm, two_axis_mm : float
         Held-out RMS error of the child sensor origin (mm, parent frame) over every frame
-        of every cycle, each cycle predicted by the model fitted without it.
+        of every cycle, each cycle predicted by the model fitted without it; the two-axis
+        figure is that of :attr:`order`.
     folds : int
         Cycles left out in turn.
     fold_hinge_mm, fold_two_axis_mm : tuple of float
         The same per cycle (mm).
     candidate : bool
-        Whether the two-axis fit was a candidate (its direction search ended inside its
+        Whether a two-axis fit was a candidate (its direction search ended inside its
         bounds).
+    order : str
+        The two-axis order with the lower held-out error (``abduction_first`` or
+        ``flexion_first``; the proximal axis first): the chosen one when
+        :attr:`chosen` is ``two_axis``.
+    two_axis_by_order_mm : dict[str, float]
+        Held-out RMS error (mm) of each two-axis order fitted.
+    orientation_by_order_deg : dict[str, float]
+        Held-out RMS angle (deg) of each order's orientation residual: the child's
+        relative orientation in each held-out frame against the model's rotations by that
+        frame's angles. The order is chosen by it (the two orders have the same number of
+        parameters; what tells them apart is how the two rotations compose).
+    fold_orientation_by_order_deg : dict[str, tuple of float]
+        The same per cycle (deg).
     """
 
     chosen: str
@@ -75,16 +111,26 @@ class ModelChoice:
     fold_hinge_mm: tuple[float, ...]
     fold_two_axis_mm: tuple[float, ...]
     candidate: bool = True
+    order: str = ABDUCTION_FIRST
+    two_axis_by_order_mm: dict[str, float] = field(default_factory=dict)
+    orientation_by_order_deg: dict[str, float] = field(default_factory=dict)
+    fold_orientation_by_order_deg: dict[str, tuple[float, ...]] = field(default_factory=dict)
 
     @property
     def note(self) -> str:
         """One sentence for the joint's quality notes."""
         which = "two axes" if self.chosen == TWO_AXIS else "one axis"
+        if self.chosen == TWO_AXIS:
+            which += f" ({_PROXIMAL[self.order]} proximal)"
         extra = "" if self.candidate else " (the two-axis fit found no optimum inside its bounds)"
+        orders = ", ".join(
+            f"{v:.3f} mm with two, {_PROXIMAL[k]} proximal"
+            for k, v in self.two_axis_by_order_mm.items()
+        )
         return (
             f"{which} chosen by held-out prediction over {self.folds} cycles: child sensor "
-            f"origin {self.hinge_mm:.3f} mm RMS with one axis, {self.two_axis_mm:.3f} mm with "
-            f"two{extra}"
+            f"origin {self.hinge_mm:.3f} mm RMS with one axis, "
+            f"{orders or f'{self.two_axis_mm:.3f} mm with two'}{extra}"
         )
 
     def summary(self) -> dict:
@@ -95,7 +141,13 @@ class ModelChoice:
             "held_out_two_axis_mm": self.two_axis_mm,
             "folds": self.folds,
             "two_axis_candidate": self.candidate,
+            "order": self.order,
+            "held_out_two_axis_by_order_mm": dict(self.two_axis_by_order_mm),
+            "held_out_orientation_by_order_deg": dict(self.orientation_by_order_deg),
         }
+
+
+_PROXIMAL = {ABDUCTION_FIRST: "ab/adduction", FLEXION_FIRST: "flexion"}
 
 
 def _hinge_axes(rotation: FloatArray, labels: np.ndarray, folds: np.ndarray) -> FloatArray:
@@ -150,15 +202,65 @@ def _held_out_sq(y: FloatArray, design: FloatArray, out: np.ndarray) -> FloatArr
     return np.einsum("ni,ni->n", err, err)
 
 
+def _two_axis_folds(
+    q: FloatArray,
+    labels: np.ndarray,
+    folds: np.ndarray,
+    fit: TwoAxisFit,
+    order: str,
+    reference_rotation: FloatArray,
+) -> list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]]:
+    """Per fold, the refitted axes and every frame's rotations about them, parent frame:
+    ``(a (3,), b (3,), Rot_a (n, 3, 3), Rot_b (n, 3, 3))``; ``Q = Rot_b Rot_a``
+    (ab/adduction first) or ``Q = Rot_a Rot_b`` (flexion first)."""
+    if order == ABDUCTION_FIRST:
+        fa, fb = _two_axis_directions(q, labels, folds, fit)
+        out = []
+        for a, b in zip(fa, fb, strict=True):
+            beta, theta = two_axis_angles(q, a, b)
+            out.append((a, b, axis_angle_matrix(a, theta), axis_angle_matrix(b, beta)))
+        return out
+    # Seen from the child: Q' = R^T R_ref = R_ref^T Q^T R_ref = Rot(b', -beta) Rot(a', -theta)
+    # with a' = R_ref^T a, b' = R_ref^T b.
+    ref = reference_rotation
+    q_child = ref.T @ np.swapaxes(q, 1, 2) @ ref
+    fa, fb = _two_axis_directions(q_child, labels, folds, fit)
+    out = []
+    for a_c, b_c in zip(fa, fb, strict=True):
+        beta, theta = two_axis_angles(q_child, a_c, b_c)
+        a, b = ref @ a_c, ref @ b_c
+        out.append((a, b, axis_angle_matrix(a, -theta), axis_angle_matrix(b, -beta)))
+    return out
+
+
+def _order(turn: dict[str, list[FloatArray]], candidates: list[str], usual: str) -> str:
+    """The two-axis order (module docstring): the usual one unless the other is a
+    candidate whose held-out orientations are explained better in so many cycles that a
+    one-sided sign test over the cycles rejects "no better" at :data:`ORDER_SIGNIFICANCE`
+    (with 10 cycles: in at least 9)."""
+    others = [o for o in candidates if o != usual]
+    if not others:
+        return usual if usual in turn else next(iter(turn))
+    other = others[0]
+    if usual not in candidates:
+        return other
+    ms = {k: np.array([np.mean(x) for x in turn[k]]) for k in (usual, other)}
+    wins = int(np.sum(ms[other] < ms[usual]))
+    p = float(binomtest(wins, ms[usual].size, 0.5, alternative="greater").pvalue)
+    return other if p < ORDER_SIGNIFICANCE else usual
+
+
 def choose_joint_model(
     rotation: FloatArray,
     translation: FloatArray,
     reference_rotation: FloatArray,
     reference_offset: FloatArray,
     labels: np.ndarray,
-    two_axis: TwoAxisFit,
+    two_axis: dict[str, TwoAxisFit],
+    usual: str = ABDUCTION_FIRST,
 ) -> ModelChoice:
-    """Choose hinge or two axes by leave-one-cycle-out prediction (module docstring).
+    """Choose hinge or two axes, and their order, by leave-one-cycle-out prediction
+    (module docstring).
 
     Parameters
     ----------
@@ -171,9 +273,14 @@ def choose_joint_model(
         Child-in-parent rotation and child origin (mm) at the reference posture.
     labels : ndarray of int, shape (n,)
         Cycle of each frame (the folds).
-    two_axis : TwoAxisFit
-        The two-axis joint fitted to every cycle (ab/adduction axis ``b`` proximal:
-        ``Q = Rot(b, beta) Rot(a, theta)``, parent frame at the reference posture).
+    two_axis : dict[str, TwoAxisFit]
+        Order -> the two-axis joint fitted to every cycle in the ab/adduction-first form
+        ``Q = Rot(b, beta) Rot(a, theta)``: ``abduction_first`` in the parent frame,
+        ``flexion_first`` seen from the child (``JointData.reversed``: child frame at the
+        reference posture). One or both.
+    usual : str
+        The digit's usual order (:mod:`fingerfit.digits`), kept when the two orders
+        predict equally well.
 
     Returns
     -------
@@ -184,8 +291,7 @@ def choose_joint_model(
     folds = np.unique(lab)
     q = rot @ reference_rotation.T
     hinge_axes = _hinge_axes(rot, lab, folds)
-    fa, fb = _two_axis_directions(q, lab, folds, two_axis)
-    sq = {HINGE: [], TWO_AXIS: []}
+    sq: dict[str, list[FloatArray]] = {HINGE: []}
     eye = np.eye(3)[None]
     for i, f in enumerate(folds):
         out = lab == f
@@ -194,28 +300,46 @@ def choose_joint_model(
         rot_a = axis_angle_matrix(a, twist_angle(q, a))
         design = (eye - rot_a) @ orthonormal_basis(a)[:2].T
         sq[HINGE].append(_held_out_sq(t - rot_a @ reference_offset, design, out))
-        # Two axes: t - Rot_b Rot_a t_ref = Rot_b (I - Rot_a) c_a + (I - Rot_b) c_b.
-        beta, theta = two_axis_angles(q, fa[i], fb[i])
-        rot_a, rot_b = axis_angle_matrix(fa[i], theta), axis_angle_matrix(fb[i], beta)
-        design = np.concatenate(
-            [
-                rot_b @ (eye - rot_a) @ orthonormal_basis(fa[i])[:2].T,
-                (eye - rot_b) @ orthonormal_basis(fb[i])[:2].T,
-            ],
-            axis=2,
-        )
-        sq[TWO_AXIS].append(_held_out_sq(t - rot_b @ rot_a @ reference_offset, design, out))
+    turn: dict[str, list[FloatArray]] = {}
+    for order, fit in two_axis.items():
+        sq[order], turn[order] = [], []
+        per_fold = _two_axis_folds(q, lab, folds, fit, order, reference_rotation)
+        for f, (a, b, rot_a, rot_b) in zip(folds, per_fold, strict=True):
+            out = lab == f
+            ca, cb = orthonormal_basis(a)[:2].T, orthonormal_basis(b)[:2].T
+            if order == ABDUCTION_FIRST:
+                # t - Rot_b Rot_a t_ref = Rot_b (I - Rot_a) c_a + (I - Rot_b) c_b.
+                moved = rot_b @ rot_a
+                design = np.concatenate([rot_b @ (eye - rot_a) @ ca, (eye - rot_b) @ cb], axis=2)
+            else:
+                # t - Rot_a Rot_b t_ref = (I - Rot_a) c_a + Rot_a (I - Rot_b) c_b.
+                moved = rot_a @ rot_b
+                design = np.concatenate([(eye - rot_a) @ ca, rot_a @ (eye - rot_b) @ cb], axis=2)
+            sq[order].append(_held_out_sq(t - moved @ reference_offset, design, out))
+            # What the fold's angles leave of its orientations: the angle of
+            # moved^T Q, from the trace.
+            cos = 0.5 * (np.einsum("nij,nij->n", moved[out], q[out]) - 1.0)
+            turn[order].append(np.arccos(np.clip(cos, -1.0, 1.0)) ** 2)
     rms = {k: float(np.sqrt(np.mean(np.concatenate(v)))) for k, v in sq.items()}
     per_fold = {k: tuple(float(np.sqrt(np.mean(s))) for s in v) for k, v in sq.items()}
-    better = rms[TWO_AXIS] < rms[HINGE] - ROUNDING_MM
+    off = {k: float(np.degrees(np.sqrt(np.mean(np.concatenate(v))))) for k, v in turn.items()}
+    candidates = [o for o, fit in two_axis.items() if fit.interior]
+    best = _order(turn, candidates, usual)
+    better = best in candidates and rms[best] < rms[HINGE] - ROUNDING_MM
     return ModelChoice(
-        TWO_AXIS if (better and two_axis.interior) else HINGE,
+        TWO_AXIS if better else HINGE,
         rms[HINGE],
-        rms[TWO_AXIS],
+        rms[best],
         int(folds.size),
         per_fold[HINGE],
-        per_fold[TWO_AXIS],
-        candidate=two_axis.interior,
+        per_fold[best],
+        candidate=bool(candidates),
+        order=best,
+        two_axis_by_order_mm={o: rms[o] for o in two_axis},
+        orientation_by_order_deg=off,
+        fold_orientation_by_order_deg={
+            k: tuple(float(np.degrees(np.sqrt(np.mean(x)))) for x in v) for k, v in turn.items()
+        },
     )
 
 

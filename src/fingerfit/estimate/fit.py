@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..digits import DIGITS, FLEXION_FIRST
+from ..digits import ABDUCTION_FIRST, DIGITS, FLEXION_FIRST
 from ..errors import FingerfitError
 from ..kinematics import twist_angle, two_axis_angles
 from ..model import (
@@ -301,7 +301,9 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
             notes.extend(tf.stability_notes())
         notes.append(f"{name}: {choice.note}")
     mig = None
-    if migration and not (abduction is not None and data.second_axis == FLEXION_FIRST):
+    if migration and not (
+        abduction is not None and choice is not None and choice.order == FLEXION_FIRST
+    ):
         q = data.rotation[k] @ data.reference_rotation.T
         if abduction is not None:
             beta, theta = two_axis_angles(q, direction, abduction.abduction_axis)
@@ -339,33 +341,40 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
 def _second_axis(data: JointData) -> tuple[TwoAxisFit, ModelChoice]:
     """The two-axis candidate of a joint that may have a second axis, and the choice.
 
-    The candidate is fitted to every movement frame of every cycle with uniform weights
-    (the hinge's outlier rules and cycle weights would discard or down-weight exactly the
-    cycles that carry the second degree of freedom), started from the SARA hinge axis, and
-    compared with the hinge by :func:`.choice.choose_joint_model`.
+    A candidate of each order is fitted to every movement frame of every cycle with
+    uniform weights (the hinge's outlier rules and cycle weights would discard or
+    down-weight exactly the cycles that carry the second degree of freedom), started from
+    the SARA hinge axis, and the hinge and both are compared by
+    :func:`.choice.choose_joint_model`.
 
     ``estimate_two_axis`` fits ``Q = Rot(b, beta) Rot(a, theta)`` with the ab/adduction
-    axis ``b`` proximal; a flexion-first joint is that form seen from the child
-    (:meth:`JointData.reversed`): fitted (and compared) there and brought back to the
-    parent frame.
+    axis ``b`` proximal; the flexion-first joint is that form seen from the child
+    (:meth:`JointData.reversed`): fitted there and brought back to the parent frame.
+    Returns the fit of the order :attr:`ModelChoice.order` names, parent frame.
     """
-    flexion_first = data.second_axis == FLEXION_FIRST
-    d = data.reversed() if flexion_first else data
-    frames = np.concatenate(d.periods)
-    labels = period_labels(d.periods)
-    start = replace(estimate_hinge(d.rotation, d.translation, "sara", d.periods), groups=labels)
-    tf = estimate_two_axis(
-        d.rotation, d.translation, d.reference_rotation, start, d.finger_direction
-    )
+    fits = {}
+    for order in (ABDUCTION_FIRST, FLEXION_FIRST):
+        d = data.reversed() if order == FLEXION_FIRST else data
+        start = estimate_hinge(d.rotation, d.translation, "sara", d.periods)
+        fits[order] = estimate_two_axis(
+            d.rotation,
+            d.translation,
+            d.reference_rotation,
+            replace(start, groups=period_labels(d.periods)),
+            d.finger_direction,
+        )
+    frames = np.concatenate(data.periods)
     choice = choose_joint_model(
-        d.rotation[frames],
-        d.translation[frames],
-        d.reference_rotation,
-        d.reference_offset,
-        labels,
-        tf,
+        data.rotation[frames],
+        data.translation[frames],
+        data.reference_rotation,
+        data.reference_offset,
+        period_labels(data.periods),
+        fits,
+        data.second_axis or ABDUCTION_FIRST,
     )
-    if not flexion_first:
+    tf = fits[choice.order]
+    if choice.order == ABDUCTION_FIRST:
         return tf, choice
     ref, off = data.reference_rotation, data.reference_offset
     back = replace(
@@ -604,9 +613,12 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             sense = np.sign(a @ (reference[parent][1] @ est.axis.direction))
             migration[j] = sense * (reference[parent][1] @ est.migration)
     second_axes = {}
+    axis_order = {}
     for j, (parent, child, _, a, est, _, _) in fitted.items():
         if est.abduction is None:
             continue
+        if est.choice is not None and est.choice.order != digit.order[j]:
+            axis_order[j] = est.choice.order
         pp, pr = reference[parent]
         b = pr @ est.abduction.abduction_axis
         # Positive ab/adduction turns the digit towards the side its flexion axis points
@@ -619,7 +631,9 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             f"{j}_abduction", parent, child, pr @ est.abduction.abduction_point + pp, b, b,
             joints[j][4],
         )  # fmt: skip
-    model = assemble_digit(finger, joints, tip, second_axes, migration)
+    model = replace(
+        assemble_digit(finger, joints, tip, second_axes, migration), axis_order=axis_order
+    )
     pad, source = session.landmarks.get(f"{finger}.pad"), "landmark"
     if pad is None:
         last = digit.joints[-1]

@@ -8,9 +8,11 @@ angle method, not from the fitted geometry (``docs/accuracy.md``).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ..digits import DIGITS, second_axis
+from ..digits import DIGITS, FLEXION_FIRST, second_axis
 from ..model import DigitModel, HandModel, JointModel, JointQuality, assemble_digit
 from ..session import HAND_SENSOR, JOINTS, joint_sensors, sensor_name
 from .study import SimulatedSubject
@@ -43,16 +45,11 @@ def truth_model(
         True joint centres, axes (tracker coordinates at the reference posture,
         mm), fingertip and, as reference sensor poses, the true sensor mountings
         (before artefact and tracker error), so that every joint is exact in its
-        parent sensor frame. A MyoHand finger (MP flexion proximal to its ab/adduction)
-        is stored in the model's order (ab/adduction proximal), noted in each joint's
-        quality: inexact once the MP ab/adducts (``docs/simulator.md``).
+        parent sensor frame. A MyoHand finger keeps its MP order (flexion proximal to
+        ab/adduction, :attr:`~fingerfit.model.DigitModel.axis_order`).
     """
     truth = sim.truth
-    notes = ["ground truth"]
-    if any(a.order[0] == "mp" for a in truth.fingers.values()):
-        # MyoHand world: the model format holds a finger's MP ab/adduction proximal.
-        notes.append("true MP order is flexion first; stored ab/adduction first (inexact)")
-    quality = JointQuality(0, [], [], [], 0.0, [], notes=notes)
+    quality = JointQuality(0, [], [], [], 0.0, [], notes=["ground truth"])
     fingers = {}
     for f, anat in truth.fingers.items():
         joints = {
@@ -75,6 +72,8 @@ def truth_model(
             rolling = {j: anat.rolling[i] for i, j in enumerate(JOINTS)}
         pad = truth.pads[f].surface if f in truth.pads else None
         fingers[f] = assemble_digit(f, joints, anat.tip, second_axes, rolling, pad)
+        if second_axes and anat.order[0] == "mp":
+            fingers[f] = replace(fingers[f], axis_order={"mp": FLEXION_FIRST})
     if truth.thumb is not None:
         mcp_two = two_axis and truth.config.abduction
         fingers = {"thumb": _thumb_model(truth.thumb, quality, mcp_two), **fingers}
