@@ -324,11 +324,13 @@ def test_stream_takes_retargets_robot_options() -> None:
 
     from fingerfit.cli.retarget import retarget as retarget_command
     from fingerfit.cli.stream import stream as stream_command
-    from fingerfit.retarget import CONTACT_MM
+    from fingerfit.retarget import Retargeter
 
     ours = inspect.signature(stream_command).parameters
     theirs = inspect.signature(retarget_command).parameters
     for name in ("map_path", "method", "orthogonal", "contact_mm"):
         assert ours[name].annotation == theirs[name].annotation, name
         assert ours[name].default == theirs[name].default, name
-    assert ours["contact_mm"].default == CONTACT_MM
+    # No --contact-mm: each pinch pair's distance from the model (Retargeter's default).
+    assert ours["contact_mm"].default is None
+    assert inspect.signature(Retargeter).parameters["contact_mm"].default is None
