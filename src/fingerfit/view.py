@@ -83,8 +83,9 @@ class RobotScene:
     strips : list of ndarray of int
         Per digit, indices into ``points``: palm origin, chain anchors, tip.
     tips : ndarray, shape (n, d, 3)
-        The retargeted digits' tip frames (tracker frame, mm).
+        The robot digits' tip frames (tracker frame, mm).
     digits : list of str
+        Every digit of the robot's map (those the model lacks hold the neutral posture).
     notes : list of str
     """
 
@@ -263,8 +264,9 @@ def robot_scene(
     """A robot hand posed by the retarget of ``recording``, placed beside the person.
 
     The robot's joints come from :class:`fingerfit.retarget.Retargeter` (``method``,
-    ``variant``). Robot points are taken into the robot's palm frame (mm), shifted so the
-    mean of the retargeted digits' bases lands on the person's and then ``offset_mm``
+    ``variant``); every digit of the robot is drawn. Robot points are taken into the
+    robot's palm frame (mm), shifted so the mean of the retargeted digits' bases lands on
+    the person's and then ``offset_mm``
     along the person's palm-frame y, towards the person's ulnar side, put in the person's
     palm frame (``fingerfit.retarget.palm.person_palm``) and carried by the hand sensor's
     motion: a rigid placement, so a right robot hand stays a right hand beside a left one.
@@ -282,7 +284,7 @@ def robot_scene(
     q, _, _ = r.step(recording, kin_v)
     s = r.setup
     n = recording.n_frames
-    digits = s.digits
+    digits = list(rmap.digits)  # every robot digit: those the model lacks at their neutral pose
     chains = []
     for d in digits:
         dm = rmap.digits[d]
@@ -302,8 +304,8 @@ def robot_scene(
         strips.append(np.array([0] + [1 + used.index(j) for j in c] + [1 + len(used) + k]))
     # Robot world (m) -> robot palm frame (mm) -> the person's palm frame, beside the hand.
     local = (world - s.robot_palm.origin) @ s.robot_palm.rotation * MM
-    shift = np.mean([s.person_base[d] for d in digits], axis=0) - np.mean(
-        [s.robot_base[d] for d in digits], axis=0
+    shift = np.mean([s.person_base[d] for d in s.digits], axis=0) - np.mean(
+        [s.robot_base[d] for d in s.digits], axis=0
     )
     side = 1.0 if model.hand == "left" else -1.0  # palm y is ulnar on a left hand
     local = local + shift + np.array([0.0, side * offset_mm, 0.0])

@@ -90,7 +90,8 @@ def view(
     scene = _scene(model, rec, recording, robot, map_path, method, orthogonal, quiet)
     for note in scene.notes:
         notice("note", note)
-    what = f"{scene.n_frames} frames, {len(scene.digits)} digits" + (
+    k = len(scene.digits)
+    what = f"{scene.n_frames} frames, {k} digit{'s' if k != 1 else ''}" + (
         f", {scene.robot.name} robot" if scene.robot is not None else ""
     )
     if save is not None:
