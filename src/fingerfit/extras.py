@@ -3,7 +3,8 @@
 Extras (``pyproject.toml``): ``c3d`` (ezc3d), ``robot`` (yourdfpy, mujoco), ``myohand``
 (myo-sim, mujoco: the MyoHand simulator world), ``live``
 (pylsl, cyclonedds, rosbags, pyserial), ``retarget`` (mujoco, pinocchio and the robot
-hands' wheels), ``stats``, ``cluster``. Each is imported only when a command needs it.
+hands' wheels), ``view`` (rerun-sdk: ``fingerfit view``), ``stats``, ``cluster``; ``all``
+installs every one. Each is imported only when a command needs it.
 """
 
 from __future__ import annotations

@@ -1,6 +1,18 @@
 """Command-line interface (``fingerfit --help``). One module per command group."""
 
-from . import convert, export, fit, joint, retarget, session, simulate, stream, study  # noqa: F401  (registers the commands)
+from . import (  # noqa: F401  (registers the commands)
+    capture,
+    convert,
+    export,
+    fit,
+    joint,
+    retarget,
+    session,
+    simulate,
+    stream,
+    study,
+    view,
+)
 from .app import app, run
 
 main = run

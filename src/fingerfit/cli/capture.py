@@ -1,0 +1,318 @@
+"""``fingerfit capture``: record a protocol into a session folder, guided by the fit's needs."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import FingerfitError, shown
+from .app import Quiet, app, console, notice, out, say, user_errors
+
+PROTOCOLS = ("grasp",)  # fingerfit.capture.PROTOCOLS (without importing NumPy)
+#: Seconds between two updates of the evidence while recording.
+UPDATE_S = 0.5
+
+
+@app.command()
+@user_errors
+def capture(
+    session_dir: Annotated[
+        Path,
+        typer.Argument(
+            metavar="SESSION_DIR",
+            help="Session folder: its session.toml (or the options below) and reference.csv.",
+        ),
+    ],
+    source: Annotated[
+        str,
+        typer.Option(
+            help="replay:FILE[@SPEED], liberty:PORT[@BAUD] or lsl:NAME (docs/streaming.md)."
+        ),
+    ],
+    protocol: Annotated[
+        str, typer.Option(help=f"The recording to take: {', '.join(PROTOCOLS)}.")
+    ] = "grasp",
+    name: Annotated[
+        str | None,
+        typer.Option(help="File name of the recording in the folder (default: PROTOCOL.csv)."),
+    ] = None,
+    duration: Annotated[
+        float | None,
+        typer.Option(
+            min=0.0,
+            help="Stop after this many seconds of recording (default: the "
+            "end of a replay, Ctrl-C for a device).",
+        ),
+    ] = None,
+    until_enough: Annotated[
+        bool,
+        typer.Option("--until-enough", help="Stop as soon as every joint has enough evidence."),
+    ] = False,
+    subject: Annotated[
+        str | None, typer.Option(help="Subject id, for a folder without session.toml.")
+    ] = None,
+    hand: Annotated[str, typer.Option(help="left or right (without session.toml).")] = "left",
+    units: Annotated[str, typer.Option(help="Units of x,y,z (without session.toml).")] = "mm",
+    rate: Annotated[
+        float, typer.Option(min=1e-6, help="Sampling rate, Hz (without session.toml).")
+    ] = 240.0,
+    fingers: Annotated[
+        str | None,
+        typer.Option(
+            help="Comma-separated digits (without session.toml; default: those the "
+            "reference recording has sensors for)."
+        ),
+    ] = None,
+    reference: Annotated[
+        Path | None,
+        typer.Option(
+            help="Reference recording (pose CSV) to copy into the folder as its "
+            "reference.csv (a new folder)."
+        ),
+    ] = None,
+    landmarks: Annotated[
+        Path | None,
+        typer.Option(help="Landmarks CSV to copy into the folder as landmarks.csv."),
+    ] = None,
+    stations: Annotated[
+        str | None,
+        typer.Option(help="liberty: station=sensor list, e.g. 1=hand,2=index.proximal,..."),
+    ] = None,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace the recording if it exists.")
+    ] = False,
+    quiet: Quiet = False,
+) -> None:
+    """Record a protocol (grasp) into a session folder, showing per joint the cycles and
+    range of motion found so far and when each has enough for `fingerfit fit`."""
+    from ..capture import Accumulator, evidence, reference_rotations, thresholds
+    from ..io import read_pose_csv
+    from ..io.atomic import check_target
+    from ..io.posecsv import write_pose_csv
+    from ..live import sources as src
+    from ..session import digit_sensors
+
+    if protocol not in PROTOCOLS:
+        raise FingerfitError(f"must be one of {', '.join(PROTOCOLS)}", field="--protocol")
+    name = name or f"{protocol}.csv"
+    if "/" in name or "\\" in name or not name.endswith(".csv") or name.startswith("."):
+        raise FingerfitError("must be a file name ending in .csv", field="--name")
+    meta = _meta(session_dir, subject, hand, units, rate, fingers)
+    target = session_dir / name
+    copies = {}
+    for given, file in ((reference, meta["recordings"]["reference"]), (landmarks, "landmarks.csv")):
+        if given is not None:
+            if not given.is_file():
+                raise FingerfitError("no such file", path=given)
+            check_target(session_dir / file, overwrite=overwrite)
+            copies[session_dir / file] = given.read_bytes()
+    if copies:
+        from ..io.atomic import write_files
+
+        write_files(copies, overwrite=overwrite)
+    if name == meta["recordings"]["reference"]:
+        raise FingerfitError("names the reference recording", field="--name")
+    check_target(target, overwrite=overwrite)
+    reference = read_pose_csv(
+        session_dir / meta["recordings"]["reference"], units=meta["units"], rate_hz=meta["rate_hz"]
+    )
+    digits = meta["fingers"] or [
+        d
+        for d in ("thumb", "index", "middle", "ring", "little")
+        if all(s in reference.poses for s in digit_sensors(d))
+    ]
+    if not digits:
+        raise FingerfitError(
+            "the reference recording has the sensors of no digit",
+            path=session_dir / meta["recordings"]["reference"],
+        )
+    meta["fingers"] = digits
+    refs = reference_rotations(reference, digits)
+    sensors = list(dict.fromkeys(s for d in digits for s in digit_sensors(d)))
+    kind = src.split_spec(source)[0]
+    if kind == "replay":
+        path, speed = src.parse_replay(source)
+        the_source = src.ReplaySource(
+            read_pose_csv(path, units=meta["units"], rate_hz=meta["rate_hz"]), speed
+        )
+    elif kind == "liberty":
+        port, baud = src.parse_liberty(source)
+        mapping = (
+            src.parse_stations(stations, sensors) if stations else src.default_stations(sensors)
+        )
+        the_source = src.LibertySource(port, baud, mapping, meta["rate_hz"])
+    elif kind == "lsl":
+        the_source = src.LslSource(src.split_spec(source)[1], sensors)
+    else:
+        raise FingerfitError(
+            f"unknown source '{shown(source)}': replay:FILE, liberty:PORT or lsl:NAME",
+            field="--source",
+        )
+    need_cycles, need_rom = thresholds()
+    acc = Accumulator(name, sensors)
+    rows = evidence(acc.recording(), refs, meta["rate_hz"])
+    live = None
+    if not quiet and console.is_terminal:
+        from rich.live import Live
+
+        live = Live(_table(rows, need_cycles, need_rom, 0, meta["rate_hz"]), console=console)
+        live.start()
+    interrupted = False
+    try:
+        last = time.monotonic()
+        for block in the_source.blocks():
+            if block is not None:
+                acc.add(block.recording)
+            now = time.monotonic()
+            seconds = acc.n_frames / meta["rate_hz"]
+            done = duration is not None and seconds >= duration
+            if now - last >= UPDATE_S or done:
+                last = now
+                rows = evidence(acc.recording(), refs, meta["rate_hz"])
+                if live is not None:
+                    live.update(_table(rows, need_cycles, need_rom, acc.n_frames, meta["rate_hz"]))
+                if until_enough and all(r.enough for r in rows):
+                    break
+            if done:
+                break
+    except KeyboardInterrupt:
+        interrupted = True  # stop recording; what was recorded is kept
+    finally:
+        the_source.close()
+        if live is not None:
+            live.stop()
+    rec = acc.recording()
+    if duration is not None:
+        rec = rec.slice(slice(0, min(rec.n_frames, math.ceil(duration * meta["rate_hz"]))))
+    if rec.n_frames == 0:
+        raise FingerfitError("nothing was recorded; no file written", field="--source")
+    rows = evidence(rec, refs, meta["rate_hz"])
+    out.print(_table(rows, need_cycles, need_rom, rec.n_frames, meta["rate_hz"]))
+    write_pose_csv(target, rec, units=meta["units"])
+    toml = _write_meta(session_dir, meta, name, protocol)
+    say(
+        "{} frames ({} s){} -> [bold]{}[/]; {} lists it",
+        rec.n_frames,
+        f"{rec.n_frames / meta['rate_hz']:.1f}",
+        " (interrupted)" if interrupted else "",
+        target,
+        toml,
+    )
+    short = [r for r in rows if not r.enough]
+    if short:
+        say(
+            "not enough for `fingerfit fit` yet: {}",
+            "; ".join(
+                f"{r.digit} {r.joint} ({r.cycles} cycle(s), ROM "
+                + ("n/a" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f} deg")
+                + ")"
+                for r in short
+            ),
+        )
+    else:
+        say(
+            "enough for every joint ({} cycles, {} deg median ROM each)",
+            need_cycles,
+            f"{need_rom:g}",
+        )
+    if not (session_dir / "landmarks.csv").is_file():
+        notice("note", f"{session_dir / 'landmarks.csv'} is missing: the fit needs it")
+
+
+def _table(rows, need_cycles: int, need_rom: float, frames: int, rate_hz: float):
+    """The evidence table (rich), one row per joint."""
+    from rich.table import Table
+
+    t = Table(
+        title=f"{frames} frames ({frames / rate_hz:.1f} s); the fit needs {need_cycles} cycles "
+        f"and {need_rom:g} deg median range of motion per joint",
+        title_justify="left",
+    )
+    for col in ("digit", "joint", "cycles", "ROM (deg)", ""):
+        t.add_column(col, justify="right" if col in ("cycles", "ROM (deg)") else "left")
+    for r in rows:
+        rom = "-" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f}"
+        t.add_row(r.digit, r.joint, str(r.cycles), rom, "enough" if r.enough else "more")
+    return t
+
+
+def _meta(
+    folder: Path, subject: str | None, hand: str, units: str, rate: float, fingers: str | None
+) -> dict:
+    """The folder's ``session.toml`` (read as TOML), or one made of the options."""
+    import tomllib
+
+    from ..session import UNITS_TO_MM, check_subject_id
+    from .app import parse_list
+
+    path = folder / "session.toml"
+    if path.is_file():
+        try:
+            meta = tomllib.loads(path.read_text(encoding="utf-8"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise FingerfitError(f"invalid TOML ({exc})", path=path) from None
+        for key in ("units", "rate_hz", "fingers", "recordings"):
+            if key not in meta:
+                raise FingerfitError(f"missing '{key}'", path=path, field=key)
+        if meta["units"] not in UNITS_TO_MM:
+            raise FingerfitError(
+                f"must be one of {', '.join(UNITS_TO_MM)}", path=path, field="units"
+            )
+        meta["rate_hz"] = float(meta["rate_hz"])
+        meta["recordings"].setdefault("reference", "reference.csv")
+        return meta
+    if subject is None:
+        raise FingerfitError(
+            f"{folder} has no session.toml: give --subject (and --hand, --units, --rate, "
+            "--fingers) to start one",
+            field="--subject",
+        )
+    check_subject_id(subject)
+    if hand not in ("left", "right"):
+        raise FingerfitError("must be left or right", field="--hand")
+    if units not in UNITS_TO_MM:
+        raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
+    digits = parse_list(fingers, ("thumb", "index", "middle", "ring", "little"), "--fingers")
+    return {
+        "format": "fingerfit.session/1",
+        "subject": subject,
+        "hand": hand,
+        "units": units,
+        "rate_hz": float(rate),
+        "fingers": digits or [],
+        "recordings": {"reference": "reference.csv", "grasp": []},
+    }
+
+
+def _write_meta(folder: Path, meta: dict, name: str, protocol: str) -> Path:
+    """``session.toml`` with the new recording listed under ``protocol`` (atomically)."""
+    from ..io.atomic import atomic_write
+
+    recs = dict(meta["recordings"])
+    listed = recs.get(protocol, [])
+    listed = [listed] if isinstance(listed, str) else list(listed)
+    if name not in listed:
+        listed.append(name)
+    recs[protocol] = listed
+    lines = [
+        f"format = {json.dumps(meta.get('format', 'fingerfit.session/1'))}",
+        f"subject = {json.dumps(meta.get('subject', folder.name))}",
+        f"hand = {json.dumps(meta.get('hand', 'left'))}",
+        f"units = {json.dumps(meta['units'])}",
+        f"rate_hz = {float(meta['rate_hz'])!r}",
+        f"fingers = {json.dumps(list(meta['fingers']))}",
+        "",
+        "[recordings]",
+    ]
+    for key in ("reference", "grasp", "targets", "test", "events"):
+        if key in recs:
+            lines.append(f"{key} = {json.dumps(recs[key])}")
+    path = folder / "session.toml"
+    with atomic_write(path) as fh:
+        fh.write("\n".join(lines) + "\n")
+    return path
