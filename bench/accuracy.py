@@ -52,7 +52,12 @@ import fingerfit.estimate.fit as fit_module
 from fingerfit.errors import FingerfitError
 from fingerfit.estimate import FitOptions, fit_session
 from fingerfit.estimate.axis import orient_flexion
-from fingerfit.estimate.choice import HINGE, TWO_AXIS, choose_joint_model
+
+try:
+    from fingerfit.estimate.choice import HINGE, TWO_AXIS, choose_joint_model
+except ImportError:  # a revision before the held-out choice (--before)
+    HINGE = TWO_AXIS = ""
+    choose_joint_model = None
 from fingerfit.estimate.fit import DEFAULT_METHOD, joint_data, reference_poses
 from fingerfit.estimate.sagittal import intersect, sagittal_plane
 from fingerfit.kinematics import carry_by_hand, chain_points, compute_kinematics
@@ -219,14 +224,20 @@ def run_subject(task: tuple[str, dict, int, bool]) -> dict:
     subject of one condition."""
     cond, overrides, seed, only_default = task
     warnings.simplefilter("ignore")
-    sim = simulate_subject(SimConfig(**overrides), seed)
     out: dict = {"condition": cond, "rows": {}}
+    try:
+        config = SimConfig(**overrides)
+    except (TypeError, FingerfitError) as exc:  # a revision (--before) without the condition
+        out["failures"] = [f"{cond}: {exc}"]
+        return out
+    sim = simulate_subject(config, seed)
     rows = [r for r in FIT_ROWS if r[0] == DEFAULT_METHOD] if only_default else FIT_ROWS
     for label, method, angles, variant in rows:
         t0 = time.perf_counter()
-        fit_module.choose_joint_model = (
-            _always_two_axes if label.endswith("always two axes") else choose_joint_model
-        )
+        if choose_joint_model is not None:
+            fit_module.choose_joint_model = (
+                _always_two_axes if label.endswith("always two axes") else choose_joint_model
+            )
         try:
             model = fit_session(
                 sim.session, FitOptions(method=method, angle_method=angles, force=True)
@@ -315,6 +326,8 @@ def summarise(results: list[dict], conditions: list[str]) -> dict:
                 "fit_s_per_finger": float(np.mean([v["fit_s"] for v in vals])),
                 "two_axis_mp": int(sum(v.get("two_axis", False) for v in vals)),
             }
+        if FLOOR not in rows:  # the condition did not run (a revision without it)
+            continue
         floor = rows[FLOOR]["tip_mm"]["mean"]
         for r in rows.values():
             r["tip_over_floor"] = r["tip_mm"]["mean"] / floor
@@ -550,6 +563,14 @@ def markdown(summary: dict, meta: dict) -> str:
     return "\n".join(lines)
 
 
+def _config(cond: str) -> dict | str:
+    """The condition's SimConfig as a dict (or why this revision cannot make it)."""
+    try:
+        return asdict(SimConfig(**CONDITIONS[cond]))
+    except (TypeError, FingerfitError) as exc:
+        return f"not available: {exc}"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--json", type=Path, default=None)
@@ -602,7 +623,7 @@ def main() -> None:
         "peers": PEER_ROWS,
         "python": platform.python_version(),
         "numpy": np.__version__,
-        "conditions": {c: asdict(SimConfig(**CONDITIONS[c])) for c in chosen},
+        "conditions": {c: _config(c) for c in chosen},
     }
     if args.only_default:
         meta["targets"] = []
