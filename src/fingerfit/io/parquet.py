@@ -27,7 +27,7 @@ key); a row is named by its 1-based index where a CSV error names a line
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -118,6 +118,18 @@ def pose_meta(units: str) -> TableMeta:
     """Metadata of a pose recording (long or wide): positions in ``units``, tracker frame,
     rotations sensor -> tracker as quaternions ``w,x,y,z``."""
     return TableMeta(POSE, units=units, frame=TRACKER_FRAME, quaternion_order=QUAT_ORDER)
+
+
+def angles_meta(units: str) -> TableMeta:
+    """Metadata of an angles table (``fingerfit angles``, ``stream --record``): angles in
+    degrees, fingertip and pad points in ``units``, tracker frame."""
+    return TableMeta(ANGLES, units=units, frame=TRACKER_FRAME, angle_units="deg")
+
+
+def joints_meta() -> TableMeta:
+    """Metadata of a joint trajectory (``retarget -o``, ``angles --urdf-names``): joint
+    positions in radians."""
+    return TableMeta(JOINTS, angle_units="rad")
 
 
 def _pa():
@@ -357,6 +369,91 @@ def write_table_file(
     from .fastcsv import write_table
 
     return write_table(path, table, progress=progress)
+
+
+def write_partitioned(
+    folder: str | Path,
+    chunks: Iterable[object],
+    schema,
+    meta: TableMeta,
+    *,
+    by: str = "subject",
+) -> Path:
+    """Write a table as a hive-partitioned Parquet dataset, one file per value of ``by``.
+
+    ``folder/<by>=<value>/part-<k>.parquet`` holds the rows of one value (``k`` counts the
+    pieces of a value met in several chunks), without the column ``by`` (its value is in
+    the folder name); ``pandas.read_parquet(folder)``, ``pyarrow.dataset`` and
+    ``dask.dataframe.read_parquet`` give it back as a column. Chunks are written as they
+    come, so the whole table is never in memory; each file is written atomically
+    (:func:`write_parquet`). A table without rows is one file ``folder/empty.parquet``
+    holding the schema (``by`` included).
+
+    Parameters
+    ----------
+    folder : str or Path
+        The dataset's folder (created).
+    chunks : iterable of DataFrame
+        The table in pieces, each with the columns of ``schema``; the values of ``by``
+        must name folders (no ``/``; a study's subject IDs do).
+    schema : pyarrow.Schema
+        Every column's type, ``by`` included; text columns string.
+    meta : TableMeta
+    by : str
+        The partition column.
+
+    Returns
+    -------
+    Path
+        ``folder``.
+    """
+    pa, _ = _pa()
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    rest = pa.schema([f for f in schema if f.name != by])
+    pieces: dict[str, int] = {}
+    for chunk in chunks:
+        if not len(chunk):
+            continue
+        keys = chunk[by].astype(str).to_numpy()
+        # the rows of each value, in the order the values come (rows of a value stay in order)
+        values, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.searchsorted(inverse[order], np.arange(values.size + 1))
+        for v in np.argsort(first, kind="stable"):
+            rows = order[bounds[v] : bounds[v + 1]]
+            value = str(values[v])
+            if "/" in value or value in ("", ".", ".."):
+                raise FingerfitError(f"'{shown(value)}' cannot name a folder", field=by)
+            k = pieces.get(value, 0)
+            pieces[value] = k + 1
+            part = chunk.iloc[rows].drop(columns=[by])
+            with ParquetSink(
+                folder / f"{by}={value}" / f"part-{k}.parquet", meta, schema=rest
+            ) as sink:
+                sink.write(_typed(part, rest))
+    if not pieces:
+        with ParquetSink(folder / "empty.parquet", meta, schema=schema) as sink:
+            sink.write(
+                {
+                    f.name: np.zeros(0) if f.type != pa.string() else np.zeros(0, object)
+                    for f in schema
+                }
+            )
+    return folder
+
+
+def _typed(table, schema) -> dict[str, object]:
+    """The columns of a DataFrame as ``schema`` types them: a text column that is all
+    missing in this piece (pandas made it float) becomes nulls."""
+    pa, _ = _pa()
+    out: dict[str, object] = {}
+    for f in schema:
+        col = table[f.name]
+        if f.type == pa.string() and col.dtype.kind == "f":
+            col = col.astype(object).where(col.notna(), None)
+        out[f.name] = col
+    return out
 
 
 # --------------------------------------------------------------------------- reading
