@@ -65,10 +65,32 @@ import fingerfit.io.posecsv as posecsv, fingerfit.io.widecsv as widecsv
 import fingerfit.io.liberty as liberty
 from fingerfit.session import UNITS_TO_MM
 
+def read_angles(p):
+    # the angles table into float64 columns: Parquet through fingerfit.io.parquet, CSV
+    # through the batched Arrow parser the readers use, into preallocated rows
+    if p.endswith(".parquet"):
+        from fingerfit.io.parquet import ANGLES, read_parquet
+        return read_parquet(p, ANGLES).columns
+    from fingerfit.io.fastcsv import RowArrays, csv_batches, estimate_rows
+    from pathlib import Path
+    with open(p) as fh:
+        names = fh.readline().strip().split(",")
+    rows = None
+    for _, n_bytes, cols in csv_batches(Path(p), names):
+        m = cols[names[0]].size
+        if rows is None:
+            rows = RowArrays(estimate_rows(Path(p), m, n_bytes), len(names))
+        block = rows.reserve(m)
+        for j, c in enumerate(names):
+            block[:, j] = cols[c]
+    return rows.array()
+
 def read(p):
-    if kind == "pose":
+    if kind.startswith("angles"):
+        return read_angles(p)
+    if kind.startswith("pose"):
         return posecsv.read_pose_csv(p, units="mm", rate_hz=240.0)
-    if kind == "wide":
+    if kind.startswith("wide"):
         return widecsv.read_wide_csv(p, units="mm", rate_hz=240.0, check=False)
     if kind == "liberty-ascii":
         return liberty.read_liberty_ascii(p, items="pos,quat,frame", rate_hz=240.0, check=False)
@@ -77,11 +99,11 @@ def read(p):
     raise SystemExit(kind)
 
 def write(rec, p):
-    if kind == "write-pose":
+    if kind.startswith("write-pose"):
         posecsv.write_pose_csv(p, rec)
-    elif kind == "write-wide":
+    elif kind.startswith("write-wide"):
         widecsv.write_wide_csv(p, rec)
-    elif kind == "write-angles":
+    elif kind.startswith("write-angles"):
         from fingerfit.estimate import FitOptions, fit_session
         from fingerfit.kinematics import compute_kinematics, kinematics_table
         from fingerfit.simulate import SimConfig, simulate_subject
@@ -94,7 +116,10 @@ def write(rec, p):
             from fingerfit.io.fastcsv import write_table as writer
         except ImportError:
             writer = None
-        if writer is not None:
+        if kind.endswith("-parquet"):
+            from fingerfit.io.parquet import angles_meta, write_parquet
+            write_parquet(p, table, angles_meta("mm"))
+        elif writer is not None:
             writer(p, table)
         else:
             from fingerfit.io.atomic import atomic_write
@@ -102,26 +127,39 @@ def write(rec, p):
                 table.to_csv(fh, index=False, lineterminator="\n")
         return time.perf_counter() - t, base, table.shape[0]
 
+PARQUET = kind.endswith("-parquet")
+
 if kind.startswith("write"):
     rec = posecsv.read_pose_csv(path, units="mm", rate_hz=240.0)
-    target = path + ".out"
-    if kind == "write-angles":
+    target = path + (".out.parquet" if PARQUET else ".out")
+    if kind.startswith("write-angles"):
         seconds, base, rows = write(rec, target)
     else:
         base = start()
         t = time.perf_counter()
         write(rec, target)
         seconds = time.perf_counter() - t
-        rows = (sum(int(p.valid.sum()) for p in rec.poses.values()) if kind == "write-pose"
-                else rec.n_frames)
+        rows = (sum(int(p.valid.sum()) for p in rec.poses.values())
+                if kind.startswith("write-pose") else rec.n_frames)
     import os
     size = os.path.getsize(target)
     peak = status("VmHWM:") - base
-    with open(target) as fh:
-        n_cols = len(fh.readline().split(","))
-    numbers = rows * (n_cols - (1 if kind == "write-pose" else 0))  # pose: sensor is text
+    if PARQUET:
+        import pyarrow.parquet as pq
+        n_cols = len(pq.read_schema(target).names)
+    else:
+        with open(target) as fh:
+            n_cols = len(fh.readline().split(","))
+    numbers = rows * (n_cols - (1 if kind.startswith("write-pose") else 0))  # sensor: text
     floor = None
-    if out == "now":  # Arrow writing the same table (read back typed): the formatting floor
+    if PARQUET:  # pyarrow writing the same table (read back): the library alone
+        import pyarrow.parquet as pq
+        table = pq.read_table(target)
+        t = time.perf_counter()
+        pq.write_table(table, target + ".floor", compression="zstd")
+        floor = time.perf_counter() - t
+        os.unlink(target + ".floor")
+    elif out == "now":  # Arrow writing the same table (read back typed): the formatting floor
         import pyarrow.csv as pacsv
         table = pacsv.read_csv(target)
         t = time.perf_counter()
@@ -138,7 +176,10 @@ if kind.startswith("floor"):
     # the raw speed of the library alone on the same file: Arrow's CSV reader with the
     # column types declared (all threads), or NumPy's structured view of the records
     t = time.perf_counter()
-    if kind == "floor-csv":
+    if kind == "floor-parquet":
+        import pyarrow.parquet as pq
+        pq.read_table(path)
+    elif kind == "floor-csv":
         import pyarrow as pa, pyarrow.csv as pacsv
         with open(path) as fh:
             names = fh.readline().strip().split(",")
@@ -157,6 +198,12 @@ base = start()
 t = time.perf_counter()
 rec = read(path)
 seconds = time.perf_counter() - t
+if kind.startswith("angles"):
+    kept = (sum(v.nbytes for v in rec.values()) if isinstance(rec, dict) else rec.nbytes)
+    peak = status("VmHWM:") - base
+    print(json.dumps({"seconds": seconds, "peak_above": peak, "kept": kept,
+                      "check_seconds": None}))
+    raise SystemExit(0)
 kept = rec.time.nbytes + sum(p.position.nbytes + p.rotation.nbytes for p in rec.poses.values())
 peak = status("VmHWM:") - base
 # The hygiene check (unit plausibility, jumps) that the wide, Liberty and C3D readers run
@@ -174,12 +221,17 @@ print(json.dumps({"seconds": seconds, "peak_above": peak, "kept": kept,
                   "check_seconds": check_seconds}))
 """
 
-FORMATS = ("pose", "wide", "liberty-ascii", "liberty-binary")
+FORMATS = ("pose", "wide", "angles", "liberty-ascii", "liberty-binary")
+#: The same tables as Parquet files (``fingerfit.io.parquet``), read and written in the
+#: same run beside the CSV path.
+PARQUET_READS = ("pose-parquet", "wide-parquet", "angles-parquet")
 #: Numbers per row (record) of each file read: pose CSV time, x, y, z, qw, qx, qy, qz (and
 #: a sensor name); wide CSV time and 7 per station (2 stations); Liberty position (3),
-#: quaternion (4) and frame count (and a station number).
+#: quaternion (4) and frame count (and a station number); the angles table: its columns
+#: (set by :func:`make_files`).
 NUMBERS_PER_ROW = {"pose": 8, "wide": 15, "liberty-ascii": 8, "liberty-binary": 8}
 WRITERS = ("write-pose", "write-wide", "write-angles")
+PARQUET_WRITERS = ("write-pose-parquet", "write-wide-parquet", "write-angles-parquet")
 
 
 def make_files(directory: Path, rows: int) -> dict[str, tuple[Path, Path, int]]:
@@ -192,14 +244,19 @@ def make_files(directory: Path, rows: int) -> dict[str, tuple[Path, Path, int]]:
     """
     import numpy as np
 
+    from fingerfit.estimate import FitOptions, fit_session
     from fingerfit.io.liberty import write_liberty_ascii, write_liberty_binary
+    from fingerfit.io.parquet import angles_meta, write_table_file
     from fingerfit.io.posecsv import write_pose_csv
     from fingerfit.io.widecsv import write_wide_csv
+    from fingerfit.kinematics import compute_kinematics, kinematics_table
     from fingerfit.session import PoseSeries, Recording
     from fingerfit.simulate import SimConfig, simulate_subject
     from fingerfit.simulate.trackerfiles import liberty_records
 
-    rec = simulate_subject(SimConfig(fingers=("index",)), 0).session.test[0]
+    session = simulate_subject(SimConfig(fingers=("index",)), 0).session
+    rec = session.test[0]
+    model = fit_session(session, FitOptions(method="tang2018"))
     n_sensors = len(rec.poses)
 
     def tiled(n_frames: int) -> Recording:
@@ -218,18 +275,29 @@ def make_files(directory: Path, rows: int) -> dict[str, tuple[Path, Path, int]]:
     for size, tag in ((rows, "big"), (2000, "small")):
         long = tiled(size // n_sensors)
         write_pose_csv(directory / f"pose-{tag}.csv", long)
+        write_pose_csv(directory / f"pose-{tag}.parquet", long)
+        angles = kinematics_table(compute_kinematics(model, long))
+        NUMBERS_PER_ROW["angles"] = NUMBERS_PER_ROW["angles-parquet"] = angles.shape[1]
+        for ext in ("csv", "parquet"):
+            write_table_file(directory / f"angles-{tag}.{ext}", angles, angles_meta("mm"))
+        del angles
         # wide CSV: one row per frame of two stations (hand and one phalanx), the layout
         # of the real Liberty logs in shared/data
         two = tiled(size)
         two = Recording("two", two.time, {k: two.poses[k] for k in list(two.poses)[:2]})
         write_wide_csv(directory / f"wide-{tag}.csv", two)
+        write_wide_csv(directory / f"wide-{tag}.parquet", two)
         recs = liberty_records(long, stations, 240.0)
         write_liberty_ascii(directory / f"liberty-{tag}.txt", recs)
         write_liberty_binary(directory / f"liberty-{tag}.bin", recs)
     n_frames = rows // n_sensors
     for kind, name, count in (
         ("pose", "pose-{}.csv", n_frames * n_sensors),
+        ("pose-parquet", "pose-{}.parquet", n_frames * n_sensors),
         ("wide", "wide-{}.csv", rows),
+        ("wide-parquet", "wide-{}.parquet", rows),
+        ("angles", "angles-{}.csv", n_frames),
+        ("angles-parquet", "angles-{}.parquet", n_frames),
         ("liberty-ascii", "liberty-{}.txt", n_frames * n_sensors),
         ("liberty-binary", "liberty-{}.bin", n_frames * n_sensors),
     ):
@@ -258,10 +326,13 @@ def run(rows: int, before: Path | None = None, repeat: int = 2) -> dict:
     results: dict = {"rows": rows, "read": {}, "write": {}, "load_before": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory(prefix="fingerfit-io-bench-") as tmp:
         files = make_files(Path(tmp), rows)
-        for kind in FORMATS:
+        for kind in FORMATS + PARQUET_READS:
             big, small, count = files[kind]
             entry = {"rows": count, "file_bytes": big.stat().st_size}
+            new = kind.endswith("-parquet") or kind == "angles"  # no older reader to compare
             for label, src in codes.items():
+                if new and label != "now":
+                    continue
                 best = min(
                     (
                         child(src, kind, big, str(small))
@@ -273,8 +344,9 @@ def run(rows: int, before: Path | None = None, repeat: int = 2) -> dict:
             floor_kind = {
                 "pose": "floor-csv",
                 "wide": "floor-csv",
+                "angles": "floor-csv",
                 "liberty-binary": "floor-binary",
-            }
+            } | dict.fromkeys(PARQUET_READS, "floor-parquet")
             if kind in floor_kind:
                 entry["floor_seconds"] = min(
                     child(src_now, floor_kind[kind], big, str(small))["seconds"]
@@ -282,9 +354,11 @@ def run(rows: int, before: Path | None = None, repeat: int = 2) -> dict:
                 )
             results["read"][kind] = entry
         big_pose = files["pose"][0]
-        for kind in WRITERS:
+        for kind in WRITERS + PARQUET_WRITERS:
             entry = {}
             for label, src in codes.items():
+                if kind.endswith("-parquet") and label != "now":
+                    continue
                 best = min(
                     (
                         child(src, kind, big_pose, label)
@@ -352,16 +426,55 @@ def table(res: dict) -> str:
         "wide": "read wide CSV",
         "liberty-ascii": "read Liberty ASCII",
         "liberty-binary": "read Liberty binary",
+        "angles": "read angles CSV (batched Arrow parser, float64 columns)",
     }
     for kind, e in res["read"].items():
+        if kind.endswith("-parquet"):
+            continue
         unit = "records" if kind == "liberty-binary" else "rows"
         lines.append(row(names[kind], e, unit, e["rows"] * NUMBERS_PER_ROW[kind]))
     for kind, e in res["write"].items():
-        lines.append(row(f"write {kind} CSV", e, "rows", None))
+        if not kind.endswith("-parquet"):
+            lines.append(row(f"write {kind} CSV", e, "rows", None))
     lines.append(
         f"(load average {res.get('load_before', 0):.1f} before, "
         f"{res.get('load_after', 0):.1f} after: the machine's 2 cores are shared)"
     )
+    return "\n".join(lines)
+
+
+def parquet_table(res: dict) -> str:
+    """Parquet beside CSV in the same run, as a Markdown table."""
+    head = (
+        "| table | operation | rows | CSV | Parquet | Parquet / CSV | file CSV / Parquet |"
+        " Parquet peak above start / arrays kept | pyarrow alone |"
+    )
+    lines = [head, "|---" * (head.count("|") - 1) + "|"]
+    for name in ("pose", "wide", "angles"):
+        for op in ("read", "write"):
+            c, p = res[op].get(name), res[op].get(f"{name}-parquet")
+            if c is None or p is None:
+                continue
+            cn, pn = c["now"], p["now"]
+            rows = c.get("rows", cn.get("rows"))
+            csv_bytes = c.get("file_bytes", cn.get("bytes"))
+            pq_bytes = p.get("file_bytes", pn.get("bytes"))
+            kept = pn.get("kept")
+            if kept:
+                mem = (
+                    f"{pn['peak_above'] / 1e6:.0f} MB / {kept / 1e6:.0f} MB "
+                    f"({pn['peak_above'] / kept:.2f}x)"
+                )
+            else:
+                mem = f"{pn['peak_above'] / 1e6:.0f} MB (a writer)"
+            floor = p.get("floor_seconds", pn.get("floor_seconds"))
+            lines.append(
+                f"| {name} | {op} | {rows:,} | {cn['rows_per_s'] / 1e6:.2f} M rows/s "
+                f"({cn['seconds']:.2f} s) | {pn['rows_per_s'] / 1e6:.2f} M rows/s "
+                f"({pn['seconds']:.2f} s) | {pn['rows_per_s'] / cn['rows_per_s']:.1f}x | "
+                f"{csv_bytes / 1e6:.0f} MB / {pq_bytes / 1e6:.0f} MB | {mem} | "
+                + (f"{rows / floor / 1e6:.2f} M rows/s |" if floor else "n/a |")
+            )
     return "\n".join(lines)
 
 
@@ -375,6 +488,8 @@ def main() -> None:
     t = time.perf_counter()
     res = run(args.rows, args.before, args.repeat)
     print(table(res))
+    print()
+    print(parquet_table(res))
     print(f"({time.perf_counter() - t:.0f} s)")
     if args.json:
         args.json.write_text(json.dumps(res, indent=1) + "\n")

@@ -80,7 +80,7 @@ def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
     import pandas as pd
 
     from ..io.atomic import atomic_write
-    from ..io.fastcsv import write_table
+    from ..io.parquet import RESIDUALS, TableMeta, is_parquet, write_table_file
 
     frames = []
     for name, fit in fits.items():
@@ -94,11 +94,23 @@ def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
                 }
             )
         )
-    if not frames:
+    meta = TableMeta(RESIDUALS, units="mm")
+    if not frames and not is_parquet(path):
         with atomic_write(path, newline="") as fh:
             pd.DataFrame().to_csv(fh, index=False, lineterminator="\n")
         return
-    write_table(path, pd.concat(frames, ignore_index=True))
+    if not frames:
+        frames = [
+            pd.DataFrame(
+                {
+                    "time": pd.Series([], dtype=float),
+                    "segment": pd.Series([], dtype=object),
+                    "residual_mm": pd.Series([], dtype=float),
+                    "markers": pd.Series([], dtype="int64"),
+                }
+            )
+        ]
+    write_table_file(path, pd.concat(frames, ignore_index=True), meta)
 
 
 @app.command()
@@ -106,7 +118,13 @@ def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
 def convert(
     source: Annotated[Path, typer.Argument(help="Tracker file to convert.", show_default=False)],
     output: Annotated[
-        Path, typer.Option("-o", "--output", help="Pose CSV to write.", show_default=False)
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="Pose CSV to write (OUT.parquet: its Parquet form).",
+            show_default=False,
+        ),
     ],
     fmt: Annotated[
         SourceFormat,

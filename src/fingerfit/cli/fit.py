@@ -172,8 +172,12 @@ def angles(
     model_path: Annotated[
         Path, typer.Argument(metavar="MODEL", help="Model JSON from `fingerfit fit`.")
     ],
-    recording: Annotated[Path, typer.Argument(help="Pose CSV (canonical format).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Angles CSV to write.")],
+    recording: Annotated[
+        Path, typer.Argument(help="Pose CSV (canonical format), or its .parquet form.")
+    ],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Angles CSV to write (.parquet: Parquet).")
+    ],
     units: Annotated[
         str | None,
         typer.Option(help="Units of the recording (default: the model's session units)."),
@@ -186,7 +190,8 @@ def angles(
         Path | None,
         typer.Option(
             "--urdf-names",
-            help="Also write the joint-angle trajectory (rad, URDF joint names, user-axis model).",
+            help="Also write the joint-angle trajectory (rad, URDF joint names, user-axis "
+            "model; .parquet: Parquet).",
         ),
     ] = None,
     force: Annotated[
@@ -201,7 +206,7 @@ def angles(
 ) -> None:
     """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
     from ..io.atomic import check_target, refuse_writing_inputs
-    from ..io.fastcsv import write_table
+    from ..io.parquet import angles_meta, write_table_file
     from ..kinematics import compute_kinematics, kinematics_table
     from ..model import load_model
     from ..session import UNITS_TO_MM
@@ -221,8 +226,11 @@ def angles(
         kin = compute_kinematics(model, rec)
         table = kinematics_table(kin, units=units)
         bar.update(task, advance=n, description=f"writing {output.name}")
-        # Atomic, floats in shortest round-trip form, in batches of rows (progress bar).
-        write_table(output, table, progress=lambda rows: bar.advance(task, rows))
+        # Atomic, in batches of rows (progress bar): CSV floats in shortest round-trip
+        # form, or Parquet (OUT.parquet) float64 with the units in its metadata.
+        write_table_file(
+            output, table, angles_meta(units), progress=lambda rows: bar.advance(task, rows)
+        )
     if urdf_names is not None:
         from ..export.trajectory import write_trajectory
 

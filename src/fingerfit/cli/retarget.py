@@ -115,8 +115,8 @@ def retarget(
         typer.Option(
             "-o",
             "--output",
-            help="Joint CSV (time, one column per robot joint, rad); "
-            "the same arrays are written to OUT.npz.",
+            help="Joint CSV (time, one column per robot joint, rad; OUT.parquet: "
+            "Parquet); the same arrays are written to OUT.npz.",
         ),
     ],
     robot: Annotated[str, typer.Option(help=ROBOT_HELP)] = "shadow",
@@ -154,8 +154,10 @@ def retarget(
     from ..session import UNITS_TO_MM
 
     robot_files = check_robot_options(robot, map_path, method, contact_mm)
-    if output.suffix.lower() != ".csv":
-        raise FingerfitError("must end in .csv (OUT.npz is written beside it)", field="--output")
+    if output.suffix.lower() not in (".csv", ".parquet"):
+        raise FingerfitError(
+            "must end in .csv or .parquet (OUT.npz is written beside it)", field="--output"
+        )
     npz = output.with_suffix(".npz")
     png = output.with_suffix(".png")
     targets = [output, npz] + ([png] if figure is not None else [])
@@ -207,7 +209,7 @@ def retarget(
     if res.violations:  # projection makes this impossible; never write a violating file
         raise FingerfitError(f"{res.violations} joint-limit violations", path=output)
     files: dict[Path, str | bytes] = {
-        output: csv_text(res.time, res.joint_names, res.q),
+        output: joints_file(output, res.time, res.joint_names, res.q),
         npz: npz_bytes(res.time, res.joint_names, res.q),
     }
     if frames:
@@ -226,6 +228,21 @@ def retarget(
         ", ".join(str(p) for p in files),
         f"{np.nanmedian(err):.2f}" if np.isfinite(err).any() else "n/a",
     )
+
+
+def joints_file(path: Path, time, names: tuple[str, ...], q) -> str | bytes:
+    """The joint table's content for ``path``: :func:`csv_text`, or for a ``.parquet``
+    path the same columns as a Parquet file's bytes (float64, radians in its metadata)."""
+    import numpy as np
+
+    from ..io.parquet import is_parquet, joints_meta, parquet_bytes
+
+    if not is_parquet(path):
+        return csv_text(time, names, q)
+    q = np.asarray(q, dtype=float)
+    cols = {"time": np.asarray(time, dtype=float)}
+    cols.update({n: q[:, j] for j, n in enumerate(names)})
+    return parquet_bytes(cols, joints_meta())
 
 
 def csv_text(time, names: tuple[str, ...], q) -> str:

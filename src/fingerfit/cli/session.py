@@ -17,7 +17,9 @@ from .app import Quiet, app, notice, parse_list, progress, say, user_errors
 def session(
     out_dir: Annotated[Path, typer.Argument(help="Session directory to create (must not exist).")],
     subject: Annotated[str, typer.Option(help="Subject identifier.")],
-    reference: Annotated[Path, typer.Option(help="Static reference recording (pose CSV).")],
+    reference: Annotated[
+        Path, typer.Option(help="Static reference recording (pose CSV or .parquet).")
+    ],
     grasp: Annotated[list[Path], typer.Option(help="Grasp recording(s); repeat the option.")],
     landmarks: Annotated[Path, typer.Option(help="Stylus landmarks CSV (name,x,y,z).")],
     hand: Annotated[str, typer.Option(help="left or right.")] = "left",
@@ -31,7 +33,8 @@ def session(
     events: Annotated[Path | None, typer.Option(help="Touch events CSV.")] = None,
     quiet: Quiet = False,
 ) -> None:
-    """Build a fingerfit.session/1 directory from pose CSVs (e.g. from `fingerfit convert`).
+    """Build a fingerfit.session/1 directory from pose CSVs or their .parquet form (e.g.
+    from `fingerfit convert`).
 
     Every file is read and checked first; the directory is written only if all are valid,
     and then loaded back and validated as a whole (sensors of every finger, landmarks).

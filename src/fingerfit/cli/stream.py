@@ -57,7 +57,11 @@ def stream(
     ] = None,
     record: Annotated[
         Path | None,
-        typer.Option("--record", help="Write the angles CSV `fingerfit angles` writes."),
+        typer.Option(
+            "--record",
+            help="Write the angles CSV `fingerfit angles` writes (.parquet: Parquet, "
+            "appended a row group per block).",
+        ),
     ] = None,
     tips_frame: Annotated[
         str, typer.Option("--tips-frame", help="LSL fingertips in the tracker or hand frame.")
@@ -299,7 +303,7 @@ def stream(
         if ros2_bag is not None:
             bag_out = BagOutput(ros2_bag, ros2 or "/joint_states", names)
         if record is not None:
-            rec_out = RecordOutput(record)
+            rec_out = RecordOutput(record, units)
         streamer = Streamer(
             model,
             lsl=lsl_out,

@@ -62,6 +62,7 @@ def _run(
     jobs: int = 1,
     scheduler: str | None = None,
     quiet: bool = False,
+    tables: str = "csv",
 ) -> StudyResult:
     from ..estimate import FitOptions
     from ..estimate.fit import METHODS
@@ -81,6 +82,7 @@ def _run(
             jobs=jobs,
             scheduler=scheduler,
             debug=debugging(),
+            tables_format=tables,
         )
     for f in result.failures:
         notice("warning", f"skipped {f.message}")
@@ -137,6 +139,14 @@ def study(
             "subjects instead (needs fingerfit[cluster]; workers must read the sessions).",
         ),
     ] = None,
+    tables: Annotated[
+        str,
+        typer.Option(
+            "--tables",
+            help="Tables as csv (NAME.csv) or parquet (NAME.parquet/subject=ID/part-0.parquet "
+            "datasets, full precision).",
+        ),
+    ] = "csv",
     quiet: Quiet = False,
 ) -> None:
     """The paper's evaluation over sessions: report.html, summary.json, CSV tables, PNG figures."""
@@ -150,6 +160,7 @@ def study(
         jobs=jobs,
         scheduler=scheduler,
         quiet=quiet,
+        tables=tables,
     )
     say("report: [bold]{}[/]", result.report)
 

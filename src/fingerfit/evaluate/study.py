@@ -141,6 +141,7 @@ def run_study(
     jobs: int = 1,
     scheduler: str | None = None,
     debug: bool = False,
+    tables_format: str = "csv",
 ) -> StudyResult:
     """Fit and evaluate sessions; write tables, figures, ``summary.json`` and ``report.html``.
 
@@ -179,6 +180,10 @@ def run_study(
         or a study worker is raised as it is, with its traceback (a worker's traceback
         as its ``__cause__``), instead of becoming one line; ``keep_going`` does not
         skip it.
+    tables_format : {"csv", "parquet"}
+        The tables as ``<name>.csv`` (6 significant digits) or as Parquet datasets
+        ``<name>.parquet/subject=<id>/part-0.parquet`` (float64, full precision; readable by
+        ``pandas.read_parquet(folder)`` and ``dask.dataframe.read_parquet``).
 
     Returns
     -------
@@ -194,6 +199,8 @@ def run_study(
         unusable output folder. Read errors come before the subject-ID and output
         checks, which come before fit errors, each in the order the sessions were given.
     """
+    if tables_format not in ("csv", "parquet"):
+        raise FingerfitError(f"must be csv or parquet, not '{tables_format}'", field="--tables")
     options = options or FitOptions()
     step = progress or (lambda _msg: None)
     out_dir = Path(out_dir)
@@ -287,7 +294,7 @@ def run_study(
             result = StudyResult(subjects, summary, tables, tmp, failures=failures)
             kept = {o.subject for o in ok if o.fit_error is None}
             drawn = dict(fig09[i] for i in sorted(fig09) if outcomes[i].subject in kept)
-            _write_outputs(result, tmp, drawn, pool, debug=debug)
+            _write_outputs(result, tmp, drawn, pool, debug=debug, tables_format=tables_format)
         step("figures")
         with atomic_write(tmp / "summary.json") as fh:
             json.dump(_json_safe(summary), fh, indent=1, allow_nan=False)
@@ -451,6 +458,7 @@ def _write_outputs(
     pool: Executor,
     *,
     debug: bool = False,
+    tables_format: str = "csv",
 ) -> None:
     """CSV tables and PNG figures into ``out_dir``; figure paths into ``result.figures``.
 
@@ -459,7 +467,8 @@ def _write_outputs(
     executor, where the study-wide figures are drawn (:func:`draw_study_figure`), each
     sent its own table, a few at a time, while this process writes the tables chunk by
     chunk (:meth:`StudyTables.chunks`). ``debug``: a worker's exception is raised as it
-    is rather than as one line.
+    is rather than as one line. ``tables_format``: ``csv`` or ``parquet``
+    (:func:`_write_tables`).
     """
     tables = result.tables
     sending: dict[str, tuple[str, Future]] = {}  # figure -> (file name, PNG bytes to come)
@@ -492,10 +501,10 @@ def _write_outputs(
         sending[key] = (made[key][0], pool.submit(draw_study_figure, key, sent))
         del sent, made
         if len(sending) == _FIGURES_AT_ONCE and not tables_written:
-            _write_tables(tables, out_dir)  # while the first figures are drawn
+            _write_tables(tables, out_dir, tables_format)  # while the first figures are drawn
             tables_written = True
     if not tables_written:
-        _write_tables(tables, out_dir)
+        _write_tables(tables, out_dir, tables_format)
     for key in list(sending):
         receive(key)
     for key in _FIGURE_TABLE:
@@ -505,8 +514,45 @@ def _write_outputs(
             result.figures.update(drawn)
 
 
-def _write_tables(tables: StudyTables, out_dir: Path) -> None:
-    """Each table as ``<name>.csv``, written chunk by chunk (6 significant digits)."""
+def _arrow_schema(tables: StudyTables, name: str):
+    """The Parquet schema of study table ``name``: text columns (text or categorical in any
+    chunk) string, columns integer in every chunk int64, booleans bool, the rest float64."""
+    import pyarrow as pa
+
+    kinds: dict[str, set[str]] = {}
+    for chunk in [tables.empty(name), *tables.chunks(name)]:
+        for c, t in chunk.dtypes.items():
+            kind = "text" if isinstance(t, pd.CategoricalDtype) or t.kind in "OSU" else t.kind
+            if isinstance(t, pd.StringDtype):
+                kind = "text"
+            if len(chunk) or not kinds.get(str(c)):
+                kinds.setdefault(str(c), set()).add(kind)
+    types = []
+    for c, k in kinds.items():
+        if "text" in k:
+            types.append((c, pa.string()))
+        elif k <= {"i", "u"}:
+            types.append((c, pa.int64()))
+        elif k == {"b"}:
+            types.append((c, pa.bool_()))
+        else:
+            types.append((c, pa.float64()))
+    return pa.schema(types)
+
+
+def _write_tables(tables: StudyTables, out_dir: Path, tables_format: str = "csv") -> None:
+    """Each table as ``<name>.csv``, written chunk by chunk (6 significant digits), or as a
+    Parquet dataset ``<name>.parquet/subject=<id>/part-0.parquet`` (full precision), written a
+    subject at a time from the same chunks."""
+    if tables_format == "parquet":
+        from ..io.parquet import STUDY_TABLE, TABLE_KEY, TableMeta, write_partitioned
+
+        for name in tables:
+            meta = TableMeta(STUDY_TABLE, time_units=None, extra={TABLE_KEY: name})
+            write_partitioned(
+                out_dir / f"{name}.parquet", tables.chunks(name), _arrow_schema(tables, name), meta
+            )
+        return
     for name in tables:
         with atomic_write(out_dir / f"{name}.csv", newline="") as fh:
             header = True

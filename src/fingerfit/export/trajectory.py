@@ -64,7 +64,8 @@ def trajectory_table(kin: Kinematics, model: HandModel, variant: str = "user_axi
 def write_trajectory(
     path: str | Path, kin: Kinematics, model: HandModel, variant: str = "user_axis"
 ) -> Path:
-    """Write :func:`trajectory_table` as CSV atomically (round-trip float precision).
+    """Write :func:`trajectory_table` as CSV atomically (round-trip float precision), or as
+    Parquet for a ``.parquet`` path (:func:`fingerfit.io.parquet.joints_meta`).
 
     Parameters
     ----------
@@ -82,6 +83,6 @@ def write_trajectory(
     FingerfitError
         As :func:`trajectory_table`, or when ``path`` cannot be written.
     """
-    from ..io.fastcsv import write_table
+    from ..io.parquet import joints_meta, write_table_file
 
-    return write_table(Path(path), trajectory_table(kin, model, variant))
+    return write_table_file(Path(path), trajectory_table(kin, model, variant), joints_meta())

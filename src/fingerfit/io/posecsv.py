@@ -206,7 +206,13 @@ def read_pose_csv(
     rate_hz: float | None = None,
     scale_to_mm: float | None = None,
 ) -> Recording:
-    """Read a canonical pose CSV into a :class:`Recording` (mm, tracker frame).
+    """Read a canonical pose CSV (or its Parquet form) into a :class:`Recording` (mm,
+    tracker frame).
+
+    A path ending in ``.parquet`` is read as the Parquet form
+    (:func:`fingerfit.io.parquet.read_parquet`: the same columns, float64, the units in
+    its metadata, which must agree with ``units``); then the same checks, rows named by
+    their 1-based index instead of the line.
 
     Read in batches of about 4 MB into preallocated arrays with Arrow's CSV parser
     (correctly rounded floats); a file the fast path does not vouch for (any error, and
@@ -239,8 +245,11 @@ def read_pose_csv(
     """
     from ..session import UNITS_TO_MM
     from .fastcsv import NotPlain, read_header
+    from .parquet import is_parquet
 
     path = Path(path)
+    if is_parquet(path):
+        return _read_parquet(path, units, rate_hz, scale_to_mm)
     first = read_header(path).split(b"\n", 1)[0].decode("utf-8", "replace").strip()
     first = first.lstrip("\ufeff")
     if tuple(h.strip() for h in first.split(",")) != HEADER:
@@ -265,12 +274,60 @@ def read_pose_csv(
     return _assemble(rows, path, scale_to_mm, rate_hz)
 
 
+def _read_parquet(
+    path: Path, units: str, rate_hz: float | None, scale_to_mm: float | None
+) -> Recording:
+    """A pose Parquet file (:data:`fingerfit.io.parquet.POSE`): the columns of the CSV,
+    its metadata stating the units (which must be ``units`` unless ``scale_to_mm`` is
+    given), then every check of the CSV reader, rows named by their 1-based index."""
+    from ..session import UNITS_TO_MM
+    from .parquet import POSE, QUAT_ORDER, TRACKER_FRAME, read_parquet
+
+    if scale_to_mm is None and units not in UNITS_TO_MM:
+        raise FingerfitError(f"unknown units '{units}'", path=path, field="units")
+    table = read_parquet(
+        path,
+        POSE,
+        columns=HEADER,
+        text=("sensor",),
+        expect={"units": None, "frame": TRACKER_FRAME, "quaternion_order": QUAT_ORDER},
+    )
+    stated = table.meta["fingerfit.units"]
+    if stated not in UNITS_TO_MM:
+        raise FingerfitError(
+            f"unknown units '{shown(stated)}' (use {', '.join(UNITS_TO_MM)})",
+            path=path,
+            field="fingerfit.units",
+        )
+    if scale_to_mm is None and stated != units:
+        raise FingerfitError(
+            f"the file's positions are in {stated}, not {units} as stated for it "
+            "(session.toml units or --units)",
+            path=path,
+            field="fingerfit.units",
+        )
+    cols = table.columns
+    codes, names = cols["sensor"]
+    pose = np.empty((table.n_rows, 7))
+    for j, c in enumerate(_NUMERIC[1:]):
+        pose[:, j] = cols.pop(c)
+    rows = _Rows(cols["time"], codes, list(names), pose)
+    del table, cols
+    scale = UNITS_TO_MM[stated] if scale_to_mm is None else scale_to_mm
+    return _assemble(rows, path, scale, rate_hz, first_line=1)
+
+
 #: Rows converted to rotation matrices at a time (bounds the temporary memory).
 _BLOCK = 1 << 16
 
 
-def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None) -> Recording:
+def _assemble(
+    rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None, first_line: int = 2
+) -> Recording:
     """Check the decoded rows and place them per sensor on the frame grid.
+
+    Errors name row ``i`` as line ``i + first_line``: the file line of a CSV (2: after
+    the header), the 1-based row of a Parquet file (1).
 
     Every check and message of the format, in this order: no rows, time missing or going
     backwards, unknown sensor names, implausible coordinates, conflicting duplicates,
@@ -284,7 +341,7 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
     bad = np.flatnonzero(~np.isfinite(time))
     if bad.size:
         raise FingerfitError(
-            "time is missing or not finite", path=path, line=int(bad[0]) + 2, field="time"
+            "time is missing or not finite", path=path, line=int(bad[0]) + first_line, field="time"
         )
     back = np.flatnonzero(time[1:] < time[:-1])
     if back.size:
@@ -292,7 +349,7 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
         raise FingerfitError(
             f"time goes backwards ({time[i]:.6f} s after {time[i - 1]:.6f} s)",
             path=path,
-            line=i + 2,
+            line=i + first_line,
             field="time",
         )
     n_codes = len(rows.names)
@@ -310,7 +367,7 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
                 f"unknown sensor name '{shown(rows.names[k])}' (expected hand, stylus or "
                 "<finger>.<segment>)",
                 path=path,
-                line=int(first_row[k]) + 2,
+                line=int(first_row[k]) + first_line,
                 field="sensor",
             )
     big = implausible_rows(pose[:, :3], scale_to_mm)
@@ -320,7 +377,7 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
         raise FingerfitError(
             implausible_message(float(pose[i, j]) * scale_to_mm),
             path=path,
-            line=i + 2,
+            line=i + first_line,
             field="xyz"[j],
         )
     # Frames: rows of equal time (time does not decrease, so they are consecutive).
@@ -342,12 +399,12 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
                 f"second, different sample for sensor '{rows.names[code[i]]}' at time "
                 f"{time[i]:.6f} s",
                 path=path,
-                line=i + 2,
+                line=i + first_line,
             )
         notes.append(f"{later.size} exact duplicate rows dropped")
         keep = np.ones(n_rows, dtype=bool)
         keep[later] = False
-        lines = np.flatnonzero(keep) + 2
+        lines = np.flatnonzero(keep) + first_line
         time, code, pose = time[keep], code[keep], pose[keep]
         new = new[keep]
         new[0] = True
@@ -358,7 +415,7 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
     del order, same_key, frame_of_row  # a row's frame is cumsum(new) - 1, made again below
 
     def line_of(i: int) -> int:
-        return int(lines[i]) if lines is not None else i + 2
+        return int(lines[i]) if lines is not None else i + first_line
 
     finite = np.isfinite(pose)
     complete = finite.all(axis=1)
@@ -382,7 +439,7 @@ def _assemble(rows: _Rows, path: Path, scale_to_mm: float, rate_hz: float | None
     grid = None  # frame -> grid index, when frames go on the sampling grid
     if rate_hz is not None and frame_times.size > 1:
         t0 = frame_times[0]
-        frame_lines = row_of_frame + 2 if lines is None else lines[row_of_frame]
+        frame_lines = row_of_frame + first_line if lines is None else lines[row_of_frame]
         check_grid_size((frame_times - t0) * rate_hz, frame_lines, path)
         idx = np.rint((frame_times - t0) * rate_hz).astype(np.int64)
         off = np.abs(frame_times - (t0 + idx / rate_hz))
@@ -487,11 +544,14 @@ def pose_table(recording: Recording, *, mm_per_unit: float = 1.0) -> pd.DataFram
 
 
 def write_pose_csv(path: str | Path, recording: Recording, *, units: str = "mm") -> Path:
-    """Write a recording as a canonical pose CSV, atomically.
+    """Write a recording as a canonical pose CSV, or Parquet for a ``.parquet`` path, atomically.
 
     Parameters
     ----------
     path : str or Path
+        ``*.parquet``: the same columns in a Parquet file
+        (:func:`fingerfit.io.parquet.pose_meta`: units, tracker frame, quaternion order in
+        its metadata; ``sensor`` dictionary-encoded text, the rest float64).
     recording : Recording
         Positions in mm (tracker frame); written in ``units``.
     units : str
@@ -505,6 +565,8 @@ def write_pose_csv(path: str | Path, recording: Recording, *, units: str = "mm")
         the same numbers.
     """
     from ..session import UNITS_TO_MM
-    from .fastcsv import write_table
+    from .parquet import pose_meta, write_table_file
 
-    return write_table(Path(path), _pose_columns(recording, UNITS_TO_MM[units]))
+    return write_table_file(
+        Path(path), _pose_columns(recording, UNITS_TO_MM[units]), pose_meta(units)
+    )

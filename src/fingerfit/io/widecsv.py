@@ -344,14 +344,17 @@ def read_wide_csv(
     sensors: Mapping[int, str] | None = None,
     check: bool = True,
 ) -> Recording:
-    """Read a wide pose CSV into a :class:`Recording`.
+    """Read a wide pose CSV (or its Parquet form) into a :class:`Recording`.
 
     Parameters
     ----------
     path : str or Path
+        ``*.parquet``: exactly the layout's columns of its stations, float64, with the
+        metadata :func:`write_wide_csv` writes; rows are named by their 1-based index.
     units : str
-        Position units of the file (``mm``, ``cm``, ``m``, ``in``). Required: the
-        format does not state them.
+        Position units of the file (``mm``, ``cm``, ``m``, ``in``). Required for a CSV:
+        the format does not state them; a Parquet file states them (``units`` may be
+        None, or must agree).
     layout : WideLayout or str, optional
         Column templates (see :func:`parse_layout`); default :data:`DEFAULT_LAYOUT`.
     rate_hz : float, optional
@@ -375,7 +378,12 @@ def read_wide_csv(
     FingerfitError
         One line naming the file and line or column.
     """
+    from .parquet import is_parquet
+
     path = Path(path)
+    parquet = is_parquet(path)
+    if parquet:
+        units = _parquet_units(path, units)
     if units is None:
         raise FingerfitError(
             "the wide CSV does not state its units: give them (--units mm|cm|m|in)",
@@ -389,6 +397,9 @@ def read_wide_csv(
     if rate_hz is not None and not rate_hz > 0:
         raise FingerfitError("the rate must be positive (Hz)", path=path, field="rate")
     lay = parse_layout(layout) if not isinstance(layout, WideLayout) else layout
+    if parquet:
+        vals, tcol, stations, names, notes = _decode_parquet(path, lay, sensors)
+        return _assemble(path, vals, tcol, stations, names, notes, lay, units, rate_hz, check, 1)
     first = read_header(path).split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
     header = [h.strip() for h in first.split(",")]
     if len(set(header)) != len(header):
@@ -404,8 +415,102 @@ def read_wide_csv(
         vals, tcol = _decode_fast(path, header, keys, lay.time)
     except NotPlain:
         vals, tcol = _decode_exact(path, header, keys, lay, units)
+    return _assemble(path, vals, tcol, stations, names, notes, lay, units, rate_hz, check, 2)
+
+
+def _parquet_units(path: Path, units: str | None) -> str:
+    """The units a wide Parquet file states (``fingerfit.units``); ``units``, when given,
+    must agree."""
+    from .parquet import WIDE, check_meta, parquet_schema
+
+    _, meta = parquet_schema(path)
+    check_meta(meta, path, WIDE, units=None)
+    stated = meta["fingerfit.units"]
+    if stated not in UNITS_TO_MM:
+        raise FingerfitError(
+            f"unknown units '{shown(stated)}' (use {', '.join(UNITS_TO_MM)})",
+            path=path,
+            field="fingerfit.units",
+        )
+    if units is not None and units != stated:
+        raise FingerfitError(
+            f"the file's positions are in {stated}, not {units} as given (--units)",
+            path=path,
+            field="fingerfit.units",
+        )
+    return stated
+
+
+#: Metadata of a wide table's orientation columns: quaternion order or Euler sequence.
+_ORIENTATION_META = {_QUAT: ("quaternion_order", "w,x,y,z"), _EULER: ("euler_order", "ZYX,deg")}
+
+
+def _wide_meta(units: str, lay: WideLayout):
+    """The Parquet metadata of a wide table in ``units`` with layout ``lay``."""
+    from .parquet import WIDE, TableMeta
+
+    key, value = _ORIENTATION_META[lay.orientation]
+    return TableMeta(WIDE, units=units, frame="tracker", extra={f"fingerfit.{key}": value})
+
+
+def _decode_parquet(
+    path: Path, lay: WideLayout, sensors: Mapping[int, str] | None
+) -> tuple[np.ndarray, np.ndarray | None, list[int], list[str], list[str]]:
+    """Values ``(n_rows, n_stations, n_keys)``, time ``(n_rows,)`` (or None), stations,
+    sensor names and notes of a wide Parquet file: exactly the layout's columns of its
+    stations, float64."""
+    from .parquet import WIDE, read_parquet
+
+    plan: list = []
+
+    def check_columns(header: list[str]) -> None:
+        try:
+            plan.extend(_header_plan(header, lay, sensors, path))
+        except FingerfitError as exc:  # no line: a Parquet file's header is its schema
+            raise FingerfitError(exc.reason, path=path, field=exc.field) from None
+        if plan[2]:  # columns not used: not a column of the layout
+            used = {lay.time} | {_column(lay.columns[key], s) for s in plan[0] for key in lay.keys}
+            extra = next(h for h in header if h not in used)
+            raise FingerfitError(
+                "unexpected column (not one of the layout's)", path=path, field=shown(extra)
+            )
+
+    key, value = _ORIENTATION_META[lay.orientation]
+    table = read_parquet(path, WIDE, columns=check_columns, expect={key: value, "frame": "tracker"})
+    stations, names, notes = plan
+    cols = table.columns
+    if table.n_rows == 0:
+        raise FingerfitError("no data rows", path=path)
+    vals = np.empty((table.n_rows, len(stations), len(lay.keys)))
+    for j, s in enumerate(stations):
+        for m, key in enumerate(lay.keys):
+            vals[:, j, m] = cols.pop(_column(lay.columns[key], s))
+    tcol = None if lay.time is None else cols.pop(lay.time)
+    return vals, tcol, stations, names, notes
+
+
+def _assemble(
+    path: Path,
+    vals: np.ndarray,
+    tcol,
+    stations: list[int],
+    names: list[str],
+    notes: list[str],
+    lay: WideLayout,
+    units: str,
+    rate_hz: float | None,
+    check: bool,
+    first_line: int,
+) -> Recording:
+    """The recording from the decoded values: every check and repair of the format.
+
+    ``vals (n_rows, n_stations, n_keys)`` in file units; ``tcol`` the time column
+    ``(n_rows,)`` s, None, or a callable converting it (the reference decoder); row
+    ``i`` is named as line ``i + first_line`` (a CSV's file line, a Parquet file's
+    1-based row).
+    """
     n_rows = vals.shape[0]
-    lines = np.arange(n_rows) + 2
+    lines = np.arange(n_rows) + first_line
     k = len(lay.keys)
     big = implausible_rows(vals[:, :, :3], UNITS_TO_MM[units])
     if big.size:
@@ -611,6 +716,8 @@ def write_wide_csv(
     Parameters
     ----------
     path : str or Path
+        ``*.parquet``: the same columns as float64 in a Parquet file, the units, frame
+        and quaternion order (or Euler sequence) in its metadata.
     recording : Recording
         Positions mm, rotations sensor -> tracker.
     units : str
@@ -622,6 +729,8 @@ def write_wide_csv(
     -------
     Path
     """
-    from .fastcsv import write_table
+    from .parquet import write_table_file
 
-    return write_table(Path(path), wide_table(recording, units=units, layout=layout))
+    lay = layout or DEFAULT_LAYOUT
+    table = wide_table(recording, units=units, layout=lay)
+    return write_table_file(Path(path), table, _wide_meta(units, lay))

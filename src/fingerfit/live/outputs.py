@@ -434,26 +434,38 @@ class BagOutput:
 
 
 class RecordOutput:
-    """The angles CSV of the streamed frames, byte for byte what ``fingerfit angles``
-    writes for the same frames; appears complete at :meth:`close` (or not at all).
+    """The angles table of the streamed frames, what ``fingerfit angles`` writes for the
+    same frames; appears complete at :meth:`close` (or not at all).
+
+    A CSV, or for a ``.parquet`` path a Parquet file (:class:`fingerfit.io.parquet.ParquetSink`:
+    each pushed block appended as a row group to a temporary file, renamed into place at
+    :meth:`close`).
 
     Parameters
     ----------
     path : Path
+    units : str
+        Units of the fingertip columns (stated in a Parquet file's metadata).
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, units: str = "mm") -> None:
         from ..io.atomic import atomic_write
+        from ..io.parquet import ParquetSink, angles_meta, is_parquet
 
         self._created = _new_folders(path)
-        self._ctx = atomic_write(path, newline="")
-        self._fh = self._ctx.__enter__()
+        self._sink = ParquetSink(path, angles_meta(units)) if is_parquet(path) else None
+        if self._sink is None:
+            self._ctx = atomic_write(path, newline="")
+            self._fh = self._ctx.__enter__()
         self._header = True
         self.rows = 0
 
     def push(self, table) -> None:
         """Append rows of :func:`fingerfit.kinematics.kinematics_table` (a DataFrame)."""
-        table.to_csv(self._fh, index=False, lineterminator="\n", header=self._header)
+        if self._sink is not None:
+            self._sink.write(table)
+        else:
+            table.to_csv(self._fh, index=False, lineterminator="\n", header=self._header)
         self._header = False
         self.rows += len(table)
 
@@ -464,6 +476,13 @@ class RecordOutput:
 
     def close(self, ok: bool = True) -> None:
         """Rename the finished file into place (``ok``) or delete it."""
+        if self._sink is not None:
+            if not ok:
+                self._sink.close(ok=False)
+                _remove_empty(self._created)
+                return
+            self._sink.close()
+            return
         if ok:
             self._ctx.__exit__(None, None, None)
         else:

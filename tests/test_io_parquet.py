@@ -1,0 +1,308 @@
+"""Parquet tables: bit-exact round trips, the checks of the reader, atomic writes, fuzzing.
+
+Every refusal must be one :class:`FingerfitError` line naming the file and the column (or
+metadata key); a damaged file -- truncated or with random bytes changed -- must never give
+another exception.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fingerfit.errors import FingerfitError
+from fingerfit.io import parquet as fpq
+from fingerfit.io import read_pose_csv, write_pose_csv
+from fingerfit.io.widecsv import read_wide_csv, write_wide_csv
+
+from .conftest import subject
+
+#: Values a float column must keep bit for bit.
+ODD = np.array([0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308 / 3, 1e308, 0.1, np.nan])
+
+
+def bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.uint64)
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return subject("exact", 1).session.grasp[0]
+
+
+def test_table_round_trip_is_bit_exact(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    n = 10_000
+    cols = {
+        "time": np.arange(n) / 240.0,
+        "a": rng.standard_normal(n),
+        "b": np.resize(ODD, n),
+        "c": rng.standard_normal(n) * 1e-310,  # subnormals
+    }
+    path = fpq.write_parquet(
+        tmp_path / "t.parquet", cols, fpq.TableMeta(fpq.ANGLES), row_group_rows=999
+    )
+    assert pq.ParquetFile(path).metadata.num_row_groups == 11
+    got = fpq.read_parquet(path, fpq.ANGLES, columns=list(cols))
+    for k, v in cols.items():
+        assert np.array_equal(bits(got.columns[k]), bits(v)), k  # -0.0, subnormals, NaN bits
+        assert np.array_equal(got.columns[k], v, equal_nan=True)
+    assert np.signbit(got.columns["b"][1])
+    assert pq.ParquetFile(path).metadata.row_group(0).column(0).compression == "ZSTD"
+    assert pd.read_parquet(path).shape == (n, 4)
+
+
+def test_pose_round_trip_equals_the_csv(tmp_path: Path, recording) -> None:
+    for units in ("mm", "cm"):
+        write_pose_csv(tmp_path / "g.csv", recording, units=units)
+        write_pose_csv(tmp_path / "g.parquet", recording, units=units)
+        a = read_pose_csv(tmp_path / "g.csv", units=units, rate_hz=240)
+        b = read_pose_csv(tmp_path / "g.parquet", units=units, rate_hz=240)
+        assert a.notes == b.notes and list(a.poses) == list(b.poses)
+        assert np.array_equal(bits(a.time), bits(b.time))
+        for s in a.poses:
+            assert np.array_equal(bits(a.poses[s].position), bits(b.poses[s].position))
+            assert np.array_equal(bits(a.poses[s].rotation), bits(b.poses[s].rotation))
+    meta = pq.read_schema(tmp_path / "g.parquet").metadata
+    assert meta[b"fingerfit.format"] == b"fingerfit.pose/1"
+    assert meta[b"fingerfit.units"] == b"cm"
+    assert meta[b"fingerfit.quaternion_order"] == b"w,x,y,z"
+    assert meta[b"fingerfit.frame"] == b"tracker"
+    df = pd.read_parquet(tmp_path / "g.parquet")
+    assert list(df.columns) == ["time", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz"]
+
+
+def test_pose_columns_round_trip_bit_exact(tmp_path: Path) -> None:
+    """The written numbers come back bit for bit, -0.0 and subnormals included."""
+    n = 8
+    cols = {
+        "time": np.arange(n) / 240.0,
+        "sensor": (np.zeros(n, np.int32), ["hand"]),
+        "x": np.resize(ODD[[0, 1, 2, 3, 4, 6]], n),  # coordinates stay within 1000 km
+        "y": -np.resize(ODD[[0, 1, 2, 3, 4, 6]], n),
+        "z": np.full(n, -0.0),
+        "qw": np.ones(n),
+        "qx": np.full(n, 5e-324),
+        "qy": np.full(n, -0.0),
+        "qz": np.zeros(n),
+    }
+    path = fpq.write_parquet(tmp_path / "p.parquet", cols, fpq.pose_meta("mm"))
+    got = fpq.read_parquet(path, fpq.POSE, columns=list(cols), text=("sensor",))
+    for k, v in cols.items():
+        if k == "sensor":
+            codes, names = got.columns[k]
+            assert names == ["hand"] and (codes == 0).all()
+        else:
+            assert np.array_equal(bits(got.columns[k]), bits(v)), k
+    rec = read_pose_csv(path)
+    assert np.array_equal(bits(rec.poses["hand"].position[:, 2]), bits(cols["z"]))
+
+
+def test_wide_round_trip_equals_the_csv(tmp_path: Path, recording) -> None:
+    write_wide_csv(tmp_path / "w.csv", recording, units="cm")
+    write_wide_csv(tmp_path / "w.parquet", recording, units="cm")
+    a = read_wide_csv(tmp_path / "w.csv", units="cm", rate_hz=240, check=False)
+    b = read_wide_csv(tmp_path / "w.parquet", units=None, rate_hz=240, check=False)
+    assert a.notes == b.notes
+    for s in a.poses:
+        assert np.array_equal(bits(a.poses[s].position), bits(b.poses[s].position))
+        assert np.array_equal(bits(a.poses[s].rotation), bits(b.poses[s].rotation))
+    with pytest.raises(
+        FingerfitError, match=r"w\.parquet: field 'fingerfit\.units': .*in cm, not mm"
+    ):
+        read_wide_csv(tmp_path / "w.parquet", units="mm", rate_hz=240)
+
+
+def _pose_file(tmp_path: Path, recording, name: str = "g.parquet") -> Path:
+    return write_pose_csv(tmp_path / name, recording, units="mm")
+
+
+def _rewrite(src: Path, dst: Path, change) -> Path:
+    table = pq.read_table(src)
+    pq.write_table(change(table), dst)
+    return dst
+
+
+def _set(table: pa.Table, name: str, values) -> pa.Table:
+    i = table.schema.get_field_index(name)
+    return table.set_column(i, name, values)
+
+
+def _refused(path: Path, *fragments: str, read=None) -> str:
+    with pytest.raises(FingerfitError) as info:
+        (read or (lambda p: read_pose_csv(p, units="mm")))(path)
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith(str(path)), msg
+    for f in fragments:
+        assert f in msg, (f, msg)
+    return msg
+
+
+def test_wrong_schema_and_metadata_are_refused(tmp_path: Path, recording) -> None:
+    src = _pose_file(tmp_path, recording)
+    n = pq.read_metadata(src).num_rows
+    cases = {
+        "missing.parquet": (lambda t: t.drop_columns(["qz"]), ["field 'qz'", "column missing"]),
+        "extra.parquet": (
+            lambda t: t.append_column("speed", pa.array(np.zeros(n))),
+            ["field 'speed'", "unexpected column"],
+        ),
+        "nometa.parquet": (
+            lambda t: t.replace_schema_metadata({}),
+            ["field 'fingerfit.format'", "no 'fingerfit.format' metadata"],
+        ),
+        "angles.parquet": (
+            lambda t: t.replace_schema_metadata(
+                {**t.schema.metadata, b"fingerfit.format": b"fingerfit.angles/1"}
+            ),
+            ["field 'fingerfit.format'", "fingerfit.angles/1"],
+        ),
+        "noquat.parquet": (
+            lambda t: t.replace_schema_metadata(
+                {k: v for k, v in t.schema.metadata.items() if k != b"fingerfit.quaternion_order"}
+            ),
+            ["field 'fingerfit.quaternion_order'", "missing"],
+        ),
+        "xyzw.parquet": (
+            lambda t: t.replace_schema_metadata(
+                {**t.schema.metadata, b"fingerfit.quaternion_order": b"x,y,z,w"}
+            ),
+            ["field 'fingerfit.quaternion_order'", "'x,y,z,w', expected 'w,x,y,z'"],
+        ),
+        "int.parquet": (
+            lambda t: _set(t, "y", pa.array(np.zeros(n, np.int64))),
+            ["field 'y'", "column type int64, not float64"],
+        ),
+        "float32.parquet": (
+            lambda t: _set(t, "qx", t.column("qx").cast(pa.float32())),
+            ["field 'qx'", "column type float, not float64"],
+        ),
+        "sensor.parquet": (
+            lambda t: _set(t, "sensor", pa.array(np.zeros(n))),
+            ["field 'sensor'", "not string"],
+        ),
+        "inf.parquet": (
+            lambda t: _set(t, "z", pa.array(np.r_[np.zeros(4), np.inf, np.zeros(n - 5)])),
+            [":5: field 'z': not a finite number: inf"],
+        ),
+        "nantime.parquet": (
+            lambda t: _set(t, "time", pa.array(np.r_[np.zeros(6), np.nan, np.ones(n - 7)])),
+            [":7: field 'time': time is missing or not finite"],
+        ),
+        "units.parquet": (
+            lambda t: t.replace_schema_metadata({**t.schema.metadata, b"fingerfit.units": b"cm"}),
+            ["field 'fingerfit.units'", "in cm, not mm"],
+        ),
+    }
+    for name, (change, fragments) in cases.items():
+        _refused(_rewrite(src, tmp_path / name, change), *fragments)
+
+
+def test_nan_positions_are_missing_samples_like_the_csv(tmp_path: Path, recording) -> None:
+    src = _pose_file(tmp_path, recording)
+    n = pq.read_metadata(src).num_rows
+    x = np.r_[np.full(3, np.nan), np.ones(n - 3)]
+    path = _rewrite(src, tmp_path / "nan.parquet", lambda t: _set(t, "x", pa.array(x)))
+    table = pq.read_table(path)
+    csv = tmp_path / "nan.csv"
+    from fingerfit.io.fastcsv import write_table
+
+    write_table(csv, table.to_pandas())
+    a = read_pose_csv(csv, units="mm")
+    b = read_pose_csv(path, units="mm")
+    assert a.notes == b.notes and "3 samples with empty fields treated as missing" in b.notes
+    # a null where a number belongs reads as NaN (missing), as an empty CSV field
+    nulls = _rewrite(
+        src, tmp_path / "null.parquet", lambda t: _set(t, "x", pa.array(x, from_pandas=True))
+    )
+    assert read_pose_csv(nulls, units="mm").notes == b.notes
+
+
+def test_damaged_files_are_one_line(tmp_path: Path, recording) -> None:
+    src = _pose_file(tmp_path, recording)
+    raw = src.read_bytes()
+    (tmp_path / "short.parquet").write_bytes(raw[: len(raw) // 2])
+    (tmp_path / "empty.parquet").write_bytes(b"")
+    (tmp_path / "text.parquet").write_bytes(
+        b"time,sensor,x,y,z,qw,qx,qy,qz\n0,hand,1,2,3,1,0,0,0\n"
+    )
+    for name in ("short.parquet", "empty.parquet", "text.parquet"):
+        _refused(tmp_path / name, "not a readable Parquet file")
+    _refused(tmp_path / "gone.parquet", "cannot read")
+
+
+def test_sink_is_atomic(tmp_path: Path) -> None:
+    target = tmp_path / "r.parquet"
+    target.write_bytes(b"old")
+    with pytest.raises(RuntimeError), fpq.ParquetSink(target, fpq.TableMeta(fpq.ANGLES)) as sink:
+        sink.write({"time": np.arange(3.0), "a": np.ones(3)})
+        raise RuntimeError("the stream failed")
+    assert target.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.parquet"]
+    with fpq.ParquetSink(target, fpq.TableMeta(fpq.ANGLES), row_group_rows=2) as sink:
+        for k in range(3):
+            sink.write({"time": np.arange(3.0) + 3 * k, "a": np.full(3, float(k))})
+            assert target.read_bytes() == b"old"  # nothing visible before the end
+    got = fpq.read_parquet(target, fpq.ANGLES, columns=["time", "a"])
+    assert np.array_equal(got.columns["time"], np.arange(9.0))
+    assert pq.ParquetFile(target).metadata.num_row_groups == 6
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.parquet"]
+
+
+FUZZ = settings(
+    max_examples=150,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+
+
+@pytest.fixture(scope="module")
+def small_files(tmp_path_factory, recording) -> dict[str, bytes]:
+    folder = tmp_path_factory.mktemp("valid")
+    short = recording.slice(slice(0, 40))
+    return {
+        "pose": write_pose_csv(folder / "p.parquet", short, units="mm").read_bytes(),
+        "wide": write_wide_csv(folder / "w.parquet", short, units="mm").read_bytes(),
+    }
+
+
+@FUZZ
+@given(
+    kind=st.sampled_from(["pose", "wide"]),
+    flips=st.lists(
+        st.tuples(st.floats(0, 1, exclude_max=True), st.integers(0, 255)), min_size=1, max_size=8
+    ),
+    cut=st.one_of(st.none(), st.floats(0, 1)),
+)
+def test_fuzz_corrupted_parquet(tmp_path: Path, small_files, kind: str, flips, cut) -> None:
+    """Random bytes changed (and perhaps the end cut off): the file reads with its
+    invariants or is refused in one line, never another exception."""
+    data = bytearray(small_files[kind])
+    for where, value in flips:
+        data[int(where * len(data))] = value
+    if cut is not None:
+        data = data[: int(cut * len(data))]
+    path = tmp_path / f"{kind}.parquet"
+    path.write_bytes(bytes(data))
+    try:
+        if kind == "pose":
+            rec = read_pose_csv(path, units="mm")
+        else:
+            rec = read_wide_csv(path, units=None, check=False)
+    except FingerfitError as exc:
+        msg = str(exc)
+        assert "\n" not in msg and str(path) in msg
+        return
+    assert np.isfinite(rec.time).all() and (np.diff(rec.time) >= 0).all()
+    for p in rec.poses.values():
+        ok = np.isfinite(p.position).all(axis=1)
+        assert (np.isfinite(p.rotation).all(axis=(1, 2)) == ok).all()

@@ -1,0 +1,172 @@
+"""Parquet through the commands: ``convert -o``, ``session``, ``angles -o``, ``retarget -o``,
+``stream --record`` -- the same numbers as the CSV path, refusals in one line."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from fingerfit.io import parquet as fpq
+from fingerfit.io import read_pose_csv, write_pose_csv
+from fingerfit.io.widecsv import write_wide_csv
+from fingerfit.simulate import write_subject
+
+from ._live import fitted, write_recording
+from .bad_inputs._cli import refused, run
+from .conftest import subject
+
+
+def _same_table(parquet: Path, csv: Path, fmt: str) -> pd.DataFrame:
+    """The Parquet table's columns equal the CSV's, bit for bit (NaN where empty)."""
+    got = fpq.read_parquet(parquet, fmt)
+    want = pd.read_csv(csv)
+    assert got.names == list(want.columns)
+    for c in want.columns:
+        assert np.array_equal(got.columns[c], want[c].to_numpy(float), equal_nan=True), c
+    return want
+
+
+def test_session_of_parquet_recordings_fits_like_the_csv_session(tmp_path: Path) -> None:
+    src = write_subject(subject("realistic", 2), tmp_path / "src")
+    models = {}
+    for ext in ("csv", "parquet"):
+        args = ["session", tmp_path / ext, "--subject", "S", "--rate", "240", "--fingers", "index"]
+        for opt, name in (("--reference", "reference"), ("--grasp", "grasp"), ("--test", "test")):
+            rec = read_pose_csv(src / f"{name}.csv", units="mm", rate_hz=240)
+            args += [opt, write_pose_csv(tmp_path / f"{name}.{ext}", rec, units="mm")]
+        args += ["--landmarks", src / "landmarks.csv", "-q"]
+        r = run(*args)
+        assert r.exit_code == 0, r.output
+        r = run("fit", tmp_path / ext, "-o", tmp_path / f"{ext}.json", "-q")
+        assert r.exit_code == 0, r.output
+        models[ext] = json.loads((tmp_path / f"{ext}.json").read_text())["fingers"]
+    names = sorted(p.name for p in (tmp_path / "parquet").iterdir())
+    assert names == ["grasp.parquet", "landmarks.csv", "reference.parquet", "session.toml",
+                     "test.parquet"]  # fmt: skip
+    assert 'grasp = ["grasp.parquet"]' in (tmp_path / "parquet" / "session.toml").read_text()
+    assert models["csv"] == models["parquet"]
+
+
+def test_angles_and_urdf_names_to_parquet(tmp_path: Path) -> None:
+    d, model = fitted()
+    rec = read_pose_csv(d / "test.csv", units="mm")
+    grasp = write_pose_csv(tmp_path / "test.parquet", rec, units="cm")
+    for out, traj in (("a.csv", "q.csv"), ("a.parquet", "q.parquet")):
+        r = run("angles", model, grasp, "--units", "cm", "-o", tmp_path / out,
+                "--urdf-names", tmp_path / traj, "-q")  # fmt: skip
+        assert r.exit_code == 0, r.output
+    _same_table(tmp_path / "a.parquet", tmp_path / "a.csv", fpq.ANGLES)
+    _same_table(tmp_path / "q.parquet", tmp_path / "q.csv", fpq.JOINTS)
+    meta = pq.read_schema(tmp_path / "a.parquet").metadata
+    assert meta[b"fingerfit.units"] == b"cm" and meta[b"fingerfit.angle_units"] == b"deg"
+    assert pq.read_schema(tmp_path / "q.parquet").metadata[b"fingerfit.angle_units"] == b"rad"
+
+
+def test_stream_record_parquet_equals_angles(tmp_path: Path) -> None:
+    _, model = fitted()
+    csv = write_recording(tmp_path / "rec.csv", 480)
+    r = run(
+        "stream", model, "--source", f"replay:{csv}@8", "--record", tmp_path / "live.parquet", "-q"
+    )
+    assert r.exit_code == 0, r.output
+    r = run("angles", model, csv, "-o", tmp_path / "a.csv", "-q")
+    assert r.exit_code == 0, r.output
+    want = _same_table(tmp_path / "live.parquet", tmp_path / "a.csv", fpq.ANGLES)
+    assert len(want) == 480
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "live.parquet", "rec.csv"]
+    assert pq.ParquetFile(tmp_path / "live.parquet").metadata.num_row_groups >= 1
+
+
+def test_record_output_appends_row_groups_and_discards_on_failure(tmp_path: Path) -> None:
+    from fingerfit.live.outputs import RecordOutput
+
+    out = RecordOutput(tmp_path / "sub" / "r.parquet", "cm")
+    for k in range(3):
+        out.push(pd.DataFrame({"time": np.arange(4.0) + 4 * k, "index.mp": np.full(4, -0.0)}))
+        assert not (tmp_path / "sub" / "r.parquet").exists()
+    out.close()
+    f = pq.ParquetFile(tmp_path / "sub" / "r.parquet")
+    assert f.metadata.num_row_groups == 3 and f.metadata.num_rows == 12
+    assert np.signbit(f.read().column("index.mp").to_numpy()).all()
+    out = RecordOutput(tmp_path / "new" / "r.parquet")
+    out.push(pd.DataFrame({"time": [0.0]}))
+    out.close(ok=False)
+    assert not (tmp_path / "new").exists()
+
+
+def test_convert_to_and_from_parquet(tmp_path: Path) -> None:
+    rec = subject("exact", 1).session.grasp[0]
+    mapping = ",".join(f"{i}={s}" for i, s in enumerate(rec.sensors, start=1))
+    wide_csv = write_wide_csv(tmp_path / "w.csv", rec, units="cm")
+    wide_pq = write_wide_csv(tmp_path / "w.parquet", rec, units="cm")
+    common = ["--from", "wide-csv", "--rate", "240", "--map", mapping, "-q"]
+    outs = {}
+    for src, out, extra in (
+        (wide_csv, "o.csv", ["--units", "cm"]),
+        (wide_csv, "o.parquet", ["--units", "cm"]),
+        (wide_pq, "p.parquet", []),
+    ):
+        r = run("convert", src, "-o", tmp_path / out, *common, *extra)
+        assert r.exit_code == 0, r.output
+        outs[out] = read_pose_csv(tmp_path / out, units="mm", rate_hz=240)
+    for name in ("o.parquet", "p.parquet"):
+        for s in rec.sensors:
+            a, b = outs["o.csv"].poses[s], outs[name].poses[s]
+            assert np.array_equal(a.position, b.position, equal_nan=True)
+            assert np.array_equal(a.rotation, b.rotation, equal_nan=True)
+    line = refused(
+        run("convert", wide_pq, "-o", tmp_path / "x.csv", *common, "--units", "mm"),
+        "w.parquet",
+        "field 'fingerfit.units'",
+    )
+    assert "in cm, not mm" in line
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_refusals_through_the_commands(tmp_path: Path) -> None:
+    d, model = fitted()
+    rec = read_pose_csv(d / "test.csv", units="mm")
+    good = write_pose_csv(tmp_path / "t.parquet", rec, units="mm")
+    bad = tmp_path / "bad.parquet"
+    bad.write_bytes(good.read_bytes()[:-100])
+    refused(
+        run("angles", model, bad, "-o", tmp_path / "a.parquet"),
+        "bad.parquet",
+        "not a readable Parquet",
+    )
+    table = pq.read_table(good)
+    pq.write_table(table.drop_columns(["qw"]), tmp_path / "noqw.parquet")
+    refused(run("angles", model, tmp_path / "noqw.parquet", "-o", tmp_path / "a.csv"),
+            "noqw.parquet", "field 'qw'", "column missing")  # fmt: skip
+    refused(run("angles", model, good, "--units", "cm", "-o", tmp_path / "a.csv"),
+            "field 'fingerfit.units'")  # fmt: skip
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "bad.parquet",
+        "noqw.parquet",
+        "t.parquet",
+    ]
+
+
+def test_retarget_to_parquet(tmp_path: Path) -> None:
+    pytest.importorskip("mujoco")
+    pytest.importorskip("pinocchio")
+    from .test_retarget import MAP, ROBOT_XML
+
+    d, model = fitted()
+    (tmp_path / "toy.xml").write_text(ROBOT_XML)
+    (tmp_path / "toy.toml").write_text(MAP)
+    shutil.copy(d / "test.csv", tmp_path / "test.csv")
+    for out in ("q.csv", "q.parquet"):
+        r = run("retarget", model, tmp_path / "test.csv", "--robot", tmp_path / "toy.xml",
+                "--map", tmp_path / "toy.toml", "-o", tmp_path / out[2:] / out, "-q")  # fmt: skip
+        assert r.exit_code == 0, r.output
+    _same_table(tmp_path / "parquet" / "q.parquet", tmp_path / "csv" / "q.csv", fpq.JOINTS)
+    refused(run("retarget", model, tmp_path / "test.csv", "--robot", tmp_path / "toy.xml",
+                "--map", tmp_path / "toy.toml", "-o", tmp_path / "o" / "q.txt"),
+            "field '--output'", ".csv or .parquet")  # fmt: skip
