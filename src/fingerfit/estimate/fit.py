@@ -403,7 +403,9 @@ METHOD_SUMMARY = {
     "robust": "the SARA hinge axis after rejecting outlier frames and cycles, cycles weighted "
     "by their residual",
     "twoaxis": "robust SARA hinge axes, with a second (ab/adduction) axis at a finger's MP "
-    "and the thumb's MCP where the data show one",
+    "and the thumb's MCP where it predicts held-out grasp cycles better than one axis (the "
+    "two axes' order, ab/adduction or flexion proximal, chosen by the held-out cycles' "
+    "orientations)",
     "rolling": "twoaxis, with rolling-contact migration of each joint centre",
 }
 ANGLE_SUMMARY = {

@@ -444,7 +444,9 @@ def write_report(result: StudyResult, path: Path) -> Path:
         "angles by "
         + "; ".join(html.escape(ANGLE_SUMMARY.get(m, m)) for m in sm["angle_methods"])
         + "; fingertips by forward kinematics from the hand sensor. Reference fingertip = "
-        "distal sensor pose carrying the stylus-measured tip vector. Statistics: Student "
+        "distal sensor pose carrying the stylus-measured tip vector. Pad points: fitted to "
+        "the session's pinch holds where it has pinch events (touching pulps coincide), else "
+        "the digitised pad landmark or the pulp geometry. Statistics: Student "
         "t-tests (scipy), two-factor ANOVA with interaction (type II, from the cells' "
         "sums, equal to statsmodels' anova_lm).</p>",
         _subjects_table(result),
