@@ -7,7 +7,9 @@ simulator at default noise: Liberty-like tracker noise and field distortion, sof
 artefact, stylus noise, MyoHand/Hollister axis obliquity, centre migration, MCP
 ab/adduction), seeds ``simulate_cohort(config, n, seed=2026)``, are written as session
 folders with their truth and evaluated by ``fingerfit study`` (default method), exactly
-as a user would. The figures are read from the study's tables:
+as a user would. ``--world myohand`` simulates MyoHand's thumb and index instead
+(``SimConfig(world="myohand", hand="right")``: MyoHand's axes, a hinge thumb MCP; the
+same seeds and noise). The figures are read from the study's tables:
 
 * **axis error** (deg): angle between each fitted thumb axis (``cmc``,
   ``cmc_abduction``, ``mcp``, ``mcp_abduction`` where the fit chose two axes, ``ip``) and
@@ -211,9 +213,13 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--keep", type=Path, default=None, help="folder for sessions and the study")
+    ap.add_argument("--world", choices=("default", "myohand"), default="default")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    config = SimConfig(fingers=("thumb", "index"))
+    if args.world == "myohand":
+        config = SimConfig(fingers=("thumb", "index"), world="myohand", hand="right")
+    else:
+        config = SimConfig(fingers=("thumb", "index"))
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         sims = simulate_cohort(config, args.subjects, SEED)
@@ -228,7 +234,8 @@ def main() -> None:
         "version": __version__,
         "python": platform.python_version(),
         "command": "python bench/thumb_accuracy.py "
-        f"--subjects {args.subjects} --json {args.json or '-'}",
+        f"--subjects {args.subjects} --json {args.json or '-'}"
+        + (f" --world {args.world}" if args.world != "default" else ""),
     }
     print(markdown(res, meta))
     if args.json:

@@ -22,6 +22,8 @@ from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.simulate import myohand as mh
 from fingerfit.simulate.anatomy import compose, joint_transform, segment_motions
 from fingerfit.simulate.study import relative_truth_in_parent, truth_document
+from fingerfit.simulate.thumb import thumb_segment_motions
+from fingerfit.simulate.truthmodel import truth_model
 from fingerfit.transforms import (
     angle_between_axes,
     distance_point_to_line,
@@ -33,6 +35,7 @@ mujoco = pytest.importorskip("mujoco")
 
 FINGERS = ("index", "middle", "ring", "little")
 KEYS = ("mp", "mp_abduction", "pip", "dip")
+THUMB_SEGMENTS = ("metacarpal", "proximal", "distal")
 
 
 @pytest.fixture(scope="module")
@@ -40,6 +43,15 @@ def subject():
     """A whole-finger MyoHand subject with every error source (4 short grasp cycles)."""
     config = SimConfig(fingers=FINGERS, hand="right", world="myohand", cycles=4)
     return simulate_subject(config, 11)
+
+
+@pytest.fixture(scope="module")
+def thumb_subject():
+    """MyoHand's thumb with the four fingers, every error source (2 grasp cycles)."""
+    config = SimConfig(
+        fingers=("thumb", *FINGERS), hand="right", world="myohand", cycles=2, targets=False
+    )
+    return simulate_subject(config, 7)
 
 
 def edited_model(sim):
@@ -56,13 +68,17 @@ def edited_model(sim):
             a = model.body_parentid[a]
         if a == capitate and b != capitate:
             model.body_pos[b] *= p.scale
-    for f in FINGERS:
+    chains = {f: (mh.JOINT_NAMES[f], mh.SEGMENT_BODIES[f], mh.TIP_SITES[f]) for f in FINGERS}
+    chains["thumb"] = (mh.THUMB_JOINT_NAMES, mh.THUMB_BODIES, mh.THUMB_TIP_SITE)
+    for f, (joints, bodies, site) in chains.items():
+        if f not in p.length_factor:
+            continue
         k = p.length_factor[f]
-        _, mid, dist = mh.SEGMENT_BODIES[f]
+        _, mid, dist = bodies
         model.body_pos[model.body(mid).id] *= k[0]
         model.body_pos[model.body(dist).id] *= k[1]
-        model.site_pos[model.site(mh.TIP_SITES[f]).id] *= p.scale * k[2]
-        for name, rv in zip(mh.JOINT_NAMES[f], p.axis_rotation[f], strict=True):
+        model.site_pos[model.site(site).id] *= p.scale * k[2]
+        for name, rv in zip(joints, p.axis_rotation[f], strict=True):
             j = mh.joint_id(model, name)
             r = data.xmat[model.jnt_bodyid[j]].reshape(3, 3)
             turn = _rotvec_matrix(rv)
@@ -84,6 +100,12 @@ def to_tracker(sim, model, data0):
     place = sim.truth.myohand.placement
     hand_origin = sim.truth.fingers["middle"].centre[0]
     return lambda p: (1000.0 * np.asarray(p) - origin) @ place.T + hand_origin
+
+
+def _rotation_angle(r):
+    """Rotation angle (rad) of ``r`` from ``|R - I|_F = 2 sqrt(2) sin(angle / 2)``: accurate
+    near 0, unlike arccos of the trace (which cannot resolve below ~1e-8 rad)."""
+    return 2 * np.arcsin(np.linalg.norm(r - np.eye(3)) / (2 * np.sqrt(2)))
 
 
 def test_product_of_exponentials_equals_mujoco(subject) -> None:
@@ -199,6 +221,147 @@ def test_exact_myohand_session_fits(tmp_path) -> None:
     assert err.max() < 1e-3, err.max()
 
 
+def test_thumb_product_of_exponentials_equals_mujoco(thumb_subject) -> None:
+    """(a) The thumb's metacarpal, proximal and distal bodies and its tip site at random
+    postures within MyoHand's thumb joint ranges: the world's PoE (ThumbAnatomy, CMC
+    flexion before ab/adduction, hinge MCP) vs MuJoCo's mj_kinematics on the edited model;
+    the fingers of the same subject too."""
+    sim = thumb_subject
+    model, data = edited_model(sim)
+    point = to_tracker(sim, model, data)
+    place = sim.truth.myohand.placement
+    ref = mh.reference_geometry(model)
+    th = sim.truth.thumb
+    assert not th.mcp_abduction
+    body0 = [
+        (point(data.body(b).xpos), place @ data.body(b).xmat.reshape(3, 3)) for b in mh.THUMB_BODIES
+    ]
+    n = 40
+    rng = np.random.default_rng(8)
+    ids = [mh.joint_id(model, j) for j in mh.THUMB_JOINT_NAMES]
+    lo, hi = model.jnt_range[ids].T
+    q = rng.uniform(lo, hi, (n, 4))
+    angles = {k: ref.thumb.sign[i] * q[:, i] for i, k in enumerate(mh.THUMB_KEYS)}
+    angles["mcp_abduction"] = np.zeros(n)
+    eye = (np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3)))
+    poe = thumb_segment_motions(th, angles, eye)
+    f_ang = {f: {k: rng.uniform(0.0, 0.5, n) for k in KEYS} for f in FINGERS}
+    f_poe = {f: segment_motions(sim.truth.fingers[f], f_ang[f], eye) for f in FINGERS}
+    worst_mm = worst_rad = worst_tip = worst_finger = 0.0
+    for k in range(n):
+        posture = {f: {j: f_ang[f][j][k] for j in KEYS} for f in FINGERS}
+        posture["thumb"] = {j: angles[j][k] for j in angles}
+        data.qpos[:] = mh.mujoco_qpos(model, ref, posture)
+        mujoco.mj_kinematics(model, data)
+        for s, b in enumerate(mh.THUMB_BODIES):
+            r, t = poe[THUMB_SEGMENTS[s]]
+            p0, r0 = body0[s]
+            rot = place @ data.body(b).xmat.reshape(3, 3)
+            worst_mm = max(worst_mm, np.linalg.norm(r[k] @ p0 + t[k] - point(data.body(b).xpos)))
+            worst_rad = max(worst_rad, _rotation_angle((r[k] @ r0).T @ rot))
+        r, t = poe["distal"]
+        tip = point(data.site(mh.THUMB_TIP_SITE).xpos)
+        worst_tip = max(worst_tip, np.linalg.norm(r[k] @ th.tip + t[k] - tip))
+        for f in FINGERS:
+            r, t = f_poe[f]["distal"]
+            tip = point(data.site(mh.TIP_SITES[f]).xpos)
+            worst_finger = max(
+                worst_finger, np.linalg.norm(r[k] @ sim.truth.fingers[f].tip + t[k] - tip)
+            )
+    assert max(worst_mm, worst_tip, worst_finger) < 1e-9 and worst_rad < 1e-9, (
+        worst_mm,
+        worst_rad,
+        worst_tip,
+        worst_finger,
+    )
+    # The CMC order matters: ab/adduction first would not reproduce MuJoCo.
+    k = int(np.argmax(np.abs(angles["cmc"] * angles["cmc_abduction"])))
+    wrong = compose(
+        joint_transform(
+            th.axis_point["cmc_abduction"],
+            th.axis["cmc_abduction"],
+            angles["cmc_abduction"][k : k + 1],
+        ),
+        joint_transform(th.axis_point["cmc"], th.axis["cmc"], angles["cmc"][k : k + 1]),
+    )
+    right = poe["metacarpal"]
+    assert np.linalg.norm(wrong[0][0] - right[0][k]) > 1e-3
+
+
+def test_thumb_truth_equals_mujoco(thumb_subject, tmp_path) -> None:
+    """(b) truth.json's thumb (centres and axes in the true parent sensor frames, tip, no
+    MCP ab/adduction line) equals MuJoCo's anchors and axes of the edited model; the pad
+    events touch exactly."""
+    sim = thumb_subject
+    write_subject(sim, tmp_path / "S")
+    doc = json.loads((tmp_path / "S" / "truth.json").read_text())
+    model, data = edited_model(sim)
+    point = to_tracker(sim, model, data)
+    place = sim.truth.myohand.placement
+    ref = mh.reference_geometry()
+    td = doc["fingers"]["thumb"]
+    assert set(td["joints"]) == {"cmc", "cmc_abduction", "mcp", "ip"}
+    assert td["axis_order"] == {"cmc": ["cmc", "cmc_abduction"]}
+    assert td["axis_offset_mm"]["cmc"] < 1e-9  # MyoHand's CMC lines meet
+    ids = [mh.joint_id(model, j) for j in mh.THUMB_JOINT_NAMES]
+    anchor = point(data.xanchor[ids])
+    axis = ref.thumb.sign[:, None] * data.xaxis[ids] @ place.T
+    worst = np.linalg.norm(point(data.site(mh.THUMB_TIP_SITE).xpos) - td["tip"])
+    for i, j in enumerate(mh.THUMB_KEYS):
+        jd = td["joints"][j]
+        s = doc["sensors"][jd["parent_sensor"]]
+        pr = matrix_from_quat_wxyz(np.array(s["quat_wxyz"])[None])[0]
+        pp = np.array(s["position"])
+        worst = max(
+            worst,
+            np.linalg.norm(pr.T @ (anchor[i] - pp) - jd["center_in_parent"]),
+            np.linalg.norm(pr.T @ axis[i] - jd["axis_in_parent"]),
+        )
+    assert worst < 1e-9, worst
+    assert set(doc["myohand"]["length_factor"]) == {"thumb", *FINGERS}
+    # Every pad-to-pad touch (opposition to each finger, tip pinches) holds its gap.
+    pads = [c for c in doc["contacts"] if c["in_events_csv"]]
+    assert len(pads) == 7
+    for c in pads:
+        assert abs(c["distance_min_mm"] - c["gap_mm"]) < 1e-9
+        assert abs(c["distance_max_mm"] - c["gap_mm"]) < 1e-9
+    # The thumb's MCP never ab/adducts.
+    for frames in sim.truth.frames.values():
+        assert not np.any(frames["angles"]["thumb"]["mcp_abduction"])
+
+
+def test_exact_thumb_session_fits_and_truth_model_is_exact(tmp_path) -> None:
+    """(c) An exact MyoHand thumb + index session: the true model drives the thumb exactly
+    (angles and tip), and the written session fits: the thumb's axes (a hinge MCP) and
+    centres equal the truth in the parent sensor frames."""
+    config = SimConfig.exact(
+        fingers=("thumb", "index"), hand="right", world="myohand", cycles=4, targets=False
+    )
+    sim = simulate_subject(config, 5)
+    model = truth_model(sim)
+    assert set(model.fingers["thumb"].second_axes) == {"cmc"}
+    for name in ("thumb_circumduction.csv", "pinch.csv", "test.csv"):
+        kin = compute_kinematics(model, sim.session.recording(name))
+        fr = sim.truth.frames[name]
+        motion = kin.motions["user_axis"]["thumb"]
+        for k, v in motion.angles.items():
+            assert np.max(np.abs(np.degrees(v - fr["angles"]["thumb"][k]))) < 1e-6, (name, k)
+        assert np.max(np.linalg.norm(motion.tip - fr["tip"]["thumb"], axis=1)) < 1e-6
+    session = load_session(write_subject(sim, tmp_path / "S"))
+    fitted = fit_session(session, FitOptions())
+    assert [a.name for a in fitted.fingers["thumb"].chain()] == [
+        "cmc",
+        "cmc_abduction",
+        "mcp",
+        "ip",
+    ]
+    for j in ("cmc", "cmc_abduction", "mcp", "ip"):
+        c, a = fitted.in_parent("thumb", j)
+        ct, at = relative_truth_in_parent(sim, "thumb", j)
+        deg, mm = np.degrees(angle_between_axes(a, at)), distance_point_to_line(c, ct, at)
+        assert deg < 1e-6 and mm < 1e-6, (j, deg, mm)
+
+
 def test_default_world_unchanged() -> None:
     """(d) The default world: same streams and truth with the new field, default order,
     no MyoHand keys in truth.json, segment motions as ab/adduction-first composition."""
@@ -224,11 +387,9 @@ def test_default_world_unchanged() -> None:
 
 
 def test_refusals(monkeypatch) -> None:
-    """A left hand, the thumb, an unknown world and a missing myo-sim: one line each."""
+    """A left hand, an unknown world and a missing myo-sim: one line each."""
     with pytest.raises(FingerfitError, match=r"--hand.*right hand"):
         simulate_subject(SimConfig(world="myohand"), 0)
-    with pytest.raises(FingerfitError, match=r"--fingers.*four fingers"):
-        simulate_subject(SimConfig(world="myohand", hand="right", fingers=("thumb",)), 0)
     with pytest.raises(FingerfitError, match=r"--world.*default, myohand"):
         SimConfig(world="mano")
     monkeypatch.setitem(__import__("sys").modules, "myo_sim", None)

@@ -92,7 +92,7 @@ def simulate(
         str,
         typer.Option(
             help="The true hand: default (fingerfit's anatomy) or myohand (the MyoHand "
-            "model's fingers; right hand, four fingers; needs fingerfit[myohand])."
+            "model's fingers and thumb; right hand; needs fingerfit[myohand])."
         ),
     ] = "default",
     fmt: Annotated[

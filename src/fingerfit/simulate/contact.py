@@ -212,10 +212,16 @@ def solve_touch(
         site, normal = key_pinch_site(finger, side)
     z_t, z_f = thumb.frame[:, 2], finger.frame[:, 2]
     t_lines = [(thumb.axis_point[k], thumb.axis[k], None) for k in THUMB_KEYS]
-    f_lines = [(finger.abduction_point, finger.abduction_axis, None)] + [
-        (finger.centre[i], finger.axis[i], finger.rolling[i]) for i in range(3)
-    ]
-    f_order = ("mp_abduction", "mp", "pip", "dip")
+    # The finger's chain in its MP order (proximal first): ab/adduction first in the
+    # default world, flexion first in the MyoHand world (FingerAnatomy.order).
+    ab_line = (finger.abduction_point, finger.abduction_axis, None)
+    flexion = [(finger.centre[i], finger.axis[i], finger.rolling[i]) for i in range(3)]
+    if finger.order[0] == "mp_abduction":
+        f_lines = [ab_line, *flexion]
+        f_order: tuple[str, ...] = ("mp_abduction", "mp", "pip", "dip")
+    else:
+        f_lines = [flexion[0], ab_line, *flexion[1:]]
+        f_order = ("mp", "mp_abduction", "pip", "dip")
     slots = [("thumb", k) for k in THUMB_KEYS] + [("finger", k) for k in f_order]
     base = np.array([fixed.get(sl, 0.0) for sl in slots])
     where = np.array([slots.index(f) for f in free])

@@ -24,10 +24,17 @@ built from MyoHand's own geometry (:func:`reference_geometry`). Angles are rad, 
 as fingerfit's (flexion positive about ~+y, MP ab/adduction positive radially about ~+z);
 ``sign`` maps them to MuJoCo's ``qpos``.
 
-Scope of this first version: the four fingers, right hand only; no thumb (MyoHand's
-thumb has no MCP ab/adduction and the thumb's contact protocols rely on the default
-thumb anatomy). Sources and the population model: ``docs/simulator.md``, "The MyoHand
-world".
+The thumb (:func:`sample_thumb`): MyoHand's ``cmc_flexion`` and ``cmc_abduction`` share
+the metacarpal body ``firstmc_r`` (flexion listed first, so **proximal**, as fingerfit's
+thumb convention; the two lines meet at the body origin), ``mp_flexion`` and
+``ip_flexion`` are hinges: MyoHand's thumb has **no MCP ab/adduction**, so in this world
+the thumb's MCP is a hinge (:attr:`~fingerfit.simulate.thumb.ThumbAnatomy.mcp_abduction`
+False, every ``mcp_abduction`` angle 0). The thumb is expressed as the default world's
+:class:`~fingerfit.simulate.thumb.ThumbAnatomy`, so its protocols (circumduction,
+opposition, pinches solved by :mod:`.contact`) and truth run unchanged on it.
+
+Scope: right hand only; the thumb and the four fingers. Sources and the population
+model: ``docs/simulator.md``, "The MyoHand world".
 """
 
 from __future__ import annotations
@@ -44,6 +51,7 @@ from ..errors import FingerfitError
 from ..extras import require
 from ..transforms import FloatArray, unit
 from .anatomy import DORSAL_DEPTH, FingerAnatomy
+from .thumb import THUMB_DORSAL_DEPTH, ThumbAnatomy, sample_pad
 
 if TYPE_CHECKING:
     from .study import SimConfig
@@ -65,6 +73,15 @@ SEGMENT_BODIES = {
 }
 #: MyoHand's fingertip site on each distal phalanx (on the distal bone's line).
 TIP_SITES = {"index": "IFtip_r", "middle": "MFtip_r", "ring": "RFtip_r", "little": "LFtip_r"}
+#: The thumb's joints, fingerfit order ``cmc``, ``cmc_abduction``, ``mcp``, ``ip`` (no MCP
+#: ab/adduction in MyoHand).
+THUMB_JOINT_NAMES = ("cmc_flexion", "cmc_abduction", "mp_flexion", "ip_flexion")
+#: fingerfit's names of those joints' angles.
+THUMB_KEYS = ("cmc", "cmc_abduction", "mcp", "ip")
+#: The thumb's bodies: metacarpal, proximal, distal phalanx.
+THUMB_BODIES = ("firstmc_r", "proximal_thumb_r", "distal_thumb_r")
+#: MyoHand's thumb tip site on the distal phalanx (on the distal bone's line).
+THUMB_TIP_SITE = "THtip_r"
 #: Per-subject scatter: link length factor SD, axis rotation SD per component (deg).
 LENGTH_SD = 0.04
 AXIS_SD_DEG = 3.0
@@ -124,12 +141,17 @@ def joint_id(model: Any, name: str) -> int:
 class MyoFinger:
     """One MyoHand finger at the all-zero posture (MuJoCo world frame, mm).
 
+    The thumb is held in the same form, its joints ``cmc``, ``cmc_abduction``, ``mcp``,
+    ``ip`` in place of ``mp``, ``mp_abduction``, ``pip``, ``dip`` (the two CMC axes share
+    the metacarpal body's origin as the MP's two axes share the proximal phalanx's).
+
     Attributes
     ----------
     name : str
-        ``index``, ``middle``, ``ring`` or ``little``.
+        ``index``, ``middle``, ``ring``, ``little`` or ``thumb``.
     joints : tuple of str
-        MuJoCo joint names, fingerfit order ``mp``, ``mp_abduction``, ``pip``, ``dip``.
+        MuJoCo joint names, fingerfit order ``mp``, ``mp_abduction``, ``pip``, ``dip``
+        (thumb: :data:`THUMB_JOINT_NAMES`).
     qpos : ndarray, shape (4,), int
         Their ``qpos`` addresses.
     sign : ndarray, shape (4,)
@@ -140,11 +162,12 @@ class MyoFinger:
         World unit axes ``sign * xaxis``: flexion towards the hand's +y (right-hand rule
         curls palmar), ab/adduction towards +z (positive = radial deviation).
     body_position : ndarray, shape (3, 3)
-        ``xpos`` of the proximal, middle, distal phalanx bodies (mm).
+        ``xpos`` of the proximal, middle, distal phalanx bodies (mm) (thumb: metacarpal,
+        proximal, distal).
     body_rotation : ndarray, shape (3, 3, 3)
         Their ``xmat`` (body -> world).
     tip : ndarray, shape (3,)
-        The fingertip site (:data:`TIP_SITES`) position (mm).
+        The fingertip site (:data:`TIP_SITES`, thumb :data:`THUMB_TIP_SITE`) position (mm).
     """
 
     name: str
@@ -170,22 +193,30 @@ class MyoHandReference:
     frame : ndarray, shape (3, 3)
         Columns x (MCP3 -> middle fingertip), y (radial: the index side), z (dorsal) of the
         hand anatomical frame in MuJoCo world coordinates.
+    thumb : MyoFinger
+        The thumb (:data:`THUMB_JOINT_NAMES`, :data:`THUMB_BODIES`, :data:`THUMB_TIP_SITE`);
+        axes oriented as fingerfit's thumb angles: positive flexion moves the tip ulnarly
+        (across the palm, towards the little finger), positive CMC ab/adduction palmarly
+        (palmar abduction). MyoHand's own signs are the opposite for the three flexions
+        (``sign`` -1) and agree for the ab/adduction.
     """
 
     fingers: dict[str, MyoFinger]
     origin: FloatArray
     frame: FloatArray
+    thumb: MyoFinger
 
     def link_angles_deg(self, finger: str) -> FloatArray:
         """Angles (deg) between successive links MCP-PIP, PIP-DIP, DIP-tip of ``finger`` at
-        the zero posture, signed positive for flexion: how far zero is from stretched.
+        the zero posture, signed positive for flexion: how far zero is from stretched
+        (``thumb``: the links CMC-MCP, MCP-IP, IP-tip).
 
         Returns
         -------
         ndarray, shape (2,)
-            PIP and DIP angles.
+            PIP and DIP angles (thumb: MCP and IP).
         """
-        f = self.fingers[finger]
+        f = self.thumb if finger == "thumb" else self.fingers[finger]
         pts = np.vstack([f.anchor[[0, 2, 3]], f.tip])
         d = unit(np.diff(pts, axis=0))
         out = []
@@ -202,7 +233,10 @@ def reference_geometry(model: Any | None = None) -> MyoHandReference:
     Every joint of the model is set to 0 (``qpos0`` of MyoHand's hinges is 0), then
     ``mj_kinematics`` runs. The hand frame: x from the middle MCP anchor to the middle
     fingertip site, y the index MCP minus the little MCP made perpendicular to x, z = x x y
-    (dorsal for a right hand; checked: the middle MCP flexion axis lies along +y).
+    (dorsal for a right hand; checked: the middle MCP flexion axis lies along +y). The
+    thumb's axes are oriented by the motion of its tip site: ``axis x (tip - anchor)``
+    towards the hand's -y (ulnar) for a flexion, towards -z (palmar) for the CMC
+    ab/adduction.
 
     Parameters
     ----------
@@ -219,18 +253,20 @@ def reference_geometry(model: Any | None = None) -> MyoHandReference:
     data.qpos[:] = 0.0
     mujoco.mj_kinematics(model, data)
     raw = {}
-    for f in FINGERS:
-        ids = [joint_id(model, n) for n in JOINT_NAMES[f]]
+    chains = {f: (JOINT_NAMES[f], SEGMENT_BODIES[f], TIP_SITES[f]) for f in FINGERS}
+    chains["thumb"] = (THUMB_JOINT_NAMES, THUMB_BODIES, THUMB_TIP_SITE)
+    for f, (joint_names, body_names, site) in chains.items():
+        ids = [joint_id(model, n) for n in joint_names]
         if np.any(model.jnt_pos[ids] != 0.0):
             raise FingerfitError(f"MyoHand's {f} joints are not at their body origins")
-        bodies = [model.body(b).id for b in SEGMENT_BODIES[f]]
+        bodies = [model.body(b).id for b in body_names]
         raw[f] = (
             ids,
             1000.0 * data.xanchor[ids],
             data.xaxis[ids].copy(),
             1000.0 * data.xpos[bodies],
             data.xmat[bodies].reshape(3, 3, 3).copy(),
-            1000.0 * data.site(TIP_SITES[f]).xpos.copy(),
+            1000.0 * data.site(site).xpos.copy(),
         )
     origin = raw["middle"][1][0]
     x = unit(raw["middle"][5] - origin)
@@ -239,9 +275,14 @@ def reference_geometry(model: Any | None = None) -> MyoHandReference:
     frame = np.column_stack([x, y, np.cross(x, y)])
     fingers = {}
     for f, (ids, anchor, axis, bpos, brot, tip) in raw.items():
-        # Orient each axis as fingerfit's angles: flexion about ~+y, ab/adduction about ~+z.
-        ref = np.array([frame[:, 1], frame[:, 2], frame[:, 1], frame[:, 1]])
-        sign = np.sign(np.einsum("ij,ij->i", axis, ref))
+        if f == "thumb":
+            # Orient by the tip's motion: flexion ulnar (-y), ab/adduction palmar (-z).
+            toward = -frame[:, [1, 2, 1, 1]].T
+            sign = np.sign(np.einsum("ij,ij->i", np.cross(axis, tip - anchor), toward))
+        else:
+            # Orient each axis as fingerfit's angles: flexion about ~+y, ab/adduction ~+z.
+            ref = np.array([frame[:, 1], frame[:, 2], frame[:, 1], frame[:, 1]])
+            sign = np.sign(np.einsum("ij,ij->i", axis, ref))
         fingers[f] = MyoFinger(
             f,
             tuple(model.joint(i).name for i in ids),
@@ -255,7 +296,8 @@ def reference_geometry(model: Any | None = None) -> MyoHandReference:
         )
     if np.dot(fingers["middle"].axis[0], frame[:, 1]) < 0.9:
         raise FingerfitError("MyoHand's middle MCP flexion axis is not along the hand's y")
-    return MyoHandReference(fingers, origin, frame)
+    thumb = fingers.pop("thumb")
+    return MyoHandReference(fingers, origin, frame, thumb)
 
 
 @dataclass(frozen=True)
@@ -269,11 +311,12 @@ class MyoHandSubject:
     scale : float
         Whole-hand size factor (the subject size factor of the default world, N(1, 0.06)).
     length_factor : dict[str, ndarray]
-        Per finger ``(3,)``: factors of the links MCP-PIP, PIP-DIP, DIP-tip site, N(1, 0.04).
+        Per finger ``(3,)``: factors of the links MCP-PIP, PIP-DIP, DIP-tip site, N(1, 0.04)
+        (``thumb``: CMC-MCP, MCP-IP, IP-tip site; added by :func:`sample_thumb`).
     axis_rotation : dict[str, ndarray]
         Per finger ``(4, 3)``: rotation vectors (rad, MuJoCo world) turning each zero-posture
-        axis (``mp``, ``mp_abduction``, ``pip``, ``dip``), N(0, 3 deg x tilt_scale) per
-        component.
+        axis (``mp``, ``mp_abduction``, ``pip``, ``dip``; ``thumb``: ``cmc``,
+        ``cmc_abduction``, ``mcp``, ``ip``), N(0, 3 deg x tilt_scale) per component.
     placement : ndarray, shape (3, 3)
         Rotation of MuJoCo world coordinates into tracker coordinates
         (``hand_rotation @ reference.frame.T``); the scaled middle MCP anchor goes to the
@@ -301,15 +344,10 @@ def check_config(config: SimConfig) -> None:
     Raises
     ------
     FingerfitError
-        A left hand, the thumb, or ``myo-sim``/``mujoco`` missing.
+        A left hand, or ``myo-sim``/``mujoco`` missing.
     """
     if config.hand != "right":
         raise FingerfitError("the MyoHand world is a right hand: use --hand right", field="--hand")
-    if "thumb" in config.fingers:
-        raise FingerfitError(
-            "the MyoHand world simulates the four fingers only (no thumb yet)",
-            field="--fingers",
-        )
     _myo_sim()
     _mujoco()
 
@@ -391,6 +429,86 @@ def sample_fingers(
     return fingers, MyoHandSubject(hand_scale, lengths, rotations, placement)
 
 
+def sample_thumb(
+    rng: np.random.Generator,
+    subject: MyoHandSubject,
+    *,
+    hand_origin: FloatArray,
+    tilt_scale: float = 1.0,
+    reference: MyoHandReference | None = None,
+) -> ThumbAnatomy:
+    """Draw one subject's MyoHand thumb and place it in tracker coordinates.
+
+    The thumb is scaled with the hand (``subject.scale`` about the middle MCP) and
+    perturbed as the fingers are: the links CMC-MCP, MCP-IP, IP-tip site each x N(1, 0.04),
+    the four axes (``cmc``, ``cmc_abduction``, ``mcp``, ``ip``) each turned by a rotation
+    vector N(0, 3 deg x ``tilt_scale``) per component. Drawn from ``rng`` in this order:
+    link factors ``(3,)``, axis rotations ``(4, 3)``, landmark depths ``(3,)``, the pad
+    (:func:`~fingerfit.simulate.thumb.sample_pad`). The draws are recorded in
+    ``subject.length_factor["thumb"]`` and ``subject.axis_rotation["thumb"]``.
+
+    Parameters
+    ----------
+    rng : numpy Generator
+        The thumb's own generator (the fingers' stream is not touched).
+    subject : MyoHandSubject
+        The subject's hand (scale, placement) from :func:`sample_fingers`.
+    hand_origin : ndarray, shape (3,)
+        Where the middle MCP anchor goes (tracker, mm).
+    tilt_scale : float
+        Scales the axis rotations (0: MyoHand's axes exactly).
+    reference : MyoHandReference, optional
+        Defaults to :func:`reference_geometry` of :func:`load_model`.
+
+    Returns
+    -------
+    ThumbAnatomy
+        Tracker coordinates at the reference posture (MyoHand's zero posture, the thumb
+        straight to within 2.1 deg), mm. ``axis_point``: the CMC anchor for both CMC axes
+        (MyoHand's lines intersect), the MCP and IP anchors; ``mcp_abduction`` False (a
+        hinge MCP; its placeholder line never turns). ``centre``: the CMC, MCP, IP anchors;
+        ``tip``: the tip site; ``frame``: x from the CMC anchor to the tip site, y the IP
+        flexion axis made perpendicular to x, z = x x y (the nail side: positive flexion
+        turns the tip towards -z); landmarks ``cmc|mcp|ip`` dorsal of the anchors by the
+        default world's depths x size (+- 0.7 mm); the pad from the tip site and frame as
+        the default world's (:func:`~fingerfit.simulate.thumb.sample_pad`).
+    """
+    ref = reference_geometry() if reference is None else reference
+    lengths = rng.normal(1.0, LENGTH_SD, 3)
+    rotations = rng.normal(0.0, np.radians(AXIS_SD_DEG) * tilt_scale, (4, 3))
+    anchor, axis, tip = subject_geometry(ref.thumb, ref.origin, subject.scale, lengths, rotations)
+    place = subject.placement
+    anchor_t = anchor @ place.T + hand_origin
+    axis_t = axis @ place.T
+    tip_t = place @ tip + hand_origin
+    centre = anchor_t[[0, 2, 3]]
+    x = unit(tip_t - centre[0])
+    y = unit(axis_t[3] - np.dot(axis_t[3], x) * x)
+    z = np.cross(x, y)
+    frame = np.column_stack([x, y, z])
+    depth = THUMB_DORSAL_DEPTH * subject.scale + rng.normal(0.0, 0.7, 3)
+    landmarks = {j: centre[i] + depth[i] * z for i, j in enumerate(("cmc", "mcp", "ip"))}
+    landmarks["tip"] = tip_t.copy()
+    pad = sample_pad(rng, "thumb", tip_t, frame)
+    landmarks["pad"] = pad.surface
+    subject.length_factor["thumb"] = lengths
+    subject.axis_rotation["thumb"] = rotations
+    points = dict(zip(THUMB_KEYS, anchor_t, strict=True))
+    axes = dict(zip(THUMB_KEYS, axis_t, strict=True))
+    return ThumbAnatomy(
+        "thumb",
+        {**points, "mcp_abduction": anchor_t[2].copy()},
+        {**axes, "mcp_abduction": z.copy()},
+        centre,
+        tip_t,
+        pad,
+        landmarks,
+        frame,
+        1.0,
+        mcp_abduction=False,
+    )
+
+
 def subject_geometry(
     finger: MyoFinger,
     origin: FloatArray,
@@ -398,7 +516,8 @@ def subject_geometry(
     length_factor: FloatArray,
     axis_rotation: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """A finger's zero-posture geometry scaled and perturbed (MuJoCo world axes, mm).
+    """A finger's (or the thumb's) zero-posture geometry scaled and perturbed (MuJoCo
+    world axes, mm).
 
     The hand is scaled by ``scale`` about ``origin``; then each link (MCP -> PIP -> DIP ->
     tip site) is stretched by its factor, the more distal points following rigidly; each
@@ -438,16 +557,28 @@ def mujoco_qpos(model: Any, reference: MyoHandReference, angles: dict) -> FloatA
     model : mujoco.MjModel
     reference : MyoHandReference
     angles : dict
-        finger -> ``mp``, ``mp_abduction``, ``pip``, ``dip`` -> float (rad).
+        finger -> ``mp``, ``mp_abduction``, ``pip``, ``dip`` -> float (rad); ``thumb`` ->
+        ``cmc``, ``cmc_abduction``, ``mcp``, ``ip`` (an ``mcp_abduction`` must be 0: the
+        thumb's MCP is a hinge in MyoHand).
 
     Returns
     -------
     ndarray, shape (model.nq,)
+
+    Raises
+    ------
+    FingerfitError
+        A thumb ``mcp_abduction`` other than 0.
     """
     q = np.zeros(model.nq)
     for f, ang in angles.items():
-        mf = reference.fingers[f]
-        for k, key in enumerate(("mp", "mp_abduction", "pip", "dip")):
+        if f == "thumb":
+            if ang.get("mcp_abduction", 0.0) != 0.0:
+                raise FingerfitError("MyoHand's thumb MCP has no ab/adduction: it must be 0")
+            mf, keys = reference.thumb, THUMB_KEYS
+        else:
+            mf, keys = reference.fingers[f], ("mp", "mp_abduction", "pip", "dip")
+        for k, key in enumerate(keys):
             q[mf.qpos[k]] = mf.sign[k] * ang[key]
     return q
 
@@ -455,6 +586,10 @@ def mujoco_qpos(model: Any, reference: MyoHandReference, angles: dict) -> FloatA
 __all__ = [
     "FINGERS",
     "ORDER",
+    "THUMB_BODIES",
+    "THUMB_JOINT_NAMES",
+    "THUMB_KEYS",
+    "THUMB_TIP_SITE",
     "MyoFinger",
     "MyoHandReference",
     "MyoHandSubject",
@@ -463,5 +598,6 @@ __all__ = [
     "mujoco_qpos",
     "reference_geometry",
     "sample_fingers",
+    "sample_thumb",
     "subject_geometry",
 ]

@@ -99,9 +99,9 @@ class SimConfig:
         Include the target-reaching and free-motion recordings.
     world : {"default", "myohand"}
         The true hand: fingerfit's own anatomy (:mod:`.anatomy`, :mod:`.thumb`) or the
-        MyoHand model's fingers (:mod:`.myohand`: right hand, four fingers, fixed axes,
-        so ``rolling`` has no effect there; ``tilt_scale`` scales its per-subject axis
-        scatter).
+        MyoHand model's fingers and thumb (:mod:`.myohand`: right hand, fixed axes, so
+        ``rolling`` has no effect there, and a hinge thumb MCP; ``tilt_scale`` scales its
+        per-subject axis scatter).
     mp_axis_tilt_deg : float, optional
         Sets every finger's MP flexion-axis obliquity off perpendicular to the bone (deg,
         about the finger's dorsal axis z: positive turns the axis's +y end distally) in
@@ -358,7 +358,7 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
     if config.world == "myohand":
         fingers, myo = mh.sample_fingers(
             rng,
-            list(config.fingers),
+            [f for f in config.fingers if f != "thumb"],
             hand_scale=scale,
             hand_rotation=hand_rot,
             hand_origin=hand_origin,
@@ -416,12 +416,17 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
         hand_scale=scale,
         tilt_scale=config.tilt_scale,
         sta=config.sta,
+        myohand=myo,
     )
     mounts.update(ts.mounts)
     trng = ts.rng
     digits = (["thumb"] if with_thumb else []) + flist
 
+    hinge_mcp = ts.thumb is not None and not ts.thumb.mcp_abduction
+
     def run(m: mo.Motion, name: str, noise: np.random.Generator = rng) -> tuple[Recording, dict]:
+        if hinge_mcp:  # a hinge MCP (MyoHand): its ab/adduction stays 0 (held thumb too)
+            m.angles["thumb"]["mcp_abduction"] = np.zeros_like(m.time)
         return _run(m, name, fingers, mounts, tracker, noise, ts)
 
     truth = SubjectTruth(fingers, mounts, config=config, thumb=ts.thumb, pads=ts.pads, myohand=myo)
@@ -510,7 +515,7 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
             pivot=hand_origin,
         )
         if with_thumb:
-            fm.angles["thumb"] = ct.thumb_free(trng, fm.time, config.abduction)
+            fm.angles["thumb"] = ct.thumb_free(trng, fm.time, config.abduction and not hinge_mcp)
         rec, truth.frames["test.csv"] = run(fm, "test.csv")
         test.append(rec)
     session = Session(

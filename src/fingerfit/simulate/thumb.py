@@ -163,6 +163,11 @@ class ThumbAnatomy:
         Columns x (distal), y, z (dorsal, nail side) of the thumb's anatomical frame.
     side : float
         +1 for a right hand, -1 for a left one.
+    mcp_abduction : bool
+        Whether the MCP has an ab/adduction axis (default). False: the MCP is a hinge
+        (the MyoHand world); ``axis_point``/``axis["mcp_abduction"]`` then hold a
+        placeholder line (through the MCP centre along the thumb's z) that never turns:
+        every simulated ``mcp_abduction`` angle is 0.
     """
 
     name: str
@@ -174,6 +179,7 @@ class ThumbAnatomy:
     landmarks: dict[str, FloatArray]
     frame: FloatArray
     side: float
+    mcp_abduction: bool = True
 
     @property
     def lengths(self) -> FloatArray:

@@ -46,7 +46,8 @@ def truth_model(
         mm), fingertip and, as reference sensor poses, the true sensor mountings
         (before artefact and tracker error), so that every joint is exact in its
         parent sensor frame. A MyoHand finger keeps its MP order (flexion proximal to
-        ab/adduction, :attr:`~fingerfit.model.DigitModel.axis_order`).
+        ab/adduction, :attr:`~fingerfit.model.DigitModel.axis_order`); MyoHand's thumb
+        (CMC flexion proximal, as fingerfit's thumb; a hinge MCP) is represented exactly.
     """
     truth = sim.truth
     quality = JointQuality(0, [], [], [], 0.0, [], notes=["ground truth"])
@@ -75,7 +76,8 @@ def truth_model(
         if second_axes and anat.order[0] == "mp":
             fingers[f] = replace(fingers[f], axis_order={"mp": FLEXION_FIRST})
     if truth.thumb is not None:
-        mcp_two = two_axis and truth.config.abduction
+        # A hinge thumb MCP (MyoHand) has no second axis to include.
+        mcp_two = two_axis and truth.config.abduction and truth.thumb.mcp_abduction
         fingers = {"thumb": _thumb_model(truth.thumb, quality, mcp_two), **fingers}
     poses = {name: (m.position, m.rotation) for name, m in truth.mounts.items()}
     return HandModel(

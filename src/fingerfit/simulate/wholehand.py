@@ -22,6 +22,7 @@ from ..digits import THUMB_JOINTS, THUMB_SEGMENTS
 from ..transforms import FloatArray
 from . import contact as ct
 from . import motion as mo
+from . import myohand as mh
 from .anatomy import FingerAnatomy
 from .sensors import SensorMount, TrackerErrors, mount, sensor_poses
 from .thumb import (
@@ -89,13 +90,21 @@ def setup(
     hand_scale: float,
     tilt_scale: float,
     sta: float,
+    myohand: mh.MyoHandSubject | None = None,
 ) -> ThumbSetup:
-    """Draw the thumb (if ``with_thumb``), its sensor mounts and every digit's pad."""
+    """Draw the thumb (if ``with_thumb``), its sensor mounts and every digit's pad.
+
+    With ``myohand`` (the MyoHand world) the thumb is MyoHand's
+    (:func:`.myohand.sample_thumb`, a hinge MCP), otherwise the default world's.
+    """
     rng = thumb_generator(seed)
     thumb = None
     pads: dict[str, Pad] = {}
     mounts: dict[str, SensorMount] = {}
-    if with_thumb:
+    if with_thumb and myohand is not None:
+        thumb = mh.sample_thumb(rng, myohand, hand_origin=hand_origin, tilt_scale=tilt_scale)
+        pads["thumb"] = thumb.pad
+    elif with_thumb:
         thumb = sample_thumb(
             rng,
             NOMINAL_HAND_LENGTH * hand_scale,
@@ -166,9 +175,12 @@ def static_angles(n: int) -> dict[str, FloatArray]:
 def grasp_angles(
     ts: ThumbSetup, motion: mo.Motion, fingers: list[str], mcp_abduction: bool
 ) -> dict[str, FloatArray]:
-    """The thumb's grasp, on the clock of the fingers' grasp cycle in ``motion``."""
+    """The thumb's grasp, on the clock of the fingers' grasp cycle in ``motion`` (the MCP
+    ab/adduction only with ``mcp_abduction`` and a thumb that has one)."""
+    assert ts.thumb is not None
     mp = np.mean([motion.angles[f]["mp"] for f in fingers], axis=0)
     clock = np.clip(mp / max(float(mp.max()), 1e-9), 0.0, 1.0)
+    mcp_abduction = mcp_abduction and ts.thumb.mcp_abduction
     return ct.thumb_grasp(ts.rng, motion.time, clock, mcp_abduction)
 
 
@@ -185,6 +197,8 @@ def protocols(
 
     ``circumduction_mcp_abduction`` (default: ``abduction``) switches the MCP's
     ab/adduction in circumduction alone (opposition and pinches follow ``abduction``).
+    A thumb without MCP ab/adduction (:attr:`ThumbAnatomy.mcp_abduction` False) never
+    ab/adducts its MCP (the touches are solved without it).
 
     Returns
     -------
@@ -192,6 +206,7 @@ def protocols(
         Every digit of the session moves in each (the fingers relaxed in circumduction).
     """
     assert ts.thumb is not None
+    has_mcp = ts.thumb.mcp_abduction
     out: list[tuple[str, mo.Motion, list[ct.Contact]]] = [
         (
             CIRCUMDUCTION,
@@ -199,16 +214,19 @@ def protocols(
                 ts.rng,
                 list(fingers),
                 rate,
-                mcp_abduction=abduction
-                if circumduction_mcp_abduction is None
-                else circumduction_mcp_abduction,
+                mcp_abduction=has_mcp
+                and (
+                    abduction
+                    if circumduction_mcp_abduction is None
+                    else circumduction_mcp_abduction
+                ),
                 abduction=abduction,
                 pivot=pivot,
             ),
             [],
         )
     ]
-    kw = dict(side=ts.side, abduction=abduction, mcp_abduction=abduction, pivot=pivot)
+    kw = dict(side=ts.side, abduction=abduction, mcp_abduction=abduction and has_mcp, pivot=pivot)
     if fingers:
         m, c = ct.opposition(ts.rng, ts.thumb, fingers, ts.pads, rate, **kw)
         out.append((OPPOSITION, m, c))
@@ -275,7 +293,11 @@ def thumb_document(th: ThumbAnatomy, ref_sensor: dict[str, tuple[FloatArray, Flo
         "ip": "thumb.proximal",
     }
     joints = {}
+    # A hinge MCP (MyoHand) has no ab/adduction line: none is written.
+    two = ("cmc", "mcp") if th.mcp_abduction else ("cmc",)
     for k in THUMB_KEYS:
+        if k == "mcp_abduction" and not th.mcp_abduction:
+            continue
         pp, pr = ref_sensor[parents[k]]
         joints[k] = {
             "center": th.axis_point[k].tolist(),
@@ -286,9 +308,9 @@ def thumb_document(th: ThumbAnatomy, ref_sensor: dict[str, tuple[FloatArray, Flo
         }
     return {
         "joints": joints,
-        "axis_order": {"cmc": ["cmc", "cmc_abduction"], "mcp": ["mcp", "mcp_abduction"]},
-        "axis_offset_mm": {j: th.offset(j) for j in ("cmc", "mcp")},
-        "axes_angle_deg": {j: float(np.degrees(th.axes_angle(j))) for j in ("cmc", "mcp")},
+        "axis_order": {j: [j, f"{j}_abduction"] for j in two},
+        "axis_offset_mm": {j: th.offset(j) for j in two},
+        "axes_angle_deg": {j: float(np.degrees(th.axes_angle(j))) for j in two},
         "segment_lengths": dict(zip(THUMB_SEGMENTS, th.lengths.tolist(), strict=True)),
         "joint_centers": dict(zip(THUMB_JOINTS, th.centre.tolist(), strict=True)),
         "frame": th.frame.tolist(),
