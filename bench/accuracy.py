@@ -93,6 +93,9 @@ CONDITIONS: dict[str, dict] = {
     },
     "STA 2x": {"sta": 2.0},
     "STA 2x without MP ab/adduction": {"sta": 2.0, "abduction": False},
+    # A finger whose MP flexion axis is 15 deg off perpendicular to the bone (about the
+    # dorsal axis), far beyond the drawn obliquity.
+    "MP axis tilted 15 deg": {"mp_axis_tilt_deg": 15.0},
     # An independent truth: MyoHand's fingers (right hand; flexion-first MP).
     "MyoHand world": {"world": "myohand", "hand": "right"},
     "MyoHand world without MP ab/adduction": {
@@ -262,8 +265,10 @@ def run_subject(task: tuple[str, dict, int, bool]) -> dict:
             ]
         err = tip_errors(sim, model, variant)
         two_axis = model.fingers[FINGER].second_axes.get("mp") is not None
+        flexion_first = two_axis and model.fingers[FINGER].order("mp") == "flexion_first"
         out["rows"][label] = {
             "two_axis": two_axis,
+            "flexion_first": flexion_first,
             "deg": deg,
             "mm": mm,
             "tip": err[::FRAME_STRIDE].tolist(),
@@ -325,6 +330,7 @@ def summarise(results: list[dict], conditions: list[str]) -> dict:
                 },
                 "fit_s_per_finger": float(np.mean([v["fit_s"] for v in vals])),
                 "two_axis_mp": int(sum(v.get("two_axis", False) for v in vals)),
+                "flexion_first_mp": int(sum(v.get("flexion_first", False) for v in vals)),
             }
         if FLOOR not in rows:  # the condition did not run (a revision without it)
             continue
@@ -531,7 +537,10 @@ def markdown(summary: dict, meta: dict) -> str:
                 geo = " | ".join(["–"] * 6)
             ref = "" if not r["refused"] else f" ({r['refused']} refused)"
             if r.get("two_axis_mp"):
-                ref += f" [{r['two_axis_mp']}/{r['subjects']} two-axis MP]"
+                ref += f" [{r['two_axis_mp']}/{r['subjects']} two-axis MP"
+                if r.get("flexion_first_mp"):
+                    ref += f", {r['flexion_first_mp']} flexion first"
+                ref += "]"
             lines.append(
                 f"| {cond} | {_label(label)}{ref} | {geo} | {r['tip_mm']['mean']:.2f} | "
                 f"{r['tip_mm']['p95']:.2f} | {r['tip_over_floor']:.2f} |"
