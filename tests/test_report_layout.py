@@ -16,7 +16,7 @@ from matplotlib.transforms import Bbox
 
 from fingerfit.estimate import FitOptions
 from fingerfit.evaluate import run_study
-from fingerfit.evaluate.report import _p, _pct, _ttest
+from fingerfit.evaluate.report_html import _p, _pct, _ttest
 from fingerfit.evaluate.study import figure_builders
 from fingerfit.evaluate.subject import evaluate_subject
 from fingerfit.evaluate.summary import summarize_study
@@ -198,7 +198,7 @@ def test_viewer_json_is_made_one_subject_at_a_time_with_the_same_text() -> None:
     object would write them, with ``<`` and ``>`` escaped inside the script element."""
     import json
 
-    from fingerfit.evaluate.report import _json_script
+    from fingerfit.evaluate.report_html import _json_script
 
     data = {
         "S</script>": {"frame": "é, ü", "tip": [1.5, -0.25, 1e-7], "pad": None},
