@@ -21,6 +21,7 @@ from . import __version__
 from .digits import DIGIT_NAMES, DIGITS, second_axis
 from .errors import FingerfitError
 from .io.atomic import atomic_write
+from .io.hygiene import MAX_COORDINATE_MM
 from .transforms import FloatArray, matrix_from_quat_wxyz, quat_wxyz_from_matrix
 
 FORMAT = "fingerfit.model/1"
@@ -29,8 +30,9 @@ VARIANTS = ("user_axis", "orthogonal")
 # projection of the child sensor origin (Fig. 6) or the swing-twist decomposition of the
 # full relative orientation. Files written before this field existed used "projection".
 ANGLE_METHODS = ("projection", "swing_twist")
-#: Largest coordinate or length accepted from a model file (mm): 1000 km.
-MAX_MODEL_MM = 1e9
+#: Largest coordinate or length accepted from a model file (mm): the readers' limit,
+#: :data:`.io.hygiene.MAX_COORDINATE_MM` (1000 km).
+MAX_MODEL_MM = MAX_COORDINATE_MM
 
 
 @dataclass(frozen=True)
