@@ -5,19 +5,19 @@ whole hand and pinches, and the data of the 3D view."""
 from __future__ import annotations
 
 import html
+import math
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
 
-from ..digits import DIGITS, FINGERS
+from ..digits import DIGIT_NAMES, DIGITS, FINGERS, second_axis
 from .pinch import pinch_labels
 from .report_html import _fmt, _img, _list, _ms, _pct, _table, _ttest
 from .stats import moments_at
 
 if TYPE_CHECKING:
-    from .gather import StudyTables
     from .results import StudyResult
 
 
@@ -175,47 +175,69 @@ def _subjects_table(result: StudyResult) -> str:
     return _table(pd.DataFrame(rows))
 
 
+def _joint_order(joints: list[str]) -> list[str]:
+    """Joint (axis) names proximal to distal, digit by digit (thumb first), each second
+    axis after its joint; names not in :data:`~fingerfit.digits.DIGITS` last, as given."""
+    order = [name for d in DIGIT_NAMES for j in DIGITS[d].joints for name in (j, second_axis(j))]
+    rank = {name: i for i, name in enumerate(dict.fromkeys(order))}
+    return sorted(joints, key=lambda j: rank.get(j, len(rank)))
+
+
+def _split_key(key: str) -> tuple[str, str]:
+    """``recording/variant`` (a key of ``summary.json``) as (recording, variant)."""
+    recording, _, variant = key.rpartition("/")
+    return recording, variant
+
+
 def _truth(result: StudyResult) -> list[str]:
-    sm, fig, tables = result.summary, result.figures, result.tables
-    values = ["axis_error_deg", "centre_to_axis_mm"]
-    axes = tables.moments("truth_axes", ["joint"], values)  # every digit's
+    """Axes and fingertips against ground truth, as ``summary.json`` has them
+    (``truth``: per joint over every digit; the fingers' tips per recording and model)."""
+    sm, fig = result.summary, result.figures
+    tr = sm["truth"]
+    axis_err, centre = tr["axis_error_deg"], tr["centre_to_axis_mm"]
     axes_t = pd.DataFrame(
         [
             {
                 "joint": str(j).upper(),
-                "axis error, mean (deg)": _fmt(moments_at(axes, values[0], j).mean),
-                "axis error, max (deg)": _fmt(moments_at(axes, values[0], j).max),
-                "centre to true axis, mean (mm)": _fmt(moments_at(axes, values[1], j).mean),
-                "centre to true axis, max (mm)": _fmt(moments_at(axes, values[1], j).max),
+                "axis error, mean (deg)": _fmt(axis_err[j]["mean"]),
+                "axis error, max (deg)": _fmt(axis_err[j]["max"]),
+                "centre to true axis, mean (mm)": _fmt(centre[j]["mean"]),
+                "centre to true axis, max (mm)": _fmt(centre[j]["max"]),
             }
-            for j in axes.index
+            for j in _joint_order(list(axis_err))
         ]
     )
-    tips = tables.moments("truth_fingertip", ["recording", "variant"], ["mean_mm", "p95_mm"])
     rank = {"user_axis": "0", "orthogonal": "1"}
+    keys = sorted(
+        tr["fingertip_mm"], key=lambda k: (_split_key(k)[0], rank.get(_split_key(k)[1], k))
+    )
     tips_t = pd.DataFrame(
         [
             {
-                "recording": str(r),
-                "model": str(v).replace("_", "-") + " model",
-                "fingertip error, mean (mm)": _fmt(moments_at(tips, "mean_mm", (r, v)).mean),
-                "95th percentile (mm)": _fmt(moments_at(tips, "p95_mm", (r, v)).mean),
+                "recording": _split_key(k)[0],
+                "model": _split_key(k)[1].replace("_", "-") + " model",
+                "fingertip error, mean (mm)": _fmt(tr["fingertip_mm"][k]["mean"]),
+                "95th percentile (mm)": _fmt(tr["fingertip_mm"][k]["p95"]),
             }
-            for r, v in sorted(tips.index, key=lambda k: (str(k[0]), rank.get(k[1], str(k[1]))))
+            for k in keys
         ]
     )
-    subj = sm["truth"]["subjects"]
+    subj = tr["subjects"]
     parts = [
         "<h2>Against ground truth (simulated sessions)</h2>",
         "<p>What the paper could not measure: the fitted axes against the true ones and the "
         "fingertip against the true fingertip on every recording "
         f"({len(subj)} subject{'s' if len(subj) != 1 else ''} with ground truth: "
-        f"{html.escape(', '.join(subj))}). Fingertip errors: mean over subjects of each "
-        "recording's mean and 95th percentile.</p>",
+        f"{html.escape(', '.join(subj))}). Axes: every digit's. Fingertip errors: the "
+        "fingers' (the thumb's are in its section, every digit's under Whole hand), mean "
+        "over subjects of each recording's mean and 95th percentile.</p>",
     ]
     if "truth" in fig:
         parts.append(_img(fig["truth"], "true fingertip error"))
-    return [*parts, _table(axes_t), _table(tips_t)]
+    parts.append(_table(axes_t))
+    if keys:
+        parts.append(_table(tips_t))
+    return parts
 
 
 _MODEL_NAMES = {"reference": "distal sensor", "user_axis": "user-axis model"}
@@ -306,22 +328,16 @@ def _thumb(result: StudyResult) -> list[str]:
     return parts
 
 
-def _means(tables: StudyTables, name: str, keys: list[str], value: str) -> pd.DataFrame:
-    """Mean of ``value`` per group of ``keys``, read chunk by chunk: one row per group of
-    all keys but the last, one column per level of the last, as
-    ``table.groupby(keys, sort=False)[value].mean().unstack(keys[-1])`` (rows ordered by
-    each key's order of first appearance, the first key first)."""
-    m = tables.moments(name, keys, [value])
-    rows: dict[tuple, dict] = {}
-    for k in m.index:
-        *row, column = (str(x) for x in k)
-        rows.setdefault(tuple(row), {})[column] = moments_at(m, value, k).mean
-    rank = [
-        {x: i for i, x in enumerate(dict.fromkeys(r[j] for r in rows))}
-        for j in range(len(keys) - 1)
-    ]
-    order = sorted(rows, key=lambda r: [rank[j][x] for j, x in enumerate(r)])
-    return pd.DataFrame([{**dict(zip(keys, r, strict=False)), **rows[r]} for r in order])
+def _per_variant(
+    items: list[tuple[tuple[str, ...], float | None]], keys: list[str]
+) -> pd.DataFrame:
+    """One row per group of ``keys`` (in order of first appearance), one column per model
+    variant: ``items`` are ((key values..., variant), value) as ``summary.json`` nests
+    them."""
+    rows: dict[tuple[str, ...], dict[str, float]] = {}
+    for (*row, variant), value in items:
+        rows.setdefault(tuple(row), {})[variant] = math.nan if value is None else value
+    return pd.DataFrame([{**dict(zip(keys, r, strict=True)), **v} for r, v in rows.items()])
 
 
 def _whole_hand(result: StudyResult) -> list[str]:
@@ -332,7 +348,15 @@ def _whole_hand(result: StudyResult) -> list[str]:
         "<p class=note>The 3D view of the whole hand (every digit, its second axes and pad "
         "points) is <a href='#view3d'>below</a>.</p>",
     ]
-    w = _means(tables, "truth_fingertip", ["finger", "recording", "variant"], "mean_mm")
+    truth = sm.get("truth", {})
+    w = _per_variant(
+        [
+            ((f, *_split_key(k)), v["mean"])
+            for f, by_key in truth.get("tip_mm_per_digit", {}).items()
+            for k, v in by_key.items()
+        ],
+        ["finger", "recording"],
+    )
     if set(("user_axis", "orthogonal")) <= set(w.columns):
         parts += [
             "<p>Tip error of every digit against ground truth (mean over subjects of each "
@@ -348,7 +372,15 @@ def _whole_hand(result: StudyResult) -> list[str]:
                 )
             ),
         ]
-    w = _means(tables, "truth_angles", ["finger", "joint", "variant"], "mean_abs_deg")
+    w = _per_variant(
+        [
+            ((f, j, variant), v["mean"])
+            for f, by_joint in truth.get("angle_error_deg", {}).items()
+            for j, by_variant in by_joint.items()
+            for variant, v in by_variant.items()
+        ],
+        ["finger", "joint"],
+    )
     if not w.empty:
         parts += [
             "<p>Every joint angle against the true angle (mean |error| over all recordings "
