@@ -31,7 +31,7 @@ from .hand import (
 
 FORMAT = "fingerfit.model/1"
 #: Largest coordinate or length accepted from a model file (mm): the readers' limit,
-#: :data:`.io.hygiene.MAX_COORDINATE_MM` (1000 km).
+#: :data:`fingerfit.io.hygiene.MAX_COORDINATE_MM` (1000 km).
 MAX_MODEL_MM = MAX_COORDINATE_MM
 
 
