@@ -1,28 +1,18 @@
 """Polhemus Liberty / Patriot output: ASCII and binary streams -> :class:`Recording`.
 
-**ASCII** (as captured from the device or saved by its host software): one CR/LF
-line per station, whitespace-separated: the station number (one or two digits,
-optionally followed by one indicator character, e.g. ``01`` or ``01D``), then the
-items of the output list in order. Numbers glued together by a sign (fixed-width
-fields overflowing, ``12.345-6.789``) are split.
+* :mod:`.records` -- the output list (device codes of the ``O`` command: ``2``/``3``
+  position x, y, z; ``4``/``5`` Euler angles azimuth, elevation, roll in degrees,
+  ``R = Rz(az) Ry(el) Rx(roll)``; ``7`` quaternion **w, x, y, z**; ``8`` timestamp (ms);
+  ``9`` frame count; ``0`` space and ``1`` CR/LF ignored; device default ``2,4,1``,
+  inches) and the raw station records both formats parse into;
+* :mod:`.ascii` -- the ASCII stream (one CR/LF line per station), parsed and written;
+* :mod:`.binary` -- the ``LY``/``PA`` binary records, parsed and written (the live serial
+  driver decodes the wire with the same record layout);
+* :mod:`.frames` -- records grouped into frames on the time grid, as a
+  :class:`Recording` (positions mm, tracker coordinates; rotations sensor -> tracker,
+  ``docs/conventions.md``), and the two file readers.
 
-**Binary**: records of an 8-byte header -- ``'LY'`` (Liberty) or ``'PA'`` (Patriot),
-station byte, command byte, error byte, reserved byte, little-endian ``uint16`` body
-size -- then the items as little-endian ``float32`` (timestamp and frame count as
-``uint32``). The space and CR/LF items carry no data in binary records.
-
-Output-list items (device codes of the ``O`` command): ``2``/``3`` position x, y, z;
-``4``/``5`` Euler angles azimuth, elevation, roll in degrees, ``R = Rz(az) Ry(el)
-Rx(roll)``; ``7`` quaternion **w, x, y, z**; ``8`` timestamp (ms); ``9`` frame count;
-``0`` space and ``1`` CR/LF (ignored). The device default list is ``2,4,1`` and the
-default units inches.
-
-Frames: by the frame-count item when present; otherwise by station cycle (a record
-whose station number is not above the previous one starts a new frame). Time: from
-the timestamp item, else frame count / rate, else cycle index / rate. With a rate,
-frames are placed on the ``1/rate`` grid and missing frames appear as NaN rows.
-Returned positions are millimetres in tracker coordinates and rotation matrices map
-sensor into tracker coordinates (``docs/conventions.md``).
+Every name is importable from here.
 """
 
 from .ascii import ASCII_DECIMALS, format_liberty_ascii, parse_liberty_ascii, write_liberty_ascii
