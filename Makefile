@@ -18,6 +18,9 @@ $(VENV)/.test-extras: $(BIN)/fingerfit
 	$(BIN)/pip install --quiet -e ".[test,stats,c3d,robot,peers]"
 	touch $@
 
+# Test worker processes (pytest-xdist); tests of one module share a worker (its fixtures).
+TEST_WORKERS ?= 2
+
 demo: $(BIN)/fingerfit
 	$(BIN)/fingerfit demo --out $(OUT)
 
@@ -28,7 +31,7 @@ test: $(VENV)/.test-extras
 	  echo "chromium not installed: the report screenshot test will be skipped")
 	$(BIN)/ruff check src tests bench
 	$(BIN)/ruff format --check --quiet src tests bench
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadscope
 
 # CLUSTER_SUBJECTS: the simulated cohort on a local Dask cluster (0: skip; 1000 take 21-40 min here).
 CLUSTER_SUBJECTS ?= 1000

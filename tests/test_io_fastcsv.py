@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from fingerfit.errors import FingerfitError
 from fingerfit.io import fastcsv, liberty, posecsv, widecsv
 from fingerfit.io.fastcsv import NotPlain, write_table
+from fingerfit.io.liberty import ascii as liberty_ascii
 from fingerfit.session import PoseSeries, Recording
 from fingerfit.transforms import quat_wxyz_from_matrix
 
@@ -199,25 +200,25 @@ def test_liberty_ascii_mutations_agree(tmp_path, monkeypatch, line, which, chunk
     lines[i] = mutate(lines[i])
     path = tmp_path / "m.txt"
     path.write_bytes("\r\n".join(lines).encode("utf-8", "surrogateescape"))
-    monkeypatch.setattr(liberty, "_ASCII_CHUNK", chunk)
+    monkeypatch.setattr(liberty_ascii, "_ASCII_CHUNK", chunk)
 
     def read(p):
         return liberty.read_liberty_ascii(p, items="pos,quat,frame", rate_hz=240.0, check=False)
 
-    both(monkeypatch, liberty, "_parse_ascii_fast", read, path)
+    both(monkeypatch, liberty_ascii, "_parse_ascii_fast", read, path)
 
 
 def test_liberty_ascii_fast_path_taken_and_identical(tmp_path, monkeypatch):
     path = tmp_path / "a.txt"
     path.write_text(_liberty_text(tmp_path, 5), newline="")
-    monkeypatch.setattr(liberty, "_ASCII_CHUNK", 100)
+    monkeypatch.setattr(liberty_ascii, "_ASCII_CHUNK", 100)
     recs = liberty._parse_ascii_fast(path, ("position", "quaternion", "frame"))
     assert recs.n_records == 40 and set(recs.indicator.tolist()) == {"", "D"}
 
     def read(p):
         return liberty.read_liberty_ascii(p, items="pos,quat,frame", rate_hz=240.0, check=False)
 
-    res = both(monkeypatch, liberty, "_parse_ascii_fast", read, path)
+    res = both(monkeypatch, liberty_ascii, "_parse_ascii_fast", read, path)
     assert res[0] == "ok"
 
 

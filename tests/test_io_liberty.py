@@ -8,7 +8,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fingerfit.errors import FingerfitError
-from fingerfit.io import liberty
 from fingerfit.io.liberty import (
     LibertyRecords,
     format_liberty_ascii,
@@ -21,6 +20,7 @@ from fingerfit.io.liberty import (
     write_liberty_ascii,
     write_liberty_binary,
 )
+from fingerfit.io.liberty import binary as liberty_binary
 
 MAP2 = {1: "hand", 2: "index.proximal"}
 
@@ -393,7 +393,7 @@ def test_binary_blocks_give_the_whole_file_and_name_the_record(
     size = len(raw) // recs.n_records
     (tmp_path / "r.bin").write_bytes(raw)
     whole = parse_liberty_binary(tmp_path / "r.bin", "2,7,9")
-    monkeypatch.setattr(liberty, "_BINARY_BLOCK_BYTES", records_per_block * size)
+    monkeypatch.setattr(liberty_binary, "_BINARY_BLOCK_BYTES", records_per_block * size)
     for got in (
         parse_liberty_binary(tmp_path / "r.bin", "2,7,9"),
         parse_liberty_binary("r.bin", "2,7,9", data=raw),

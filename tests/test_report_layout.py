@@ -16,7 +16,7 @@ from matplotlib.transforms import Bbox
 
 from fingerfit.estimate import FitOptions
 from fingerfit.evaluate import run_study
-from fingerfit.evaluate.report import _p, _pct, _ttest
+from fingerfit.evaluate.report_html import _p, _pct, _ttest
 from fingerfit.evaluate.study import figure_builders
 from fingerfit.evaluate.subject import evaluate_subject
 from fingerfit.evaluate.summary import summarize_study
@@ -193,12 +193,45 @@ def test_whole_hand_report_has_thumb_pinch_and_3d_view(whole) -> None:
     assert {"thumb", "pinch"} <= set(whole.summary)
 
 
+def test_report_truth_numbers_are_the_summary_s(whole) -> None:
+    """The ground-truth tables of the report show ``summary.json``'s numbers (read, not
+    computed again): every joint's axis error, the fingers' tips, every digit's tip and
+    angle errors."""
+    from fingerfit.evaluate.report_html import _fmt
+
+    html = whole.report.read_text()
+    body = re.sub(r"<script.*?</script>", "", html, flags=re.S)
+    rows = [
+        [re.sub(r"<[^>]+>", "", c) for c in re.findall(r"<td[^>]*>(.*?)</td>", r)]
+        for r in re.findall(r"<tr>(.*?)</tr>", body, flags=re.S)
+    ]
+    tr = whole.summary["truth"]
+    for j, v in tr["axis_error_deg"].items():
+        c = tr["centre_to_axis_mm"][j]
+        want = [j.upper(), _fmt(v["mean"]), _fmt(v["max"]), _fmt(c["mean"]), _fmt(c["max"])]
+        assert want in rows, want
+    assert tr["fingertip_mm"]
+    for key, v in tr["fingertip_mm"].items():
+        rec, _, variant = key.rpartition("/")
+        want = [rec, variant.replace("_", "-") + " model", _fmt(v["mean"]), _fmt(v["p95"])]
+        assert want in rows, want
+    for digit, by_key in tr["tip_mm_per_digit"].items():
+        for rec in {k.rpartition("/")[0] for k in by_key}:
+            u, o = (by_key.get(f"{rec}/{m}", {}).get("mean") for m in ("user_axis", "orthogonal"))
+            assert [digit, rec, _fmt(u), _fmt(o)] in rows, (digit, rec)
+    for digit, by_joint in tr["angle_error_deg"].items():
+        for j, by_variant in by_joint.items():
+            name = j.upper().replace("_ABDUCTION", " ab/adduction")
+            u, o = (by_variant.get(m, {}).get("mean") for m in ("user_axis", "orthogonal"))
+            assert [digit, name, _fmt(u), _fmt(o)] in rows, (digit, j)
+
+
 def test_viewer_json_is_made_one_subject_at_a_time_with_the_same_text() -> None:
     """The 3D view's data are written subject by subject, as ``json.dumps`` of the whole
     object would write them, with ``<`` and ``>`` escaped inside the script element."""
     import json
 
-    from fingerfit.evaluate.report import _json_script
+    from fingerfit.evaluate.report_html import _json_script
 
     data = {
         "S</script>": {"frame": "é, ü", "tip": [1.5, -0.25, 1e-7], "pad": None},

@@ -224,7 +224,7 @@ def test_study_counts_and_reports_the_events_not_evaluated(exact, tmp_path, monk
 
     from fingerfit.cli import app
     from fingerfit.evaluate import StudyResult
-    from fingerfit.evaluate.report import _problems
+    from fingerfit.evaluate.report_sections import _problems
 
     session, model, _truth, res = exact
     fingers = {k: v for k, v in res.model.fingers.items() if k != "index"}

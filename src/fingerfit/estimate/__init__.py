@@ -7,7 +7,8 @@
 * :mod:`.plausibility` -- physical plausibility: units, landmarks, quaternion convention;
 * :mod:`.fit` -- the whole fit of a session into a :class:`~fingerfit.model.DigitModel`;
 * :mod:`.joint` -- one joint between any two tracked segments (:func:`fit_joint`,
-  :func:`hinge_axis`, :func:`two_axis`, :func:`joint_centre`; ``docs/joint.md``).
+  :func:`hinge_axis`, :func:`two_axis`, :func:`joint_centre`; ``docs/joint.md``), with
+  :mod:`.joint_checks`, :mod:`.joint_estimators`, :mod:`.bootstrap`, :mod:`.joint_result`.
 """
 
 from .fit import FitError, FitOptions, fit_session

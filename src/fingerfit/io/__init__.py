@@ -5,7 +5,7 @@
 * :mod:`.atomic` -- all-or-nothing file writes;
 * :mod:`.liberty`, :mod:`.widecsv`, :mod:`.c3d` -- real tracker files (Polhemus
   Liberty/Patriot ASCII and binary, wide CSV logs, C3D markers and 6-DOF channels);
-* :mod:`.hygiene` -- repeated samples, gaps, jumps and unit checks;
+* :mod:`.hygiene` -- repeated samples, gaps, jumps (:mod:`.jumps`) and unit checks;
   :mod:`.rigid` -- segment poses from marker clusters.
 """
 
