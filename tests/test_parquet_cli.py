@@ -127,6 +127,14 @@ def test_convert_to_and_from_parquet(tmp_path: Path) -> None:
     )
     assert "in cm, not mm" in line
     assert not (tmp_path / "x.csv").exists()
+    # `fingerfit joint` reads the same files through the same dispatch: the wide Parquet
+    # file states its units, so no --units is needed and the results are in its cm.
+    res = run(
+        "joint", wide_pq, "--from", "wide-csv", "--rate", "240", "--parent", "2", "--child", "3",
+        "--kind", "hinge", "-o", tmp_path / "j.json",
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "j.json").read_text())["units"] == "cm"
 
 
 def test_refusals_through_the_commands(tmp_path: Path) -> None:

@@ -69,13 +69,6 @@ def parse_map(spec: str | None, *, numeric: bool) -> dict | None:
     return out_map
 
 
-def _check_units_option(units: str | None) -> None:
-    from ..session import UNITS_TO_MM
-
-    if units is not None and units not in UNITS_TO_MM:
-        raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
-
-
 def _write_residuals(path: Path, rec: Recording, fits: dict) -> None:
     import pandas as pd
 
@@ -220,9 +213,19 @@ def convert(
     from ..io.hygiene import check_recording
     from ..io.hygiene import fill_gaps as fill
     from ..io.posecsv import write_pose_csv
+    from ..io.trackerfile import check_format_options, read_tracker_file
     from ..session import UNITS_TO_MM, is_sensor_name
 
-    _check_units_option(units)
+    check_format_options(
+        fmt.value,
+        units,
+        items=items,
+        columns=columns,
+        clusters=clusters,
+        static=static,
+        residuals=residuals,
+        rate=rate,
+    )
     if out_units not in UNITS_TO_MM:
         raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--out-units")
     if not source.is_file():
@@ -233,51 +236,21 @@ def convert(
         check_target(target)
     numeric = fmt is not SourceFormat.c3d
     sensors = parse_map(map_, numeric=numeric)
-    for opt, value, ok in (
-        ("--items", items, fmt in (SourceFormat.liberty, SourceFormat.liberty_binary)),
-        ("--columns", columns, fmt is SourceFormat.wide_csv),
-        ("--clusters", clusters, fmt is SourceFormat.c3d),
-        ("--static", static, fmt is SourceFormat.c3d),
-        ("--residuals", residuals, fmt is SourceFormat.c3d),
-        ("--rate", rate, fmt is not SourceFormat.c3d),
-    ):
-        if value is not None and not ok:
-            raise FingerfitError(f"does not apply to --from {fmt.value}", field=opt)
-
     with progress(quiet) as bar:
         task = bar.add_task(f"reading {source.name}", total=3)
-        fits: dict = {}
-        if fmt in (SourceFormat.liberty, SourceFormat.liberty_binary):
-            from ..io.liberty import read_liberty_ascii, read_liberty_binary
-
-            reader = read_liberty_ascii if fmt is SourceFormat.liberty else read_liberty_binary
-            rec = reader(
-                source,
-                items=items,
-                units=units or "in",
-                rate_hz=rate,
-                sensors=sensors,
-                keep_repeats=keep_repeats,
-                check=False,
-            )
-        elif fmt is SourceFormat.wide_csv:
-            from ..io.widecsv import read_wide_csv
-
-            rec = read_wide_csv(
-                source, units=units, layout=columns, rate_hz=rate, sensors=sensors, check=False
-            )
-        else:
-            from ..io.c3d import parse_clusters, read_c3d_segments
-
-            seg = read_c3d_segments(
-                source,
-                units=units,
-                clusters=None if clusters is None else parse_clusters(clusters),
-                segments=sensors,
-                static=static,
-                check=False,
-            )
-            rec, fits = seg.recording, seg.fits
+        read = read_tracker_file(
+            source,
+            fmt.value,
+            units=units,
+            rate=rate,
+            items=items,
+            columns=columns,
+            clusters=clusters,
+            sensors=sensors,
+            static=static,
+            keep_repeats=keep_repeats,
+        )
+        rec, fits = read.recording, read.fits
 
         bad = [s for s in rec.sensors if not is_sensor_name(s)]
         if bad:

@@ -46,7 +46,8 @@ def read_any(
     columns: str | None,
     clusters: str | None,
 ) -> tuple[Recording, str]:
-    """Read ``source`` in ``fmt`` (positions mm, rotations sensor -> tracker).
+    """Read ``source`` in ``fmt`` (positions mm, rotations sensor -> tracker) through
+    :func:`fingerfit.io.trackerfile.read_tracker_file`, as ``fingerfit convert`` does.
 
     Sensors keep the file's names: pose CSV names, Liberty station numbers (``1``, ``2``,
     ...), wide-CSV sensor numbers, C3D cluster or ROTATION channel names.
@@ -56,53 +57,18 @@ def read_any(
     recording : Recording
     declared : str
         The units the file's positions were read in: ``units``, else the format's default
-        (pose CSV mm, Liberty inches) or the C3D file's ``POINT:UNITS``.
+        (pose CSV mm, Liberty inches), the wide Parquet file's or the C3D file's
+        ``POINT:UNITS``.
     """
-    from ..session import UNITS_TO_MM
+    from ..io.trackerfile import check_format_options, read_tracker_file
 
-    if units is not None and units not in UNITS_TO_MM:
-        raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
-    for opt, value, ok in (
-        ("--items", items, fmt in (JointSource.liberty, JointSource.liberty_binary)),
-        ("--columns", columns, fmt is JointSource.wide_csv),
-        ("--clusters", clusters, fmt is JointSource.c3d),
-        ("--rate", rate, fmt is not JointSource.c3d),
-    ):
-        if value is not None and not ok:
-            raise FingerfitError(f"does not apply to --from {fmt.value}", field=opt)
-    if fmt is JointSource.pose_csv:
-        from ..io.posecsv import read_pose_csv
-
-        return read_pose_csv(source, units=units or "mm", rate_hz=rate), units or "mm"
-    if fmt in (JointSource.liberty, JointSource.liberty_binary):
-        from ..io.liberty import read_liberty_ascii, read_liberty_binary
-
-        reader = read_liberty_ascii if fmt is JointSource.liberty else read_liberty_binary
-        rec = reader(source, items=items, units=units or "in", rate_hz=rate, check=False)
-        return rec, units or "in"
-    if fmt is JointSource.wide_csv:
-        from ..io.widecsv import read_wide_csv
-
-        rec = read_wide_csv(source, units=units, layout=columns, rate_hz=rate, check=False)
-        assert units is not None  # the reader refuses a wide CSV without units
-        return rec, units
-    from ..io.c3d import parse_clusters, read_c3d_segments
-
-    seg = read_c3d_segments(
-        source,
-        units=units,
-        clusters=None if clusters is None else parse_clusters(clusters),
-        check=False,
+    check_format_options(
+        fmt.value, units, items=items, columns=columns, clusters=clusters, rate=rate
     )
-    return seg.recording, units or _c3d_units(source)
-
-
-def _c3d_units(source: Path) -> str:
-    """``POINT:UNITS`` of a C3D file that :func:`~fingerfit.io.c3d.read_c3d_segments` read."""
-    from ..io.c3d import _ezc3d, _param
-
-    value = _param(_ezc3d().c3d(str(source)), "POINT", "UNITS", [""])
-    return str(value[0] if len(value) else "").strip()
+    read = read_tracker_file(
+        source, fmt.value, units=units, rate=rate, items=items, columns=columns, clusters=clusters
+    )
+    return read.recording, read.declared_units
 
 
 def _rate(rec: Recording) -> float | None:

@@ -383,7 +383,7 @@ def read_wide_csv(
     path = Path(path)
     parquet = is_parquet(path)
     if parquet:
-        units = _parquet_units(path, units)
+        units = wide_parquet_units(path, units)
     if units is None:
         raise FingerfitError(
             "the wide CSV does not state its units: give them (--units mm|cm|m|in)",
@@ -418,7 +418,7 @@ def read_wide_csv(
     return _assemble(path, vals, tcol, stations, names, notes, lay, units, rate_hz, check, 2)
 
 
-def _parquet_units(path: Path, units: str | None) -> str:
+def wide_parquet_units(path: Path, units: str | None) -> str:
     """The units a wide Parquet file states (``fingerfit.units``); ``units``, when given,
     must agree."""
     from .parquet import WIDE, check_meta, parquet_schema

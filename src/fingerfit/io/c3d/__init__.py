@@ -19,7 +19,13 @@ name is importable from here.
 """
 
 from .header import C3DHeader, read_c3d_header
-from .markers import C3DMarkers, find_clusters, parse_clusters, read_c3d_markers
+from .markers import (
+    C3DMarkers,
+    c3d_point_units,
+    find_clusters,
+    parse_clusters,
+    read_c3d_markers,
+)
 from .markers import _ezc3d as _ezc3d
 from .markers import _param as _param
 from .segments import (
@@ -36,6 +42,7 @@ __all__ = [
     "C3DHeader",
     "C3DMarkers",
     "C3DSegments",
+    "c3d_point_units",
     "find_clusters",
     "parse_clusters",
     "read_c3d",

@@ -70,6 +70,12 @@ def _param(c, group: str, name: str, default=None):
         return default
 
 
+def c3d_point_units(path: Path) -> str:
+    """The file's ``POINT:UNITS`` (e.g. ``mm``; empty when the file states none)."""
+    value = _param(_ezc3d().c3d(str(path)), "POINT", "UNITS", [""])
+    return str(value[0] if len(value) else "").strip()
+
+
 def _open(path: Path):
     ezc3d = _ezc3d()
     if not path.is_file():
