@@ -154,7 +154,7 @@ def test_gaps_stay_visible_and_are_counted(session_dir, tmp_path) -> None:
     assert np.isnan(rec.poses["hand"].position[10]).all()
     assert rec.time[10] == pytest.approx(10 / 240)
     assert np.isnan(rec.poses[blank[1]].position[20]).all()
-    assert "1 frames missing for every sensor (kept as NaN)" in rec.notes
+    assert "1 frames missing for every sensor (kept as NaN rows)" in rec.notes
     assert "1 samples with empty fields treated as missing" in rec.notes
 
 

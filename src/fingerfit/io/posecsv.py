@@ -20,7 +20,13 @@ from ..errors import FingerfitError, shown
 from ..session import PoseSeries, Recording, is_sensor_name
 from ..transforms import quat_wxyz_from_matrix
 from .fastcsv import put_quat_rows, put_rows, put_scaled_rows, rows_where
-from .hygiene import check_grid_size, implausible_message, implausible_rows, missing_note
+from .hygiene import (
+    frames_missing_note,
+    implausible_message,
+    implausible_rows,
+    missing_note,
+    place_on_grid,
+)
 
 HEADER = ("time", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz")
 _NUMERIC = ("time", "x", "y", "z", "qw", "qx", "qy", "qz")
@@ -438,25 +444,9 @@ def _assemble(
     frame_times = time[row_of_frame]
     grid = None  # frame -> grid index, when frames go on the sampling grid
     if rate_hz is not None and frame_times.size > 1:
-        t0 = frame_times[0]
         frame_lines = row_of_frame + first_line if lines is None else lines[row_of_frame]
-        check_grid_size((frame_times - t0) * rate_hz, frame_lines, path)
-        idx = np.rint((frame_times - t0) * rate_hz).astype(np.int64)
-        off = np.abs(frame_times - (t0 + idx / rate_hz))
-        if np.any(off > 0.25 / rate_hz) or np.any(np.diff(idx) == 0):
-            i = int(np.flatnonzero((off > 0.25 / rate_hz) | np.r_[False, np.diff(idx) == 0])[0])
-            raise FingerfitError(
-                f"time {frame_times[i]:.6f} s is not on the {rate_hz:g} Hz sampling grid",
-                path=path,
-                line=int(frame_lines[i]),
-                field="time",
-            )
-        n = int(idx[-1]) + 1
-        full_time = t0 + np.arange(n) / rate_hz
-        full_time[idx] = frame_times
-        if n > frame_times.size:
-            notes.append(f"{n - frame_times.size} frames missing for every sensor (kept as NaN)")
-        grid = idx
+        full_time, grid = place_on_grid(frame_times, rate_hz, frame_lines, path)
+        notes += frames_missing_note(full_time.size - frame_times.size)
         frame_times = full_time
     n = frame_times.size
     del row_of_frame
