@@ -15,11 +15,8 @@ import fingerfit
 SRC = Path(fingerfit.__file__).resolve().parent.parent
 
 #: Cycles known and accepted, each as the sorted modules of one strongly connected
-#: component, with the reason. ``simulate.myohand`` names ``SimConfig`` of
-#: ``simulate.study`` in a type annotation only (``check_config``).
-KNOWN_CYCLES: set[tuple[str, ...]] = {
-    ("fingerfit.simulate.myohand", "fingerfit.simulate.study"),
-}
+#: component, with the reason (none today).
+KNOWN_CYCLES: set[tuple[str, ...]] = set()
 
 
 def module_names(src: Path, package: str) -> dict[str, tuple[Path, bool]]:

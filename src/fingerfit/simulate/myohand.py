@@ -42,7 +42,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -52,9 +52,6 @@ from ..extras import require
 from ..transforms import FloatArray, unit
 from .anatomy import DORSAL_DEPTH, FingerAnatomy
 from .thumb import THUMB_DORSAL_DEPTH, ThumbAnatomy, sample_pad
-
-if TYPE_CHECKING:
-    from .study import SimConfig
 
 #: fingerfit's MP axis order of a MyoHand finger: flexion proximal.
 ORDER = ("mp", "mp_abduction")
@@ -338,15 +335,16 @@ class MyoHandSubject:
         }
 
 
-def check_config(config: SimConfig) -> None:
-    """Refuse, in one line naming the option, what the MyoHand world cannot simulate.
+def check_config(hand: str) -> None:
+    """Refuse, in one line naming the option, what the MyoHand world cannot simulate
+    (``hand``: the simulated hand, ``left`` or ``right``).
 
     Raises
     ------
     FingerfitError
         A left hand, or ``myo-sim``/``mujoco`` missing.
     """
-    if config.hand != "right":
+    if hand != "right":
         raise FingerfitError("the MyoHand world is a right hand: use --hand right", field="--hand")
     _myo_sim()
     _mujoco()

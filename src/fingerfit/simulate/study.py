@@ -348,7 +348,7 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
         finger touched).
     """
     if config.world == "myohand":
-        mh.check_config(config)
+        mh.check_config(config.hand)
     rng = np.random.default_rng(seed)
     hand_rot, hand_origin = _hand_pose(rng)
     scale = rng.normal(1.0, 0.06)
