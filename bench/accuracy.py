@@ -58,6 +58,10 @@ try:
 except ImportError:  # a revision before the held-out choice (--before)
     HINGE = TWO_AXIS = ""
     choose_joint_model = None
+try:  # the module whose estimators call the choice (fit.py in older revisions)
+    import fingerfit.estimate.methods as CHOICE_USER
+except ImportError:
+    CHOICE_USER = fit_module
 from fingerfit.estimate.fit import DEFAULT_METHOD, joint_data, reference_poses
 from fingerfit.estimate.sagittal import intersect, sagittal_plane
 from fingerfit.kinematics import carry_by_hand, chain_points, compute_kinematics
@@ -238,7 +242,7 @@ def run_subject(task: tuple[str, dict, int, bool]) -> dict:
     for label, method, angles, variant in rows:
         t0 = time.perf_counter()
         if choose_joint_model is not None:
-            fit_module.choose_joint_model = (
+            CHOICE_USER.choose_joint_model = (
                 _always_two_axes if label.endswith("always two axes") else choose_joint_model
             )
         try:

@@ -32,7 +32,7 @@ directions by one Gauss-Newton step from the fit to every cycle without the fold
 (the held-out influence of the fold); the axis points exactly (linear least squares with
 the fold's directions: ``c_a`` perpendicular to ``a``, and ``c_b`` perpendicular to ``b``).
 A flexion-first joint is fitted, and its directions refitted, as the ab/adduction-first
-form seen from the child (:meth:`fingerfit.estimate.fit.JointData.reversed`) and brought
+form seen from the child (:meth:`fingerfit.estimate.methods.JointData.reversed`) and brought
 back to the parent frame, so that every candidate predicts the same thing.
 
 The **order** is chosen first, by the held-out **orientations**: the two orders have the
