@@ -282,6 +282,9 @@ class Summary:
         Received frames with a missing sensor (values held, ``valid`` 0).
     silences : int
         Times the source fell silent for ``silence`` s (the watchdog fired).
+    outages, reconnects : int
+        Times a live source was lost (serial port failed, LSL stream gone) and came back
+        (the source's ``stats``, copied when the stream ends).
     latency : list of ndarray
         Robot lane, per sent frame: arrival to the moment every live output had it (s);
         :meth:`latency_ms` joins them.
@@ -314,6 +317,8 @@ class Summary:
     lost: int = 0
     invalid: int = 0
     silences: int = 0
+    outages: int = 0
+    reconnects: int = 0
     latency: list = field(default_factory=list)
     ages: list = field(default_factory=list)
     compute: list = field(default_factory=list)
@@ -703,6 +708,12 @@ class Streamer:
         ``retargeter.setup.hold``, which DDS then also gets; under ``hold`` DDS, whose
         ``JointState`` has no validity field, gets nothing)."""
         self.summary.silences += 1
+        self.invalidate(now)
+
+    def invalidate(self, now: float) -> None:
+        """What :meth:`silence` sends (``valid`` 0, the robot's policy), without counting
+        a silence: also sent when the source ends with an error before the watchdog
+        fired, so the robot's last command says the data stopped."""
         if not self.live or not self._last:
             return
         held = {k: v[None, :] for k, v in self._last.items()}
@@ -833,7 +844,8 @@ def run(
         :meth:`Streamer.silence` and one ``warn`` line; again after frames come back
         and stop again. None: no watchdog.
     warn : callable, optional
-        Called with the watchdog's one-line warning (default: printed on stderr).
+        Called with the watchdog's one-line warning, and with a live source's outage
+        warning (``source.warn`` is set to it; default: printed on stderr).
 
     Returns
     -------
@@ -845,6 +857,13 @@ def run(
     line = StatusLine(status)
     stop = threading.Event()
     say = warn or (lambda text: print(f"warning: {text}", file=sys.stderr, flush=True))
+    if hasattr(source, "warn"):  # a live source's outage warning, past the status line
+
+        def source_warns(text: str) -> None:
+            line.clear()
+            say(text)
+
+        source.warn = source_warns
     # Installed until the outputs are closed: a Ctrl-C while the data lane writes its
     # backlog lets it finish (the files complete).
     with _ctrl_c_sets(stop):
@@ -865,6 +884,8 @@ def _run(
     """:func:`run`'s loop, with Ctrl-C setting ``stop``."""
     s = streamer.summary
     ok = True
+    t0 = last = None
+    silent = False
     # The data lane's thread gives the GIL back every SWITCH_INTERVAL (Python's default
     # is 5 ms, which the robot lane would wait on).
     interval = sys.getswitchinterval()
@@ -881,8 +902,6 @@ def _run(
                         f"no consumer within {wait:g} s for every output", field="--wait"
                     )
                 time.sleep(0.01)
-        t0 = last = None
-        silent = False
         for block in source.blocks():
             if block is not None and block.recording.n_frames:
                 if t0 is None:
@@ -911,11 +930,17 @@ def _run(
         s.interrupted = True
     except FingerfitError:
         ok = s.received > 0  # a device lost mid-stream: keep what was streamed
+        if ok and not silent:  # the robot's last command: valid 0, its policy
+            with contextlib.suppress(Exception):
+                streamer.invalidate(time.monotonic())
         raise
     except BaseException:
         ok = False
         raise
     finally:
+        stats = getattr(source, "stats", None)
+        s.outages = getattr(stats, "outages", 0)
+        s.reconnects = getattr(stats, "reconnects", 0)
         line.update(s, force=True)  # the final figures, at least once
         line.clear()
         source.close()
