@@ -155,6 +155,15 @@ def stream(
             f"{DEFAULT_RECONNECT_S:g}; 0: end at once).",
         ),
     ] = None,
+    realtime: Annotated[
+        bool,
+        typer.Option(
+            "--realtime",
+            help="Ask the OS for a real-time class for the robot lane where permitted "
+            "(SCHED_FIFO 50, memory locked, its own CPU); one line says what was granted. "
+            "Never fails the run.",
+        ),
+    ] = False,
     quiet: Annotated[
         bool,
         typer.Option(
@@ -349,6 +358,8 @@ def stream(
             duration=duration,
             silence=silence_s,
             warn=lambda text: notice("warning", text),
+            realtime=realtime,
+            note=lambda text: notice("realtime", text),
         )
     except FingerfitError as exc:
         if streamer.summary.frames:

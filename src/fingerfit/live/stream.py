@@ -433,6 +433,11 @@ class DataLane:
         self._thread = threading.Thread(target=self._run, name="fingerfit-data-lane", daemon=True)
         self._thread.start()
 
+    @property
+    def thread(self) -> threading.Thread:
+        """The lane's thread (``--realtime`` keeps it off the robot lane's CPU)."""
+        return self._thread
+
     def put(self, block: Block) -> None:
         """Queue a block (cheap: the thread computes it)."""
         with self._lock:
@@ -823,6 +828,8 @@ def run(
     duration: float | None = None,
     silence: float | None = DEFAULT_SILENCE_MS / 1e3,
     warn: Callable[[str], None] | None = None,
+    realtime: bool = False,
+    note: Callable[[str], None] | None = None,
 ) -> Summary:
     """Stream until the source ends, ``duration`` passes, or Ctrl-C.
 
@@ -846,6 +853,13 @@ def run(
     warn : callable, optional
         Called with the watchdog's one-line warning, and with a live source's outage
         warning (``source.warn`` is set to it; default: printed on stderr).
+    realtime : bool
+        Ask for a real-time class for the loop's thread (the robot lane) once streaming
+        starts (after ``wait``): SCHED_FIFO, memory locked, CPU affinity
+        (:class:`~fingerfit.live.realtime.Realtime`; restored at the end). What was
+        granted goes to ``note`` in one line; nothing refused stops the stream.
+    note : callable, optional
+        Called with the ``--realtime`` line (default: ``realtime: ...`` on stderr).
 
     Returns
     -------
@@ -866,8 +880,9 @@ def run(
         source.warn = source_warns
     # Installed until the outputs are closed: a Ctrl-C while the data lane writes its
     # backlog lets it finish (the files complete).
+    tell = note or (lambda text: print(f"realtime: {text}", file=sys.stderr, flush=True))
     with _ctrl_c_sets(stop):
-        _run(source, streamer, line, stop, wait, duration, silence, say)
+        _run(source, streamer, line, stop, wait, duration, silence, say, tell if realtime else None)
     return streamer.summary
 
 
@@ -880,12 +895,15 @@ def _run(
     duration: float | None,
     silence: float | None,
     say: Callable[[str], None],
+    realtime: Callable[[str], None] | None = None,
 ) -> None:
-    """:func:`run`'s loop, with Ctrl-C setting ``stop``."""
+    """:func:`run`'s loop, with Ctrl-C setting ``stop``; ``realtime``: ask for a real-time
+    class and tell it what was granted."""
     s = streamer.summary
     ok = True
     t0 = last = None
     silent = False
+    rt = contextlib.ExitStack()  # the real-time class, until the outputs are closed
     # The data lane's thread gives the GIL back every SWITCH_INTERVAL (Python's default
     # is 5 ms, which the robot lane would wait on).
     interval = sys.getswitchinterval()
@@ -902,6 +920,12 @@ def _run(
                         f"no consumer within {wait:g} s for every output", field="--wait"
                     )
                 time.sleep(0.01)
+        if realtime is not None:
+            from .realtime import Realtime
+
+            others = [streamer.data.thread] if streamer.data is not None else []
+            lane = "robot lane" if streamer.live else "stream loop"
+            realtime(rt.enter_context(Realtime(others=others, lane=lane)).line())
         for block in source.blocks():
             if block is not None and block.recording.n_frames:
                 if t0 is None:
@@ -948,3 +972,4 @@ def _run(
             streamer.close(ok)
         finally:
             sys.setswitchinterval(interval)
+            rt.close()
