@@ -152,3 +152,33 @@ def test_bad_lane_options_are_refused_in_one_line(tmp_path: Path, args, field, t
     res = cli("stream", model_path, "--source", f"replay:{csv}", "--record", out, *args)
     refused(res, field, text)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("tips_frame", ["tracker", "hand"])
+def test_robot_lane_frame_values_equal_block_values(tips_frame: str) -> None:
+    """The robot lane's buffers (allocated once) hold, frame by frame, what the data
+    lane's block_values gives; the validity is the sensors' own."""
+    from fingerfit.live.stream import FrameValues, block_values, frames_valid, model_sensors
+
+    model = load_model(fitted()[1])
+    rec = short_recording(60, ((5, "index.middle"), (9, "hand"), (20, "index.distal")))
+    sensors = model_sensors(model)
+    kin = compute_kinematics(model, rec, ("user_axis",))
+    ch = channels_of(model, kin)
+    want = block_values(kin, ch, rec, sensors, tips_frame)
+    valid = np.ones(rec.n_frames, dtype=bool)
+    for s in sensors:
+        valid &= rec.poses[s].valid
+    np.testing.assert_array_equal(frames_valid(rec, sensors), valid)
+    np.testing.assert_array_equal(want.valid, valid.astype(float))
+    frame = FrameValues(ch, tips_frame)
+    for i in range(rec.n_frames):
+        one = rec.slice(slice(i, i + 1))
+        robot = np.array([[float(i), np.nan]])
+        got = frame.values(compute_kinematics(model, one, ("user_axis",)), one, robot)
+        for key in ("angles", "tips", "joints"):
+            np.testing.assert_allclose(
+                got[key][0], getattr(want, key)[i], rtol=0, atol=1e-9, equal_nan=True
+            )
+        np.testing.assert_array_equal(got["robot"], robot)
+        assert got["robot"] is not robot  # a copy: the retargeter's array is its own
