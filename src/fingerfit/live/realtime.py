@@ -116,9 +116,10 @@ class Realtime:
         self._affinity: dict[int, set[int]] = {}
 
     def __enter__(self) -> Realtime:
-        self._fifo()
+        # The lock first: it faults every page in, which is no work for a FIFO thread.
         self.locked = mlockall()
         self._pin()
+        self._fifo()
         return self
 
     def _fifo(self) -> None:
