@@ -10,6 +10,11 @@ same object the file readers return) with each frame's arrival time. Source spec
 * ``lsl:NAME`` -- an LSL stream of type ``MoCap`` whose channels are labelled
   ``<sensor>.x|y|z`` (position, unit in the channel metadata) and
   ``<sensor>.qw|qx|qy|qz`` (quaternion, scalar first).
+
+The live sources survive an outage: a serial port that fails is reopened, an LSL stream
+that goes away is looked for again, for up to ``reconnect`` s (``--reconnect``), with one
+warning per outage; meanwhile they yield None, and the stream's watchdog marks the
+silence.
 """
 
 from __future__ import annotations
@@ -83,10 +88,6 @@ class SourceStats:
     notes: list[str] = field(default_factory=list)
 
 
-def _suppress() -> contextlib.AbstractContextManager:
-    return contextlib.suppress(Exception)
-
-
 def _stderr_warning(text: str) -> None:
     print(f"warning: {text}", file=sys.stderr, flush=True)
 
@@ -106,7 +107,23 @@ def _retry(attempt: Callable[[], bool], deadline: float) -> Iterator[None]:
     :data:`RECONNECT_BACKOFF_S` [1]); None is yielded every :data:`POLL_S` s meanwhile,
     so the loop keeps checking its watchdog, ``--duration`` and Ctrl-C.
 
-    Returns (as the generator's value) whether an attempt succeeded.
+    Parameters
+    ----------
+    attempt : callable
+        One try (reopen the port, find the stream): True when it worked.
+    deadline : float
+        ``time.monotonic()`` s after which no attempt starts.
+
+    Yields
+    ------
+    None
+        While waiting for the next attempt.
+
+    Returns
+    -------
+    bool
+        The generator's value (``back = yield from _retry(...)``): whether an attempt
+        worked.
     """
     delay, cap = RECONNECT_BACKOFF_S
     while True:
@@ -372,7 +389,7 @@ class LibertySource:
         FingerfitError
             Not back in time (or ``reconnect`` is 0): ``device disconnected (...)``.
         """
-        with _suppress():
+        with contextlib.suppress(Exception):
             self.serial.close()
         what = f"device disconnected ({reason})" if reason else "device disconnected"
         if self.reconnect <= 0:
@@ -697,7 +714,7 @@ class LslSource:
             pos, quat, scale = mocap_layout(labels, units, self.sensors, self.stream)
             inlet.open_stream(timeout=timeout)
         except BaseException:
-            with _suppress():
+            with contextlib.suppress(Exception):
                 inlet.close_stream()
             raise
         self.inlet, self.pos, self.quat, self.scale = inlet, pos, quat, scale
@@ -712,7 +729,7 @@ class LslSource:
             Not back in time (or ``reconnect`` is 0); the stream that came back does not
             check (:meth:`_connect`).
         """
-        with _suppress():
+        with contextlib.suppress(Exception):
             self.inlet.close_stream()
         if self.reconnect <= 0:
             raise FingerfitError("stream lost (its outlet was closed)", path=self.name)
@@ -788,7 +805,7 @@ class LslSource:
 
     def close(self) -> None:
         """Close the inlet."""
-        with _suppress():
+        with contextlib.suppress(Exception):
             self.inlet.close_stream()
 
 
