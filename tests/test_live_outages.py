@@ -296,3 +296,77 @@ def test_summary_line_counts_outages() -> None:
     s = Summary(received=240, recorded=240, silences=2, outages=2, reconnects=1)
     line = summary_line(s, live=False, files=True, max_age_ms=20.0)
     assert "(0 lost, 0 with a missing sensor held, 2 silences, 2 outages, 1 reconnected)" in line
+
+
+def test_cli_lsl_source_lost_is_one_line_and_the_robot_gets_valid_0(tmp_path) -> None:
+    """`fingerfit stream --source lsl:NAME --lsl` in a process of its own: the source's
+    outlet goes and does not come back. A consumer of the stream's own outlet sees the
+    frames with valid 1, then valid 0; the process ends with one error line."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from fingerfit.kinematics import compute_kinematics, kinematics_table
+
+    from ._live import resolve_prefix
+
+    pylsl = pytest.importorskip("pylsl")
+    _, model_path = fitted()
+    model = load_model(model_path)
+    sensors = model_sensors(model)
+    rec = short_recording(60)
+    want = kinematics_table(compute_kinematics(model, rec), units=model.session_units)
+    name, prefix = f"ffclisrc{os.getpid()}", f"ffcliout{os.getpid()}"
+    outlet = pylsl.StreamOutlet(_mocap(name, sensors))
+    out = tmp_path / "live.csv"
+    fingerfit = str(Path(sys.executable).with_name("fingerfit"))
+    proc = subprocess.Popen(
+        [fingerfit, "stream", str(model_path), "--source", f"lsl:{name}", "--lsl",
+         "--lsl-name", prefix, "--record", str(out), "--reconnect", "1", "-q"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    got: list = []
+    try:
+        assert outlet.wait_for_consumers(30), "the stream did not connect"
+        info = resolve_prefix(prefix, 2)[f"{prefix}-angles"]
+        inlet = pylsl.StreamInlet(info)
+        inlet.open_stream(timeout=20)
+        labels = [c for c in _labels(inlet) if c != "valid"]  # the outlet's order
+        last = want[labels].iloc[-1].to_numpy(float)
+        outlet.push_chunk(_samples(rec, sensors))
+        t_end = time.monotonic() + 30
+        while not got or not np.allclose(got[-1][: len(labels)], last, atol=1e-6):
+            assert time.monotonic() < t_end, "the newest frame did not come through"
+            chunk, _ = inlet.pull_chunk(timeout=0.2)
+            got += chunk
+        del outlet  # the source goes away for good
+        _, err = proc.communicate(timeout=60)
+        while True:  # what the stream sent since (its outlets linger 0.25 s)
+            chunk, _ = inlet.pull_chunk(timeout=1.0)
+            if not chunk:
+                break
+            got += chunk
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 2, err
+    assert "Traceback" not in err
+    errors = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert errors == [
+        f"error: lsl:{name}: stream lost (its outlet was closed); not back within 1 s "
+        f"(after 60 frames; kept {out})"
+    ]
+    assert err.count(f"warning: lsl:{name}: stream lost") == 1
+    valid = np.array([row[-1] for row in got])
+    assert valid[0] == 1 and valid[-1] == 0 and (valid == 0).sum() == 1
+    assert len(pd.read_csv(out)) == 60
+
+
+def _labels(inlet) -> list[str]:
+    ch = inlet.info(timeout=20).desc().child("channels").child("channel")
+    out = []
+    while not ch.empty():
+        out.append(ch.child_value("label"))
+        ch = ch.next_sibling()
+    return out
