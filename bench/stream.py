@@ -28,6 +28,13 @@ keep the figures). Two parts, in one run:
    consumers receive (arrival at fingerfit -> receipt) against ``--max-age``, the
    stream's own counts (sent, skipped, stale, recorded) and age at send, and whether
    the record holds every frame.
+4. **Robot lane per frame, before and after** (``--lane-before REV``, alone): the robot
+   lane's own work per one-frame block -- :meth:`fingerfit.live.stream.Streamer.process`:
+   the frame's validity, kinematics, the streamed values, the hold, the pushes to three
+   real LSL outlets and a DDS writer with no consumer -- p50 / p99 / mean over 3000
+   frames, for the one-finger and whole-hand models, measured in child processes that
+   import fingerfit from this tree and from ``git archive REV``, alternately
+   (``--lane-rounds`` rounds, the order swapped each round) so both see the same load.
 """
 
 from __future__ import annotations
@@ -262,6 +269,90 @@ def print_overload(speed: float, e2e: dict) -> None:
     )
 
 
+def lane_per_frame(model_path: Path, rec_path: Path, n: int = 3000) -> dict[str, float]:
+    """Microseconds of the robot lane's work per one-frame block (``Streamer.process``
+    with an LSL output and a DDS writer, neither with a consumer), p50 / p99 / mean,
+    after 200 frames of warm-up; the fingerfit imported is whichever ``PYTHONPATH``
+    names."""
+    from fingerfit.io import read_pose_csv
+    from fingerfit.live.outputs import LslOutput, Ros2Output
+    from fingerfit.live.sources import Block
+    from fingerfit.live.stream import Streamer, empty_recording
+    from fingerfit.model import load_model
+
+    model = load_model(model_path)
+    rec = read_pose_csv(rec_path)
+    sensors = model_sensors(model)
+    ch = channels_of(model, compute_kinematics(model, empty_recording(sensors), ("user_axis",)))
+    tag = f"lane{os.getpid()}"
+    lsl = LslOutput(tag, ch.angle_labels, ch.tip_labels, 240.0)
+    ros = Ros2Output(f"/{tag}", ch.joint_names)
+    streamer = Streamer(model, lsl=lsl, ros2=ros, channels=ch, max_age=60.0)
+    blocks = [Block(rec.slice(slice(i, i + 1)), np.zeros(1)) for i in range(rec.n_frames)]
+    times = []
+    for i in range(n + 200):
+        block = blocks[i % len(blocks)]
+        block.arrival[0] = time.monotonic()
+        t = time.perf_counter()
+        streamer.process(block)
+        times.append(time.perf_counter() - t)
+    streamer.close()
+    us = 1e6 * np.array(times[200:])
+    return {
+        "p50_us": float(np.percentile(us, 50)),
+        "p99_us": float(np.percentile(us, 99)),
+        "mean_us": float(us.mean()),
+        "sent": streamer.summary.sent,
+    }
+
+
+def lane_before_after(rev: str, rounds: int) -> dict:
+    """:func:`lane_per_frame` of this tree and of revision ``rev``, in child processes,
+    alternately; medians over the rounds and the ratio before / after."""
+    root = Path(__file__).resolve().parents[1]
+    out: dict = {"before": rev, "rounds": rounds, "load_average_at_start": os.getloadavg()}
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "before"
+        old.mkdir()
+        archive = subprocess.run(
+            ["git", "-C", str(root), "archive", rev, "src"], check=True, capture_output=True
+        ).stdout
+        subprocess.run(["tar", "-x", "-C", str(old)], input=archive, check=True)
+        trees = {"before": str(old / "src"), "after": str(root / "src")}
+        for key in ("index", "hand5"):
+            sim = subject_for(("index",) if key == "index" else HAND)
+            model_path = save_model(fit_session(sim.session), Path(tmp) / f"{key}.json")
+            rec_path = write_pose_csv(Path(tmp) / f"{key}.csv", sim.session.test[0])
+            runs: dict[str, list] = {"before": [], "after": []}
+            for r in range(rounds):
+                for label in ("before", "after") if r % 2 == 0 else ("after", "before"):
+                    env = os.environ | {"PYTHONPATH": trees[label]}
+                    res = subprocess.run(
+                        [sys.executable, __file__, "--lane-run", str(model_path), str(rec_path)],
+                        env=env, capture_output=True, text=True, check=True,
+                    )  # fmt: skip
+                    runs[label].append(json.loads(res.stdout.strip().splitlines()[-1]))
+            row = {}
+            for label, xs in runs.items():
+                row[label] = {k: float(np.median([x[k] for x in xs])) for k in xs[0]}
+                row[label + "_runs"] = xs
+            row["ratio_p50"] = row["before"]["p50_us"] / row["after"]["p50_us"]
+            row["ratio_p99"] = row["before"]["p99_us"] / row["after"]["p99_us"]
+            row["ratio_mean"] = row["before"]["mean_us"] / row["after"]["mean_us"]
+            out[key] = row
+            b, a = row["before"], row["after"]
+            print(
+                f"{key}: robot lane per frame, before ({rev}) p50 {b['p50_us']:.0f} us, p99 "
+                f"{b['p99_us']:.0f} us, mean {b['mean_us']:.0f} us; after p50 {a['p50_us']:.0f}"
+                f" us, p99 {a['p99_us']:.0f} us, mean {a['mean_us']:.0f} us; before/after "
+                f"p50 {row['ratio_p50']:.2f}x, p99 {row['ratio_p99']:.2f}x, mean "
+                f"{row['ratio_mean']:.2f}x",
+                flush=True,
+            )
+    out["load_average_at_end"] = os.getloadavg()
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="replay length (s)")
@@ -277,10 +368,25 @@ def main() -> None:
         default="4",
         help="replay speeds of the overload case (whole hand, --retarget shadow); '' for none",
     )
+    ap.add_argument(
+        "--lane-before",
+        metavar="REV",
+        help="only part 4: the robot lane per frame, this tree against revision REV",
+    )
+    ap.add_argument("--lane-rounds", type=int, default=3, help="rounds of part 4")
+    ap.add_argument("--lane-run", nargs=2, type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     from fingerfit.live import quiet_lsl
 
     quiet_lsl()  # this process's consumers: no liblsl log lines in the report
+    if args.lane_run:  # a child of --lane-before
+        print(json.dumps(lane_per_frame(*args.lane_run)), flush=True)
+        return
+    if args.lane_before:
+        results = lane_before_after(args.lane_before, args.lane_rounds)
+        if args.json:
+            args.json.write_text(json.dumps(results, indent=1) + "\n")
+        return
     wanted = {
         "index": ("index",),
         "hand4": ("index", "middle", "ring", "little"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import re
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -106,3 +107,80 @@ def sent_frames(
         if full.any() and np.allclose(got[full], want[idx][full], rtol=0, atol=1e-9):
             return idx
     raise AssertionError("the received rows are no subset of the recording's frames")
+
+
+# Stand-ins for the live outputs and a logging source (the lanes' and watchdog's tests).
+
+
+class FakeLsl:
+    """An LSL output that keeps every push; each takes ``delay`` s (a slow network)."""
+
+    def __init__(self, delay: float = 0.0) -> None:
+        self.delay = delay
+        self.angles: list[np.ndarray] = []
+        self.valid: list[np.ndarray] = []
+        self.arrival: list[np.ndarray] = []
+        self.robot: list[np.ndarray] = []
+
+    def push(self, angles, tips, valid, arrival, robot=None) -> None:
+        self.angles.append(angles.copy())
+        self.valid.append(valid.copy())
+        self.arrival.append(arrival.copy())
+        if robot is not None:
+            self.robot.append(robot.copy())
+        if self.delay:
+            time.sleep(self.delay)
+
+    def has_consumers(self) -> bool:
+        return True
+
+    def close(self) -> None:
+        pass
+
+
+class FakeRos2:
+    """A DDS output that keeps every message's positions."""
+
+    def __init__(self) -> None:
+        self.positions: list[np.ndarray] = []
+
+    def push(self, positions, wall) -> None:
+        self.positions.append(positions.copy())
+
+    def has_consumers(self) -> bool:
+        return True
+
+    def close(self) -> None:
+        pass
+
+
+class Logged:
+    """A source that notes every block it hands over (arrival times, sizes); its
+    ``warn`` and ``stats`` are the wrapped source's."""
+
+    live = False
+
+    def __init__(self, source) -> None:
+        self.source = source
+        self.blocks_seen: list[np.ndarray] = []
+
+    @property
+    def stats(self):
+        return self.source.stats
+
+    @property
+    def warn(self):
+        return getattr(self.source, "warn", None)
+
+    @warn.setter
+    def warn(self, fn) -> None:
+        self.source.warn = fn
+
+    def blocks(self):
+        for b in self.source.blocks():
+            if b is not None:
+                self.blocks_seen.append(b.arrival.copy())
+            yield b
+
+    def close(self) -> None:
+        self.source.close()

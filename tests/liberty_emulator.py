@@ -18,7 +18,9 @@ import fcntl
 import os
 import pty
 import select
+import shutil
 import struct
+import tempfile
 import termios
 import threading
 import time
@@ -47,13 +49,25 @@ class Faults:
         Bytes written just before the frame.
     drop : dict[int, tuple[int, int]]
         Frame -> (station index within the frame, byte offset in its record) to drop.
+    pause : dict[int, float]
+        Frame -> seconds without a byte just before it (the port stays open).
     unplug_after : int, optional
-        Close the port after sending this many frames.
+        Close the port after sending this many frames (once every byte was read).
+    replug_after : float, optional
+        With ``unplug_after``: seconds later, a new port at the same path, the device
+        reset (it must be set up again), streaming on from the next frame; the end of
+        the recording then unplugs it for good.
+    restart_count : bool
+        After the replug, frame counts start again at ``first_frame`` (a power cycle)
+        instead of going on.
     """
 
     garbage: dict[int, bytes] = field(default_factory=dict)
     drop: dict[int, tuple[int, int]] = field(default_factory=dict)
+    pause: dict[int, float] = field(default_factory=dict)
     unplug_after: int | None = None
+    replug_after: float | None = None
+    restart_count: bool = False
 
 
 class LibertyEmulator:
@@ -83,24 +97,37 @@ class LibertyEmulator:
         self.faults = faults or Faults()
         self.rate_hz = rate_hz
         self.first_frame = first_frame
+        self.commands: list[bytes] = []
+        self.sent_frames = 0
+        self.plugs = 0  # ports plugged in so far
+        self._count_base = 0  # frame index whose count is first_frame
+        self._dir = tempfile.mkdtemp(prefix="liberty-")
+        self.port = os.path.join(self._dir, "ttyLiberty")
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._gone = threading.Event()  # the current port is unplugged
+        self._threads: list[threading.Thread] = []
+        self._plug()
+        t = threading.Thread(target=self._stream, daemon=True)
+        self._threads.append(t)
+        t.start()
+
+    def _plug(self) -> None:
+        """A new pseudo-terminal at :attr:`port`, a device in its power-on state."""
         self.items = parse_items("2,4,1")  # device default list
         self.units = "in"
         self.binary = False
         self.continuous = False
-        self.commands: list[bytes] = []
-        self.sent_frames = 0
         self.master, slave = pty.openpty()
         tty.setraw(slave)
-        self.port = os.ttyname(slave)
         self._slave = slave  # kept open so the pty exists until the port is opened
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._threads = [
-            threading.Thread(target=self._read_commands, daemon=True),
-            threading.Thread(target=self._stream, daemon=True),
-        ]
-        for t in self._threads:
-            t.start()
+        os.symlink(os.ttyname(slave), self.port + ".new")
+        os.replace(self.port + ".new", self.port)
+        self._gone.clear()
+        self.plugs += 1
+        t = threading.Thread(target=self._read_commands, args=(self.master,), daemon=True)
+        self._threads.append(t)
+        t.start()
 
     # -- records --------------------------------------------------------------------
 
@@ -123,7 +150,8 @@ class LibertyEmulator:
             elif item == "timestamp":
                 values[item] = np.full(len(st), round(1000 * i / self.rate_hz), float)
             elif item == "frame":
-                values[item] = np.full(len(st), self.first_frame + i, float)
+                count = self.first_frame + i - self._count_base
+                values[item] = np.full(len(st), count, float)
         k = len(st)
         return LibertyRecords(
             tuple(items),
@@ -154,14 +182,14 @@ class LibertyEmulator:
         except OSError:
             return False
 
-    def _read_commands(self) -> None:
+    def _read_commands(self, master: int) -> None:
         buf = b""
-        while not self._stop.is_set():
+        while not self._stop.is_set() and not self._gone.is_set():
             try:
-                ready, _, _ = select.select([self.master], [], [], 0.05)
+                ready, _, _ = select.select([master], [], [], 0.05)
                 if not ready:
                     continue
-                chunk = os.read(self.master, 256)
+                chunk = os.read(master, 256)
             except (OSError, ValueError):
                 return
             if not chunk:
@@ -214,11 +242,27 @@ class LibertyEmulator:
                 time.sleep(delay)
             i = self.sent_frames
             f = self.faults
-            end = self.recording.n_frames if f.unplug_after is None else f.unplug_after
+            replug = f.replug_after is not None and self.plugs == 1
+            end = self.recording.n_frames
+            if f.unplug_after is not None and (replug or f.replug_after is None):
+                end = f.unplug_after
             if i >= end:  # the recording is over: the cable is pulled once all is read
                 self._wait_drained()
-                self.unplug()
-                return
+                if not replug:
+                    self.unplug()
+                    return
+                self._pull()
+                if self._stop.wait(f.replug_after):
+                    return
+                with self._lock:
+                    if f.restart_count:
+                        self._count_base = i
+                    self._plug()
+                continue
+            if i in f.pause:  # silent for a while, then frame i and on at the rate
+                if self._stop.wait(f.pause[i]):
+                    return
+                due = time.monotonic()
             with self._lock:
                 parts = self.frame_bytes(i)
             if i in f.drop:
@@ -239,14 +283,24 @@ class LibertyEmulator:
                 return
             time.sleep(0.005)
 
-    def unplug(self) -> None:
-        """Close the master side: the port's next read fails, as on a pulled cable."""
-        self._stop.set()
+    def _pull(self) -> None:
+        """The cable pulled: the port's path disappears, the master side closes (the
+        port's next read fails)."""
+        self._gone.set()
+        try:
+            os.unlink(self.port)
+        except OSError:
+            pass
         for fd in (self.master, self._slave):
             try:
                 os.close(fd)
             except OSError:
                 pass
+
+    def unplug(self) -> None:
+        """Pull the cable for good: the port's next read fails, and no replug."""
+        self._stop.set()
+        self._pull()
 
     def close(self) -> None:
         """Stop the threads and release the pty."""
@@ -254,3 +308,4 @@ class LibertyEmulator:
             self.unplug()
         for t in self._threads:
             t.join(timeout=2)
+        shutil.rmtree(self._dir, ignore_errors=True)

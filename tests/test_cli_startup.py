@@ -86,3 +86,6 @@ def test_signature_names_mirror_the_real_ones() -> None:
 
     assert _names.DEFAULT_MAX_AGE_MS == stream.DEFAULT_MAX_AGE_MS
     assert _names.DEFAULT_SILENCE_MS == stream.DEFAULT_SILENCE_MS
+    from fingerfit.live import sources
+
+    assert _names.DEFAULT_RECONNECT_S == sources.DEFAULT_RECONNECT_S

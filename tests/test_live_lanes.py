@@ -7,7 +7,6 @@ counts, order and values -- never a duration, which belongs in ``bench/stream.py
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -22,73 +21,12 @@ from fingerfit.live.stream import Streamer, channels_of, run
 from fingerfit.model import load_model
 from fingerfit.session import PoseSeries, Recording
 
-from ._live import fitted, short_recording, stream_counts
+from ._live import FakeLsl, FakeRos2, Logged, fitted, short_recording, stream_counts
 from .bad_inputs._cli import refused
 from .bad_inputs._cli import run as cli
 
 N = 480
 HOLES = ((50, "index.middle"), (51, "index.middle"), (120, "hand"), (300, "index.distal"))
-
-
-class FakeLsl:
-    """An LSL output that keeps every push; each takes ``delay`` s (a slow network)."""
-
-    def __init__(self, delay: float = 0.0) -> None:
-        self.delay = delay
-        self.angles: list[np.ndarray] = []
-        self.valid: list[np.ndarray] = []
-        self.arrival: list[np.ndarray] = []
-        self.robot: list[np.ndarray] = []
-
-    def push(self, angles, tips, valid, arrival, robot=None) -> None:
-        self.angles.append(angles.copy())
-        self.valid.append(valid.copy())
-        self.arrival.append(arrival.copy())
-        if robot is not None:
-            self.robot.append(robot.copy())
-        if self.delay:
-            time.sleep(self.delay)
-
-    def has_consumers(self) -> bool:
-        return True
-
-    def close(self) -> None:
-        pass
-
-
-class FakeRos2:
-    """A DDS output that keeps every message's positions."""
-
-    def __init__(self) -> None:
-        self.positions: list[np.ndarray] = []
-
-    def push(self, positions, wall) -> None:
-        self.positions.append(positions.copy())
-
-    def has_consumers(self) -> bool:
-        return True
-
-    def close(self) -> None:
-        pass
-
-
-class Logged:
-    """A source that notes every block it hands over (arrival times, sizes)."""
-
-    live = False
-
-    def __init__(self, source) -> None:
-        self.source = source
-        self.blocks_seen: list[np.ndarray] = []
-
-    def blocks(self):
-        for b in self.source.blocks():
-            if b is not None:
-                self.blocks_seen.append(b.arrival.copy())
-            yield b
-
-    def close(self) -> None:
-        self.source.close()
 
 
 def test_overload_sends_the_newest_fresh_frame_and_records_every_frame(tmp_path: Path) -> None:
@@ -214,3 +152,33 @@ def test_bad_lane_options_are_refused_in_one_line(tmp_path: Path, args, field, t
     res = cli("stream", model_path, "--source", f"replay:{csv}", "--record", out, *args)
     refused(res, field, text)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("tips_frame", ["tracker", "hand"])
+def test_robot_lane_frame_values_equal_block_values(tips_frame: str) -> None:
+    """The robot lane's buffers (allocated once) hold, frame by frame, what the data
+    lane's block_values gives; the validity is the sensors' own."""
+    from fingerfit.live.stream import FrameValues, block_values, frames_valid, model_sensors
+
+    model = load_model(fitted()[1])
+    rec = short_recording(60, ((5, "index.middle"), (9, "hand"), (20, "index.distal")))
+    sensors = model_sensors(model)
+    kin = compute_kinematics(model, rec, ("user_axis",))
+    ch = channels_of(model, kin)
+    want = block_values(kin, ch, rec, sensors, tips_frame)
+    valid = np.ones(rec.n_frames, dtype=bool)
+    for s in sensors:
+        valid &= rec.poses[s].valid
+    np.testing.assert_array_equal(frames_valid(rec, sensors), valid)
+    np.testing.assert_array_equal(want.valid, valid.astype(float))
+    frame = FrameValues(ch, tips_frame)
+    for i in range(rec.n_frames):
+        one = rec.slice(slice(i, i + 1))
+        robot = np.array([[float(i), np.nan]])
+        got = frame.values(compute_kinematics(model, one, ("user_axis",)), one, robot)
+        for key in ("angles", "tips", "joints"):
+            np.testing.assert_allclose(
+                got[key][0], getattr(want, key)[i], rtol=0, atol=1e-9, equal_nan=True
+            )
+        np.testing.assert_array_equal(got["robot"], robot)
+        assert got["robot"] is not robot  # a copy: the retargeter's array is its own

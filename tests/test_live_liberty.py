@@ -53,11 +53,16 @@ def test_liberty_stream_resynchronises_and_ends_on_unplug(tmp_path) -> None:
     emu = LibertyEmulator(rec, stations, faults)
     out = tmp_path / "live.csv"
     try:
-        res = run("stream", model_path, "--source", f"liberty:{emu.port}", "--record", out, "-q")
+        res = run(
+            "stream", model_path, "--source", f"liberty:{emu.port}", "--record", out,
+            "--reconnect", "0.5", "-q",
+        )  # fmt: skip
     finally:
         emu.close()
-    line = refused(res, emu.port, "device disconnected", "kept")
+    line = refused(res, emu.port, "device disconnected", "not back within 0.5 s", "kept")
     assert "Traceback" not in res.output
+    # One warning for the outage, then the port was tried again for 0.5 s.
+    assert res.output.count("reopening the port (up to 0.5 s)") == 1
     # The set-up the docs list, in order, before any data.
     assert emu.commands[:5] == [b"P", b"O*,2,7,9", b"U1", b"F1", b"C"]
     frames = int(re.search(r"after (\d+) frames", line).group(1))

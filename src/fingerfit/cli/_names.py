@@ -23,3 +23,5 @@ RETARGET_ROBOTS = ("shadow", "allegro")
 DEFAULT_MAX_AGE_MS = 20.0
 #: :data:`fingerfit.live.stream.DEFAULT_SILENCE_MS` (ms).
 DEFAULT_SILENCE_MS = 50.0
+#: :data:`fingerfit.live.sources.DEFAULT_RECONNECT_S` (s).
+DEFAULT_RECONNECT_S = 10.0

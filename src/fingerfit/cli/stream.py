@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from ._names import DEFAULT_MAX_AGE_MS, DEFAULT_SILENCE_MS
+from ._names import DEFAULT_MAX_AGE_MS, DEFAULT_RECONNECT_S, DEFAULT_SILENCE_MS
 from .app import app, notice, say, user_errors
 from .retarget import (
     DEFAULT_CONTACT_MM,
@@ -145,6 +145,25 @@ def stream(
             "(its last pose) or release (its rest pose).",
         ),
     ] = "hold",
+    reconnect: Annotated[
+        float | None,
+        typer.Option(
+            "--reconnect",
+            metavar="S",
+            help="Live sources: how long (s) to keep reopening a lost serial port or "
+            f"looking for a lost LSL stream before the stream ends (default "
+            f"{DEFAULT_RECONNECT_S:g}; 0: end at once).",
+        ),
+    ] = None,
+    realtime: Annotated[
+        bool,
+        typer.Option(
+            "--realtime",
+            help="Ask the OS for a real-time class for the robot lane where permitted "
+            "(SCHED_FIFO 50, memory locked, its own CPU); one line says what was granted. "
+            "Never fails the run.",
+        ),
+    ] = False,
     quiet: Annotated[
         bool,
         typer.Option(
@@ -194,6 +213,9 @@ def stream(
         raise FingerfitError("only a replay source waits for consumers", field="--wait")
     if stations is not None and kind != "liberty":
         raise FingerfitError("only a liberty source has stations", field="--stations")
+    if reconnect is not None and kind == "replay":
+        raise FingerfitError("only a live source (liberty:, lsl:) reconnects", field="--reconnect")
+    reconnect_s = src.check_reconnect(DEFAULT_RECONNECT_S if reconnect is None else reconnect)
     max_age_s = check_max_age(max_age)
     silence_s = check_silence(silence_ms)
     if on_silence not in SILENCE_POLICIES:
@@ -272,10 +294,10 @@ def stream(
             src.parse_stations(stations, sensors) if stations else src.default_stations(sensors)
         )
         nominal = rate or src.LIBERTY_RATE_HZ
-        the_source = src.LibertySource(port, baud, mapping, nominal)
+        the_source = src.LibertySource(port, baud, mapping, nominal, reconnect_s)
     else:
         name = src.split_spec(source)[1]
-        the_source = src.LslSource(name, sensors)
+        the_source = src.LslSource(name, sensors, reconnect=reconnect_s)
         nominal = 0.0
 
     from ..export.geometry import joint_names
@@ -336,12 +358,18 @@ def stream(
             duration=duration,
             silence=silence_s,
             warn=lambda text: notice("warning", text),
+            realtime=realtime,
+            note=lambda text: notice("realtime", text),
         )
     except FingerfitError as exc:
         if streamer.summary.frames:
             kept = [str(p) for p in (record, ros2_bag) if p is not None]
             extra = f"; kept {', '.join(kept)}" if kept else ""
-            raise FingerfitError(f"{exc} (after {streamer.summary.frames} frames{extra})") from None
+            n = streamer.summary.reconnects
+            back = f", {n} reconnect{'s' * (n > 1)}" if n else ""
+            raise FingerfitError(
+                f"{exc} (after {streamer.summary.frames} frames{back}{extra})"
+            ) from None
         raise
     say(
         "{}",
@@ -401,7 +429,11 @@ def summary_line(
     if counts:
         text += ": " + ", ".join(counts)
     text += f" ({s.lost} lost, {s.invalid} with a missing sensor held"
-    text += f", {s.silences} silence{'s' * (s.silences > 1)})" if s.silences else ")"
+    if s.silences:
+        text += f", {s.silences} silence{'s' * (s.silences > 1)}"
+    if s.outages:
+        text += f", {s.outages} outage{'s' * (s.outages > 1)}, {s.reconnects} reconnected"
+    text += ")"
     lat, age, comp = s.latency_ms(), s.age_ms(), s.compute_ms_per_frame()
     if lat.size:
         text += (

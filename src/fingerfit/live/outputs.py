@@ -134,6 +134,7 @@ class LslOutput:
         pylsl = require("pylsl")
         self.pylsl = pylsl
         self.outlets = []
+        self._rows: list[FloatArray] = []
         specs = [
             (
                 f"{prefix}-angles",
@@ -169,6 +170,7 @@ class LslOutput:
             if name.endswith("-robot"):
                 info.desc().append_child_value("robot", robot_name)
             self.outlets.append(pylsl.StreamOutlet(info, chunk_size=0, max_buffered=10))
+            self._rows.append(np.empty((1, len(channels))))  # one sample, with valid
         # LSL clock = steady clock; arrival times are time.monotonic(): one offset.
         self.offset = pylsl.local_clock() - time.monotonic()
         self._first_consumer: float | None = None  # when one outlet first had a consumer
@@ -215,8 +217,15 @@ class LslOutput:
         robot : ndarray, shape (n, n_robot_joints), optional
             The robot's joints (rad; m for a slide joint), when the outlet exists.
         """
-        stamps = (arrival + self.offset).tolist()
         values = (angles, tips) if robot is None else (angles, tips, robot)
+        if valid.shape[0] == 1:  # the robot lane: one frame, into buffers allocated once
+            stamp = float(arrival[0]) + self.offset  # one sample: its own stamp
+            for o, x, row in zip(self.outlets, values, self._rows, strict=True):
+                row[0, :-1] = x[0]
+                row[0, -1] = valid[0]
+                o.push_chunk(row, stamp)
+            return
+        stamps = (arrival + self.offset).tolist()
         for o, x in zip(self.outlets, values, strict=True):
             o.push_chunk(np.column_stack([x, valid]), stamps)
 

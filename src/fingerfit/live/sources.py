@@ -10,13 +10,20 @@ same object the file readers return) with each frame's arrival time. Source spec
 * ``lsl:NAME`` -- an LSL stream of type ``MoCap`` whose channels are labelled
   ``<sensor>.x|y|z`` (position, unit in the channel metadata) and
   ``<sensor>.qw|qx|qy|qz`` (quaternion, scalar first).
+
+The live sources survive an outage: a serial port that fails is reopened, an LSL stream
+that goes away is looked for again, for up to ``reconnect`` s (``--reconnect``), with one
+warning per outage; meanwhile they yield None, and the stream's watchdog marks the
+silence.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,6 +42,12 @@ NO_DATA_SECONDS = 2.0
 #: Seconds a source waits for data before it yields None (the loop then checks its
 #: duration, Ctrl-C and the silence watchdog).
 POLL_S = 0.01
+#: Default ``--reconnect`` (s): how long a live source may stay lost (serial port gone,
+#: LSL stream gone) before the stream ends.
+DEFAULT_RECONNECT_S = 10.0
+#: Seconds between attempts to reopen a lost source: doubled after each failed attempt
+#: from the first value, up to the second.
+RECONNECT_BACKOFF_S = (0.05, 1.0)
 #: Liberty frame rate (Hz): the device's default, one frame every 4.2 ms.
 LIBERTY_RATE_HZ = 240.0
 #: The Liberty sample rate after ``U1`` is in cm.
@@ -64,12 +77,66 @@ class Block:
 @dataclass
 class SourceStats:
     """Counts a source keeps: bytes skipped and records rejected while resynchronising,
-    frames lost (frame-count gaps)."""
+    frames lost (frame-count gaps), outages (the device or stream lost) and reconnects
+    (an outage over: the source is back)."""
 
     skipped_bytes: int = 0
     rejected: int = 0
     lost_frames: int = 0
+    outages: int = 0
+    reconnects: int = 0
     notes: list[str] = field(default_factory=list)
+
+
+def _stderr_warning(text: str) -> None:
+    print(f"warning: {text}", file=sys.stderr, flush=True)
+
+
+def check_reconnect(seconds: float) -> float:
+    """``--reconnect`` in s; a clear error unless a number >= 0."""
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise FingerfitError(
+            f"must be a number of seconds >= 0, not {seconds:g}", field="--reconnect"
+        )
+    return seconds
+
+
+def _retry(attempt: Callable[[], bool], deadline: float) -> Iterator[None]:
+    """Call ``attempt`` until it returns True or ``deadline`` (``time.monotonic()`` s)
+    passes, waiting 0.05, 0.1, 0.2 ... s between attempts (at most
+    :data:`RECONNECT_BACKOFF_S` [1]); None is yielded every :data:`POLL_S` s meanwhile,
+    so the loop keeps checking its watchdog, ``--duration`` and Ctrl-C.
+
+    Parameters
+    ----------
+    attempt : callable
+        One try (reopen the port, find the stream): True when it worked.
+    deadline : float
+        ``time.monotonic()`` s after which no attempt starts.
+
+    Yields
+    ------
+    None
+        While waiting for the next attempt.
+
+    Returns
+    -------
+    bool
+        The generator's value (``back = yield from _retry(...)``): whether an attempt
+        worked.
+    """
+    delay, cap = RECONNECT_BACKOFF_S
+    while True:
+        if attempt():
+            return True
+        now = time.monotonic()
+        if now >= deadline:
+            return False
+        wake = min(now + delay, deadline)
+        delay = min(2 * delay, cap)
+        while time.monotonic() < wake:
+            time.sleep(min(POLL_S, max(0.0, wake - time.monotonic())))
+            yield None
 
 
 def split_spec(spec: str) -> tuple[str, str, str | None]:
@@ -227,44 +294,82 @@ def parse_stations(text: str, sensors: list[str]) -> dict[int, str]:
 class LibertySource:
     """A Polhemus Liberty on a serial port, in continuous binary output.
 
+    When the port fails (a pulled cable: the read raises ``OSError`` /
+    ``SerialException``) the source warns once (:attr:`warn`), closes it and tries to
+    open it again -- 0.05, 0.1, 0.2 ... s apart, at most 1 s -- and to set the device up
+    again, for up to ``reconnect`` s; meanwhile it yields None every :data:`POLL_S` s (the
+    stream's watchdog marks the silence). Once back, frames flow as before; the outage is
+    counted in :attr:`stats` (``outages``, ``reconnects``).
+
     Parameters
     ----------
     port : str
-        Serial device (``/dev/ttyUSB0``, ``COM3``).
+        Serial device (``/dev/ttyUSB0``, ``/dev/serial/by-id/...``, ``COM3``).
     baud : int
     stations : dict[int, str]
         Station number -> sensor name (every sensor the model uses).
     rate_hz : float
         Device frame rate, for the frame time ``frame count / rate``.
+    reconnect : float
+        Seconds to keep trying to reopen a lost port (0: the stream ends at once).
+
+    Attributes
+    ----------
+    warn : callable
+        Called with the one-line warning of an outage (default: printed on stderr;
+        :func:`fingerfit.live.stream.run` sets its own).
     """
 
     live = True
 
     def __init__(
-        self, port: str, baud: int, stations: dict[int, str], rate_hz: float = LIBERTY_RATE_HZ
+        self,
+        port: str,
+        baud: int,
+        stations: dict[int, str],
+        rate_hz: float = LIBERTY_RATE_HZ,
+        reconnect: float = DEFAULT_RECONNECT_S,
     ) -> None:
-        serial = require("serial")
+        self._pyserial = require("serial")
         self.name = f"liberty:{port}"
         self.port = port
+        self.baud = baud
         self.stations = stations
         self.rate_hz = rate_hz
+        self.reconnect = check_reconnect(reconnect)
         self.stats = SourceStats()
+        self.warn: Callable[[str], None] = _stderr_warning
         self._station_list = np.array(sorted(stations), dtype=np.int64)
         self._col = {s: k for k, s in enumerate(sorted(stations))}
         try:
-            self.serial = serial.Serial(port, baud, timeout=POLL_S)
-        except (serial.SerialException, OSError, ValueError) as exc:
+            self.serial = self._open()
+        except (self._pyserial.SerialException, OSError, ValueError) as exc:
             raise FingerfitError(f"cannot open the serial port: {exc}", path=port) from None
+
+    def _open(self):
+        """Open the port and put the device into continuous binary output (the set-up of
+        ``docs/streaming.md``, every time: a device that was power-cycled forgot it).
+
+        Raises
+        ------
+        SerialException, OSError, ValueError
+            The port does not open.
+        FingerfitError
+            A command could not be written (the port is closed again).
+        """
+        port = self._pyserial.Serial(self.port, self.baud, timeout=POLL_S)
+        self.serial = port
         try:
             self._write(STOP)
             time.sleep(0.1)
-            self.serial.reset_input_buffer()
+            port.reset_input_buffer()
             for command in SETUP_COMMANDS:
                 self._write(command)
             self._write(START)
-        except FingerfitError:
-            self.serial.close()
+        except BaseException:
+            port.close()
             raise
+        return port
 
     def _write(self, data: bytes) -> None:
         try:
@@ -275,23 +380,60 @@ class LibertySource:
                 f"device disconnected (write failed: {exc})", path=self.port
             ) from None
 
+    def _reopen(self, reason: str) -> Iterator[None]:
+        """The port failed: close it, warn once, and reopen it within ``reconnect`` s
+        (yielding None while waiting).
+
+        Raises
+        ------
+        FingerfitError
+            Not back in time (or ``reconnect`` is 0): ``device disconnected (...)``.
+        """
+        with contextlib.suppress(Exception):
+            self.serial.close()
+        what = f"device disconnected ({reason})" if reason else "device disconnected"
+        if self.reconnect <= 0:
+            raise FingerfitError(what, path=self.port)
+        self.stats.outages += 1
+        self.warn(f"{self.port}: {what}; reopening the port (up to {self.reconnect:g} s)")
+
+        def attempt() -> bool:
+            try:
+                self._open()
+            except (self._pyserial.SerialException, OSError, ValueError, FingerfitError):
+                return False
+            return True
+
+        back = yield from _retry(attempt, time.monotonic() + self.reconnect)
+        if not back:
+            raise FingerfitError(f"{what}; not back within {self.reconnect:g} s", path=self.port)
+        self.stats.reconnects += 1
+
     def blocks(self) -> Iterator[Block | None]:
         """Frames as their last station record arrives (None after a poll without data).
 
         A frame is complete when every mapped station has reported; a frame whose
         records are not all there is handed over (with NaN for the missing sensors)
-        when the next frame starts. Frame-count gaps are counted as lost frames.
+        when the next frame starts. Frame-count gaps are counted as lost frames. After a
+        reconnect, a frame count that went on counts the frames of the outage as lost; one
+        that started again (the device was power-cycled) continues the time column from
+        the last frame plus the outage's duration; a frame half received when the port
+        failed is dropped.
 
         Raises
         ------
         FingerfitError
-            The port fails (unplugged) or no byte arrives for :data:`NO_DATA_SECONDS`.
+            The port fails and does not come back within ``reconnect`` s, or no byte
+            arrives for :data:`NO_DATA_SECONDS` while the port is open.
         """
         buf = bytearray()
         k = len(self.stations)
         last_frame: int | None = None
         emitted: int | None = None
         first_frame: int | None = None
+        t_offset = 0.0  # s added to the frame time (a counter restarted after an outage)
+        t_last = 0.0  # time of the last frame handed over (s)
+        lost_at: float | None = None  # when the port failed, until the first frame after
         # Pending records of the newest frame: columns = sorted stations.
         pend_pos = np.full((k, 3), np.nan)
         pend_quat = np.full((k, 4), np.nan)
@@ -301,10 +443,14 @@ class LibertySource:
             try:
                 chunk = self.serial.read(max(1, self.serial.in_waiting))
             except Exception as exc:  # SerialException / OSError on unplug
-                raise FingerfitError(
-                    f"device disconnected ({exc})" if str(exc) else "device disconnected",
-                    path=self.port,
-                ) from None
+                if lost_at is None:
+                    lost_at = time.monotonic()
+                yield from self._reopen(str(exc))
+                buf.clear()
+                last_frame = pend_frame = None
+                pend_pos, pend_quat = np.full((k, 3), np.nan), np.full((k, 4), np.nan)
+                quiet_since = time.monotonic()
+                continue
             now = time.monotonic()
             if not chunk:
                 if now - quiet_since > NO_DATA_SECONDS:
@@ -341,6 +487,11 @@ class LibertySource:
             if not frames:
                 continue
             fcs = np.array([f[0] for f in frames], dtype=np.int64)
+            if lost_at is not None and emitted is not None and fcs[0] <= emitted:
+                # The counter started again: the time goes on from the last frame.
+                t_offset = t_last + (now - lost_at)
+                first_frame, emitted = int(fcs[0]), None
+            lost_at = None
             lost = 0
             if emitted is not None:
                 gaps = np.diff(np.concatenate([[emitted], fcs])) - 1
@@ -358,7 +509,8 @@ class LibertySource:
             poses = {
                 self.stations[s]: PoseSeries(pos[:, c], rot[:, c]) for s, c in self._col.items()
             }
-            time_s = (fcs - first_frame) / self.rate_hz
+            time_s = (fcs - first_frame) / self.rate_hz + t_offset
+            t_last = float(time_s[-1])
             yield Block(_recording(self.name, time_s, poses), np.full(n, now), lost)
 
     def close(self) -> None:
@@ -418,6 +570,12 @@ def mocap_layout(
     FingerfitError
         A sensor without all seven channels, or a position unit not understood.
     """
+    if not any(labels):
+        raise FingerfitError(
+            f"{len(labels)} channel(s) without labels: need <sensor>.x|y|z and "
+            "<sensor>.qw|qx|qy|qz for each sensor",
+            path=f"lsl:{name}",
+        )
     where = {lab: i for i, lab in enumerate(labels)}
     scale = np.ones(len(labels))
     pos, quat = {}, {}
@@ -443,8 +601,22 @@ def mocap_layout(
     return pos, quat, scale
 
 
+#: Seconds a reconnecting LSL source waits for a stream it found to answer.
+LSL_CONNECT_S = 0.5
+#: LSL channel formats a pose stream may have (positions and unit quaternions).
+LSL_FORMATS = ("float32", "double64")
+
+
 class LslSource:
     """An LSL stream of sensor poses (type ``MoCap``).
+
+    The stream is checked when it is found (type ``MoCap``, channel format float32 or
+    double64, the seven channels of every sensor): a stream that fails ends the stream
+    before anything is written, with one line. When the stream disappears (its outlet is
+    destroyed: liblsl's ``LostError``) the source warns once (:attr:`warn`) and looks for
+    a stream of that name again, 0.05, 0.1, 0.2 ... s apart (at most 1 s), for up to
+    ``reconnect`` s, yielding None meanwhile (the stream's watchdog marks the silence);
+    the one it finds is checked as the first was.
 
     Parameters
     ----------
@@ -455,50 +627,158 @@ class LslSource:
         ``<sensor>.qw|qx|qy|qz`` channels.
     timeout : float
         Seconds to wait for the stream to appear.
+    reconnect : float
+        Seconds to keep looking for a lost stream (0: the stream ends at once).
+
+    Attributes
+    ----------
+    warn : callable
+        Called with the one-line warning of an outage (default: printed on stderr).
     """
 
     live = True
 
-    def __init__(self, name: str, sensors: list[str], timeout: float = 5.0) -> None:
-        pylsl = require("pylsl")
+    def __init__(
+        self,
+        name: str,
+        sensors: list[str],
+        timeout: float = 5.0,
+        reconnect: float = DEFAULT_RECONNECT_S,
+    ) -> None:
+        self._pylsl = pylsl = require("pylsl")
         self.name = f"lsl:{name}"
+        self.stream = name
+        self.sensors = sensors
+        self.timeout = timeout
+        self.reconnect = check_reconnect(reconnect)
         self.stats = SourceStats()
+        self.warn: Callable[[str], None] = _stderr_warning
         found = pylsl.resolve_byprop("name", name, minimum=1, timeout=timeout)
         if not found:
             raise FingerfitError(
                 f"no LSL stream named '{shown(name)}' within {timeout:g} s", path=self.name
             )
-        info = found[0]
-        if info.type() != "MoCap":
+        try:
+            self._connect(found[0], timeout)
+        except FingerfitError:
+            raise
+        except Exception as exc:  # pylsl's TimeoutError, LostError
             raise FingerfitError(
-                f"stream type is '{shown(info.type())}', not MoCap", path=self.name
-            )
-        self.inlet = pylsl.StreamInlet(info, max_buflen=10, processing_flags=0)
-        full = self.inlet.info(timeout=timeout)
-        ch = full.desc().child("channels").child("channel")
-        labels, units = [], []
-        for _ in range(full.channel_count()):
-            labels.append(ch.child_value("label"))
-            units.append(ch.child_value("unit"))
-            ch = ch.next_sibling()
-        self.pos, self.quat, self.scale = mocap_layout(labels, units, sensors, name)
-        self.inlet.open_stream(timeout=timeout)
+                f"the stream was found but did not answer ({exc})", path=self.name
+            ) from None
         self._clock = pylsl.local_clock
         self._offset = pylsl.local_clock() - time.monotonic()
 
-    def blocks(self) -> Iterator[Block | None]:
-        """Samples as they are pulled (None after a poll without data); time = the sender's LSL timestamp, arrival =
-        the moment the pull returned.
+    def _connect(self, info, timeout: float) -> None:
+        """Open an inlet on ``info`` and check its type, format and channels.
+
+        Parameters
+        ----------
+        info : pylsl.StreamInfo
+            As resolved.
+        timeout : float
+            Seconds to wait for the stream's full description and for it to open.
 
         Raises
         ------
         FingerfitError
-            No sample for :data:`NO_DATA_SECONDS` (the sender stopped).
+            Not ``MoCap``, a channel format other than float32 / double64, or a sensor
+            without its seven channels (the inlet is closed again).
+        Exception
+            pylsl's ``TimeoutError`` / ``LostError``: the stream did not answer (the
+            inlet is closed again).
+        """
+        pylsl = self._pylsl
+        if info.type() != "MoCap":
+            raise FingerfitError(
+                f"stream type is '{shown(info.type())}', not MoCap", path=self.name
+            )
+        fmt = _format_name(info.channel_format())
+        if fmt not in LSL_FORMATS:
+            raise FingerfitError(
+                f"channel format is {fmt}, not {' or '.join(LSL_FORMATS)} (positions and "
+                "unit quaternions)",
+                path=self.name,
+            )
+        # recover=False: a destroyed outlet raises LostError at once instead of liblsl
+        # waiting for it silently; the source then looks for the stream itself.
+        inlet = pylsl.StreamInlet(info, max_buflen=10, processing_flags=0, recover=False)
+        try:
+            full = inlet.info(timeout=timeout)
+            ch = full.desc().child("channels").child("channel")
+            labels, units = [], []
+            for _ in range(full.channel_count()):
+                labels.append(ch.child_value("label"))
+                units.append(ch.child_value("unit"))
+                ch = ch.next_sibling()
+            pos, quat, scale = mocap_layout(labels, units, self.sensors, self.stream)
+            inlet.open_stream(timeout=timeout)
+        except BaseException:
+            with contextlib.suppress(Exception):
+                inlet.close_stream()
+            raise
+        self.inlet, self.pos, self.quat, self.scale = inlet, pos, quat, scale
+
+    def _refind(self) -> Iterator[None]:
+        """The stream was lost: warn once and find it again within ``reconnect`` s
+        (yielding None while waiting).
+
+        Raises
+        ------
+        FingerfitError
+            Not back in time (or ``reconnect`` is 0); the stream that came back does not
+            check (:meth:`_connect`).
+        """
+        with contextlib.suppress(Exception):
+            self.inlet.close_stream()
+        if self.reconnect <= 0:
+            raise FingerfitError("stream lost (its outlet was closed)", path=self.name)
+        self.stats.outages += 1
+        self.warn(
+            f"{self.name}: stream lost (its outlet was closed); looking for it again "
+            f"(up to {self.reconnect:g} s)"
+        )
+
+        def attempt() -> bool:
+            found = self._pylsl.resolve_byprop("name", self.stream, minimum=1, timeout=POLL_S)
+            if not found:
+                return False
+            try:  # a stream that fails the checks ends the stream (FingerfitError)
+                self._connect(found[0], LSL_CONNECT_S)
+            except FingerfitError:
+                raise
+            except Exception:  # found, but gone again (the old outlet, closing): retry
+                return False
+            return True
+
+        back = yield from _retry(attempt, time.monotonic() + self.reconnect)
+        if not back:
+            raise FingerfitError(
+                f"stream lost (its outlet was closed); not back within {self.reconnect:g} s",
+                path=self.name,
+            )
+        self.stats.reconnects += 1
+
+    def blocks(self) -> Iterator[Block | None]:
+        """Samples as they are pulled (None after a poll without data); time = the
+        sender's LSL timestamp, arrival = the moment the pull returned.
+
+        Raises
+        ------
+        FingerfitError
+            No sample for :data:`NO_DATA_SECONDS` (the sender stopped sending), or the
+            stream lost and not back within ``reconnect`` s.
         """
         quiet_since = time.monotonic()
         t_first = None
+        lost = _lsl_lost_error(self._pylsl)
         while True:
-            data, stamps = self.inlet.pull_chunk(timeout=POLL_S, max_samples=MAX_BLOCK)
+            try:
+                data, stamps = self.inlet.pull_chunk(timeout=POLL_S, max_samples=MAX_BLOCK)
+            except lost:
+                yield from self._refind()
+                quiet_since = time.monotonic()
+                continue
             now = time.monotonic()
             if not stamps:
                 if now - quiet_since > NO_DATA_SECONDS:
@@ -525,7 +805,19 @@ class LslSource:
 
     def close(self) -> None:
         """Close the inlet."""
-        try:
+        with contextlib.suppress(Exception):
             self.inlet.close_stream()
-        except Exception:
-            pass
+
+
+def _lsl_lost_error(pylsl) -> type[BaseException]:
+    """pylsl's ``LostError`` (``pylsl.util`` in pylsl 1.16+, the top level before)."""
+    found = getattr(pylsl, "LostError", None)
+    if found is None:
+        from pylsl.util import LostError as found
+    return found
+
+
+def _format_name(code: int) -> str:
+    """liblsl's channel format code -> its name (``float32``, ``string``, ...)."""
+    names = {1: "float32", 2: "double64", 3: "string", 4: "int32", 5: "int16", 6: "int8"}
+    return names.get(code, "int64" if code == 7 else f"format {code}")

@@ -153,6 +153,30 @@ class Values:
     valid: FloatArray
 
 
+def frames_valid(recording: Recording, sensors: list[str]) -> np.ndarray:
+    """Frames in which every sensor of ``sensors`` is present.
+
+    One ``isfinite`` over the sensors' poses side by side (the per-sensor
+    :attr:`~fingerfit.session.PoseSeries.valid`, 13 NumPy calls each, cost 20 times more
+    for a one-frame block of a whole hand).
+
+    Parameters
+    ----------
+    recording : Recording
+        Poses per sensor, position ``(n, 3)`` mm and rotation ``(n, 3, 3)``.
+    sensors : list of str
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    n = recording.n_frames
+    poses = [recording.poses[s] for s in sensors]
+    parts = [p.position.reshape(n, 3) for p in poses]
+    parts += [p.rotation.reshape(n, 9) for p in poses]
+    return np.isfinite(np.concatenate(parts, axis=1)).all(axis=1)
+
+
 def block_values(
     kin: Kinematics, channels: Channels, recording: Recording, sensors: list[str], tips_frame: str
 ) -> Values:
@@ -199,10 +223,80 @@ def block_values(
             base = kind.removesuffix("_abduction")
             flexion = a[base] if base in a else next(iter(a.values()))
             joints[:, k] = np.where(np.isfinite(flexion), 0.0, np.nan)
-    valid = np.ones(n, dtype=bool)
-    for s in sensors:
-        valid &= recording.poses[s].valid
+    valid = frames_valid(recording, sensors)
     return Values(angles, tips, joints, valid.astype(float))
+
+
+class FrameValues:
+    """The streamed values of one frame, written into buffers allocated once (the robot
+    lane's :func:`block_values`, without the per-frame arrays, string splitting and
+    validity).
+
+    Parameters
+    ----------
+    channels : Channels
+    tips_frame : {"tracker", "hand"}
+
+    Notes
+    -----
+    :meth:`values` returns the same arrays every call: a caller that keeps them past
+    the next call copies them (the LSL and DDS outputs copy what they push).
+    """
+
+    def __init__(self, channels: Channels, tips_frame: str) -> None:
+        self.channels = channels
+        self.tips_frame = tips_frame
+        self.angles = np.empty((1, len(channels.angles)))
+        self.tips = np.empty((1, 3 * len(channels.digits)))
+        self.joints = np.empty((1, len(channels.joint_names)))
+        self.robot: FloatArray | None = None
+        # Per joint name: its digit, its angle and, for an ab/adduction the model may not
+        # have, the flexion that says whether the joint exists (block_values' rule).
+        self._joints = []
+        for name in channels.joint_names:
+            d, kind = name.split("_", 1)
+            self._joints.append((d, kind, kind.removesuffix("_abduction")))
+
+    def values(self, kin: Kinematics, rec: Recording, robot: FloatArray | None) -> dict:
+        """``{"angles", "tips", "joints"[, "robot"]}``, each of shape (1, k), as
+        :func:`block_values` (and the robot's joints, copied) gives them for the one
+        frame of ``rec``.
+
+        Parameters
+        ----------
+        kin : Kinematics
+            Of ``rec`` (one frame, with a ``user_axis`` variant).
+        rec : Recording
+            One frame (mm, tracker frame).
+        robot : ndarray, shape (1, n_robot), optional
+            The robot's joints (rad).
+        """
+        motions = kin.motions["user_axis"]
+        a = self.angles[0]
+        for k, (d, j) in enumerate(self.channels.angles):
+            a[k] = motions[d].angles[j][0]
+        np.degrees(a, out=a)
+        tips = self.tips.reshape(-1, 3)
+        for k, d in enumerate(self.channels.digits):
+            tips[k] = motions[d].tip[0]
+        if self.tips_frame == "hand":  # R_hand^T (tip - p_hand)
+            hand = rec.poses[HAND_SENSOR]
+            np.matmul(tips - hand.position[0], hand.rotation[0], out=tips)
+        q = self.joints[0]
+        for k, (d, kind, base) in enumerate(self._joints):
+            angles = motions[d].angles
+            if kind in angles:
+                q[k] = angles[kind][0]
+            else:  # an ab/adduction not computed: 0 where the joint's flexion exists
+                flexion = angles[base] if base in angles else next(iter(angles.values()))
+                q[k] = 0.0 if math.isfinite(flexion[0]) else math.nan
+        out = {"angles": self.angles, "tips": self.tips, "joints": self.joints}
+        if robot is not None:
+            if self.robot is None or self.robot.shape != robot.shape:
+                self.robot = np.empty(robot.shape)
+            np.copyto(self.robot, robot)
+            out["robot"] = self.robot
+        return out
 
 
 def hold(x: FloatArray, last: FloatArray) -> FloatArray:
@@ -282,6 +376,9 @@ class Summary:
         Received frames with a missing sensor (values held, ``valid`` 0).
     silences : int
         Times the source fell silent for ``silence`` s (the watchdog fired).
+    outages, reconnects : int
+        Times a live source was lost (serial port failed, LSL stream gone) and came back
+        (the source's ``stats``, copied when the stream ends).
     latency : list of ndarray
         Robot lane, per sent frame: arrival to the moment every live output had it (s);
         :meth:`latency_ms` joins them.
@@ -314,6 +411,8 @@ class Summary:
     lost: int = 0
     invalid: int = 0
     silences: int = 0
+    outages: int = 0
+    reconnects: int = 0
     latency: list = field(default_factory=list)
     ages: list = field(default_factory=list)
     compute: list = field(default_factory=list)
@@ -427,6 +526,11 @@ class DataLane:
         self.ok = True
         self._thread = threading.Thread(target=self._run, name="fingerfit-data-lane", daemon=True)
         self._thread.start()
+
+    @property
+    def thread(self) -> threading.Thread:
+        """The lane's thread (``--realtime`` keeps it off the robot lane's CPU)."""
+        return self._thread
 
     def put(self, block: Block) -> None:
         """Queue a block (cheap: the thread computes it)."""
@@ -607,6 +711,11 @@ class Streamer:
         )
         self.wall_offset = time.time() - time.monotonic()
         self.summary = Summary()
+        # The robot lane's per-frame buffers, allocated once: the values of the frame
+        # sent, its valid flag and arrival, and the last values sent (the hold).
+        self._frame = FrameValues(self.channels, self.tips_frame)
+        self._valid = np.zeros(1)
+        self._arrival = np.zeros(1)
         self._last: dict[str, FloatArray] = {}
         self.data: DataLane | None = None
         if bag is not None and retargeter is not None and self.live and bag_retargeter is None:
@@ -638,32 +747,32 @@ class Streamer:
         if n == 0:
             return
         s = self.summary
+        valid = frames_valid(block.recording, self.sensors)
         if self.live:
-            self._send(block)
+            self._send(block, bool(valid[-1]))
         s.received += n
         s.lost += block.lost
-        valid = np.ones(n, dtype=bool)
-        for k in self.sensors:
-            valid &= block.recording.poses[k].valid
-        s.invalid += int(n - valid.sum())
+        s.invalid += int(n - np.count_nonzero(valid))
         if self.data is not None:
             if self.data.error is not None:
                 raise self.data.error
             self.data.put(block)
 
-    def _send(self, block: Block) -> None:
-        """The robot lane: the newest frame of ``block`` if it is fresh enough."""
+    def _send(self, block: Block, valid: bool) -> None:
+        """The robot lane: the newest frame of ``block`` (``valid``: every sensor present
+        in it) if it is fresh enough."""
         s = self.summary
         n = block.recording.n_frames
-        age = time.monotonic() - block.arrival
-        old = age[:-1] > self.max_age
-        s.stale += int(old.sum())
-        s.skipped += int(n - 1 - old.sum())
-        if age[-1] > self.max_age:
+        arrived = float(block.arrival[-1])
+        if n > 1:
+            age = time.monotonic() - block.arrival[:-1]
+            old = int(np.count_nonzero(age > self.max_age))
+            s.stale += old
+            s.skipped += n - 1 - old
+        if time.monotonic() - arrived > self.max_age:
             s.stale += 1
             return
-        rec = block.recording.slice(slice(n - 1, n))
-        arrival = block.arrival[n - 1 :]
+        rec = block.recording if n == 1 else block.recording.slice(slice(n - 1, n))
         t = time.perf_counter()
         kin = (
             self.plan.run(rec)
@@ -672,23 +781,31 @@ class Streamer:
         )
         robot = self.retargeter.step(rec, kin)[0] if self.retargeter is not None else None
         compute = time.perf_counter() - t
-        v = block_values(kin, self.channels, rec, self.sensors, self.tips_frame)
-        values = {"angles": v.angles, "tips": v.tips, "joints": v.joints}
-        if robot is not None:
-            values["robot"] = robot
-        held = {}
-        for key, x in values.items():
-            last = self._last.get(key, np.full(x.shape[1], np.nan))
-            held[key] = hold(x, last) if not np.isfinite(x).all() else x
-            self._last[key] = held[key][-1]
-        sent_age = time.monotonic() - float(arrival[0])
+        held = self._frame.values(kin, rec, robot)
+        for key, row in held.items():
+            self._hold(key, row)
+        sent_age = time.monotonic() - arrived
         if sent_age > self.max_age:  # the compute made it too old
             s.stale += 1
             return
-        self._push(held, v.valid, arrival, robot is not None)
+        self._valid[0] = 1.0 if valid else 0.0
+        self._arrival[0] = arrived
+        self._push(held, self._valid, self._arrival, robot is not None)
         done = time.monotonic()
         s.sent += 1
-        s.add(done - arrival, compute, 1, sent_age)
+        s.add(done - arrived, compute, 1, sent_age)
+
+    def _hold(self, key: str, row: FloatArray) -> None:
+        """In place: NaN in ``row`` (shape (1, k)) -> the column's last value sent; the
+        last values are then ``row``'s (kept in arrays of their own)."""
+        last = self._last.get(key)
+        if last is None:
+            self._last[key] = row[0].copy()
+            return
+        r = row[0]
+        if not np.isfinite(r).all():
+            np.copyto(r, last, where=~np.isfinite(r))
+        np.copyto(last, r)
 
     def _push(self, held: dict, valid: FloatArray, arrival: FloatArray, robot: bool) -> None:
         if self.lsl is not None:
@@ -703,6 +820,12 @@ class Streamer:
         ``retargeter.setup.hold``, which DDS then also gets; under ``hold`` DDS, whose
         ``JointState`` has no validity field, gets nothing)."""
         self.summary.silences += 1
+        self.invalidate(now)
+
+    def invalidate(self, now: float) -> None:
+        """What :meth:`silence` sends (``valid`` 0, the robot's policy), without counting
+        a silence: also sent when the source ends with an error before the watchdog
+        fired, so the robot's last command says the data stopped."""
         if not self.live or not self._last:
             return
         held = {k: v[None, :] for k, v in self._last.items()}
@@ -710,7 +833,7 @@ class Streamer:
         if release:
             rest = np.asarray(self.retargeter.setup.hold, dtype=float)
             held["robot"] = rest[None, :]
-            self._last["robot"] = rest
+            self._last["robot"] = rest.copy()
         arrival = np.array([now])
         if self.lsl is not None:
             self.lsl.push(held["angles"], held["tips"], np.zeros(1), arrival, held.get("robot"))
@@ -812,6 +935,8 @@ def run(
     duration: float | None = None,
     silence: float | None = DEFAULT_SILENCE_MS / 1e3,
     warn: Callable[[str], None] | None = None,
+    realtime: bool = False,
+    note: Callable[[str], None] | None = None,
 ) -> Summary:
     """Stream until the source ends, ``duration`` passes, or Ctrl-C.
 
@@ -833,7 +958,15 @@ def run(
         :meth:`Streamer.silence` and one ``warn`` line; again after frames come back
         and stop again. None: no watchdog.
     warn : callable, optional
-        Called with the watchdog's one-line warning (default: printed on stderr).
+        Called with the watchdog's one-line warning, and with a live source's outage
+        warning (``source.warn`` is set to it; default: printed on stderr).
+    realtime : bool
+        Ask for a real-time class for the loop's thread (the robot lane) once streaming
+        starts (after ``wait``): SCHED_FIFO, memory locked, CPU affinity
+        (:class:`~fingerfit.live.realtime.Realtime`; restored at the end). What was
+        granted goes to ``note`` in one line; nothing refused stops the stream.
+    note : callable, optional
+        Called with the ``--realtime`` line (default: ``realtime: ...`` on stderr).
 
     Returns
     -------
@@ -845,10 +978,18 @@ def run(
     line = StatusLine(status)
     stop = threading.Event()
     say = warn or (lambda text: print(f"warning: {text}", file=sys.stderr, flush=True))
+    if hasattr(source, "warn"):  # a live source's outage warning, past the status line
+
+        def source_warns(text: str) -> None:
+            line.clear()
+            say(text)
+
+        source.warn = source_warns
     # Installed until the outputs are closed: a Ctrl-C while the data lane writes its
     # backlog lets it finish (the files complete).
+    tell = note or (lambda text: print(f"realtime: {text}", file=sys.stderr, flush=True))
     with _ctrl_c_sets(stop):
-        _run(source, streamer, line, stop, wait, duration, silence, say)
+        _run(source, streamer, line, stop, wait, duration, silence, say, tell if realtime else None)
     return streamer.summary
 
 
@@ -861,10 +1002,15 @@ def _run(
     duration: float | None,
     silence: float | None,
     say: Callable[[str], None],
+    realtime: Callable[[str], None] | None = None,
 ) -> None:
-    """:func:`run`'s loop, with Ctrl-C setting ``stop``."""
+    """:func:`run`'s loop, with Ctrl-C setting ``stop``; ``realtime``: ask for a real-time
+    class and tell it what was granted."""
     s = streamer.summary
     ok = True
+    t0 = last = None
+    silent = False
+    rt = contextlib.ExitStack()  # the real-time class, until the outputs are closed
     # The data lane's thread gives the GIL back every SWITCH_INTERVAL (Python's default
     # is 5 ms, which the robot lane would wait on).
     interval = sys.getswitchinterval()
@@ -881,8 +1027,12 @@ def _run(
                         f"no consumer within {wait:g} s for every output", field="--wait"
                     )
                 time.sleep(0.01)
-        t0 = last = None
-        silent = False
+        if realtime is not None:
+            from .realtime import Realtime
+
+            others = [streamer.data.thread] if streamer.data is not None else []
+            lane = "robot lane" if streamer.live else "stream loop"
+            realtime(rt.enter_context(Realtime(others=others, lane=lane)).line())
         for block in source.blocks():
             if block is not None and block.recording.n_frames:
                 if t0 is None:
@@ -911,11 +1061,17 @@ def _run(
         s.interrupted = True
     except FingerfitError:
         ok = s.received > 0  # a device lost mid-stream: keep what was streamed
+        if ok and not silent:  # the robot's last command: valid 0, its policy
+            with contextlib.suppress(Exception):
+                streamer.invalidate(time.monotonic())
         raise
     except BaseException:
         ok = False
         raise
     finally:
+        stats = getattr(source, "stats", None)
+        s.outages = getattr(stats, "outages", 0)
+        s.reconnects = getattr(stats, "reconnects", 0)
         line.update(s, force=True)  # the final figures, at least once
         line.clear()
         source.close()
@@ -923,3 +1079,4 @@ def _run(
             streamer.close(ok)
         finally:
             sys.setswitchinterval(interval)
+            rt.close()
