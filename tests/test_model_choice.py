@@ -102,9 +102,9 @@ def _mp_axis_error_deg(sim: SimulatedSubject, model) -> float:
 
 def test_myohand_mp_flexion_first_is_found_in_the_data(tmp_path) -> None:
     """MyoHand's MP turns about its flexion axis proximally (the OpenSim hand models'
-    order). Fitted in the finger's usual order (ab/adduction proximal) its flexion axis
-    was 5.0 deg off on average (seeds 1000-1003); the held-out cycles choose the order
-    (9-10 of 10 cycles explained better; 0.85 deg)."""
+    order). Fitted in the finger's usual order (ab/adduction proximal, 8dd570e) its
+    flexion axis was 7.43 deg off on average over 20 hands (docs/simulator.md); the
+    held-out cycles choose the order (1.15 deg there; 0.64 deg on this seed)."""
     pytest.importorskip("myo_sim")
     sim = simulate_subject(SimConfig(world="myohand", hand="right"), 1002)
     model = fit_session(sim.session, FitOptions())

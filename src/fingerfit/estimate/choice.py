@@ -237,7 +237,7 @@ def _order(turn: dict[str, list[FloatArray]], candidates: list[str], usual: str)
     """The two-axis order (module docstring): the usual one unless the other is a
     candidate whose held-out orientations are explained better in so many cycles that a
     one-sided sign test over the cycles rejects "no better" at :data:`ORDER_SIGNIFICANCE`
-    (with 10 cycles: in at least 9)."""
+    (every cycle up to 10 cycles, 10 of 11; fewer than 7 cycles keep the usual order)."""
     others = [o for o in candidates if o != usual]
     if not others:
         return usual if usual in turn else next(iter(turn))
