@@ -35,6 +35,13 @@ keep the figures). Two parts, in one run:
    frames, for the one-finger and whole-hand models, measured in child processes that
    import fingerfit from this tree and from ``git archive REV``, alternately
    (``--lane-rounds`` rounds, the order swapped each round) so both see the same load.
+5. **The robot lane with and without the view** (``--view-compare``, alone): part 2's end
+   to end run of the whole hand with ``--retarget shadow``, once as is and once with
+   ``--view-save OUT.rrd`` (the live view of ``--view``, written to a file: the data
+   lane logs every frame to Rerun, the robot lane's sent joints pose its robot),
+   alternately (``--view-rounds`` rounds, the order swapped each round); per run the
+   consumers' latency (LSL, DDS) and the stream's own arrival -> sent, and the ratios
+   with / without of the medians over the rounds.
 """
 
 from __future__ import annotations
@@ -145,6 +152,9 @@ def stream_counts(line: str) -> dict[str, float]:
     age = re.search(r"age at send max ([0-9.]+) ms", line)
     if age:
         out["age_at_send_max_ms"] = float(age.group(1))
+    sent = re.search(r"arrival -> sent p50 ([0-9.]+) ms, p99 ([0-9.]+) ms", line)
+    if sent:
+        out["sent_p50_ms"], out["sent_p99_ms"] = float(sent.group(1)), float(sent.group(2))
     return out
 
 
@@ -156,6 +166,7 @@ def end_to_end(
     retarget: str | None = None,
     speed: float = 1.0,
     record: Path | None = None,
+    extra: tuple[str, ...] = (),
 ) -> dict:
     """Stream ``csv`` (``speed`` times real time) to LSL and DDS; measure latency, losses
     and CPU (``retarget``: ``--retarget ROBOT``, the robot's outlet and JointState;
@@ -179,7 +190,7 @@ def end_to_end(
         [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@{speed:g}", "--lsl",
          "--lsl-name", name, "--ros2", topic, "--wait", "--wait-timeout", "60", "-q",
          *(["--retarget", retarget] if retarget else []),
-         *(["--record", str(record)] if record else [])],
+         *(["--record", str(record)] if record else []), *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
     )  # fmt: skip
@@ -353,6 +364,57 @@ def lane_before_after(rev: str, rounds: int) -> dict:
     return out
 
 
+def view_compare(seconds: float, rounds: int) -> dict:
+    """Part 5: the whole hand with ``--retarget shadow`` to LSL and DDS, without and with
+    ``--view-save``, alternately; medians over the rounds and the ratios with / without."""
+    out: dict = {"seconds": seconds, "rounds": rounds, "load_average_at_start": os.getloadavg()}
+    keys = {
+        "lsl_p50_ms": ("lsl", "p50_ms"),
+        "lsl_p99_ms": ("lsl", "p99_ms"),
+        "dds_p50_ms": ("dds", "p50_ms"),
+        "dds_p99_ms": ("dds", "p99_ms"),
+        "sent_p50_ms": ("counts", "sent_p50_ms"),
+        "sent_p99_ms": ("counts", "sent_p99_ms"),
+    }
+    with tempfile.TemporaryDirectory() as tmp:
+        sim = subject_for(HAND)
+        model_path = save_model(fit_session(sim.session), Path(tmp) / "view.json")
+        long = long_recording(sim.session.test[0], seconds)
+        csv = write_pose_csv(Path(tmp) / "view.csv", long)
+        runs: dict[str, list] = {"without": [], "with": []}
+        for r in range(rounds):
+            for label in ("without", "with") if r % 2 == 0 else ("with", "without"):
+                rrd = Path(tmp) / f"view{r}.rrd"
+                extra = ("--view-save", str(rrd)) if label == "with" else ()
+                e2e = end_to_end(
+                    model_path, csv, long.n_frames, f"view{r}{label}", "shadow", extra=extra
+                )
+                row = {k: e2e[a].get(b, float("nan")) for k, (a, b) in keys.items()}
+                row["lsl_lost"], row["dds_lost"] = e2e["lsl"]["lost"], e2e["dds"]["lost"]
+                row["cpu_share_of_one_core"] = e2e["cpu_share_of_one_core"]
+                row["recorded"] = e2e["counts"].get("recorded", 0)
+                if label == "with":
+                    row["rrd_mb"] = rrd.stat().st_size / 1e6 if rrd.exists() else None
+                runs[label].append(row)
+                print(f"view {label} (round {r + 1}): {json.dumps(row)}", flush=True)
+    for label, xs in runs.items():
+        out[label] = {k: float(np.median([x[k] for x in xs])) for k in keys}
+        out[label + "_runs"] = xs
+    out["ratio_with_over_without"] = {
+        k: out["with"][k] / out["without"][k] for k in keys if out["without"][k] > 0
+    }
+    out["load_average_at_end"] = os.getloadavg()
+    print(
+        f"| robot lane ({long.n_frames} frames, 240 Hz, whole hand, --retarget shadow) "
+        "| without --view | with --view-save | with / without |"
+    )
+    print("|---|---|---|---|")
+    for k in keys:
+        w, v = out["without"][k], out["with"][k]
+        print(f"| {k} | {w:.3f} | {v:.3f} | {v / w if w else float('nan'):.2f} |")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="replay length (s)")
@@ -374,6 +436,12 @@ def main() -> None:
         help="only part 4: the robot lane per frame, this tree against revision REV",
     )
     ap.add_argument("--lane-rounds", type=int, default=3, help="rounds of part 4")
+    ap.add_argument(
+        "--view-compare",
+        action="store_true",
+        help="only part 5: the robot lane's latency without and with --view-save",
+    )
+    ap.add_argument("--view-rounds", type=int, default=2, help="rounds of part 5")
     ap.add_argument("--lane-run", nargs=2, type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     from fingerfit.live import quiet_lsl
@@ -381,6 +449,11 @@ def main() -> None:
     quiet_lsl()  # this process's consumers: no liblsl log lines in the report
     if args.lane_run:  # a child of --lane-before
         print(json.dumps(lane_per_frame(*args.lane_run)), flush=True)
+        return
+    if args.view_compare:
+        results = view_compare(args.seconds, args.view_rounds)
+        if args.json:
+            args.json.write_text(json.dumps(results, indent=1) + "\n")
         return
     if args.lane_before:
         results = lane_before_after(args.lane_before, args.lane_rounds)

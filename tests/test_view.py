@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import time
 import warnings
 from collections import defaultdict
 
@@ -153,3 +154,140 @@ def test_save_must_be_an_rrd_and_map_needs_a_robot(simulated, tmp_path):
         ["view", str(model_path), str(grasp), "--save", str(tmp_path / "v.rrd"), "--map", "m.toml"],
     )
     assert r.exit_code == 2 and "needs --robot" in r.output
+
+
+# --- fingerfit stream --view-save: the same view, live, fed by the data lane ----------------
+
+
+def _angles_tips(model, model_path, grasp, tmp_path):
+    """The tips ``fingerfit angles`` writes, (n, d, 3) mm."""
+    import pandas as pd
+
+    out = tmp_path / "angles.csv"
+    r = CliRunner().invoke(app, ["angles", str(model_path), str(grasp), "-o", str(out), "-q"])
+    assert r.exit_code == 0, r.output
+    table = pd.read_csv(out)
+    cols = [f"{d}.tip.{c}" for d in model.fingers for c in "xyz"]
+    return table[cols].to_numpy().reshape(len(table), -1, 3)
+
+
+def test_stream_view_save_has_every_frame_and_the_angles_tips(simulated, tmp_path):
+    pytest.importorskip("rerun")
+    pytest.importorskip("mujoco")
+    from fingerfit.io import read_pose_csv
+    from fingerfit.retarget import resolve
+    from fingerfit.view import robot_scene
+
+    model, sub, folder, model_path = simulated
+    grasp = folder / sub.session.grasp[0].name
+    out = tmp_path / "live" / "grasp.rrd"
+    args = ["stream", str(model_path), "--source", f"replay:{grasp}@50", "--view-save", str(out)]
+    r = CliRunner().invoke(app, [*args, "--retarget", "shadow", "-q"])
+    assert r.exit_code == 0, r.output
+    assert out.is_file() and not list(out.parent.glob(".*part*"))
+    rows, static = _read(out)
+    n = sub.session.grasp[0].n_frames
+    expected = ["/person/skeleton", "/person/joints", "/person/axes", "/person/tips"]
+    expected += ["/person/pads", "/person/orthogonal/tips", "/sensors"]
+    expected += ["/robot/skeleton", "/robot/joints", "/robot/tips"]
+    expected += [f"/angles/{d}/{a}" for d in DIGITS for a in model.fingers[d].angle_names()]
+    assert set(expected) <= set(rows), sorted(set(expected) - set(rows))
+    for entity in rows:
+        assert sorted(rows[entity]["frame"]) == list(range(n)), entity  # one row per frame
+    want = _angles_tips(model, model_path, grasp, tmp_path)
+    got = np.array([v for _, v in sorted(rows["/person/tips"]["tip_mm"])]).reshape(want.shape)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+    assert "Points3D:labels" in static["/person/tips"]
+    assert "Points3D:labels" in static["/robot/tips"]
+    # No live output: the data lane's retargeter steps through every frame, as offline.
+    rec = read_pose_csv(grasp)
+    offline = robot_scene(model, rec, *resolve("shadow", None, model.hand))
+    series = {k.replace("\\", ""): v for k, v in rows.items()}  # entity paths escape ':'
+    for j, name in enumerate(offline.joint_names):
+        got = [v[0] for _, v in sorted(series[f"/robot_angles/{name}"]["Scalars:scalars"])]
+        np.testing.assert_allclose(got, np.degrees(offline.q[:, j]), atol=1e-6, err_msg=name)
+
+
+class _Outlet:
+    """A live output that keeps what it is sent (the robot lane's pushes)."""
+
+    def __init__(self):
+        self.robot = []
+
+    def push(self, angles, tips, valid, arrival, robot=None):
+        self.robot.append(robot[0].copy())
+
+    def has_consumers(self):
+        return True
+
+    def close(self):
+        pass
+
+
+def test_view_robot_follows_the_robot_lane_when_the_data_lane_has_no_robot(simulated, tmp_path):
+    """With a live output and no bag, the view's robot is what the robot lane sent, at
+    the frames it sent; the person has every frame."""
+    pytest.importorskip("rerun")
+    pytest.importorskip("mujoco")
+    from fingerfit.live.sources import Block
+    from fingerfit.live.stream import Streamer
+    from fingerfit.retarget import Retargeter, resolve, setup
+    from fingerfit.view import LiveView, RobotPlacement
+
+    model, sub, _, _ = simulated
+    rec = sub.session.grasp[0].slice(slice(0, 60))
+    robot, rmap = resolve("shadow", None, model.hand)
+    robot3, rmap3 = resolve("shadow", None, model.hand)
+    placement = RobotPlacement(model, robot3, rmap3, setup(model, robot3, rmap3))
+    out = tmp_path / "lane.rrd"
+    outlet = _Outlet()
+    streamer = Streamer(
+        model,
+        lsl=outlet,
+        retargeter=Retargeter(model, robot, rmap, "tip"),
+        max_age=60.0,
+        view=LiveView(model, out, placement),
+    )
+    # Blocks of 1, 2 and 3 frames: the robot lane sends the newest of each.
+    sizes = [1, 2, 3] * 10
+    starts = np.cumsum([0, *sizes[:-1]])
+    for i, k in zip(starts, sizes, strict=True):
+        part = rec.slice(slice(i, i + k))
+        streamer.process(Block(part, np.full(k, time.monotonic())))
+    streamer.close()
+    rows, _ = _read(out)
+    assert sorted(rows["/person/tips"]["frame"]) == list(range(60))
+    sent = [int(i + k - 1) for i, k in zip(starts, sizes, strict=True)]
+    assert sorted(rows["/robot/tips"]["frame"]) == sent
+    name = robot.joint_names[-1]
+    series = {k.replace("\\", ""): v for k, v in rows.items()}  # entity paths escape ':'
+    got = [v[0] for _, v in sorted(series[f"/robot_angles/{name}"]["Scalars:scalars"])]
+    np.testing.assert_allclose(got, np.degrees([q[-1] for q in outlet.robot]), atol=1e-9)
+
+
+def test_stream_view_refusals_are_one_line(simulated, tmp_path, monkeypatch):
+    _, sub, folder, model_path = simulated
+    grasp = folder / sub.session.grasp[0].name
+    base = ["stream", str(model_path), "--source", f"replay:{grasp}@50"]
+    rrd = str(tmp_path / "v.rrd")
+    cases = [
+        (["--view", "--view-save", rrd], "--view-save"),
+        (["--view-save", str(tmp_path / "v.txt")], "must end in .rrd"),
+        (["--view-save", str(grasp)], "would overwrite the input"),
+        (["--view-save", rrd, "--record", rrd], "--view-save"),
+    ]
+    for extra, says in cases:
+        r = CliRunner().invoke(app, [*base, *extra])
+        assert r.exit_code == 2, (extra, r.output)
+        assert says in r.output and len(r.output.strip().splitlines()) == 1, (extra, r.output)
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(sys, "platform", "linux")
+    r = CliRunner().invoke(app, [*base, "--view"])
+    assert r.exit_code == 2 and "--view-save" in r.output, r.output
+    assert len(r.output.strip().splitlines()) == 1
+    monkeypatch.setitem(sys.modules, "rerun", None)
+    r = CliRunner().invoke(app, [*base, "--view-save", rrd])
+    assert r.exit_code == 2 and "pip install fingerfit[view]" in r.output, r.output
+    assert len(r.output.strip().splitlines()) == 1
+    assert not (tmp_path / "v.rrd").exists()

@@ -16,6 +16,7 @@ person's palm frame and moves with the hand. Rerun (the extra ``view``) is impor
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import os
 import sys
@@ -277,84 +278,104 @@ def robot_scene(
         From :func:`fingerfit.retarget.resolve`.
     """
     from .retarget import Retargeter
-    from .retarget.solve import MM
 
     r = Retargeter(model, robot, rmap, method, variant)
     kin_v = kin if kin is not None and variant in kin.motions else None
     q, _, _ = r.step(recording, kin_v)
-    s = r.setup
-    n = recording.n_frames
-    digits = list(rmap.digits)  # every robot digit: those the model lacks at their neutral pose
-    chains = []
-    for d in digits:
-        dm = rmap.digits[d]
-        chain = robot.ancestors(dm.tip)
-        base = robot.joint_names.index(dm.base)
-        chains.append(chain[chain.index(base) :] if base in chain else chain)
-    used = sorted({j for c in chains for j in c})
-    anchors = np.empty((n, len(used), 3))
-    for i in range(n):
-        anchors[i] = robot.anchors(q[i])[used]
-    tip_frames = [rmap.digits[d].tip for d in digits]
-    tips = robot.positions(q, tip_frames)  # (n, d, 3) m, robot world
-    origin = np.broadcast_to(s.robot_palm.origin, (n, 1, 3))
-    world = np.concatenate([origin, anchors, tips], axis=1)
-    strips = []
-    for k, c in enumerate(chains):
-        strips.append(np.array([0] + [1 + used.index(j) for j in c] + [1 + len(used) + k]))
-    # Robot world (m) -> robot palm frame (mm) -> the person's palm frame, beside the hand.
-    local = (world - s.robot_palm.origin) @ s.robot_palm.rotation * MM
-    shift = np.mean([s.person_base[d] for d in s.digits], axis=0) - np.mean(
-        [s.robot_base[d] for d in s.digits], axis=0
-    )
-    side = 1.0 if model.hand == "left" else -1.0  # palm y is ulnar on a left hand
-    local = local + shift + np.array([0.0, side * offset_mm, 0.0])
-    palm = s.palm
-    ref = palm.origin + local @ palm.rotation.T
-    points = _carry(model, recording, ref)
-    notes = list(r.notes)
-    return RobotScene(
-        name=rmap.name,
-        joint_names=tuple(robot.joint_names),
-        q=q,
-        points=points,
-        strips=strips,
-        tips=points[:, 1 + len(used) :],
-        digits=list(digits),
-        notes=notes,
-    )
+    placement = RobotPlacement(model, robot, rmap, r.setup, offset_mm)
+    return placement.scene(q, recording, notes=list(r.notes))
+
+
+class RobotPlacement:
+    """Where a robot hand's points go beside the person (:func:`robot_scene`), prepared
+    once; :meth:`scene` poses it by joint values of any frames.
+
+    Parameters
+    ----------
+    model : HandModel
+    robot, rmap : Robot, RobotMap
+        From :func:`fingerfit.retarget.resolve`; ``robot`` is used by :meth:`scene` only
+        (its MuJoCo / Pinocchio data: one thread at a time).
+    setup : fingerfit.retarget.Setup
+        ``fingerfit.retarget.setup(model, robot, rmap)`` (a Retargeter's ``setup``).
+    offset_mm : float
+    """
+
+    def __init__(self, model: HandModel, robot, rmap, setup, offset_mm: float = ROBOT_OFFSET_MM):
+        from .retarget.solve import MM
+
+        self.model, self.robot, self.rmap, self.setup = model, robot, rmap, setup
+        self.mm = MM
+        self.digits = list(rmap.digits)  # every robot digit: those the model lacks held
+        chains = []
+        for d in self.digits:
+            dm = rmap.digits[d]
+            chain = robot.ancestors(dm.tip)
+            base = robot.joint_names.index(dm.base)
+            chains.append(chain[chain.index(base) :] if base in chain else chain)
+        self.used = sorted({j for c in chains for j in c})
+        self.tip_frames = [rmap.digits[d].tip for d in self.digits]
+        u = len(self.used)
+        self.strips = [
+            np.array([0] + [1 + self.used.index(j) for j in c] + [1 + u + k])
+            for k, c in enumerate(chains)
+        ]
+        s = setup
+        self.shift = np.mean([s.person_base[d] for d in s.digits], axis=0) - np.mean(
+            [s.robot_base[d] for d in s.digits], axis=0
+        )
+        side = 1.0 if model.hand == "left" else -1.0  # palm y is ulnar on a left hand
+        self.shift = self.shift + np.array([0.0, side * offset_mm, 0.0])
+
+    def scene(self, q: FloatArray, recording: Recording, notes=None) -> RobotScene:
+        """The robot posed by ``q`` (n, nq) at the frames of ``recording`` (n frames)."""
+        robot, s = self.robot, self.setup
+        n = q.shape[0]
+        anchors = np.empty((n, len(self.used), 3))
+        for i in range(n):
+            anchors[i] = robot.anchors(q[i])[self.used]
+        tips = robot.positions(q, self.tip_frames)  # (n, d, 3) m, robot world
+        origin = np.broadcast_to(s.robot_palm.origin, (n, 1, 3))
+        world = np.concatenate([origin, anchors, tips], axis=1)
+        # Robot world (m) -> robot palm frame (mm) -> the person's palm frame, beside the hand.
+        local = (world - s.robot_palm.origin) @ s.robot_palm.rotation * self.mm + self.shift
+        ref = s.palm.origin + local @ s.palm.rotation.T
+        points = _carry(self.model, recording, ref)
+        return RobotScene(
+            name=self.rmap.name,
+            joint_names=tuple(robot.joint_names),
+            q=q,
+            points=points,
+            strips=self.strips,
+            tips=points[:, 1 + len(self.used) :],
+            digits=list(self.digits),
+            notes=list(notes or []),
+        )
 
 
 # --- Logging ---------------------------------------------------------------------------------
 
 
-def _indexes(rr, time: FloatArray) -> list:
-    n = time.shape[0]
+def _indexes(rr, time: FloatArray, frames: np.ndarray) -> list:
     return [
-        rr.TimeColumn("frame", sequence=np.arange(n, dtype=np.int64)),
+        rr.TimeColumn("frame", sequence=np.asarray(frames, dtype=np.int64)),
         rr.TimeColumn("time", duration=np.asarray(time, dtype=float)),
     ]
 
 
-def _points(
-    rr, stream, entity: str, idx, pts: FloatArray, colour, radius: float, labels=None, extra=()
-):
+def _static(rr, stream, entity: str, archetype) -> None:
+    rr.log(entity, archetype, static=True, recording=stream)
+
+
+def _points(rr, stream, entity: str, idx, pts: FloatArray, extra=()) -> None:
     """Points ``(n, k, 3)``: positions per frame (with the ``extra`` component columns in
-    the same rows), colour/radius/labels once (static)."""
+    the same rows)."""
     n, k = pts.shape[:2]
     columns = rr.Points3D.columns(positions=pts.reshape(-1, 3)).partition(np.full(n, k))
     rr.send_columns(entity, indexes=idx, columns=[*columns, *extra], recording=stream)
-    rr.log(
-        entity,
-        rr.Points3D.from_fields(colors=[colour], radii=[radius], labels=labels),
-        static=True,
-        recording=stream,
-    )
 
 
-def _strips(
-    rr, stream, entity: str, idx, pts: FloatArray, strips: list[np.ndarray], colour, radius
-):
+def _strips(rr, stream, entity: str, idx, pts: FloatArray, strips: list[np.ndarray]) -> None:
     """Line strips through ``pts (n, k, 3)``, each strip a list of point indices."""
     n = pts.shape[0]
     lines = [pts[i, s] for i in range(n) for s in strips]
@@ -364,15 +385,9 @@ def _strips(
         columns=rr.LineStrips3D.columns(strips=lines).partition(np.full(n, len(strips))),
         recording=stream,
     )
-    rr.log(
-        entity,
-        rr.LineStrips3D.from_fields(colors=[colour], radii=[radius]),
-        static=True,
-        recording=stream,
-    )
 
 
-def _arrows(rr, stream, entity: str, idx, origins: FloatArray, vectors: FloatArray, colours):
+def _arrows(rr, stream, entity: str, idx, origins: FloatArray, vectors: FloatArray) -> None:
     n, k = origins.shape[:2]
     rr.send_columns(
         entity,
@@ -382,20 +397,15 @@ def _arrows(rr, stream, entity: str, idx, origins: FloatArray, vectors: FloatArr
         ).partition(np.full(n, k)),
         recording=stream,
     )
-    rr.log(
-        entity,
-        rr.Arrows3D.from_fields(colors=colours, radii=[0.6]),
-        static=True,
-        recording=stream,
-    )
 
 
-def blueprint(scene: Scene):
-    """The default layout: the 3D scene beside the joint angles' time series."""
+def blueprint(robot: bool = False):
+    """The default layout: the 3D scene beside the joint angles' time series (and the
+    robot's joints, with a ``robot``)."""
     import rerun.blueprint as rrb
 
     series = [rrb.TimeSeriesView(origin="angles", name="joint angles (deg)")]
-    if scene.robot is not None:
+    if robot:
         series.append(rrb.TimeSeriesView(origin="robot_angles", name="robot joints (deg)"))
     return rrb.Blueprint(
         rrb.Horizontal(
@@ -411,60 +421,126 @@ def blueprint(scene: Scene):
     )
 
 
-def log_scene(scene: Scene, stream) -> None:
-    """Send a :class:`Scene` to a Rerun recording stream, each entity as whole columns.
+def _padded(scene: Scene) -> list[str]:
+    return [g for g in scene.digits if scene.kinematics.motions["user_axis"][g].pad is not None]
+
+
+def _truth_digits(scene: Scene) -> list[str]:
+    return [g for g in scene.digits if g in scene.truth_tips] if scene.truth_tips else []
+
+
+def log_static(scene: Scene, stream) -> None:
+    """What does not change from frame to frame (colours, radii, labels, the scene's
+    axes), logged once; ``scene`` may be any block of frames of the recording (its
+    digits, axes, sensors and variants are the recording's)."""
+    rr = require_rerun()
+    kin = scene.kinematics
+    _static(rr, stream, "/", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
+    _static(
+        rr,
+        stream,
+        "person/skeleton",
+        rr.LineStrips3D.from_fields(colors=[_COLOURS["skeleton"]], radii=[1.2]),
+    )
+    _static(
+        rr,
+        stream,
+        "person/joints",
+        rr.Points3D.from_fields(colors=[_COLOURS["joints"]], radii=[2.5]),
+    )
+    colours = [_COLOURS[kind] for _, _, kind in scene.axes]
+    _static(rr, stream, "person/axes", rr.Arrows3D.from_fields(colors=colours, radii=[0.6]))
+    _static(
+        rr,
+        stream,
+        "person/tips",
+        rr.Points3D.from_fields(colors=[_COLOURS["tips"]], radii=[3.0], labels=scene.digits),
+    )
+    padded = _padded(scene)
+    if padded:
+        _static(
+            rr,
+            stream,
+            "person/pads",
+            rr.Points3D.from_fields(colors=[_COLOURS["pads"]], radii=[2.5], labels=padded),
+        )
+    if "orthogonal" in kin.motions:
+        _static(
+            rr,
+            stream,
+            "person/orthogonal/tips",
+            rr.Points3D.from_fields(colors=[_COLOURS["orthogonal"]], radii=[3.0]),
+        )
+    if scene.sensors:
+        colours = list(_SENSOR_AXIS_COLOURS) * len(scene.sensors)
+        _static(rr, stream, "sensors", rr.Arrows3D.from_fields(colors=colours, radii=[0.6]))
+    have = _truth_digits(scene)
+    if have:
+        _static(
+            rr,
+            stream,
+            "truth/tips",
+            rr.Points3D.from_fields(colors=[_COLOURS["truth"]], radii=[2.0], labels=have),
+        )
+    if scene.robot is not None:
+        log_robot_static(scene.robot.digits, stream)
+
+
+def log_robot_static(digits: list[str], stream) -> None:
+    """The robot's colours, radii and labels, logged once."""
+    rr = require_rerun()
+    _static(
+        rr,
+        stream,
+        "robot/skeleton",
+        rr.LineStrips3D.from_fields(colors=[_COLOURS["robot"]], radii=[2.0]),
+    )
+    _static(
+        rr, stream, "robot/joints", rr.Points3D.from_fields(colors=[_COLOURS["robot"]], radii=[3.0])
+    )
+    _static(
+        rr,
+        stream,
+        "robot/tips",
+        rr.Points3D.from_fields(colors=[_COLOURS["robot_tips"]], radii=[4.0], labels=digits),
+    )
+
+
+def log_frames(scene: Scene, stream, first: int = 0) -> None:
+    """Send a block of frames of a :class:`Scene` (whose first frame is the recording's
+    frame ``first``) to a Rerun recording stream, each entity as whole columns.
 
     Entities (``docs/view.md``): ``person/skeleton`` (per digit: joint centre to joint
     centre to tip), ``person/joints``, ``person/axes`` (every axis, flexion orange,
     ab/adduction purple), ``person/tips`` (with ``tip_mm``, the same tips in float64:
     Rerun stores positions in float32), ``person/pads``, ``person/orthogonal/tips``,
     ``sensors`` (each sensor's x, y, z axes), ``angles/<digit>/<angle>`` (deg),
-    ``truth/tips``, ``robot/skeleton|joints|tips`` and ``robot_angles/<joint>`` (deg).
+    ``truth/tips``, and the robot's (:func:`log_robot_frames`). Their colours and labels
+    are :func:`log_static`'s.
     """
     rr = require_rerun()
-    idx = _indexes(rr, scene.time)
     n = scene.n_frames
+    if n == 0:
+        return
+    idx = _indexes(rr, scene.time, first + np.arange(n))
     kin = scene.kinematics
     d = len(scene.digits)
-    rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True, recording=stream)
     # The person: each digit's skeleton, joint centre to joint centre to tip.
     tips = np.stack([kin.motions["user_axis"][g].tip for g in scene.digits], axis=1)
     skeleton = np.concatenate([scene.centres, tips[:, :, None, :]], axis=2)  # (n, d, 4, 3)
     strips = [np.arange(4) + 4 * k for k in range(d)]
-    _strips(
-        rr,
-        stream,
-        "person/skeleton",
-        idx,
-        skeleton.reshape(n, -1, 3),
-        strips,
-        _COLOURS["skeleton"],
-        1.2,
-    )
-    _points(
-        rr, stream, "person/joints", idx, scene.centres.reshape(n, -1, 3), _COLOURS["joints"], 2.5
-    )
-    colours = [_COLOURS[kind] for _, _, kind in scene.axes]
-    _arrows(rr, stream, "person/axes", idx, scene.axis_origins, scene.axis_vectors, colours)
+    _strips(rr, stream, "person/skeleton", idx, skeleton.reshape(n, -1, 3), strips)
+    _points(rr, stream, "person/joints", idx, scene.centres.reshape(n, -1, 3))
+    _arrows(rr, stream, "person/axes", idx, scene.axis_origins, scene.axis_vectors)
     exact = rr.AnyValues.columns(tip_mm=tips.reshape(-1).astype(np.float64))
-    _points(
-        rr,
-        stream,
-        "person/tips",
-        idx,
-        tips,
-        _COLOURS["tips"],
-        3.0,
-        labels=scene.digits,
-        extra=exact.partition(np.full(n, 3 * d)),
-    )
-    padded = [g for g in scene.digits if kin.motions["user_axis"][g].pad is not None]
+    _points(rr, stream, "person/tips", idx, tips, extra=exact.partition(np.full(n, 3 * d)))
+    padded = _padded(scene)
     if padded:
         pads = np.stack([kin.motions["user_axis"][g].pad for g in padded], axis=1)
-        _points(rr, stream, "person/pads", idx, pads, _COLOURS["pads"], 2.5, labels=padded)
+        _points(rr, stream, "person/pads", idx, pads)
     if "orthogonal" in kin.motions:
         ortho = np.stack([kin.motions["orthogonal"][g].tip for g in scene.digits], axis=1)
-        _points(rr, stream, "person/orthogonal/tips", idx, ortho, _COLOURS["orthogonal"], 3.0)
+        _points(rr, stream, "person/orthogonal/tips", idx, ortho)
     # The sensors: each one's x, y, z axes.
     names = list(scene.sensors)
     if names:
@@ -472,9 +548,7 @@ def log_scene(scene: Scene, stream) -> None:
         rot = np.stack([scene.sensors[s][1] for s in names], axis=1)  # (n, s, 3, 3)
         origins = np.repeat(pos, 3, axis=1)
         vectors = SENSOR_AXIS_MM * np.swapaxes(rot, 2, 3).reshape(n, -1, 3)
-        _arrows(
-            rr, stream, "sensors", idx, origins, vectors, list(_SENSOR_AXIS_COLOURS) * len(names)
-        )
+        _arrows(rr, stream, "sensors", idx, origins, vectors)
     # Joint angles (deg), one series per angle.
     for g in scene.digits:
         for name, a in kin.motions["user_axis"][g].angles.items():
@@ -484,41 +558,38 @@ def log_scene(scene: Scene, stream) -> None:
                 columns=rr.Scalars.columns(scalars=np.degrees(a)),
                 recording=stream,
             )
-    if scene.truth_tips:
-        have = [g for g in scene.digits if g in scene.truth_tips]
+    have = _truth_digits(scene)
+    if have:
         truth = np.stack([scene.truth_tips[g] for g in have], axis=1)
-        _points(rr, stream, "truth/tips", idx, truth, _COLOURS["truth"], 2.0, labels=have)
-    robot = scene.robot
-    if robot is not None:
-        _strips(
-            rr, stream, "robot/skeleton", idx, robot.points, robot.strips, _COLOURS["robot"], 2.0
+        _points(rr, stream, "truth/tips", idx, truth)
+    if scene.robot is not None:
+        log_robot_frames(scene.robot, stream, first + np.arange(n), scene.time)
+
+
+def log_robot_frames(robot: RobotScene, stream, frames: np.ndarray, time: FloatArray) -> None:
+    """Send a robot hand's frames (``robot/skeleton|joints|tips``, ``robot_angles/<joint>``
+    in degrees) at the recording's frames ``frames`` (n,) and times ``time`` (n,) s."""
+    rr = require_rerun()
+    if robot.q.shape[0] == 0:
+        return
+    idx = _indexes(rr, time, frames)
+    _strips(rr, stream, "robot/skeleton", idx, robot.points, robot.strips)
+    _points(rr, stream, "robot/joints", idx, robot.points[:, 1 : -len(robot.digits)])
+    _points(rr, stream, "robot/tips", idx, robot.tips)
+    for j, name in enumerate(robot.joint_names):
+        rr.send_columns(
+            f"robot_angles/{name}",
+            indexes=idx,
+            columns=rr.Scalars.columns(scalars=np.degrees(robot.q[:, j])),
+            recording=stream,
         )
-        _points(
-            rr,
-            stream,
-            "robot/joints",
-            idx,
-            robot.points[:, 1 : -len(robot.digits)],
-            _COLOURS["robot"],
-            3.0,
-        )
-        _points(
-            rr,
-            stream,
-            "robot/tips",
-            idx,
-            robot.tips,
-            _COLOURS["robot_tips"],
-            4.0,
-            labels=robot.digits,
-        )
-        for j, name in enumerate(robot.joint_names):
-            rr.send_columns(
-                f"robot_angles/{name}",
-                indexes=idx,
-                columns=rr.Scalars.columns(scalars=np.degrees(robot.q[:, j])),
-                recording=stream,
-            )
+
+
+def log_scene(scene: Scene, stream) -> None:
+    """Send a whole :class:`Scene` to a Rerun recording stream: :func:`log_static`, then
+    every frame as whole columns (:func:`log_frames`)."""
+    log_static(scene, stream)
+    log_frames(scene, stream)
 
 
 def new_stream(recording_id: str | None = None):
@@ -534,11 +605,113 @@ def save_rrd(scene: Scene, path: str | Path) -> Path:
     path = Path(path)
     with atomic_path(path, suffix=".part.rrd") as tmp, no_usage_reporting():
         stream = new_stream()
-        stream.save(tmp, default_blueprint=blueprint(scene))
+        stream.save(tmp, default_blueprint=blueprint(scene.robot is not None))
         log_scene(scene, stream)
         stream.flush()
         stream.disconnect()
     return path
+
+
+class LiveView:
+    """The view of ``fingerfit stream --view`` / ``--view-save``, fed block by block.
+
+    :meth:`push` is called by the stream's data lane (its own thread, every frame, in
+    blocks) with the kinematics it computed: the same :func:`hand_scene`,
+    :func:`log_static` and :func:`log_frames` as ``fingerfit view``, with frames counted
+    on from block to block. The robot (``placement``) is posed by the joints the data
+    lane's own retargeter gives for every frame (:meth:`push`'s ``q``), or else by the
+    joints the robot lane sent (:attr:`sent`, filled by the robot lane: one row per sent
+    frame, at that frame).
+
+    Parameters
+    ----------
+    model : HandModel
+    save : Path, optional
+        Write a Rerun file (atomically, when :meth:`close` is called with ``ok``);
+        otherwise the native viewer is spawned (its usage reporting off).
+    placement : RobotPlacement, optional
+        The robot beside the hand, on a robot of its own (used on the data lane's thread).
+    """
+
+    def __init__(
+        self, model: HandModel, save: Path | None = None, placement: RobotPlacement | None = None
+    ) -> None:
+        from .io.atomic import atomic_path
+
+        require_rerun()
+        self.model, self.placement = model, placement
+        self.frames = 0
+        #: (frame, joints (nq,)) of every frame the robot lane sent, when the view's robot
+        #: follows it (appended by the robot lane, taken by :meth:`push`).
+        self.sent: collections.deque | None = None
+        self._stack = contextlib.ExitStack()
+        self.stream = new_stream()
+        layout = blueprint(placement is not None)
+        if save is not None:
+            tmp = self._stack.enter_context(atomic_path(save, suffix=".part.rrd"))
+            self.stream.save(tmp, default_blueprint=layout)
+        else:
+            with no_usage_reporting():
+                self.stream.spawn(default_blueprint=layout)
+        self._started = False
+
+    def push(self, recording: Recording, kin: Kinematics, q: FloatArray | None = None) -> None:
+        """Log a block of frames (the next ones of the stream).
+
+        Parameters
+        ----------
+        recording : Recording
+            The block's frames (mm, tracker frame).
+        kin : Kinematics
+            Their :func:`~fingerfit.kinematics.compute_kinematics` (``user_axis``, and
+            ``orthogonal`` for its tips).
+        q : ndarray, shape (n, nq), optional
+            The robot's joints at every frame of the block.
+        """
+        n = recording.n_frames
+        if n == 0:
+            return
+        scene = hand_scene(self.model, recording, kin)
+        if not self._started:
+            log_static(scene, self.stream)
+            if self.placement is not None:
+                log_robot_static(self.placement.digits, self.stream)
+            self._started = True
+        first = self.frames
+        log_frames(scene, self.stream, first)
+        if self.placement is not None:
+            rows = np.arange(n)
+            if q is None:
+                rows, q = self._sent_until(first + n)
+                rows = rows - first
+            if rows.size:
+                robot = self.placement.scene(q, recording.slice(rows))
+                log_robot_frames(robot, self.stream, first + rows, recording.time[rows])
+        self.frames += n
+
+    def _sent_until(self, end: int) -> tuple[np.ndarray, FloatArray]:
+        """The robot lane's sent frames before frame ``end``: their frames and joints."""
+        rows, qs = [], []
+        sent = self.sent
+        while sent and sent[0][0] < end:
+            frame, joints = sent.popleft()
+            rows.append(frame)
+            qs.append(joints)
+        if not rows:
+            return np.zeros(0, dtype=int), np.zeros((0, 0))
+        return np.array(rows), np.stack(qs)
+
+    def close(self, ok: bool = True) -> None:
+        """Flush the stream; the file (``save``) is kept when ``ok``, else removed."""
+        try:
+            self.stream.flush()
+            self.stream.disconnect()
+        finally:
+            if ok:
+                self._stack.close()
+            else:
+                with contextlib.suppress(BaseException):
+                    self._stack.__exit__(RuntimeError, RuntimeError("stream failed"), None)
 
 
 #: The environment variable that turns the native Rerun viewer's usage reporting off for one

@@ -63,6 +63,23 @@ def stream(
             "appended a row group per block).",
         ),
     ] = None,
+    view: Annotated[
+        bool,
+        typer.Option(
+            "--view",
+            help="Show the hand live in the Rerun viewer (as `fingerfit view`; a display "
+            "is needed), fed by the data lane, never by the robot lane.",
+        ),
+    ] = False,
+    view_save: Annotated[
+        Path | None,
+        typer.Option(
+            "--view-save",
+            metavar="OUT.rrd",
+            help="Write the live view to this Rerun file instead of a window (complete "
+            "when the stream ends).",
+        ),
+    ] = None,
     tips_frame: Annotated[
         str, typer.Option("--tips-frame", help="LSL fingertips in the tracker or hand frame.")
     ] = "tracker",
@@ -181,7 +198,7 @@ def stream(
     The values are those of `fingerfit angles` (same kinematics). A frame with a missing
     sensor holds the last values and has valid = 0. With --retarget ROBOT, the robot's
     joints of `fingerfit retarget` go out too. LSL and DDS get the newest frame, never
-    one older than --max-age; --record and --ros2-bag get every frame.
+    one older than --max-age; --record, --ros2-bag and --view get every frame.
     """
     import numpy as np
 
@@ -237,10 +254,23 @@ def stream(
     else:
         robot_files = check_robot_options(retarget, map_path, method, contact_mm)
     inputs = [model_path, *robot_files] + ([replay_path] if replay_path is not None else [])
-    files = [p for p in (record, ros2_bag) if p is not None]
+    files = [p for p in (record, ros2_bag, view_save) if p is not None]
     refuse_writing_inputs(files, inputs)
     if record is not None:
         check_target(record)
+    if view_save is not None:
+        check_view_save(view_save, view, record)
+    if view:
+        from ..view import has_display
+
+        if not has_display():
+            raise FingerfitError(
+                "no display to open the viewer on: give --view-save OUT.rrd", field="--view"
+            )
+    if view or view_save is not None:
+        from ..view import require_rerun
+
+        require_rerun()  # before the source opens: one line naming the extra
     if (
         ros2_bag is not None
         and ros2_bag.exists()
@@ -272,6 +302,14 @@ def stream(
             bag_retargeter = Retargeter(
                 model, robot2, rmap2, method, variant, contact_mm=contact_mm
             )
+    placement = None
+    if retargeter is not None and (view or view_save is not None):
+        # The view poses its robot on the data lane's thread: a robot of its own.
+        from ..retarget import setup
+        from ..view import RobotPlacement
+
+        robot3, rmap3 = resolve_robot(retarget, map_path, model.hand, "--retarget")
+        placement = RobotPlacement(model, robot3, rmap3, setup(model, robot3, rmap3))
     if not verbose and (lsl or kind == "lsl"):
         from ..live import quiet_lsl
 
@@ -305,7 +343,7 @@ def stream(
     names = list(robot.joint_names) if retargeter is not None else joint_names(model)
     streamer = None
     try:
-        lsl_out = ros_out = bag_out = rec_out = None
+        lsl_out = ros_out = bag_out = rec_out = live_view = None
         ch = channels_of(model, compute_kinematics(model, empty_recording(sensors), ("user_axis",)))
         if lsl and retargeter is not None:
             lsl_out = LslOutput(
@@ -326,6 +364,10 @@ def stream(
             bag_out = BagOutput(ros2_bag, ros2 or "/joint_states", names)
         if record is not None:
             rec_out = RecordOutput(record, units)
+        if view or view_save is not None:
+            from ..view import LiveView
+
+            live_view = LiveView(model, view_save, placement)
         streamer = Streamer(
             model,
             lsl=lsl_out,
@@ -339,13 +381,14 @@ def stream(
             bag_retargeter=bag_retargeter,
             max_age=max_age_s,
             on_silence=on_silence,
+            view=live_view,
         )
     except BaseException:
         the_source.close()
         for o in (lsl_out, ros_out):
             if o is not None:
                 o.close()
-        for o in (bag_out, rec_out):
+        for o in (bag_out, rec_out, live_view):
             if o is not None:
                 o.close(ok=False)
         raise
@@ -363,7 +406,7 @@ def stream(
         )
     except FingerfitError as exc:
         if streamer.summary.frames:
-            kept = [str(p) for p in (record, ros2_bag) if p is not None]
+            kept = [str(p) for p in (record, ros2_bag, view_save) if p is not None]
             extra = f"; kept {', '.join(kept)}" if kept else ""
             n = streamer.summary.reconnects
             back = f", {n} reconnect{'s' * (n > 1)}" if n else ""
@@ -393,9 +436,25 @@ def stream(
             f"{the_source.stats.skipped_bytes} bytes skipped and {the_source.stats.rejected} "
             "records rejected while resynchronising",
         )
-    for p, what in ((record, "angles CSV"), (ros2_bag, "rosbag2")):
+    for p, what in ((record, "angles CSV"), (ros2_bag, "rosbag2"), (view_save, "view")):
         if p is not None:
             say("{} -> [bold]{}[/]", what, p)
+
+
+def check_view_save(path: Path, view: bool, record: Path | None) -> None:
+    """``--view-save OUT.rrd``: a Rerun file, not with ``--view``, not the record."""
+    from ..errors import FingerfitError
+    from ..io.atomic import check_target
+
+    if view:
+        raise FingerfitError(
+            "one of --view (a window) or --view-save (a file)", field="--view-save"
+        )
+    if path.suffix.lower() != ".rrd":
+        raise FingerfitError("must end in .rrd (a Rerun file)", field="--view-save")
+    if record is not None and path.resolve() == record.resolve():
+        raise FingerfitError("must not be the --record file", field="--view-save")
+    check_target(path)
 
 
 def summary_line(

@@ -142,7 +142,9 @@ def _serve_web(scene, what: str, web_port: int, grpc_port: int) -> None:
     with no_usage_reporting():
         stream = new_stream()
         try:
-            uri = stream.serve_grpc(grpc_port=grpc_port, default_blueprint=blueprint(scene))
+            uri = stream.serve_grpc(
+                grpc_port=grpc_port, default_blueprint=blueprint(scene.robot is not None)
+            )
             log_scene(scene, stream)
             stream.flush()
             rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=uri)
@@ -166,7 +168,7 @@ def _spawn(scene, what: str) -> None:
 
     stream = new_stream()
     with no_usage_reporting():
-        stream.spawn(default_blueprint=blueprint(scene))
+        stream.spawn(default_blueprint=blueprint(scene.robot is not None))
     log_scene(scene, stream)
     stream.flush()
     say("{} sent to the Rerun viewer", what)

@@ -27,6 +27,7 @@ robot's ``hold`` or ``release`` policy, :meth:`Streamer.silence`).
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import math
 import signal
@@ -468,7 +469,8 @@ class Summary:
 
 
 class DataLane:
-    """Every frame to the files (``--record``, ``--ros2-bag``), on a thread of its own.
+    """Every frame to the files (``--record``, ``--ros2-bag``) and the view (``--view``,
+    ``--view-save``), on a thread of its own.
 
     Blocks are queued as they arrive (:meth:`put`); the thread takes everything queued
     every :data:`DATA_PERIOD` s and computes it as one block (at most
@@ -487,7 +489,11 @@ class DataLane:
     channels : Channels
     sensors : list of str
     retargeter : fingerfit.retarget.Retargeter, optional
-        The bag's robot joints (its own instance: its warm start follows every frame).
+        The bag's and the view's robot joints (its own instance: its warm start follows
+        every frame).
+    view : fingerfit.view.LiveView, optional
+        Gets every block's frames and kinematics (and the robot's joints, with a
+        ``retargeter``), after the files.
     wall_offset : float
         System clock minus ``time.monotonic()`` (s), for the bag's stamps.
     """
@@ -504,13 +510,15 @@ class DataLane:
         sensors: list[str],
         retargeter: Any = None,
         wall_offset: float = 0.0,
+        view: Any = None,
     ) -> None:
         self.model, self.summary = model, summary
-        self.record, self.bag = record, bag
+        self.record, self.bag, self.view = record, bag, view
         self.record_units = record_units
         self.channels, self.sensors = channels, sensors
-        self.retargeter = retargeter if bag is not None else None
-        variants = ["user_axis"] + (["orthogonal"] if record is not None else [])
+        self.retargeter = retargeter if bag is not None or view is not None else None
+        both = record is not None or view is not None  # the angles CSV, the view's tips
+        variants = ["user_axis"] + (["orthogonal"] if both else [])
         if self.retargeter is not None and self.retargeter.variant not in variants:
             variants.append(self.retargeter.variant)
         self.variants = tuple(variants)
@@ -563,7 +571,7 @@ class DataLane:
         except BaseException as exc:  # handed to the loop, which raises it
             self.error, ok = exc, False
         # The files are closed on this thread (a bag's SQLite objects belong to it).
-        for o in (self.record, self.bag):
+        for o in (self.record, self.bag, self.view):
             if o is not None:
                 try:
                     o.close(ok)
@@ -588,10 +596,12 @@ class DataLane:
             kin = self.plan.run(rec)
         else:
             kin = compute_kinematics(self.model, rec, self.variants)
-        joints = None
+        joints = robot = None
+        if self.retargeter is not None:
+            robot = self.retargeter.step(rec, kin)[0]
         if self.bag is not None:
-            if self.retargeter is not None:
-                joints = self.retargeter.step(rec, kin)[0]
+            if robot is not None:
+                joints = robot
             else:
                 joints = block_values(kin, self.channels, rec, self.sensors, "tracker").joints
         compute = time.perf_counter() - t
@@ -604,6 +614,8 @@ class DataLane:
             if joints.shape[0]:
                 self._last = joints[-1]
             self.bag.push(joints, block.arrival + self.wall_offset)
+        if self.view is not None:
+            self.view.push(rec, kin, robot)
         s.data_compute.append(compute)
         s.data_sizes.append(rec.n_frames)
         if len(s.data_compute) >= 4096:
@@ -631,8 +643,8 @@ class Streamer:
       ``retargeter``) is latest-wins: of the frames that arrived together it computes and
       sends only the newest, counts the others as skipped, and never sends a frame older
       than ``max_age`` (counted as stale).
-    * The **data lane** (:class:`DataLane`: ``record``, ``bag``) writes every frame, on
-      its own thread, behind the robot lane.
+    * The **data lane** (:class:`DataLane`: ``record``, ``bag``, ``view``) writes every
+      frame, on its own thread, behind the robot lane.
 
     Parameters
     ----------
@@ -659,6 +671,11 @@ class Streamer:
         Seconds: a frame older than this when the robot lane would send it is not sent.
     on_silence : {"hold", "release"}
         What the robot outlet sends when the watchdog fires (:meth:`silence`).
+    view : fingerfit.view.LiveView, optional
+        The live view, fed by the data lane. Its robot follows the data lane's
+        retargeter when that lane has one (no live output, or a bag); else, with a live
+        output and a ``retargeter``, the joints the robot lane sent (each sent frame's
+        copied to ``view.sent``, nothing else added to the robot lane).
     """
 
     def __init__(
@@ -676,6 +693,7 @@ class Streamer:
         bag_retargeter: Any = None,
         max_age: float = DEFAULT_MAX_AGE_MS / 1e3,
         on_silence: str = "hold",
+        view: Any = None,
     ) -> None:
         if tips_frame not in ("tracker", "hand"):
             raise FingerfitError("must be tracker or hand", field="--tips-frame")
@@ -720,7 +738,11 @@ class Streamer:
         self.data: DataLane | None = None
         if bag is not None and retargeter is not None and self.live and bag_retargeter is None:
             raise ValueError("a bag of the robot's joints beside live outputs needs bag_retargeter")
-        if record is not None or bag is not None:
+        self._view_sent = None
+        if record is not None or bag is not None or view is not None:
+            data_retargeter = bag_retargeter if self.live else retargeter
+            if view is not None and retargeter is not None and data_retargeter is None:
+                view.sent = self._view_sent = collections.deque()
             self.data = DataLane(
                 model,
                 self.summary,
@@ -729,8 +751,9 @@ class Streamer:
                 record_units=record_units,
                 channels=self.channels,
                 sensors=self.sensors,
-                retargeter=bag_retargeter if self.live else retargeter,
+                retargeter=data_retargeter,
                 wall_offset=self.wall_offset,
+                view=view,
             )
 
     def outputs(self) -> list:
@@ -794,6 +817,8 @@ class Streamer:
         done = time.monotonic()
         s.sent += 1
         s.add(done - arrived, compute, 1, sent_age)
+        if self._view_sent is not None:  # the view's robot: this frame's sent joints
+            self._view_sent.append((s.received + n - 1, held["robot"][0].copy()))
 
     def _hold(self, key: str, row: FloatArray) -> None:
         """In place: NaN in ``row`` (shape (1, k)) -> the column's last value sent; the
