@@ -9,7 +9,7 @@ result about the ab/adduction axis ``b`` fixed in the hand,
 with ``a`` and ``b`` in the parent (hand) sensor frame at the reference posture.
 
 **Axes** -- variable projection: for given ``(a, b)`` the per-frame angles come
-in closed form from :func:`fingerfit.kinematics.two_axis_angles` (the same
+in closed form from :func:`fingerfit.angles.two_axis_angles` (the same
 decomposition the angles use later), and the residual is the small rotation
 ``vee(E - E^T) / 2`` of ``E = Rot(a, theta)^T Rot(b, beta)^T Q`` (rad).
 ``scipy.optimize.least_squares`` minimises it, first with ``b`` held perpendicular
@@ -65,7 +65,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.stats import chi2
 
-from ..kinematics import two_axis_angles
+from ..angles import two_axis_angles
 from ..transforms import FloatArray, orthonormal_basis, skew, unit
 from .migration import fit_axis_points
 from .shrink import MIN_DATA_SHARE, data_share
@@ -258,7 +258,7 @@ _VEE = np.stack([skew(e).T for e in np.eye(3)])
 def _skew_residual(q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
     """Rotation ``(n, 3)`` (rad, small-angle) left after removing the two-axis motion.
 
-    The angles are :func:`fingerfit.kinematics.two_axis_angles`; the residual is
+    The angles are :func:`fingerfit.angles.two_axis_angles`; the residual is
     ``vee(E - E^T) / 2`` of ``E = Rot(a, -theta) Rot(b, -beta) Q``.
 
     With Rodrigues' ``Rot(a, -theta) = sum_i c_i K_a^i`` (``c = 1, -sin theta,
