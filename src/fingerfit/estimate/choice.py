@@ -55,8 +55,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import binomtest
 
+from ..angles import twist_angle, two_axis_angles
 from ..digits import ABDUCTION_FIRST, FLEXION_FIRST
-from ..kinematics import twist_angle, two_axis_angles
 from ..transforms import FloatArray, axis_angle_matrix, orthonormal_basis, unit
 from .twoaxis import MAX_FRAMES, TwoAxisFit, direction_jacobian
 

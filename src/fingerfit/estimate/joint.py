@@ -33,8 +33,8 @@ import math
 
 import numpy as np
 
+from ..angles import twist_angle, two_axis_angles
 from ..errors import FingerfitError
-from ..kinematics import twist_angle, two_axis_angles
 from ..transforms import (
     FloatArray,
     axis_angle_matrix,

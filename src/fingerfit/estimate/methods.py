@@ -23,9 +23,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..angles import twist_angle, two_axis_angles
 from ..digits import ABDUCTION_FIRST, FLEXION_FIRST
 from ..errors import FingerfitError
-from ..kinematics import twist_angle, two_axis_angles
 from ..transforms import FloatArray, angle_between_axes
 from .axis import AxisFit, mean_null_axis
 from .centre import CentreFit, centre_of_rotation

@@ -21,9 +21,9 @@ about ``alpha delta (p x d) / 2``), which is large when both angles span tens of
 coarse search over the pairs of directions of the plane (``GRID_STEP_DEG``; ``p`` and
 ``d`` apart by at least ``MIN_AXIS_ANGLE_DEG``) scores each pair by the rotation residual;
 its best local minima (and the caller's guesses) start ``scipy.optimize.least_squares``
-with both axes free (four parameters). The residual is :mod:`.twoaxis`'s: per frame the
+with both axes free (four parameters). The residual is :mod:`.twoaxis_residual`'s: per frame the
 small rotation left in ``Rot(d, -delta) Rot(p, -alpha) Q`` with the angles in closed form
-from :func:`fingerfit.kinematics.two_axis_angles` (variable projection). Unlike the finger
+from :func:`fingerfit.angles.two_axis_angles` (variable projection). Unlike the finger
 MP fit there is no bound on how far the flexion axis may turn from a hinge axis and no
 prior on the angle between the axes: both angles have large ranges, so both directions and
 their angle are determined by the data.
@@ -58,12 +58,12 @@ from typing import Literal
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..angles import two_axis_angles
 from ..errors import FingerfitError
-from ..kinematics import two_axis_angles
 from ..transforms import FloatArray, angle_between_axes, orthonormal_basis, rotation_vector, unit
 from .migration import fit_axis_points
 from .pooled import sara_axis
-from .twoaxis import _skew_residual
+from .twoaxis_residual import _skew_residual
 
 Order = Literal["flexion_first", "abduction_first"]
 ORDERS: tuple[str, ...] = ("flexion_first", "abduction_first")
@@ -114,7 +114,7 @@ class SaddleFit:
         reference posture).
     flexion_angle, abduction_angle : ndarray, shape (n,)
         Per-frame angles (rad, 0 at the reference posture), exactly
-        :func:`fingerfit.kinematics.two_axis_angles` of ``Q = R R_ref^T`` about these axes.
+        :func:`fingerfit.angles.two_axis_angles` of ``Q = R R_ref^T`` about these axes.
     axis_angle_deg : float
         Angle between the two lines (deg, 0-90).
     offset_mm : float

@@ -9,7 +9,7 @@ result about the ab/adduction axis ``b`` fixed in the hand,
 with ``a`` and ``b`` in the parent (hand) sensor frame at the reference posture.
 
 **Axes** -- variable projection: for given ``(a, b)`` the per-frame angles come
-in closed form from :func:`fingerfit.kinematics.two_axis_angles` (the same
+in closed form from :func:`fingerfit.angles.two_axis_angles` (the same
 decomposition the angles use later), and the residual is the small rotation
 ``vee(E - E^T) / 2`` of ``E = Rot(a, theta)^T Rot(b, beta)^T Q`` (rad).
 ``scipy.optimize.least_squares`` minimises it, first with ``b`` held perpendicular
@@ -55,6 +55,10 @@ two-axis model with ``REST_SPREAD_CONFIDENCE`` (one-sided chi-square lower bound
 the cycles). Soft-tissue artefact driven by the finger's flexion repeats in every
 cycle and passes (1)-(3) on data without ab/adduction; it fails (4). Otherwise the
 joint stays a hinge.
+
+The residual, its Jacobian and the cluster-robust covariance are in
+:mod:`.twoaxis_residual`, test (4) in :mod:`.rest_abduction`; their names are importable
+from here too.
 """
 
 from __future__ import annotations
@@ -63,19 +67,24 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.stats import chi2
 
-from ..kinematics import two_axis_angles
-from ..transforms import FloatArray, orthonormal_basis, skew, unit
+from ..angles import two_axis_angles
+from ..transforms import FloatArray, orthonormal_basis, unit
 from .migration import fit_axis_points
+from .rest_abduction import REST_SPREAD_CONFIDENCE as REST_SPREAD_CONFIDENCE
+from .rest_abduction import REST_SPREAD_RATIO as REST_SPREAD_RATIO
+from .rest_abduction import RestAbductionTest, rest_abduction_test
 from .shrink import MIN_DATA_SHARE, data_share
+from .twoaxis_residual import (
+    _cluster_covariance,
+    _hinge_residual,
+    _skew_residual,
+    _tangent_coords,
+    direction_jacobian,
+)
 
 MAX_RESIDUAL_RATIO = 0.5
 MIN_RANGE_DEG = 1.5
-# The ab/adduction at zero flexion must vary between grasp cycles by more than this many
-# times the RMS rotation off the two-axis model (SD over cycles, lower confidence bound).
-REST_SPREAD_RATIO = 1.0
-REST_SPREAD_CONFIDENCE = 0.95
 MAX_FRAMES = 600  # the direction fit uses at most this many frames (evenly strided)
 MAX_FLEXION_TILT_DEG = 20.0  # the flexion axis stays within this of the pooled hinge axis
 MAX_ABDUCTION_TURN_DEG = 60.0  # the ab/adduction axis within this of its starting direction
@@ -171,176 +180,6 @@ class TwoAxisFit:
                 f"(+/-{self.offset_sd_mm:.1f} mm from the data alone)"
             )
         return notes
-
-
-@dataclass(frozen=True)
-class RestAbductionTest:
-    """Result of :func:`rest_abduction_test`.
-
-    Attributes
-    ----------
-    spread_deg : float
-        SD over the cycles of the ab/adduction at zero flexion (deg); NaN with fewer
-        than two usable cycles.
-    low_deg : float
-        One-sided lower confidence bound of that SD (deg; NaN as above).
-    cycles : int
-        Usable cycles (at least three frames and a flexion range).
-    passed : bool
-        ``low_deg > REST_SPREAD_RATIO * rms_deg``.
-    """
-
-    spread_deg: float
-    low_deg: float
-    cycles: int
-    passed: bool
-
-
-def rest_abduction_test(
-    beta: FloatArray,
-    theta: FloatArray,
-    groups: FloatArray,
-    rms_rad: float,
-    weights: FloatArray | None = None,
-) -> RestAbductionTest:
-    """Does the ab/adduction vary independently of flexion between grasp cycles?
-
-    Per cycle ``c`` a weighted least-squares line ``beta = beta0_c + k_c theta`` gives
-    ``beta0_c``, the ab/adduction at zero flexion. With ``s`` the SD of the ``G``
-    values ``beta0_c`` (one number per cycle: a systematic error repeated within a
-    cycle counts once), the one-sided lower confidence bound of the true SD is
-    ``s sqrt((G - 1) / chi2_{p, G - 1})`` (normal cycles, ``p`` =
-    ``REST_SPREAD_CONFIDENCE``); the test passes when it exceeds
-    ``REST_SPREAD_RATIO * rms_rad``. Ab/adduction that follows flexion alike in every
-    cycle (coupling, or soft-tissue artefact driven by the finger's flexion) gives
-    ``beta0_c`` equal up to noise; without variation independent of flexion the flexion
-    axis is not told apart from the hinge axis to first order (``docs/methods.md``).
-
-    Parameters
-    ----------
-    beta, theta : ndarray, shape (n,)
-        Ab/adduction and flexion angles (rad).
-    groups : ndarray, shape (n,)
-        Grasp cycle of each frame.
-    rms_rad : float
-        RMS rotation off the two-axis model per frame (rad).
-    weights : ndarray, shape (n,), optional
-        Frame weights.
-
-    Returns
-    -------
-    RestAbductionTest
-    """
-    w = np.ones(beta.shape[0]) if weights is None else np.asarray(weights, dtype=float)
-    _, idx = np.unique(np.asarray(groups), return_inverse=True)
-    sums = [np.bincount(idx, weights=w * v) for v in (np.ones_like(beta), theta, beta)]
-    sw, st, sb = sums
-    stt = np.bincount(idx, weights=w * theta * theta)
-    stb = np.bincount(idx, weights=w * theta * beta)
-    count = np.bincount(idx)
-    det = sw * stt - st * st
-    ok = (count >= 3) & (det > 1e-12 * np.maximum(sw * stt, 1e-300))
-    g = int(ok.sum())
-    if g < 2:
-        return RestAbductionTest(float("nan"), float("nan"), g, False)
-    beta0 = (stt[ok] * sb[ok] - st[ok] * stb[ok]) / det[ok]
-    sd = float(np.std(beta0, ddof=1))
-    low = sd * float(np.sqrt((g - 1) / chi2.ppf(REST_SPREAD_CONFIDENCE, g - 1)))
-    return RestAbductionTest(
-        float(np.degrees(sd)), float(np.degrees(low)), g, bool(low > REST_SPREAD_RATIO * rms_rad)
-    )
-
-
-# L_k = skew(e_k)^T: tr(M L_k) = M[r, c] - M[c, r] for (r, c) = (2, 1), (0, 2), (1, 0).
-_VEE = np.stack([skew(e).T for e in np.eye(3)])
-
-
-def _skew_residual(q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-    """Rotation ``(n, 3)`` (rad, small-angle) left after removing the two-axis motion.
-
-    The angles are :func:`fingerfit.kinematics.two_axis_angles`; the residual is
-    ``vee(E - E^T) / 2`` of ``E = Rot(a, -theta) Rot(b, -beta) Q``.
-
-    With Rodrigues' ``Rot(a, -theta) = sum_i c_i K_a^i`` (``c = 1, -sin theta,
-    1 - cos theta``; likewise ``d`` for ``b`` and ``beta``), each component ``k`` is
-    ``sum_ij c_i d_j tr(Q L_k K_a^i K_b^j) / 2`` with ``L_k = skew(e_k)^T``: 27 fixed
-    linear functionals of ``Q``, one matrix product for all frames (no per-frame 3 x 3
-    products; the least-squares fits evaluate this hundreds of times per joint).
-    """
-    beta, theta = two_axis_angles(q, a, b)
-    n = q.shape[0]
-    ka, kb = skew(a), skew(b)
-    pa = np.stack([np.eye(3), ka, ka @ ka])
-    pb = np.stack([np.eye(3), kb, kb @ kb])
-    # Row (i, j, k): tr(Q C) = sum(Q * C^T) for C = L_k K_a^i K_b^j.
-    w = 0.5 * np.einsum("kxy,iyz,jzw->ijkwx", _VEE, pa, pb).reshape(27, 9)
-    t = (w @ q.reshape(n, 9).T).reshape(3, 3, 3, n)
-    u = t[:, 0] - np.sin(beta) * t[:, 1] + (1.0 - np.cos(beta)) * t[:, 2]
-    return (u[0] - np.sin(theta) * u[1] + (1.0 - np.cos(theta)) * u[2]).T
-
-
-def _hinge_residual(q: FloatArray, a: FloatArray) -> FloatArray:
-    """Per-frame rotation off the hinge axis ``a`` (rad): ``|Q a - a|``."""
-    return np.linalg.norm(q @ a - a, axis=1)
-
-
-def _tangent_coords(v: FloatArray, v0: FloatArray, basis: FloatArray) -> FloatArray:
-    """Coordinates ``x (2,)`` with ``unit(v0 + x[0] e0 + x[1] e1) = v`` (``v . v0 > 0``)."""
-    return np.array([v @ basis[0], v @ basis[1]]) / (v @ v0)
-
-
-def direction_jacobian(
-    q: FloatArray, a: FloatArray, b: FloatArray, sw: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Weighted residual ``(3n,)`` and its Jacobian ``(3n, 4)`` in tangent coordinates.
-
-    The four coordinates turn ``a`` and ``b`` (rad) towards the two vectors of
-    :func:`orthonormal_basis` perpendicular to each; returned with those vectors
-    ``(4, 3)`` (two for ``a``, then two for ``b``).
-    """
-    ta, tb = orthonormal_basis(a), orthonormal_basis(b)
-
-    def res(z: FloatArray) -> FloatArray:
-        aa = unit(a + z[0] * ta[0] + z[1] * ta[1])
-        bb = unit(b + z[2] * tb[0] + z[3] * tb[1])
-        return (_skew_residual(q, aa, bb) * sw[:, None]).ravel()
-
-    h = 1e-6
-    jac = np.stack([(res(h * e) - res(-h * e)) / (2 * h) for e in np.eye(4)], axis=1)
-    return res(np.zeros(4)), jac, np.concatenate([ta[:2], tb[:2]])
-
-
-def _cluster_covariance(
-    jac: FloatArray, resid: FloatArray, groups: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Cluster-robust (sandwich) covariance of the direction parameters.
-
-    Parameters
-    ----------
-    jac : ndarray, shape (3n, p)
-    resid : ndarray, shape (3n,)
-    groups : ndarray, shape (n,)
-        Cluster label of each frame (grasp cycle).
-
-    Returns
-    -------
-    cov : ndarray, shape (p, p)
-        ``H^+ M H^+`` with ``H = J^T J`` and ``M`` the covariance of the per-cluster
-        scores ``J_c^T r_c`` (centred, times ``G / (G - 1)``): a systematic error
-        repeated within a cycle counts once per cycle, not once per frame.
-    h_inv : ndarray, shape (p, p)
-        ``H^+``.
-    """
-    p = jac.shape[1]
-    lab = np.repeat(np.asarray(groups), 3)
-    uniq, idx = np.unique(lab, return_inverse=True)
-    scores = np.zeros((uniq.size, p))
-    np.add.at(scores, idx, jac * resid[:, None])
-    g = uniq.size
-    scores -= scores.mean(axis=0)
-    m = scores.T @ scores * (g / max(g - 1, 1))
-    h_inv = np.linalg.pinv(jac.T @ jac)
-    return h_inv @ m @ h_inv, h_inv
 
 
 @dataclass(frozen=True)

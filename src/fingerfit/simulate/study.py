@@ -8,24 +8,21 @@ the session directory plus ``truth.json`` and ``truth/<recording>.csv``.
 With ``thumb`` among the digits, :mod:`.wholehand` adds the thumb to every recording
 and its own calibration recordings (circumduction, opposition, pinches), from the
 thumb's own random stream.
+
+:class:`SimConfig` is in :mod:`.config`, the truth and its files in :mod:`.truth`; their
+names are importable from here too.
 """
 
 from __future__ import annotations
 
-import json
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from ..errors import FingerfitError
-from ..io.atomic import atomic_write
 from ..io.sessiondir import save_session
 from ..session import (
     HAND_SENSOR,
-    JOINTS,
     SEGMENTS,
     PoseSeries,
     Recording,
@@ -33,173 +30,26 @@ from ..session import (
     TargetEvent,
     sensor_name,
 )
-from ..transforms import FloatArray, apply_inverse_pose, quat_wxyz_from_matrix
+from ..transforms import FloatArray
 from . import contact as ct
 from . import motion as mo
 from . import myohand as mh
 from . import wholehand as wh
 from .anatomy import FingerAnatomy, sample_finger, segment_motions
+from .config import WORLDS as WORLDS
+from .config import SimConfig
 from .sensors import SensorMount, TrackerErrors, mount, sensor_poses
-from .thumb import THUMB_KEYS, Pad, ThumbAnatomy
+from .truth import TRUTH_FORMAT as TRUTH_FORMAT
+from .truth import SimulatedSubject, SubjectTruth, write_truth
+from .truth import relative_truth_in_parent as relative_truth_in_parent
+from .truth import truth_document as truth_document
+from .truth import truth_table as truth_table
 
-TRUTH_FORMAT = "fingerfit.truth/1"
-#: The true hands a session can be simulated from (``SimConfig.world``).
-WORLDS = ("default", "myohand")
 TARGET_SPACING_MM = 20.0
 N_TARGETS = 7
 SENSOR_HEIGHT = np.array([7.5, 6.5, 5.0])  # dorsal height of phalanx sensors (mm)
 # Relative skin sliding under the phalanx sensors; the distal one sits on the nail.
 SENSOR_STA = np.array([1.0, 1.0, 0.3])
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    """Switches and magnitudes of a simulated session.
-
-    Every error source can be switched off; :meth:`exact` gives the noise-free,
-    pure-hinge configuration used to check exactness.
-
-    Attributes
-    ----------
-    fingers : tuple of str
-        Digits: any of ``thumb``, ``index``, ``middle``, ``ring``, ``little``. The thumb
-        adds its own recordings (:mod:`.wholehand`) and draws everything from its own
-        generator, so the fingers' truth does not depend on it.
-    hand : {"left", "right"}
-    rate_hz : float
-    noise : float
-        Tracker error scale (white noise and field distortion); 1 = Liberty-like.
-    distortion : bool
-        Smooth field distortion on/off (scaled by ``noise``).
-    sta : float
-        Soft-tissue artefact scale (1 = realistic, 0 = rigid sensors).
-    stylus_mm : float
-        Stylus noise SD per axis (mm).
-    tilt_scale : float
-        Axis obliquity scale (1 = literature; 0 = axes perpendicular to bones).
-    rolling : bool
-        Centre of rotation migrating with flexion.
-    abduction : bool
-        MP ab/adduction axis moving during grasp and free motion (the thumb's MCP
-        ab/adduction likewise; its CMC always has two axes).
-    abduction_coupling : tuple of float
-        MP ab/adduction per radian of MP flexion (rad/rad): mean and SD over subjects and
-        fingers (drawn per finger).
-    abduction_wander_deg, abduction_wander_hz : float
-        The MP ab/adduction independent of flexion during the grasp cycles: SD (deg) and
-        the highest frequency (Hz) of its slow wander (frequencies from 0.05 Hz up).
-    thumb_mcp_abduction : {"every", "contact"}
-        Recordings in which the thumb's MCP ab/adducts (with ``abduction``): ``every``
-        one, or only the opposition and pinch recordings (and free motion).
-    rom_scale : float
-        Grasp range-of-motion scale.
-    cycles : int
-        Grasp cycles.
-    targets, test : bool
-        Include the target-reaching and free-motion recordings.
-    world : {"default", "myohand"}
-        The true hand: fingerfit's own anatomy (:mod:`.anatomy`, :mod:`.thumb`) or the
-        MyoHand model's fingers and thumb (:mod:`.myohand`: right hand, fixed axes, so
-        ``rolling`` has no effect there, and a hinge thumb MCP; ``tilt_scale`` scales its
-        per-subject axis scatter).
-    mp_axis_tilt_deg : float, optional
-        Sets every finger's MP flexion-axis obliquity off perpendicular to the bone (deg,
-        about the finger's dorsal axis z: positive turns the axis's +y end distally) in
-        place of the drawn one; the dorsal tilt and everything else are drawn as usual.
-        ``None`` (default): the drawn obliquity, every output as without the field.
-        Default world only; ``|value| < 60``.
-    """
-
-    fingers: tuple[str, ...] = ("index",)
-    hand: str = "left"
-    rate_hz: float = 240.0
-    noise: float = 1.0
-    distortion: bool = True
-    sta: float = 1.0
-    stylus_mm: float = 0.3
-    tilt_scale: float = 1.0
-    rolling: bool = True
-    abduction: bool = True
-    abduction_coupling: tuple[float, float] = (-0.07, 0.04)
-    abduction_wander_deg: float = 1.0
-    abduction_wander_hz: float = 0.3
-    thumb_mcp_abduction: str = "every"
-    rom_scale: float = 1.0
-    cycles: int = 10
-    targets: bool = True
-    test: bool = True
-    world: str = "default"
-    mp_axis_tilt_deg: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.world not in WORLDS:
-            raise FingerfitError(
-                f"must be one of {', '.join(WORLDS)}, not {self.world!r}", field="--world"
-            )
-        tilt = self.mp_axis_tilt_deg
-        if tilt is not None:
-            if not (np.isfinite(tilt) and abs(tilt) < 60.0):
-                raise FingerfitError(
-                    f"must be a finite angle below 60 deg in magnitude, not {tilt!r}",
-                    field="mp_axis_tilt_deg",
-                )
-            if self.world != "default":
-                raise FingerfitError(
-                    "the MP axis tilt is an option of the default world only",
-                    field="mp_axis_tilt_deg",
-                )
-
-    @classmethod
-    def exact(cls, **kw) -> SimConfig:
-        """Noise-free, rigid sensors, pure hinges: the model is exactly right."""
-        base = dict(
-            noise=0.0, distortion=False, sta=0.0, stylus_mm=0.0, rolling=False, abduction=False
-        )
-        base.update(kw)
-        return cls(**base)
-
-
-@dataclass
-class SubjectTruth:
-    """Ground truth of one simulated subject (mm, rad, tracker coordinates).
-
-    Attributes
-    ----------
-    fingers : dict[str, FingerAnatomy]
-        True geometry at the reference posture (the four fingers only).
-    mounts : dict[str, SensorMount]
-        True sensor poses at the reference posture (before artefact and noise), thumb
-        sensors included.
-    frames : dict[str, dict]
-        Per recording: ``time`` ``(n,)``, ``angles[digit][key]`` ``(n,)`` rad,
-        ``tip[digit]`` and ``pad[digit]`` (pulp centre) ``(n, 3)`` mm, ``sensors[name]``
-        noise-free ``(position (n, 3), rotation (n, 3, 3))``, ``motions[name]`` the
-        segment motions ``(R (n, 3, 3), t (n, 3))`` relative to the reference posture.
-    config : SimConfig
-    thumb : ThumbAnatomy or None
-        The thumb's true geometry (None without a thumb).
-    pads : dict[str, Pad]
-        Every digit's pad (pulp centre, half-thickness, skin point).
-    contacts : list of dict
-        Every touch of the thumb (:func:`.wholehand.contact_truth`).
-    myohand : MyoHandSubject or None
-        The subject's MyoHand parameters (``world="myohand"`` only).
-    """
-
-    fingers: dict[str, FingerAnatomy]
-    mounts: dict[str, SensorMount]
-    frames: dict[str, dict] = field(default_factory=dict)
-    config: SimConfig = field(default_factory=SimConfig)
-    thumb: ThumbAnatomy | None = None
-    pads: dict[str, Pad] = field(default_factory=dict)
-    contacts: list[dict] = field(default_factory=list)
-    myohand: mh.MyoHandSubject | None = None
-
-
-@dataclass
-class SimulatedSubject:
-    session: Session
-    truth: SubjectTruth
 
 
 def _hand_pose(rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
@@ -534,112 +384,6 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
     return SimulatedSubject(session, truth)
 
 
-def truth_document(sim: SimulatedSubject) -> dict:
-    """``truth.json`` content: true geometry at the reference posture (tracker and sensor frames)."""
-    truth = sim.truth
-    ref_sensor = {name: (m.position, m.rotation) for name, m in truth.mounts.items()}
-    fingers = {}
-    for f, anat in truth.fingers.items():
-        joints = {}
-        parents = [HAND_SENSOR] + [sensor_name(f, s) for s in SEGMENTS]
-        for i, j in enumerate(JOINTS):
-            pp, pr = ref_sensor[parents[i]]
-            joints[j] = {
-                "center": anat.centre[i].tolist(),
-                "axis": anat.axis[i].tolist(),
-                "rolling_mm_per_rad": anat.rolling[i].tolist(),
-                "parent_sensor": parents[i],
-                "center_in_parent": (pr.T @ (anat.centre[i] - pp)).tolist(),
-                "axis_in_parent": (pr.T @ anat.axis[i]).tolist(),
-            }
-        fingers[f] = {
-            "joints": joints,
-            "mp_abduction": {
-                "point": anat.abduction_point.tolist(),
-                "axis": anat.abduction_axis.tolist(),
-            },
-            "segment_lengths": dict(zip(SEGMENTS, anat.lengths.tolist(), strict=True)),
-            "tip": anat.tip.tolist(),
-            "landmarks": {k: v.tolist() for k, v in anat.landmarks.items()},
-        }
-        if anat.order != FingerAnatomy.order:
-            fingers[f]["axis_order"] = {"mp": list(anat.order)}
-        if f in truth.pads:
-            fingers[f].update(_pad_document(truth.pads[f]))
-    if truth.thumb is not None:
-        thumb = wh.thumb_document(truth.thumb, ref_sensor)
-        thumb.update(_pad_document(truth.thumb.pad))
-        fingers = {"thumb": thumb, **fingers}
-    config = asdict(truth.config)
-    if config["world"] == "default":
-        del config["world"]  # truth.json of the default world as before the field existed
-    if config["mp_axis_tilt_deg"] is None:
-        del config["mp_axis_tilt_deg"]  # likewise
-    doc = {
-        "format": TRUTH_FORMAT,
-        "subject": sim.session.subject,
-        "units": "mm",
-        "frame": "tracker coordinates at the reference posture; *_in_parent: parent sensor frame",
-        "config": config,
-        "sensors": {
-            name: {"position": p.tolist(), "quat_wxyz": quat_wxyz_from_matrix(r).tolist()}
-            for name, (p, r) in ref_sensor.items()
-        },
-        "fingers": fingers,
-        "contacts": truth.contacts,
-    }
-    if truth.myohand is not None:
-        doc["myohand"] = truth.myohand.document()
-    return doc
-
-
-def _pad_document(pad: Pad) -> dict:
-    return {
-        "pad": pad.surface.tolist(),
-        "pad_center": pad.centre.tolist(),
-        "pad_half_thickness_mm": pad.half_thickness,
-    }
-
-
-def truth_table(frames: dict, pads: dict[str, Pad] | None = None) -> pd.DataFrame:
-    """Per-frame truth of one recording (tracker coordinates, mm; angles deg).
-
-    Columns: ``time``; per digit ``<digit>.<angle>`` (``mp``, ``mp_abduction``, ``pip``,
-    ``dip``; the thumb's ``cmc``, ``cmc_abduction``, ``mcp``, ``mcp_abduction``, ``ip``)
-    and ``<digit>.tip.x|y|z``; with ``pads``, ``<digit>.pad.x|y|z`` (the pulp's skin
-    point, as the ``<digit>.pad`` landmark) and, with the thumb,
-    ``thumb.pad_distance.<finger>``: thumb to finger pulp centre (pads touch at the sum
-    of the half-thicknesses) and ``thumb.contact.<finger>.x|y|z``: the point of the thumb's
-    pulp surface on the line between the two pulp centres, where the pulps touch during
-    that finger's pad-to-pad events (every frame; meaningful while they touch).
-    """
-    cols: dict[str, FloatArray] = {"time": frames["time"]}
-    for f, ang in frames["angles"].items():
-        for k in THUMB_KEYS if f == "thumb" else mo.ANGLE_KEYS:
-            cols[f"{f}.{k}"] = np.degrees(ang[k])
-        for i, c in enumerate("xyz"):
-            cols[f"{f}.tip.{c}"] = frames["tip"][f][:, i]
-        if pads and f in pads and f in frames.get("pad", {}):
-            # Skin point = centre moved palmar by the half-thickness, carried by the
-            # distal segment: centre + R (surface - centre).
-            r = frames["motions"][f"{f}.distal"][0]
-            skin = frames["pad"][f] + r @ (pads[f].surface - pads[f].centre)
-            for i, c in enumerate("xyz"):
-                cols[f"{f}.pad.{c}"] = skin[:, i]
-    if "thumb" in frames["angles"] and pads:
-        for f in frames["angles"]:
-            if f != "thumb" and f in frames.get("pad", {}):
-                line = frames["pad"][f] - frames["pad"]["thumb"]
-                dist = np.linalg.norm(line, axis=1)
-                cols[f"thumb.pad_distance.{f}"] = dist
-                contact = frames["pad"]["thumb"] + pads["thumb"].half_thickness * (
-                    line / dist[:, None]
-                )
-                for i, c in enumerate("xyz"):
-                    cols[f"thumb.contact.{f}.{c}"] = contact[:, i]
-    return pd.DataFrame(cols)
-
-
 def write_subject(sim: SimulatedSubject, directory: str | Path) -> Path:
     """Write the session directory plus ``truth.json`` and ``truth/<recording>.csv``."""
     directory = Path(directory)
@@ -649,16 +393,6 @@ def write_subject(sim: SimulatedSubject, directory: str | Path) -> Path:
     return directory
 
 
-def write_truth(sim: SimulatedSubject, directory: str | Path) -> None:
-    """Write ``truth.json`` and ``truth/<recording>.csv`` into ``directory``."""
-    directory = Path(directory)
-    with atomic_write(directory / "truth.json") as fh:
-        json.dump(truth_document(sim), fh, indent=1)
-    for name, frames in sim.truth.frames.items():
-        with atomic_write(directory / "truth" / name, newline="") as fh:
-            truth_table(frames, sim.truth.pads).to_csv(fh, index=False, lineterminator="\n")
-
-
 def simulate_cohort(config: SimConfig, n_subjects: int, seed: int) -> list[SimulatedSubject]:
     """``n_subjects`` independent subjects ``S01..``; subject i uses seed ``(seed, i)``."""
     seeds = np.random.SeedSequence(seed).spawn(n_subjects)
@@ -666,32 +400,6 @@ def simulate_cohort(config: SimConfig, n_subjects: int, seed: int) -> list[Simul
         simulate_subject(config, int(s.generate_state(1)[0]), f"S{i + 1:02d}")
         for i, s in enumerate(seeds)
     ]
-
-
-def relative_truth_in_parent(
-    sim: SimulatedSubject, finger: str, joint: str
-) -> tuple[FloatArray, FloatArray]:
-    """True joint centre ``(3,)`` mm and axis ``(3,)`` in the parent sensor frame at reference.
-
-    For the thumb, ``joint`` is any of ``cmc``, ``cmc_abduction``, ``mcp``,
-    ``mcp_abduction``, ``ip``; the centre of a second axis is the point of its line
-    nearest the flexion axis.
-    """
-    if finger == "thumb":
-        th = sim.truth.thumb
-        if th is None:
-            raise ValueError("the simulated subject has no thumb")
-        flexion = joint.removesuffix("_abduction")
-        parent = {"cmc": HAND_SENSOR, "mcp": "thumb.metacarpal", "ip": "thumb.proximal"}[flexion]
-        m = sim.truth.mounts[parent]
-        c = apply_inverse_pose(m.rotation[None], m.position[None], th.axis_point[joint][None])[0]
-        return c, m.rotation.T @ th.axis[joint]
-    i = JOINTS.index(joint)
-    parent = HAND_SENSOR if i == 0 else sensor_name(finger, SEGMENTS[i - 1])
-    m = sim.truth.mounts[parent]
-    anat = sim.truth.fingers[finger]
-    c = apply_inverse_pose(m.rotation[None], m.position[None], anat.centre[i][None])[0]
-    return c, m.rotation.T @ anat.axis[i]
 
 
 __all__ = [

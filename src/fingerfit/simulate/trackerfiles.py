@@ -43,7 +43,7 @@ from ..io.liberty import LibertyRecords, write_liberty_ascii, write_liberty_bina
 from ..io.sessiondir import EVENTS_FILE, LANDMARKS_FILE, write_events, write_landmarks
 from ..session import HAND_SENSOR, UNITS_TO_MM, Recording, sensor_name
 from ..transforms import quat_wxyz_from_matrix
-from .study import SimulatedSubject, write_truth
+from .truth import SimulatedSubject, write_truth
 
 #: Tracker formats ``fingerfit simulate --format`` can write (besides ``csv``).
 TRACKER_FORMATS = ("liberty-ascii", "liberty-binary", "c3d")

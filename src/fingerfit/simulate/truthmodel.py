@@ -15,8 +15,8 @@ import numpy as np
 from ..digits import DIGITS, FLEXION_FIRST, second_axis
 from ..model import DigitModel, HandModel, JointModel, JointQuality, assemble_digit
 from ..session import HAND_SENSOR, JOINTS, joint_sensors, sensor_name
-from .study import SimulatedSubject
 from .thumb import ThumbAnatomy
+from .truth import SimulatedSubject
 
 
 def truth_model(

@@ -1,0 +1,247 @@
+"""Parquet tables read and checked before they are trusted: a readable Parquet file at
+all (a truncated or corrupted file is one line, never a traceback), metadata naming the
+expected format, exactly the format's columns, each of the right type, and no infinity in
+a float column; the columns come back as plain NumPy arrays. Every refusal is a one-line
+:class:`~fingerfit.errors.FingerfitError` naming the file and the column (or metadata
+key); a row is named by its 1-based index (``docs/errors.md``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FingerfitError, shown
+from .parquet_meta import FORMAT_KEY, _pa
+
+
+@dataclass
+class ParquetTable:
+    """The checked columns of a Parquet file.
+
+    Attributes
+    ----------
+    columns : dict of str to ndarray or tuple
+        Float columns as ``(n,)`` float64 arrays (a null read as NaN); text columns as
+        ``(codes (n,) int32, names list of str)`` (a null as the name ``""``).
+    meta : dict of str to str
+        The file's ``fingerfit.*`` metadata.
+    n_rows : int
+    names : list of str
+        The column names, in file order.
+    """
+
+    columns: dict[str, object]
+    meta: dict[str, str]
+    n_rows: int
+    names: list[str]
+
+
+def _reason(exc: BaseException) -> str:
+    """An exception's message on one line, shortened."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return shown(text, 160)
+
+
+def _corrupt(path: Path, exc: BaseException) -> FingerfitError:
+    return FingerfitError(
+        f"not a readable Parquet file (truncated or corrupted?): {_reason(exc)}", path=path
+    )
+
+
+def _open(path: Path):
+    """The ``pyarrow.parquet.ParquetFile`` of ``path``, or a one-line error."""
+    _, pq = _pa()
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    try:
+        return pq.ParquetFile(fh), fh
+    except Exception as exc:  # any failure of a damaged file is one line
+        fh.close()
+        raise _corrupt(path, exc) from None
+
+
+def parquet_schema(path: str | Path) -> tuple[list[str], dict[str, str]]:
+    """The column names and the ``fingerfit.*`` metadata of a Parquet file (no data read).
+
+    Raises
+    ------
+    FingerfitError
+        The file cannot be read or is not Parquet.
+    """
+    path = Path(path)
+    pf, fh = _open(path)
+    with fh:
+        try:
+            schema = pf.schema_arrow
+        except Exception as exc:
+            raise _corrupt(path, exc) from None
+    return list(schema.names), _metadata(schema)
+
+
+def _metadata(schema) -> dict[str, str]:
+    raw = schema.metadata or {}
+    out = {}
+    for k, v in raw.items():
+        try:
+            key, value = k.decode("utf-8"), v.decode("utf-8")
+        except UnicodeDecodeError:
+            continue
+        if key.startswith("fingerfit."):
+            out[key] = value
+    return out
+
+
+def check_meta(meta: Mapping[str, str], path: Path, fmt: str, **expected: str | None) -> None:
+    """Refuse a file whose metadata is not that of format ``fmt``.
+
+    ``expected``: further keys without their ``fingerfit.`` prefix (``units="mm"``,
+    ``quaternion_order="w,x,y,z"``): each must be present with that value (a value of
+    None: present with any value).
+    """
+    have = meta.get(FORMAT_KEY)
+    if have is None:
+        raise FingerfitError(
+            f"no '{FORMAT_KEY}' metadata: not a table fingerfit wrote (expected {fmt})",
+            path=path,
+            field=FORMAT_KEY,
+        )
+    if have != fmt:
+        raise FingerfitError(
+            f"holds a '{shown(have)}' table, not {fmt}", path=path, field=FORMAT_KEY
+        )
+    for short, value in expected.items():
+        key = f"fingerfit.{short}"
+        got = meta.get(key)
+        if got is None:
+            raise FingerfitError(f"metadata '{key}' missing", path=path, field=key)
+        if value is not None and got != value:
+            raise FingerfitError(
+                f"metadata says '{shown(got)}', expected '{value}'", path=path, field=key
+            )
+
+
+def read_parquet(
+    path: str | Path,
+    fmt: str,
+    *,
+    columns: Sequence[str] | Callable[[list[str]], None] | None = None,
+    text: Sequence[str] = (),
+    expect: Mapping[str, str | None] | None = None,
+) -> ParquetTable:
+    """Read and check a Parquet table of format ``fmt``.
+
+    Parameters
+    ----------
+    path : str or Path
+    fmt : str
+        The required ``fingerfit.format`` (:data:`POSE`, :data:`WIDE`, ...).
+    columns : sequence of str or callable, optional
+        The exact columns (in any order; a missing or an extra column is an error), or a
+        function checking the list of names (raising :class:`FingerfitError`).
+    text : sequence of str
+        Columns that hold text (strings, or dictionary-encoded strings); every other
+        column must be float64.
+    expect : mapping, optional
+        Further metadata (:func:`check_meta`).
+
+    Returns
+    -------
+    ParquetTable
+
+    Raises
+    ------
+    FingerfitError
+        One line naming the file and the column or metadata key: not readable
+        (truncated, corrupted, not Parquet), metadata missing or of another format,
+        a column missing, extra, repeated or of another type, an infinite value (named
+        by its 1-based row).
+    """
+    pa, _ = _pa()
+    path = Path(path)
+    pf, fh = _open(path)
+    with fh:
+        try:
+            schema = pf.schema_arrow
+        except Exception as exc:
+            raise _corrupt(path, exc) from None
+        check_meta(_metadata(schema), path, fmt, **(expect or {}))
+        names = list(schema.names)
+        dup = [n for n in names if names.count(n) > 1]
+        if dup:
+            raise FingerfitError("column appears twice", path=path, field=shown(dup[0]))
+        if callable(columns):
+            columns(names)
+        elif columns is not None:
+            for c in columns:
+                if c not in names:
+                    raise FingerfitError(
+                        f"column missing (expected {', '.join(columns)})", path=path, field=c
+                    )
+            for c in names:
+                if c not in columns:
+                    raise FingerfitError(
+                        f"unexpected column (expected {', '.join(columns)})",
+                        path=path,
+                        field=shown(c),
+                    )
+        for f in schema:
+            t = f.type
+            if f.name in text:
+                if pa.types.is_dictionary(t):
+                    t = t.value_type
+                if not (pa.types.is_string(t) or pa.types.is_large_string(t)):
+                    raise FingerfitError(
+                        f"column type {t}, not string", path=path, field=shown(f.name)
+                    )
+            elif t != pa.float64():
+                raise FingerfitError(
+                    f"column type {t}, not float64 (double)", path=path, field=shown(f.name)
+                )
+        try:
+            table = pf.read(use_threads=True)
+        except Exception as exc:  # a damaged data page
+            raise _corrupt(path, exc) from None
+    if table.schema.names != names:  # pragma: no cover - pyarrow reads what it described
+        raise _corrupt(path, ValueError("schema changed while reading"))
+    out: dict[str, object] = {}
+    try:
+        for name in names:
+            col = table.column(name)
+            if name in text:
+                out[name] = _text_codes(pa, col)
+                continue
+            v = col.to_numpy()  # a null becomes NaN
+            if v.dtype != np.float64:  # pragma: no cover - checked above
+                v = v.astype(np.float64)
+            bad = np.flatnonzero(np.isinf(v))
+            if bad.size:
+                raise FingerfitError(
+                    f"not a finite number: {float(v[bad[0]])!r}",
+                    path=path,
+                    line=int(bad[0]) + 1,
+                    field=shown(name),
+                )
+            out[name] = v
+    except FingerfitError:
+        raise
+    except Exception as exc:  # inconsistent pages of a damaged file
+        raise _corrupt(path, exc) from None
+    return ParquetTable(out, _metadata(schema), table.num_rows, names)
+
+
+def _text_codes(pa, col) -> tuple[np.ndarray, list[str]]:
+    """A text column as ``(codes (n,) int32, names)``; nulls become ``""``."""
+    if not pa.types.is_dictionary(col.type):
+        col = col.dictionary_encode()
+    col = col.unify_dictionaries().combine_chunks() if col.num_chunks > 1 else col.combine_chunks()
+    names = [("" if s is None else s) for s in col.dictionary.to_pylist()]
+    codes = col.indices
+    if codes.null_count:
+        names.append("")
+        codes = codes.fill_null(len(names) - 1)
+    return codes.to_numpy(zero_copy_only=False).astype(np.int32, copy=False), names
