@@ -172,19 +172,13 @@ def simulate(
 
 def _check_tracker_outputs(out_dir: Path, subjects: int, overwrite: bool) -> None:
     """Refuse, before simulating, outputs that could not or must not be written."""
-    from ..io.atomic import check_target
+    from ..io.atomic import check_folder_target, check_target
+    from ..simulate.study import subject_ids
     from ..simulate.trackerfiles import CONVERTED_DIR, SESSION_DIR
 
-    for i in range(subjects):
-        sub = out_dir / f"S{i + 1:02d}"
-        if sub.exists() and not sub.is_dir():
-            raise FingerfitError("exists and is not a folder", path=sub)
-        if sub.is_dir() and any(sub.iterdir()) and not overwrite:
-            raise FingerfitError(
-                "exists and is not empty; pass --overwrite to replace it (its converted "
-                f"'{CONVERTED_DIR}' and '{SESSION_DIR}' folders too)",
-                path=sub,
-            )
+    hint = f" (its converted '{CONVERTED_DIR}' and '{SESSION_DIR}' folders too)"
+    for name in subject_ids(subjects):
+        check_folder_target(out_dir / name, overwrite=overwrite, hint=hint)
     check_target(out_dir / COMMANDS_FILE, overwrite=overwrite)
 
 

@@ -200,6 +200,31 @@ def _renamed(exc: FingerfitError, staging: Path, target: Path) -> FingerfitError
     return exc
 
 
+def check_folder_target(target: str | Path, *, overwrite: bool = False, hint: str = "") -> None:
+    """Refuse a folder :func:`staged_directory` would not write: a file of that name, or a
+    non-empty folder without ``overwrite``.
+
+    Parameters
+    ----------
+    target : str or Path
+    overwrite : bool
+    hint : str
+        Added to the refusal of a non-empty folder (what else ``--overwrite`` replaces).
+
+    Raises
+    ------
+    FingerfitError
+        Naming ``target``.
+    """
+    target = Path(target)
+    if target.exists() and not target.is_dir():
+        raise FingerfitError("exists and is not a folder", path=target)
+    if target.is_dir() and any(target.iterdir()) and not overwrite:
+        raise FingerfitError(
+            f"exists and is not empty; pass --overwrite to replace it{hint}", path=target
+        )
+
+
 @contextlib.contextmanager
 def staged_directory(target: str | Path, *, overwrite: bool = False) -> Iterator[Path]:
     """Build a folder in a hidden sibling; move it to ``target`` when the block succeeds.
@@ -222,10 +247,7 @@ def staged_directory(target: str | Path, *, overwrite: bool = False) -> Iterator
         raised in the block name ``target`` instead of the staging folder.
     """
     target = Path(target)
-    if target.exists() and not target.is_dir():
-        raise FingerfitError("exists and is not a folder", path=target)
-    if target.is_dir() and any(target.iterdir()) and not overwrite:
-        raise FingerfitError("exists and is not empty; pass --overwrite to replace it", path=target)
+    check_folder_target(target, overwrite=overwrite)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(

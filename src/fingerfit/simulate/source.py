@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .study import SimConfig, simulate_subject, write_subject
+from .study import SimConfig, simulate_subject, subject_ids, write_subject
 
 
 @dataclass(frozen=True)
@@ -53,13 +53,12 @@ class SimulatedSession:
 
 
 def simulated_cohort(config: SimConfig, n_subjects: int, seed: int) -> list[SimulatedSession]:
-    """``n_subjects`` sources, subject IDs ``S`` + the number zero-padded to the digits of
-    ``n_subjects`` (at least 2: ``S01``, ``S001``, ``S0001``), the seeds of
+    """``n_subjects`` sources, subject IDs by :func:`~fingerfit.simulate.study.subject_ids`,
+    the seeds of
     :func:`~fingerfit.simulate.simulate_cohort` (subject i: the i-th seed spawned from
     ``seed``); each is simulated only when a study task opens it."""
     seeds = np.random.SeedSequence(seed).spawn(n_subjects)
-    width = max(2, len(str(n_subjects)))
     return [
-        SimulatedSession(config, int(s.generate_state(1)[0]), f"S{i + 1:0{width}d}")
-        for i, s in enumerate(seeds)
+        SimulatedSession(config, int(s.generate_state(1)[0]), name)
+        for s, name in zip(seeds, subject_ids(n_subjects), strict=True)
     ]

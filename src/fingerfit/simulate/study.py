@@ -394,12 +394,21 @@ def write_subject(sim: SimulatedSubject, directory: str | Path) -> Path:
 
 
 def simulate_cohort(config: SimConfig, n_subjects: int, seed: int) -> list[SimulatedSubject]:
-    """``n_subjects`` independent subjects ``S01..``; subject i uses seed ``(seed, i)``."""
+    """``n_subjects`` independent subjects named by :func:`subject_ids`; subject i uses
+    seed ``(seed, i)``."""
     seeds = np.random.SeedSequence(seed).spawn(n_subjects)
     return [
-        simulate_subject(config, int(s.generate_state(1)[0]), f"S{i + 1:02d}")
-        for i, s in enumerate(seeds)
+        simulate_subject(config, int(s.generate_state(1)[0]), name)
+        for s, name in zip(seeds, subject_ids(n_subjects), strict=True)
     ]
+
+
+def subject_ids(n_subjects: int) -> list[str]:
+    """The IDs of a simulated cohort: ``S`` + the subject's number zero-padded to the
+    digits of ``n_subjects`` (at least 2: ``S01``, ``S001``, ``S0001``), so they sort in
+    order."""
+    width = max(2, len(str(n_subjects)))
+    return [f"S{i + 1:0{width}d}" for i in range(n_subjects)]
 
 
 __all__ = [
