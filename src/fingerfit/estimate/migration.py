@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..transforms import FloatArray, axis_angle_matrix
-from .shrink import MIN_DATA_SHARE, data_share
+from .shrink import MIN_DATA_SHARE, cluster_score_outer, data_share
 
 PRIOR_OFFSET_MM = 5.0  # SD of the ab/adduction axis offset from the flexion centre
 PRIOR_MIGRATION = 2.0  # SD of each migration component (mm/rad)
@@ -177,11 +177,8 @@ def fit_axis_points(
         nrm = np.cross(axis, abduction_axis)
         h_inv = proj @ np.linalg.pinv(proj @ data_ata @ proj) @ proj
         r = (big @ x - rhs).reshape(n, 3)
-        uniq, idx = np.unique(np.asarray(groups), return_inverse=True)
-        scores = np.zeros((uniq.size, p))
-        np.add.at(scores, idx, np.einsum("nij,ni->nj", big.reshape(n, 3, p), r))
-        scores -= scores.mean(axis=0)
-        cov = h_inv @ (scores.T @ scores) @ h_inv * (uniq.size / max(uniq.size - 1, 1))
+        outer, g = cluster_score_outer(np.einsum("nij,ni->nj", big.reshape(n, 3, p), r), groups)
+        cov = h_inv @ outer @ h_inv * (g / max(g - 1, 1))
         # Both directions across b: along the common perpendicular and along a.
         scales, var_d = [], 0.0
         for v in (nrm, axis - (axis @ abduction_axis) * abduction_axis):

@@ -38,3 +38,31 @@ def data_share(sd: float, half: float) -> float:
 
 
 __all__ = ["MIN_DATA_SHARE", "data_share"]
+
+
+def cluster_score_outer(contributions: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, int]:
+    """The outer product of the per-cluster scores of a least-squares fit: the "meat" of a
+    cluster-robust (sandwich) covariance, where a systematic error repeated within a
+    cluster (a grasp cycle) counts once per cluster, not once per row.
+
+    Parameters
+    ----------
+    contributions : ndarray, shape (n_rows, p)
+        Each row's score ``J_row^T r_row`` (Jacobian row times residual, or a frame's
+        block of them).
+    labels : ndarray, shape (n_rows,)
+        The cluster of each row.
+
+    Returns
+    -------
+    outer : ndarray, shape (p, p)
+        ``S^T S`` of the per-cluster sums ``S`` (clusters x p), centred over the clusters;
+        a covariance multiplies it by ``G / (G - 1)`` and puts ``H^+`` on both sides.
+    clusters : int
+        ``G``, the number of clusters.
+    """
+    uniq, idx = np.unique(np.asarray(labels), return_inverse=True)
+    scores = np.zeros((uniq.size, contributions.shape[1]))
+    np.add.at(scores, idx, contributions)
+    scores -= scores.mean(axis=0)
+    return scores.T @ scores, int(uniq.size)

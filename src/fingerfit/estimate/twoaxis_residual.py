@@ -11,6 +11,7 @@ import numpy as np
 
 from ..angles import two_axis_angles
 from ..transforms import FloatArray, orthonormal_basis, skew, unit
+from .shrink import cluster_score_outer
 
 # L_k = skew(e_k)^T: tr(M L_k) = M[r, c] - M[c, r] for (r, c) = (2, 1), (0, 2), (1, 0).
 _VEE = np.stack([skew(e).T for e in np.eye(3)])
@@ -92,13 +93,7 @@ def _cluster_covariance(
     h_inv : ndarray, shape (p, p)
         ``H^+``.
     """
-    p = jac.shape[1]
-    lab = np.repeat(np.asarray(groups), 3)
-    uniq, idx = np.unique(lab, return_inverse=True)
-    scores = np.zeros((uniq.size, p))
-    np.add.at(scores, idx, jac * resid[:, None])
-    g = uniq.size
-    scores -= scores.mean(axis=0)
-    m = scores.T @ scores * (g / max(g - 1, 1))
+    outer, g = cluster_score_outer(jac * resid[:, None], np.repeat(np.asarray(groups), 3))
+    m = outer * (g / max(g - 1, 1))
     h_inv = np.linalg.pinv(jac.T @ jac)
     return h_inv @ m @ h_inv, h_inv
