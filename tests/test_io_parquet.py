@@ -306,3 +306,82 @@ def test_fuzz_corrupted_parquet(tmp_path: Path, small_files, kind: str, flips, c
     for p in rec.poses.values():
         ok = np.isfinite(p.position).all(axis=1)
         assert (np.isfinite(p.rotation).all(axis=(1, 2)) == ok).all()
+
+
+def _same_recording(a, b) -> None:
+    assert a.notes == b.notes and list(a.poses) == list(b.poses) and a.name == b.name
+    assert np.array_equal(bits(a.time), bits(b.time))
+    for s in a.poses:
+        assert np.array_equal(bits(a.poses[s].position), bits(b.poses[s].position)), s
+        assert np.array_equal(bits(a.poses[s].rotation), bits(b.poses[s].rotation)), s
+
+
+def _messy_pose_table(recording, rng) -> pd.DataFrame:
+    """The recording's long table with frames lost, samples lost, empty fields, sensors in
+    varying order within a frame, and an unused sensor name in the dictionary."""
+    from fingerfit.io.posecsv import pose_table
+
+    df = pose_table(recording)
+    keep = rng.random(len(df)) > 0.05
+    df = df[keep].reset_index(drop=True)
+    df.loc[rng.random(len(df)) < 0.02, "qx"] = np.nan
+    df = df.sample(frac=1.0, random_state=1).sort_values("time", kind="stable")
+    return df.reset_index(drop=True)
+
+
+@pytest.mark.parametrize("row_group_rows", [97, 1 << 20])
+def test_streamed_pose_read_is_the_reference_bit_for_bit(
+    tmp_path: Path, recording, monkeypatch, row_group_rows
+) -> None:
+    """The streaming reader of pose Parquet files is taken for ordinary files and gives
+    what the reference path (the whole table, then the CSV reader's assembly) gives."""
+    from fingerfit.io import posecsv
+
+    rng = np.random.default_rng(3)
+    tables = {
+        "plain": posecsv._pose_columns(recording, 1.0),
+        "messy": {c: v for c, v in _messy_pose_table(recording, rng).items()},
+    }
+    for name, cols in tables.items():
+        path = fpq.write_parquet(
+            tmp_path / f"{name}.parquet", cols, fpq.pose_meta("mm"), row_group_rows=row_group_rows
+        )
+        fast = posecsv.read_pose_csv(path, units="mm", rate_hz=240)
+        with monkeypatch.context() as m:
+            m.setattr(posecsv, "_assemble", _no_assembly)  # the streaming path only
+            _same_recording(fast, posecsv.read_pose_csv(path, units="mm", rate_hz=240))
+            _same_recording(
+                posecsv.read_pose_csv(path, units="mm"),
+                posecsv.read_pose_csv(path, units="mm"),
+            )
+        with monkeypatch.context() as m:
+            m.setattr(posecsv, "_read_parquet_fast", _no_assembly)  # the reference only
+            _same_recording(fast, posecsv.read_pose_csv(path, units="mm", rate_hz=240))
+            slow = posecsv.read_pose_csv(path, units="mm")
+        _same_recording(slow, posecsv.read_pose_csv(path, units="mm"))
+        csv = tmp_path / f"{name}.csv"
+        from fingerfit.io.fastcsv import write_table
+
+        write_table(csv, pq.read_table(path).to_pandas())
+        ref = posecsv.read_pose_csv(csv, units="mm", rate_hz=240)
+        assert ref.notes == fast.notes
+        for s in ref.poses:
+            assert np.array_equal(bits(ref.poses[s].rotation), bits(fast.poses[s].rotation))
+
+
+def test_pose_duplicates_go_to_the_reference_path(tmp_path: Path, recording) -> None:
+    from fingerfit.io import posecsv
+
+    df = posecsv.pose_table(recording)
+    dup = pd.concat([df.iloc[:5], df]).sort_values("time", kind="stable").reset_index(drop=True)
+    path = fpq.write_parquet(tmp_path / "dup.parquet", dict(dup.items()), fpq.pose_meta("mm"))
+    rec = posecsv.read_pose_csv(path, units="mm", rate_hz=240)
+    assert "5 exact duplicate rows dropped" in rec.notes
+    bad = dup.copy()
+    bad.loc[1, "x"] += 1.0
+    path = fpq.write_parquet(tmp_path / "bad.parquet", dict(bad.items()), fpq.pose_meta("mm"))
+    _refused(path, "second, different sample")
+
+
+def _no_assembly(*args, **kwargs):
+    raise AssertionError("not this path")

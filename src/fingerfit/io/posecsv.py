@@ -291,6 +291,10 @@ def _read_parquet(
 
     if scale_to_mm is None and units not in UNITS_TO_MM:
         raise FingerfitError(f"unknown units '{units}'", path=path, field="units")
+    try:
+        return _read_parquet_fast(path, units, rate_hz, scale_to_mm)
+    except Exception:  # _Irregular, a FingerfitError, a damaged page Arrow reports
+        pass  # the reference path below says what is wrong, or reads what is unusual
     table = read_parquet(
         path,
         POSE,
@@ -325,6 +329,151 @@ def _read_parquet(
 
 #: Rows converted to rotation matrices at a time (bounds the temporary memory).
 _BLOCK = 1 << 16
+
+
+def _first(rows: slice | np.ndarray) -> int:
+    """The first row of a :func:`~fingerfit.io.fastcsv.rows_where` selection."""
+    return int(rows.start) if isinstance(rows, slice) else int(rows[0])
+
+
+class _Irregular(Exception):
+    """A pose Parquet file the streaming reader does not vouch for (an error somewhere,
+    exact duplicates): read again by the reference path, which names the error."""
+
+
+def _read_parquet_fast(
+    path: Path, units: str, rate_hz: float | None, scale_to_mm: float | None
+) -> Recording:
+    """The common case of a pose Parquet file, streamed into the recording's arrays.
+
+    The time and sensor columns first (the frames, the sampling grid, the sensors), then
+    the numbers :data:`_BLOCK` rows at a time straight into each sensor's positions and
+    rotation matrices: no whole table and no ``(n, 7)`` copy. The same arithmetic as
+    :func:`_assemble` (the same bits); anything :func:`_assemble` would refuse or repair
+    (exact duplicates) raises :class:`_Irregular` or :class:`FingerfitError`, and the
+    caller reads the file by the reference path.
+    """
+    from ..session import UNITS_TO_MM
+    from .parquet import (
+        POSE,
+        QUAT_ORDER,
+        TRACKER_FRAME,
+        _metadata,
+        _pa,
+        _text_codes,
+        float_blocks,
+        open_checked,
+    )
+
+    pa, _ = _pa()
+    pf, fh, schema = open_checked(
+        path,
+        POSE,
+        columns=HEADER,
+        text=("sensor",),
+        expect={"units": None, "frame": TRACKER_FRAME, "quaternion_order": QUAT_ORDER},
+    )
+    with fh:
+        stated = _metadata(schema)["fingerfit.units"]
+        if stated not in UNITS_TO_MM or (scale_to_mm is None and stated != units):
+            raise _Irregular
+        scale = UNITS_TO_MM[stated] if scale_to_mm is None else scale_to_mm
+        n_rows = pf.metadata.num_rows
+        head = pf.read(columns=["time", "sensor"], use_threads=True)
+        time = head.column("time").to_numpy()  # a null becomes NaN
+        code, names = _text_codes(pa, head.column("sensor"))
+        del head
+        if n_rows == 0 or not np.isfinite(time).all() or (time[1:] < time[:-1]).any():
+            raise _Irregular
+        n_codes = len(names)
+        counts = np.bincount(code, minlength=n_codes)
+        present = [int(k) for k in np.flatnonzero(counts)]
+        if not all(is_sensor_name(names[k]) for k in present):
+            raise _Irregular
+        new = np.empty(n_rows, dtype=bool)
+        new[0] = True
+        np.not_equal(time[1:], time[:-1], out=new[1:])
+        row_of_frame = np.flatnonzero(new)
+        frame_of_row = np.cumsum(new, dtype=np.int64 if n_rows >= 1 << 31 else np.int32)
+        # a sensor twice in a frame (a duplicate): its rows' frames do not increase
+        first_row = {}
+        for k in present:
+            rows = rows_where(code, k)
+            frames = frame_of_row[rows]
+            first_row[k] = _first(rows)
+            if (frames[1:] == frames[:-1]).any():
+                raise _Irregular
+            del rows, frames
+        del frame_of_row
+        frame_times = time[row_of_frame]
+        grid = None
+        frames_note: list[str] = []
+        if rate_hz is not None and frame_times.size > 1:
+            full_time, grid = place_on_grid(frame_times, rate_hz, row_of_frame + 1, path)
+            frames_note = frames_missing_note(full_time.size - frame_times.size)
+            frame_times = full_time
+        n = frame_times.size
+        del row_of_frame, time
+
+        appear = sorted(present, key=lambda k: first_row[k])
+        pos = {k: np.empty((n, 3)) for k in appear}
+        rot = {k: np.empty((n, 3, 3)) for k in appear}
+        filled = {k: np.zeros(n, dtype=bool) for k in appear}
+        frames_before = 0
+        n_partial = 0
+        block = np.empty((min(_BLOCK, n_rows), 7))
+        rows_read = 0
+        for lo, cols in float_blocks(pf, _NUMERIC[1:], n_rows, batch_rows=_BLOCK):
+            m = cols[0].size
+            hi = lo + m
+            p = block[:m]
+            for j, v in enumerate(cols):
+                p[:, j] = v
+            del cols
+            finite = np.isfinite(p)
+            ok = finite.all(axis=1)
+            if not ok.all():
+                if np.isinf(p).any():
+                    raise _Irregular
+                n_partial += int(np.count_nonzero(~ok & finite.any(axis=1)))
+            if implausible_rows(p[:, :3], scale).size:
+                raise _Irregular
+            q = p[:, 3:]
+            with np.errstate(over="ignore", invalid="ignore"):
+                norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+            if (ok & (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)).any():
+                raise _Irregular
+            f = np.cumsum(new[lo:hi], dtype=np.int64)  # the rows' frames
+            f += frames_before - 1
+            frames_before = int(f[-1]) + 1
+            if grid is not None:
+                f = grid[f]
+            c = code[lo:hi]
+            if not ok.all():
+                c, f, p = c[ok], f[ok], p[ok]
+            for k in np.flatnonzero(np.bincount(c, minlength=n_codes)):
+                r = rows_where(c, k)
+                fk = f[r]
+                put_scaled_rows(pos[int(k)], fk, p[r, :3], scale)
+                put_quat_rows(rot[int(k)], fk, p[r, 3:])
+                put_rows(filled[int(k)], fk, True)
+            rows_read = hi
+        if rows_read != n_rows:
+            raise _Irregular
+    notes: list[str] = []
+    if n_partial:
+        notes.append(f"{n_partial} samples with empty fields treated as missing")
+    notes += frames_note
+    poses: dict[str, PoseSeries] = {}
+    for k in appear:
+        name = names[k]
+        gap = ~filled.pop(k)
+        p_k, r_k = pos.pop(k), rot.pop(k)
+        p_k[gap] = np.nan
+        r_k[gap] = np.nan
+        poses[name] = PoseSeries(p_k, r_k)
+        notes += missing_note(name, int(np.count_nonzero(gap)), n)
+    return Recording(path.name, frame_times, poses, notes)
 
 
 def _assemble(

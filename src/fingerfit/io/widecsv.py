@@ -459,7 +459,8 @@ def _decode_parquet(
     """Values ``(n_rows, n_stations, n_keys)``, time ``(n_rows,)`` (or None), stations,
     sensor names and notes of a wide Parquet file: exactly the layout's columns of its
     stations, float64."""
-    from .parquet import WIDE, read_parquet
+    from .parquet import WIDE, float_blocks, open_checked
+    from .parquet import _corrupt as parquet_corrupt
 
     plan: list = []
 
@@ -476,16 +477,46 @@ def _decode_parquet(
             )
 
     key, value = _ORIENTATION_META[lay.orientation]
-    table = read_parquet(path, WIDE, columns=check_columns, expect={key: value, "frame": "tracker"})
+    pf, fh, schema = open_checked(
+        path, WIDE, columns=check_columns, expect={key: value, "frame": "tracker"}
+    )
     stations, names, notes = plan
-    cols = table.columns
-    if table.n_rows == 0:
+    n_rows = pf.metadata.num_rows
+    # every column straight into its place in the values (and the time), a row group at
+    # a time: no whole Arrow table, no second copy
+    vals = np.empty((n_rows, len(stations), len(lay.keys)))
+    tcol = None if lay.time is None else np.empty(n_rows)
+    targets = [vals[:, j, m] for j in range(len(stations)) for m in range(len(lay.keys))]
+    columns = [_column(lay.columns[key], s) for s in stations for key in lay.keys]
+    if tcol is not None:
+        targets.append(tcol)
+        columns.append(lay.time)
+    with fh:
+        try:
+            read = 0
+            for lo, block in float_blocks(pf, columns, n_rows):
+                for out, v in zip(targets, block, strict=True):
+                    out[lo : lo + v.size] = v
+                read = lo + block[0].size
+            if read != n_rows:
+                raise ValueError(f"{read} rows read of {n_rows}")
+        except Exception as exc:  # a damaged data page
+            raise parquet_corrupt(path, exc) from None
+    # an infinity is refused as read_parquet refuses it: the first column (in the file's
+    # order) holding one, its first row
+    if np.isinf(vals).any() or (tcol is not None and np.isinf(tcol).any()):
+        where = dict(zip(columns, targets, strict=True))
+        for c in schema.names:
+            bad = np.flatnonzero(np.isinf(where[c]))
+            if bad.size:
+                raise FingerfitError(
+                    f"not a finite number: {float(where[c][bad[0]])!r}",
+                    path=path,
+                    line=int(bad[0]) + 1,
+                    field=shown(c),
+                )
+    if n_rows == 0:
         raise FingerfitError("no data rows", path=path)
-    vals = np.empty((table.n_rows, len(stations), len(lay.keys)))
-    for j, s in enumerate(stations):
-        for m, key in enumerate(lay.keys):
-            vals[:, j, m] = cols.pop(_column(lay.columns[key], s))
-    tcol = None if lay.time is None else cols.pop(lay.time)
     return vals, tcol, stations, names, notes
 
 
