@@ -443,6 +443,35 @@ def write_partitioned(
     return folder
 
 
+def table_schema(frames: Iterable[object], empty: object | None = None):
+    """The Parquet schema of a table given in pieces (DataFrames): text columns (text or
+    categorical in any piece) string, columns integer in every piece int64, booleans bool,
+    the rest float64. ``empty``: the table without rows, whose types count only for a
+    column no piece with rows has."""
+    import pandas as pd
+
+    pa, _ = _pa()
+    kinds: dict[str, set[str]] = {}
+    for chunk in [*([] if empty is None else [empty]), *frames]:
+        for c, t in chunk.dtypes.items():
+            kind = "text" if isinstance(t, pd.CategoricalDtype) or t.kind in "OSU" else t.kind
+            if isinstance(t, pd.StringDtype):
+                kind = "text"
+            if len(chunk) or not kinds.get(str(c)):
+                kinds.setdefault(str(c), set()).add(kind)
+    types = []
+    for c, k in kinds.items():
+        if "text" in k:
+            types.append((c, pa.string()))
+        elif k <= {"i", "u"}:
+            types.append((c, pa.int64()))
+        elif k == {"b"}:
+            types.append((c, pa.bool_()))
+        else:
+            types.append((c, pa.float64()))
+    return pa.schema(types)
+
+
 def _typed(table, schema) -> dict[str, object]:
     """The columns of a DataFrame as ``schema`` types them: a text column that is all
     missing in this piece (pandas made it float) becomes nulls."""
