@@ -385,3 +385,26 @@ def test_pose_duplicates_go_to_the_reference_path(tmp_path: Path, recording) -> 
 
 def _no_assembly(*args, **kwargs):
     raise AssertionError("not this path")
+
+
+def test_blocked_writers_write_the_whole_table(tmp_path: Path, recording, monkeypatch) -> None:
+    """Pose and wide recordings are written a row group of frames at a time: the same
+    rows and numbers, bit for bit, as the whole table."""
+    from fingerfit.io import posecsv, widecsv
+
+    monkeypatch.setattr(fpq, "ROW_GROUP_ROWS", 1000)
+    monkeypatch.setattr(posecsv, "QUAT_BLOCK", 77)
+    rec = posecsv.read_pose_csv(_pose_file(tmp_path, recording), units="mm")
+    for units in ("mm", "cm"):
+        got = pq.read_table(write_pose_csv(tmp_path / "p.parquet", rec, units=units))
+        assert pq.ParquetFile(tmp_path / "p.parquet").metadata.num_row_groups > 2
+        want = posecsv._pose_columns(rec, {"mm": 1.0, "cm": 10.0}[units])
+        codes, names = want.pop("sensor")
+        assert got.column("sensor").to_pylist() == [names[c] for c in codes]
+        for c, v in want.items():
+            assert np.array_equal(bits(got.column(c).to_numpy()), bits(v)), c
+        got = pq.read_table(write_wide_csv(tmp_path / "w.parquet", rec, units=units))
+        want = widecsv.wide_table(rec, units=units)
+        assert got.column_names == list(want.columns)
+        for c in want.columns:
+            assert np.array_equal(bits(got.column(c).to_numpy()), bits(want[c].to_numpy())), c

@@ -704,8 +704,74 @@ def write_pose_csv(path: str | Path, recording: Recording, *, units: str = "mm")
         the same numbers.
     """
     from ..session import UNITS_TO_MM
-    from .parquet import pose_meta, write_table_file
+    from .parquet import is_parquet, pose_meta, write_table_file
 
+    if is_parquet(path):
+        return _write_parquet(Path(path), recording, UNITS_TO_MM[units], pose_meta(units))
     return write_table_file(
         Path(path), _pose_columns(recording, UNITS_TO_MM[units]), pose_meta(units)
     )
+
+
+#: Rotation matrices turned into quaternions at a time by the writers (their temporaries
+#: stay in cache).
+QUAT_BLOCK = 8192
+
+
+def quats_blocked(rotation: np.ndarray) -> np.ndarray:
+    """:func:`~fingerfit.transforms.quat_wxyz_from_matrix` of ``(n, 3, 3)``, a block of
+    :data:`QUAT_BLOCK` at a time (the same bits; an error is the one of the whole array)."""
+    out = np.empty((rotation.shape[0], 4))
+    try:
+        for lo in range(0, rotation.shape[0], QUAT_BLOCK):
+            out[lo : lo + QUAT_BLOCK] = quat_wxyz_from_matrix(rotation[lo : lo + QUAT_BLOCK])
+    except ValueError:
+        quat_wxyz_from_matrix(rotation)  # raises, naming the matrix by its index in all
+        raise
+    return out
+
+
+def _whole_quat_error(recording: Recording) -> None:
+    """Raise the error the whole recording's conversion raises (the first sensor, in
+    order, with a matrix that is not a rotation, that matrix by its frame)."""
+    for s in recording.sensors:
+        quat_wxyz_from_matrix(recording.poses[s].rotation)
+
+
+def _write_parquet(path: Path, recording: Recording, mm_per_unit: float, meta) -> Path:
+    """The long table of :func:`_pose_columns` written a row group of frames at a time
+    (about :data:`fingerfit.io.parquet.ROW_GROUP_ROWS` rows): the same rows and numbers,
+    without the whole table in memory."""
+    from .parquet import ROW_GROUP_ROWS, ParquetSink
+
+    names = recording.sensors
+    n = recording.n_frames
+    step = max(1, ROW_GROUP_ROWS // max(len(names), 1))
+    with ParquetSink(path, meta) as sink:
+        for lo in range(0, max(n, 1), step):
+            hi = min(lo + step, n)
+            pos = np.empty((hi - lo, len(names), 3))
+            quat = np.empty((hi - lo, len(names), 4))
+            for j, s in enumerate(names):
+                pose = recording.poses[s]
+                pos[:, j] = pose.position[lo:hi] / mm_per_unit
+                try:
+                    quat[:, j] = quats_blocked(pose.rotation[lo:hi])
+                except ValueError:
+                    _whole_quat_error(recording)
+                    raise
+            ok = np.isfinite(pos).all(axis=2) & np.isfinite(quat).all(axis=2)
+            frame, sensor = np.nonzero(ok)
+            cols: dict[str, object] = {
+                "time": recording.time[lo:hi][frame],
+                "sensor": (sensor.astype(np.int32), list(names)),
+            }
+            sel = pos[frame, sensor]
+            for j, c in enumerate(("x", "y", "z")):
+                cols[c] = np.ascontiguousarray(sel[:, j])
+            sel = quat[frame, sensor]
+            for j, c in enumerate(("qw", "qx", "qy", "qz")):
+                cols[c] = np.ascontiguousarray(sel[:, j])
+            del pos, quat, sel
+            sink.write(cols)
+    return path

@@ -760,8 +760,40 @@ def write_wide_csv(
     -------
     Path
     """
-    from .parquet import write_table_file
+    from .parquet import is_parquet, write_table_file
 
     lay = layout or DEFAULT_LAYOUT
+    if is_parquet(path) and lay.orientation == _QUAT:
+        return _write_parquet(Path(path), recording, units, lay)
     table = wide_table(recording, units=units, layout=lay)
     return write_table_file(Path(path), table, _wide_meta(units, lay))
+
+
+def _write_parquet(path: Path, recording: Recording, units: str, lay: WideLayout) -> Path:
+    """The columns of :func:`wide_table` (quaternion layouts) written a row group of
+    frames at a time: the same numbers, without the whole table in memory."""
+    from .parquet import ROW_GROUP_ROWS, ParquetSink
+    from .posecsv import _whole_quat_error, quats_blocked
+
+    n = recording.n_frames
+    with ParquetSink(path, _wide_meta(units, lay)) as sink:
+        for lo in range(0, max(n, 1), ROW_GROUP_ROWS):
+            hi = min(lo + ROW_GROUP_ROWS, n)
+            data: dict[str, np.ndarray] = {}
+            if lay.time is not None:
+                data[lay.time] = recording.time[lo:hi]
+            for s, name in enumerate(recording.sensors, start=1):
+                pose = recording.poses[name]
+                try:
+                    ori = quats_blocked(pose.rotation[lo:hi])
+                except ValueError:
+                    _whole_quat_error(recording)
+                    raise
+                for m, key in enumerate(lay.orientation):
+                    data[_column(lay.columns[key], s)] = np.ascontiguousarray(ori[:, m])
+                for m, key in enumerate(_POS):
+                    data[_column(lay.columns[key], s)] = (
+                        pose.position[lo:hi, m] / UNITS_TO_MM[units]
+                    )
+            sink.write(data)
+    return path
