@@ -408,3 +408,39 @@ def test_blocked_writers_write_the_whole_table(tmp_path: Path, recording, monkey
         assert got.column_names == list(want.columns)
         for c in want.columns:
             assert np.array_equal(bits(got.column(c).to_numpy()), bits(want[c].to_numpy())), c
+
+
+@pytest.mark.parametrize("block", [50, 1 << 16])
+def test_streamed_wide_read_is_the_reference_bit_for_bit(
+    tmp_path: Path, recording, monkeypatch, block
+) -> None:
+    """The streaming reader of wide Parquet files is taken for ordinary files (lost frames,
+    empty fields) and gives what the reference path gives; repeated rows go to the
+    reference path, which drops them."""
+    from fingerfit.io import widecsv
+
+    monkeypatch.setattr(widecsv, "_PARQUET_BLOCK", block)
+    rng = np.random.default_rng(5)
+    plain = widecsv.wide_table(recording)
+    messy = plain[rng.random(len(plain)) > 0.03].reset_index(drop=True)
+    messy.loc[rng.random(len(messy)) < 0.05, "x2"] = np.nan
+    repeated = pd.concat([plain.iloc[:40], plain.iloc[39:]]).reset_index(drop=True)
+    meta = widecsv._wide_meta("mm", widecsv.DEFAULT_LAYOUT)
+    for name, table in (("plain", plain), ("messy", messy), ("repeated", repeated)):
+        path = fpq.write_parquet(tmp_path / f"{name}.parquet", table, meta, row_group_rows=333)
+        for rate in (240, None):
+            with monkeypatch.context() as m:
+                m.setattr(widecsv, "_read_parquet_fast", _no_assembly)  # the reference only
+                ref = read_wide_csv(path, units="mm", rate_hz=rate, check=False)
+            if name == "repeated":
+                with monkeypatch.context() as m:
+                    m.setattr(widecsv, "_assemble", _no_assembly)
+                    with pytest.raises(AssertionError, match="not this path"):
+                        read_wide_csv(path, units="mm", rate_hz=rate, check=False)
+                assert any("exactly repeated rows dropped" in n for n in ref.notes)
+                _same_recording(ref, read_wide_csv(path, units="mm", rate_hz=rate, check=False))
+                continue
+            with monkeypatch.context() as m:
+                m.setattr(widecsv, "_assemble", _no_assembly)  # the streaming path only
+                fast = read_wide_csv(path, units="mm", rate_hz=rate, check=False)
+            _same_recording(ref, fast)

@@ -398,6 +398,10 @@ def read_wide_csv(
         raise FingerfitError("the rate must be positive (Hz)", path=path, field="rate")
     lay = parse_layout(layout) if not isinstance(layout, WideLayout) else layout
     if parquet:
+        try:
+            return _read_parquet_fast(path, lay, sensors, units, rate_hz, check)
+        except Exception:  # _Irregular, a FingerfitError, a damaged page Arrow reports
+            pass  # the reference path below says what is wrong, or reads what is unusual
         vals, tcol, stations, names, notes = _decode_parquet(path, lay, sensors)
         return _assemble(path, vals, tcol, stations, names, notes, lay, units, rate_hz, check, 1)
     first = read_header(path).split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
@@ -451,6 +455,124 @@ def _wide_meta(units: str, lay: WideLayout):
 
     key, value = _ORIENTATION_META[lay.orientation]
     return TableMeta(WIDE, units=units, frame="tracker", extra={f"fingerfit.{key}": value})
+
+
+class _Irregular(Exception):
+    """A wide Parquet file the streaming reader does not vouch for (an error somewhere,
+    repeated rows, stations updated one at a time, no time column, Euler angles): read
+    again by the reference path, which names the error or repairs the rows."""
+
+
+#: Rows of a wide Parquet file placed at a time by the streaming reader.
+_PARQUET_BLOCK = 1 << 16
+
+
+def _read_parquet_fast(
+    path: Path,
+    lay: WideLayout,
+    sensors: Mapping[int, str] | None,
+    units: str,
+    rate_hz: float | None,
+    check: bool,
+) -> Recording:
+    """The common case of a wide Parquet file, streamed into the recording's arrays.
+
+    The time column first (the frames on the grid, :func:`_frame_grid`), then the values
+    :data:`_PARQUET_BLOCK` rows at a time straight into each station's positions and
+    rotation matrices: no ``(n, stations, keys)`` copy of the table. The arithmetic of
+    :func:`_assemble` (the same bits); whatever :func:`_assemble` would refuse or repair
+    raises, and the caller reads the file by the reference path.
+    """
+    from .parquet import WIDE, float_blocks, open_checked
+
+    if lay.orientation != _QUAT or lay.time is None:
+        raise _Irregular
+    plan: list = []
+
+    def check_columns(header: list[str]) -> None:
+        plan.extend(_header_plan(header, lay, sensors, path))
+        if plan[2]:
+            raise _Irregular
+
+    key, value = _ORIENTATION_META[lay.orientation]
+    pf, fh, _ = open_checked(
+        path, WIDE, columns=check_columns, expect={key: value, "frame": "tracker"}
+    )
+    stations, names, notes = plan
+    n_st, k = len(stations), len(lay.keys)
+    columns = [_column(lay.columns[key], s) for s in stations for key in lay.keys]
+    scale = UNITS_TO_MM[units]
+    with fh:
+        n_rows = pf.metadata.num_rows
+        if n_rows == 0:
+            raise _Irregular
+        tcol = pf.read(columns=[lay.time], use_threads=True).column(0).to_numpy()
+        if tcol.size != n_rows or not np.isfinite(tcol).all():
+            raise _Irregular
+        lines = np.arange(n_rows) + 1
+        notes.insert(0, f"{n_rows} rows of {n_st} stations read")
+        time, grid_idx = _frame_grid(tcol, lines, n_rows, n_rows, rate_hz, path, notes)
+        del tcol, lines
+        n = int(grid_idx[-1]) + 1
+        pos = [np.empty((n, 3)) for _ in stations]
+        rot = [np.empty((n, 3, 3)) for _ in stations]
+        filled = [np.zeros(n, dtype=bool) for _ in stations]
+        ext = np.empty((min(_PARQUET_BLOCK, n_rows) + 1, n_st, k))
+        n_partial_rows = n_partial_samples = 0
+        read = lo_prev = 0
+        for lo, block in float_blocks(pf, columns, n_rows, batch_rows=_PARQUET_BLOCK):
+            m = block[0].size
+            if lo:
+                ext[0] = ext[read - lo_prev]  # the last row of the block before
+            v = ext[1 : m + 1]
+            for c, col in enumerate(block):
+                v[:, c // k, c % k] = col
+            del block
+            if np.isinf(v).any() or implausible_rows(v[:, :, :3], scale).size:
+                raise _Irregular
+            rep, same = _repeats(ext[: m + 1] if lo else v)
+            if lo:
+                rep, same = rep[1:], same[1:]
+            if rep.any():
+                raise _Irregular
+            n_partial_rows += int(np.count_nonzero(same.any(axis=1) & ~same.all(axis=1)))
+            del rep, same
+            finite = np.isfinite(v)
+            complete = finite.all(axis=2)
+            n_partial_samples += int(np.count_nonzero(~complete & finite.any(axis=2)))
+            del finite
+            at_all = grid_idx[lo : lo + m]
+            for j in range(n_st):
+                ok_j = complete[:, j]
+                rows = slice(0, m) if ok_j.all() else np.flatnonzero(ok_j)
+                fv = v[rows, j]
+                at = at_all[rows]
+                put_scaled_rows(pos[j], at, fv[:, :3], scale)
+                with np.errstate(over="ignore"):
+                    norm = row_norms(fv[:, 3:])
+                if (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE).any():
+                    raise _Irregular
+                put_quat_rows(rot[j], at, fv[:, 3:])
+                put_rows(filled[j], at, True)
+            lo_prev = lo
+            read = lo + m
+        if read != n_rows or (n_st > 1 and n_partial_rows / n_rows > 0.5):
+            raise _Irregular
+    if n_partial_samples:
+        notes.append(f"{n_partial_samples} samples with empty fields treated as missing")
+    poses: dict[str, PoseSeries] = {}
+    missing: list[str] = []
+    for j, name in enumerate(names):
+        gap = np.flatnonzero(~filled[j])
+        if gap.size:
+            pos[j][gap] = np.nan
+            rot[j][gap] = np.nan
+        missing += missing_note(name, gap.size, n)
+        poses[name] = PoseSeries(pos[j], rot[j])
+    rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes + missing)
+    if check:
+        check_recording(rec, path)
+    return rec
 
 
 def _decode_parquet(
@@ -518,6 +640,61 @@ def _decode_parquet(
     if n_rows == 0:
         raise FingerfitError("no data rows", path=path)
     return vals, tcol, stations, names, notes
+
+
+def _frame_grid(
+    f_time: np.ndarray | None,
+    f_lines: np.ndarray,
+    n_frames: int,
+    n_kept: int,
+    rate_hz: float | None,
+    path: Path,
+    notes: list[str],
+) -> tuple[np.ndarray, np.ndarray]:
+    """The recording's time and each frame's place on it (``grid_idx``), from the frames'
+    times ``f_time`` (None: no time column), noting in ``notes`` how they were timed."""
+    if f_time is None:
+        if rate_hz is None:
+            raise FingerfitError(
+                "--rate is needed: the layout has no time column", path=path, field="rate"
+            )
+        time = np.arange(n_frames) / rate_hz
+        grid_idx = np.arange(n_frames)
+        notes.append(f"time = frame / {rate_hz:g} Hz (no time column: lost frames undetectable)")
+    elif rate_hz is None:
+        check_increasing(f_time, f_lines, path, what="time")
+        time, grid_idx = f_time.copy(), np.arange(n_frames)  # not a view of all values
+        notes.append(
+            "no --rate: frames kept at the time column's values, not on a grid"
+            + (" (a logger's clock: give --rate for reliable timing)" if n_frames != n_kept else "")
+        )
+    else:
+        check_increasing(f_time, f_lines, path, what="time")
+        idx = np.rint((f_time - f_time[0]) * rate_hz)
+        off = np.abs(f_time - (f_time[0] + idx / rate_hz))
+        if n_frames < 2 or ((off <= 0.25 / rate_hz).all() and (np.diff(idx) > 0).all()):
+            time, grid_idx = place_on_grid(f_time, rate_hz, f_lines, path)
+            notes += frames_missing_note(time.size - n_frames)
+        else:
+            span = f_time[-1] - f_time[0]
+            implied = (n_frames - 1) / span if span > 0 else np.inf
+            if abs(implied / rate_hz - 1.0) > RATE_TOLERANCE:
+                raise FingerfitError(
+                    f"the time column spans {span:.4g} s for {n_frames} frames ({implied:.4g} Hz), "
+                    f"not {rate_hz:g} Hz: frames lost or wrong --rate",
+                    path=path,
+                    field="rate",
+                )
+            time = f_time[0] + np.arange(n_frames) / rate_hz
+            grid_idx = np.arange(n_frames)
+            lag = f_time - time
+            notes.append(
+                f"time column too irregular for the {rate_hz:g} Hz grid (a logger's clock): "
+                f"frames timed by count from its first value; its span implies "
+                f"{implied:.4g} Hz and its delay varies by up to "
+                f"{1000 * (lag.max() - lag.min()):.0f} ms"
+            )
+    return time, grid_idx
 
 
 def _assemble(
@@ -606,47 +783,7 @@ def _assemble(
         f_lines = row_lines[first_row]
         f_time = None if t_rows is None else t_rows[first_row]
 
-    if f_time is None:
-        if rate_hz is None:
-            raise FingerfitError(
-                "--rate is needed: the layout has no time column", path=path, field="rate"
-            )
-        time = np.arange(n_frames) / rate_hz
-        grid_idx = np.arange(n_frames)
-        notes.append(f"time = frame / {rate_hz:g} Hz (no time column: lost frames undetectable)")
-    elif rate_hz is None:
-        check_increasing(f_time, f_lines, path, what="time")
-        time, grid_idx = f_time.copy(), np.arange(n_frames)  # not a view of all values
-        notes.append(
-            "no --rate: frames kept at the time column's values, not on a grid"
-            + (" (a logger's clock: give --rate for reliable timing)" if n_frames != n_kept else "")
-        )
-    else:
-        check_increasing(f_time, f_lines, path, what="time")
-        idx = np.rint((f_time - f_time[0]) * rate_hz)
-        off = np.abs(f_time - (f_time[0] + idx / rate_hz))
-        if n_frames < 2 or ((off <= 0.25 / rate_hz).all() and (np.diff(idx) > 0).all()):
-            time, grid_idx = place_on_grid(f_time, rate_hz, f_lines, path)
-            notes += frames_missing_note(time.size - n_frames)
-        else:
-            span = f_time[-1] - f_time[0]
-            implied = (n_frames - 1) / span if span > 0 else np.inf
-            if abs(implied / rate_hz - 1.0) > RATE_TOLERANCE:
-                raise FingerfitError(
-                    f"the time column spans {span:.4g} s for {n_frames} frames ({implied:.4g} Hz), "
-                    f"not {rate_hz:g} Hz: frames lost or wrong --rate",
-                    path=path,
-                    field="rate",
-                )
-            time = f_time[0] + np.arange(n_frames) / rate_hz
-            grid_idx = np.arange(n_frames)
-            lag = f_time - time
-            notes.append(
-                f"time column too irregular for the {rate_hz:g} Hz grid (a logger's clock): "
-                f"frames timed by count from its first value; its span implies "
-                f"{implied:.4g} Hz and its delay varies by up to "
-                f"{1000 * (lag.max() - lag.min()):.0f} ms"
-            )
+    time, grid_idx = _frame_grid(f_time, f_lines, n_frames, n_kept, rate_hz, path, notes)
     n = int(grid_idx[-1]) + 1 if n_frames else 0
 
     scale = UNITS_TO_MM[units]
