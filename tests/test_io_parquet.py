@@ -444,3 +444,21 @@ def test_streamed_wide_read_is_the_reference_bit_for_bit(
                 m.setattr(widecsv, "_assemble", _no_assembly)  # the streaming path only
                 fast = read_wide_csv(path, units="mm", rate_hz=rate, check=False)
             _same_recording(ref, fast)
+
+
+def test_blocks_decoded_ahead_stop_and_fail_like_the_plain_ones() -> None:
+    import threading
+
+    def items(fail_at=None):
+        for i in range(50):
+            if i == fail_at:
+                raise OSError("damaged page")
+            yield i
+
+    assert list(fpq._ahead(items())) == list(range(50))
+    with pytest.raises(OSError, match="damaged page"):
+        list(fpq._ahead(items(fail_at=7)))
+    gen = fpq._ahead(items())
+    assert [next(gen) for _ in range(3)] == [0, 1, 2]
+    gen.close()  # the consumer stops early: the thread ends
+    assert not [t for t in threading.enumerate() if t.name == "fingerfit-parquet-ahead"]

@@ -705,11 +705,16 @@ def read_parquet(
             n_rows = pf.metadata.num_rows
             # float columns straight into their final arrays, a row group at a time (no
             # whole Arrow table beside them)
-            out: dict[str, object] = {c: np.empty(n_rows) for c in floats}
+            # (one row group: its decoded columns are the arrays, no copy at all)
+            single = pf.num_row_groups == 1
+            out: dict[str, object] = {} if single else {c: np.empty(n_rows) for c in floats}
             filled = 0
             for lo, block in float_blocks(pf, floats, n_rows):
                 for c, v in zip(floats, block, strict=True):
-                    out[c][lo : lo + v.size] = v
+                    if single:
+                        out[c] = v
+                    else:
+                        out[c][lo : lo + v.size] = v
                 filled = lo + (block[0].size if block else 0)
             if floats and filled != n_rows:
                 raise ValueError(f"{filled} rows read of {n_rows}")
@@ -737,13 +742,69 @@ def read_parquet(
     return ParquetTable({c: out[c] for c in names}, _metadata(schema), n_rows, names)
 
 
-def float_blocks(pf, columns: Sequence[str], n_rows: int, batch_rows: int | None = None):
+def float_blocks(
+    pf, columns: Sequence[str], n_rows: int, batch_rows: int | None = None, ahead: bool = False
+):
     """The float64 columns ``columns`` of an open Parquet file, a block of rows at a time.
 
     Yields ``(first row, [one (m,) float64 array per column])``: a row group at a time, or
     batches of ``batch_rows`` rows (a null read as NaN). The arrays are the decoded
-    buffers where Arrow allows (no copy), so they are valid until the next block.
+    buffers where Arrow allows (no copy). ``ahead``: the next block is decoded in a
+    thread of its own while the caller works on this one (Arrow decodes without the
+    GIL, so decoding and NumPy's work share the cores).
     """
+    blocks = _float_blocks(pf, columns, n_rows, batch_rows)
+    if ahead:
+        blocks = _ahead(blocks)
+    yield from blocks
+
+
+def _ahead(items):
+    """``items`` produced one ahead in a thread of its own; its exception re-raised here.
+    Stopped when the consumer stops (closes this generator)."""
+    import queue
+    import threading
+
+    box: queue.Queue = queue.Queue(maxsize=1)
+    stop = threading.Event()
+    done = object()
+
+    def produce() -> None:
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        box.put((item, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            box.put((done, None))
+        except BaseException as exc:  # handed to the consumer
+            box.put((done, exc))
+
+    worker = threading.Thread(target=produce, name="fingerfit-parquet-ahead", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, exc = box.get()
+            if exc is not None:
+                raise exc
+            if item is done:
+                return
+            yield item
+    finally:
+        stop.set()
+        while worker.is_alive():
+            try:
+                box.get(timeout=0.1)
+            except queue.Empty:
+                pass
+        worker.join()
+
+
+def _float_blocks(pf, columns: Sequence[str], n_rows: int, batch_rows: int | None):
     if not columns:
         return
     lo = 0

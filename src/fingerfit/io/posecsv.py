@@ -423,7 +423,7 @@ def _read_parquet_fast(
         n_partial = 0
         block = np.empty((min(_BLOCK, n_rows), 7))
         rows_read = 0
-        for lo, cols in float_blocks(pf, _NUMERIC[1:], n_rows, batch_rows=_BLOCK):
+        for lo, cols in float_blocks(pf, _NUMERIC[1:], n_rows, batch_rows=_BLOCK, ahead=True):
             m = cols[0].size
             hi = lo + m
             p = block[:m]

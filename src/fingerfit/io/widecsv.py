@@ -520,7 +520,7 @@ def _read_parquet_fast(
         ext = np.empty((min(_PARQUET_BLOCK, n_rows) + 1, n_st, k))
         n_partial_rows = n_partial_samples = 0
         read = lo_prev = 0
-        for lo, block in float_blocks(pf, columns, n_rows, batch_rows=_PARQUET_BLOCK):
+        for lo, block in float_blocks(pf, columns, n_rows, batch_rows=_PARQUET_BLOCK, ahead=True):
             m = block[0].size
             if lo:
                 ext[0] = ext[read - lo_prev]  # the last row of the block before
