@@ -379,10 +379,25 @@ def _read_parquet_fast(
             raise _Irregular
         scale = UNITS_TO_MM[stated] if scale_to_mm is None else scale_to_mm
         n_rows = pf.metadata.num_rows
-        head = pf.read(columns=["time", "sensor"], use_threads=True)
-        time = head.column("time").to_numpy()  # a null becomes NaN
-        code, names = _text_codes(pa, head.column("sensor"))
-        del head
+        # time and sensor a row group at a time into their arrays (no whole column twice)
+        time = np.empty(n_rows)
+        code = np.empty(n_rows, dtype=np.int32)
+        code_of: dict[str, int] = {}
+        lo = 0
+        for g in range(pf.num_row_groups):
+            head = pf.read_row_group(g, columns=["time", "sensor"], use_threads=True)
+            m = head.num_rows
+            if lo + m > n_rows:
+                raise _Irregular
+            time[lo : lo + m] = head.column("time").to_numpy()  # a null becomes NaN
+            c, group_names = _text_codes(pa, head.column("sensor"))
+            lut = np.array([code_of.setdefault(v, len(code_of)) for v in group_names], np.int32)
+            code[lo : lo + m] = lut[c] if lut.size else c
+            lo += m
+            del head, c
+        if lo != n_rows:
+            raise _Irregular
+        names = list(code_of)
         if n_rows == 0 or not np.isfinite(time).all() or (time[1:] < time[:-1]).any():
             raise _Irregular
         n_codes = len(names)

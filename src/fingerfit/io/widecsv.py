@@ -506,8 +506,12 @@ def _read_parquet_fast(
         n_rows = pf.metadata.num_rows
         if n_rows == 0:
             raise _Irregular
-        tcol = pf.read(columns=[lay.time], use_threads=True).column(0).to_numpy()
-        if tcol.size != n_rows or not np.isfinite(tcol).all():
+        tcol = np.empty(n_rows)
+        read = 0
+        for lo, (t,) in float_blocks(pf, [lay.time], n_rows):
+            tcol[lo : lo + t.size] = t
+            read = lo + t.size
+        if read != n_rows or not np.isfinite(tcol).all():
             raise _Irregular
         lines = np.arange(n_rows) + 1
         notes.insert(0, f"{n_rows} rows of {n_st} stations read")
