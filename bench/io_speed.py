@@ -24,6 +24,8 @@ timed apart on the recording read, and the table gives the rows per second with 
 Run by ``bench/speed.py`` (``make bench``) or alone::
 
     python bench/io_speed.py --rows 2000000 --before /tmp/before/src
+
+``--tables pose,wide`` measures only those tables (CSV and Parquet).
 """
 
 from __future__ import annotations
