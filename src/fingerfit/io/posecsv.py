@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import csv
 import io
+import threading
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -329,6 +332,8 @@ def _read_parquet(
 
 #: Rows converted to rotation matrices at a time (bounds the temporary memory).
 _BLOCK = 1 << 16
+#: Threads placing the blocks of a pose Parquet file.
+_THREADS = 2
 
 
 def _first(rows: slice | np.ndarray) -> int:
@@ -428,29 +433,32 @@ def _read_parquet_fast(
             frames_note = frames_missing_note(full_time.size - frame_times.size)
             frame_times = full_time
         n = frame_times.size
-        del row_of_frame, time
+        del time
 
         appear = sorted(present, key=lambda k: first_row[k])
         pos = {k: np.empty((n, 3)) for k in appear}
         rot = {k: np.empty((n, 3, 3)) for k in appear}
         filled = {k: np.zeros(n, dtype=bool) for k in appear}
-        frames_before = 0
-        n_partial = 0
-        block = np.empty((min(_BLOCK, n_rows), 7))
-        rows_read = 0
-        for lo, cols in float_blocks(pf, _NUMERIC[1:], n_rows, batch_rows=_BLOCK, ahead=True):
+        buffers = threading.local()
+
+        def place(lo: int, cols: list[np.ndarray]) -> int:
+            """Check and place rows ``lo:lo + m``; their samples with empty fields."""
             m = cols[0].size
             hi = lo + m
+            block = getattr(buffers, "block", None)
+            if block is None or block.shape[0] < m:
+                block = buffers.block = np.empty((max(m, _BLOCK), 7))
             p = block[:m]
             for j, v in enumerate(cols):
                 p[:, j] = v
             del cols
+            partial = 0
             finite = np.isfinite(p)
             ok = finite.all(axis=1)
             if not ok.all():
                 if np.isinf(p).any():
                     raise _Irregular
-                n_partial += int(np.count_nonzero(~ok & finite.any(axis=1)))
+                partial = int(np.count_nonzero(~ok & finite.any(axis=1)))
             if implausible_rows(p[:, :3], scale).size:
                 raise _Irregular
             q = p[:, 3:]
@@ -459,8 +467,7 @@ def _read_parquet_fast(
             if (ok & (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)).any():
                 raise _Irregular
             f = np.cumsum(new[lo:hi], dtype=np.int64)  # the rows' frames
-            f += frames_before - 1
-            frames_before = int(f[-1]) + 1
+            f += int(np.searchsorted(row_of_frame, lo)) - 1  # frames begun before
             if grid is not None:
                 f = grid[f]
             c = code[lo:hi]
@@ -472,7 +479,28 @@ def _read_parquet_fast(
                 put_scaled_rows(pos[int(k)], fk, p[r, :3], scale)
                 put_quat_rows(rot[int(k)], fk, p[r, 3:])
                 put_rows(filled[int(k)], fk, True)
-            rows_read = hi
+            return partial
+
+        # Blocks are placed by two threads (NumPy works without the GIL; each block's
+        # rows go to frames of their own) while Arrow decodes the next ones.
+        n_partial = 0
+        rows_read = 0
+        pending: deque = deque()
+        blocks = float_blocks(pf, _NUMERIC[1:], n_rows, batch_rows=_BLOCK, ahead=True)
+        with ThreadPoolExecutor(max_workers=_THREADS) as pool:
+            try:
+                for lo, cols in blocks:
+                    if len(pending) > _THREADS:
+                        n_partial += pending.popleft().result()
+                    pending.append(pool.submit(place, lo, cols))
+                    rows_read = lo + cols[0].size
+                    del cols
+                while pending:
+                    n_partial += pending.popleft().result()
+            finally:
+                blocks.close()
+                for fut in pending:
+                    fut.cancel()
         if rows_read != n_rows:
             raise _Irregular
     notes: list[str] = []
