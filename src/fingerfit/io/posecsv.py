@@ -332,8 +332,9 @@ def _read_parquet(
 
 #: Rows converted to rotation matrices at a time (bounds the temporary memory).
 _BLOCK = 1 << 16
-#: Threads placing the blocks of a pose Parquet file.
+#: Threads placing the blocks of a pose Parquet file, and the rows of a block.
 _THREADS = 2
+_PARQUET_BLOCK = 1 << 15
 
 
 def _first(rows: slice | np.ndarray) -> int:
@@ -447,7 +448,7 @@ def _read_parquet_fast(
             hi = lo + m
             block = getattr(buffers, "block", None)
             if block is None or block.shape[0] < m:
-                block = buffers.block = np.empty((max(m, _BLOCK), 7))
+                block = buffers.block = np.empty((max(m, _PARQUET_BLOCK), 7))
             p = block[:m]
             for j, v in enumerate(cols):
                 p[:, j] = v
@@ -486,11 +487,11 @@ def _read_parquet_fast(
         n_partial = 0
         rows_read = 0
         pending: deque = deque()
-        blocks = float_blocks(pf, _NUMERIC[1:], n_rows, batch_rows=_BLOCK, ahead=True)
+        blocks = float_blocks(pf, _NUMERIC[1:], n_rows, batch_rows=_PARQUET_BLOCK, ahead=True)
         with ThreadPoolExecutor(max_workers=_THREADS) as pool:
             try:
                 for lo, cols in blocks:
-                    if len(pending) > _THREADS:
+                    if len(pending) >= _THREADS:
                         n_partial += pending.popleft().result()
                     pending.append(pool.submit(place, lo, cols))
                     rows_read = lo + cols[0].size
