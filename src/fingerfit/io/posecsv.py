@@ -359,6 +359,7 @@ def _read_parquet_fast(
     (exact duplicates) raises :class:`_Irregular` or :class:`FingerfitError`, and the
     caller reads the file by the reference path.
     """
+    from ..memory import release_freed_memory
     from ..session import UNITS_TO_MM
     from .parquet import (
         POSE,
@@ -435,6 +436,9 @@ def _read_parquet_fast(
             frame_times = full_time
         n = frame_times.size
         del time
+        # what the frames and the grid used goes back to the system before the
+        # recording's arrays are allocated (else it counts in the peak beside them)
+        release_freed_memory()
 
         appear = sorted(present, key=lambda k: first_row[k])
         pos = {k: np.empty((n, 3)) for k in appear}
