@@ -22,7 +22,10 @@ from __future__ import annotations
 import csv
 import io
 import re
+import threading
+from collections import deque
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -463,8 +466,9 @@ class _Irregular(Exception):
     again by the reference path, which names the error or repairs the rows."""
 
 
-#: Rows of a wide Parquet file placed at a time by the streaming reader.
-_PARQUET_BLOCK = 1 << 16
+#: Rows of a wide Parquet file placed at a time by the streaming reader, and its threads.
+_PARQUET_BLOCK = 1 << 15
+_THREADS = 2
 
 
 def _read_parquet_fast(
@@ -521,29 +525,33 @@ def _read_parquet_fast(
         pos = [np.empty((n, 3)) for _ in stations]
         rot = [np.empty((n, 3, 3)) for _ in stations]
         filled = [np.zeros(n, dtype=bool) for _ in stations]
-        ext = np.empty((min(_PARQUET_BLOCK, n_rows) + 1, n_st, k))
-        n_partial_rows = n_partial_samples = 0
-        read = lo_prev = 0
-        for lo, block in float_blocks(pf, columns, n_rows, batch_rows=_PARQUET_BLOCK, ahead=True):
+        buffers = threading.local()
+
+        def place(lo: int, block: list[np.ndarray], before: np.ndarray | None) -> tuple[int, int]:
+            """Check and place rows ``lo:lo + m`` (``before``: the row before them, for
+            the repeats); their rows with held values and samples with empty fields."""
             m = block[0].size
-            if lo:
-                ext[0] = ext[read - lo_prev]  # the last row of the block before
+            ext = getattr(buffers, "ext", None)
+            if ext is None or ext.shape[0] < m + 1:
+                ext = buffers.ext = np.empty((max(m, _PARQUET_BLOCK) + 1, n_st, k))
+            if before is not None:
+                ext[0] = before
             v = ext[1 : m + 1]
             for c, col in enumerate(block):
                 v[:, c // k, c % k] = col
             del block
             if np.isinf(v).any() or implausible_rows(v[:, :, :3], scale).size:
                 raise _Irregular
-            rep, same = _repeats(ext[: m + 1] if lo else v)
-            if lo:
+            rep, same = _repeats(ext[: m + 1] if before is not None else v)
+            if before is not None:
                 rep, same = rep[1:], same[1:]
             if rep.any():
                 raise _Irregular
-            n_partial_rows += int(np.count_nonzero(same.any(axis=1) & ~same.all(axis=1)))
+            held = int(np.count_nonzero(same.any(axis=1) & ~same.all(axis=1)))
             del rep, same
             finite = np.isfinite(v)
             complete = finite.all(axis=2)
-            n_partial_samples += int(np.count_nonzero(~complete & finite.any(axis=2)))
+            empty = int(np.count_nonzero(~complete & finite.any(axis=2)))
             del finite
             at_all = grid_idx[lo : lo + m]
             for j in range(n_st):
@@ -558,8 +566,34 @@ def _read_parquet_fast(
                     raise _Irregular
                 put_quat_rows(rot[j], at, fv[:, 3:])
                 put_rows(filled[j], at, True)
-            lo_prev = lo
-            read = lo + m
+            return held, empty
+
+        # Blocks placed by two threads (NumPy works without the GIL; each block's rows go
+        # to frames of their own) while Arrow decodes the next ones.
+        n_partial_rows = n_partial_samples = 0
+        read = 0
+        before = None
+        pending: deque = deque()
+        blocks = float_blocks(pf, columns, n_rows, batch_rows=_PARQUET_BLOCK, ahead=True)
+        with ThreadPoolExecutor(max_workers=_THREADS) as pool:
+            try:
+                for lo, block in blocks:
+                    if len(pending) >= _THREADS:
+                        held, empty = pending.popleft().result()
+                        n_partial_rows += held
+                        n_partial_samples += empty
+                    pending.append(pool.submit(place, lo, block, before))
+                    before = np.array([col[-1] for col in block]).reshape(n_st, k)
+                    read = lo + block[0].size
+                    del block
+                while pending:
+                    held, empty = pending.popleft().result()
+                    n_partial_rows += held
+                    n_partial_samples += empty
+            finally:
+                blocks.close()
+                for fut in pending:
+                    fut.cancel()
         if read != n_rows or (n_st > 1 and n_partial_rows / n_rows > 0.5):
             raise _Irregular
     if n_partial_samples:
