@@ -24,6 +24,8 @@ timed apart on the recording read, and the table gives the rows per second with 
 Run by ``bench/speed.py`` (``make bench``) or alone::
 
     python bench/io_speed.py --rows 2000000 --before /tmp/before/src
+
+``--tables pose,wide`` measures only those tables (CSV and Parquet).
 """
 
 from __future__ import annotations
@@ -319,17 +321,25 @@ def child(src: Path, kind: str, path: Path, extra: str) -> dict:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def run(rows: int, before: Path | None = None, repeat: int = 2) -> dict:
-    """Measure every reader and writer (best of ``repeat`` fresh processes)."""
+def run(
+    rows: int, before: Path | None = None, repeat: int = 2, tables: tuple[str, ...] | None = None
+) -> dict:
+    """Measure every reader and writer (best of ``repeat`` fresh processes); with
+    ``tables`` (e.g. ``("pose", "wide")``) only those tables, CSV and Parquet."""
+
+    def wanted(kind: str) -> bool:
+        base = kind.removeprefix("write-").removesuffix("-parquet")
+        return tables is None or base in tables
+
     src_now = Path(__file__).resolve().parents[1] / "src"
     codes = {"now": src_now} | ({"before": before} if before is not None else {})
     results: dict = {"rows": rows, "read": {}, "write": {}, "load_before": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory(prefix="fingerfit-io-bench-") as tmp:
         files = make_files(Path(tmp), rows)
-        for kind in FORMATS + PARQUET_READS:
+        for kind in filter(wanted, FORMATS + PARQUET_READS):
             big, small, count = files[kind]
             entry = {"rows": count, "file_bytes": big.stat().st_size}
-            new = kind.endswith("-parquet") or kind == "angles"  # no older reader to compare
+            new = kind == "angles"  # no older reader to compare
             for label, src in codes.items():
                 if new and label != "now":
                     continue
@@ -354,11 +364,9 @@ def run(rows: int, before: Path | None = None, repeat: int = 2) -> dict:
                 )
             results["read"][kind] = entry
         big_pose = files["pose"][0]
-        for kind in WRITERS + PARQUET_WRITERS:
+        for kind in filter(wanted, WRITERS + PARQUET_WRITERS):
             entry = {}
             for label, src in codes.items():
-                if kind.endswith("-parquet") and label != "now":
-                    continue
                 best = min(
                     (
                         child(src, kind, big_pose, label)
@@ -449,6 +457,11 @@ def parquet_table(res: dict) -> str:
         "| table | operation | rows | CSV | Parquet | Parquet / CSV | file CSV / Parquet |"
         " Parquet peak above start / arrays kept | pyarrow alone |"
     )
+    has_before = any(
+        "before" in e for op in ("read", "write") for k, e in res[op].items() if "parquet" in k
+    )
+    if has_before:
+        head += " Parquet before | before peak / kept | speed-up |"
     lines = [head, "|---" * (head.count("|") - 1) + "|"]
     for name in ("pose", "wide", "angles"):
         for op in ("read", "write"):
@@ -475,6 +488,17 @@ def parquet_table(res: dict) -> str:
                 f"{csv_bytes / 1e6:.0f} MB / {pq_bytes / 1e6:.0f} MB | {mem} | "
                 + (f"{rows / floor / 1e6:.2f} M rows/s |" if floor else "n/a |")
             )
+            if "before" in p:
+                b = p["before"]
+                bm = f"{b['peak_above'] / 1e6:.0f} MB" + (
+                    f" ({b['peak_above'] / b['kept']:.2f}x)" if b.get("kept") else ""
+                )
+                lines[-1] += (
+                    f" {b['rows_per_s'] / 1e6:.2f} M rows/s ({b['seconds']:.2f} s) | {bm} | "
+                    f"{b['seconds'] / pn['seconds']:.2f}x |"
+                )
+            elif has_before:
+                lines[-1] += " | | |"
     return "\n".join(lines)
 
 
@@ -484,9 +508,13 @@ def main() -> None:
     ap.add_argument("--before", type=Path, default=None, help="src folder of older code")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument(
+        "--tables", default=None, help="only these tables, e.g. pose,wide,angles (CSV and Parquet)"
+    )
     args = ap.parse_args()
     t = time.perf_counter()
-    res = run(args.rows, args.before, args.repeat)
+    tables = tuple(args.tables.split(",")) if args.tables else None
+    res = run(args.rows, args.before, args.repeat, tables)
     print(table(res))
     print()
     print(parquet_table(res))

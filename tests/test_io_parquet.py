@@ -306,3 +306,161 @@ def test_fuzz_corrupted_parquet(tmp_path: Path, small_files, kind: str, flips, c
     for p in rec.poses.values():
         ok = np.isfinite(p.position).all(axis=1)
         assert (np.isfinite(p.rotation).all(axis=(1, 2)) == ok).all()
+
+
+def _same_recording(a, b) -> None:
+    assert a.notes == b.notes and list(a.poses) == list(b.poses) and a.name == b.name
+    assert np.array_equal(bits(a.time), bits(b.time))
+    for s in a.poses:
+        assert np.array_equal(bits(a.poses[s].position), bits(b.poses[s].position)), s
+        assert np.array_equal(bits(a.poses[s].rotation), bits(b.poses[s].rotation)), s
+
+
+def _messy_pose_table(recording, rng) -> pd.DataFrame:
+    """The recording's long table with frames lost, samples lost, empty fields, sensors in
+    varying order within a frame, and an unused sensor name in the dictionary."""
+    from fingerfit.io.posecsv import pose_table
+
+    df = pose_table(recording)
+    keep = rng.random(len(df)) > 0.05
+    df = df[keep].reset_index(drop=True)
+    df.loc[rng.random(len(df)) < 0.02, "qx"] = np.nan
+    df = df.sample(frac=1.0, random_state=1).sort_values("time", kind="stable")
+    return df.reset_index(drop=True)
+
+
+@pytest.mark.parametrize("row_group_rows", [97, 1 << 20])
+def test_streamed_pose_read_is_the_reference_bit_for_bit(
+    tmp_path: Path, recording, monkeypatch, row_group_rows
+) -> None:
+    """The streaming reader of pose Parquet files is taken for ordinary files and gives
+    what the reference path (the whole table, then the CSV reader's assembly) gives."""
+    from fingerfit.io import posecsv
+
+    rng = np.random.default_rng(3)
+    tables = {
+        "plain": posecsv._pose_columns(recording, 1.0),
+        "messy": {c: v for c, v in _messy_pose_table(recording, rng).items()},
+    }
+    for name, cols in tables.items():
+        path = fpq.write_parquet(
+            tmp_path / f"{name}.parquet", cols, fpq.pose_meta("mm"), row_group_rows=row_group_rows
+        )
+        fast = posecsv.read_pose_csv(path, units="mm", rate_hz=240)
+        with monkeypatch.context() as m:
+            m.setattr(posecsv, "_assemble", _no_assembly)  # the streaming path only
+            _same_recording(fast, posecsv.read_pose_csv(path, units="mm", rate_hz=240))
+            _same_recording(
+                posecsv.read_pose_csv(path, units="mm"),
+                posecsv.read_pose_csv(path, units="mm"),
+            )
+        with monkeypatch.context() as m:
+            m.setattr(posecsv, "_read_parquet_fast", _no_assembly)  # the reference only
+            _same_recording(fast, posecsv.read_pose_csv(path, units="mm", rate_hz=240))
+            slow = posecsv.read_pose_csv(path, units="mm")
+        _same_recording(slow, posecsv.read_pose_csv(path, units="mm"))
+        csv = tmp_path / f"{name}.csv"
+        from fingerfit.io.fastcsv import write_table
+
+        write_table(csv, pq.read_table(path).to_pandas())
+        ref = posecsv.read_pose_csv(csv, units="mm", rate_hz=240)
+        assert ref.notes == fast.notes
+        for s in ref.poses:
+            assert np.array_equal(bits(ref.poses[s].rotation), bits(fast.poses[s].rotation))
+
+
+def test_pose_duplicates_go_to_the_reference_path(tmp_path: Path, recording) -> None:
+    from fingerfit.io import posecsv
+
+    df = posecsv.pose_table(recording)
+    dup = pd.concat([df.iloc[:5], df]).sort_values("time", kind="stable").reset_index(drop=True)
+    path = fpq.write_parquet(tmp_path / "dup.parquet", dict(dup.items()), fpq.pose_meta("mm"))
+    rec = posecsv.read_pose_csv(path, units="mm", rate_hz=240)
+    assert "5 exact duplicate rows dropped" in rec.notes
+    bad = dup.copy()
+    bad.loc[1, "x"] += 1.0
+    path = fpq.write_parquet(tmp_path / "bad.parquet", dict(bad.items()), fpq.pose_meta("mm"))
+    _refused(path, "second, different sample")
+
+
+def _no_assembly(*args, **kwargs):
+    raise AssertionError("not this path")
+
+
+def test_blocked_writers_write_the_whole_table(tmp_path: Path, recording, monkeypatch) -> None:
+    """Pose and wide recordings are written a row group of frames at a time: the same
+    rows and numbers, bit for bit, as the whole table."""
+    from fingerfit.io import posecsv, widecsv
+
+    monkeypatch.setattr(fpq, "ROW_GROUP_ROWS", 1000)
+    monkeypatch.setattr(posecsv, "QUAT_BLOCK", 77)
+    rec = posecsv.read_pose_csv(_pose_file(tmp_path, recording), units="mm")
+    for units in ("mm", "cm"):
+        got = pq.read_table(write_pose_csv(tmp_path / "p.parquet", rec, units=units))
+        assert pq.ParquetFile(tmp_path / "p.parquet").metadata.num_row_groups > 2
+        want = posecsv._pose_columns(rec, {"mm": 1.0, "cm": 10.0}[units])
+        codes, names = want.pop("sensor")
+        assert got.column("sensor").to_pylist() == [names[c] for c in codes]
+        for c, v in want.items():
+            assert np.array_equal(bits(got.column(c).to_numpy()), bits(v)), c
+        got = pq.read_table(write_wide_csv(tmp_path / "w.parquet", rec, units=units))
+        want = widecsv.wide_table(rec, units=units)
+        assert got.column_names == list(want.columns)
+        for c in want.columns:
+            assert np.array_equal(bits(got.column(c).to_numpy()), bits(want[c].to_numpy())), c
+
+
+@pytest.mark.parametrize("block", [50, 1 << 16])
+def test_streamed_wide_read_is_the_reference_bit_for_bit(
+    tmp_path: Path, recording, monkeypatch, block
+) -> None:
+    """The streaming reader of wide Parquet files is taken for ordinary files (lost frames,
+    empty fields) and gives what the reference path gives; repeated rows go to the
+    reference path, which drops them."""
+    from fingerfit.io import widecsv
+
+    monkeypatch.setattr(widecsv, "_PARQUET_BLOCK", block)
+    rng = np.random.default_rng(5)
+    plain = widecsv.wide_table(recording)
+    messy = plain[rng.random(len(plain)) > 0.03].reset_index(drop=True)
+    messy.loc[rng.random(len(messy)) < 0.05, "x2"] = np.nan
+    repeated = pd.concat([plain.iloc[:40], plain.iloc[39:]]).reset_index(drop=True)
+    meta = widecsv._wide_meta("mm", widecsv.DEFAULT_LAYOUT)
+    for name, table in (("plain", plain), ("messy", messy), ("repeated", repeated)):
+        path = fpq.write_parquet(tmp_path / f"{name}.parquet", table, meta, row_group_rows=333)
+        for rate in (240, None):
+            with monkeypatch.context() as m:
+                m.setattr(widecsv, "_read_parquet_fast", _no_assembly)  # the reference only
+                ref = read_wide_csv(path, units="mm", rate_hz=rate, check=False)
+            if name == "repeated":
+                with monkeypatch.context() as m:
+                    m.setattr(widecsv, "_assemble", _no_assembly)
+                    with pytest.raises(AssertionError, match="not this path"):
+                        read_wide_csv(path, units="mm", rate_hz=rate, check=False)
+                assert any("exactly repeated rows dropped" in n for n in ref.notes)
+                _same_recording(ref, read_wide_csv(path, units="mm", rate_hz=rate, check=False))
+                continue
+            with monkeypatch.context() as m:
+                m.setattr(widecsv, "_assemble", _no_assembly)  # the streaming path only
+                fast = read_wide_csv(path, units="mm", rate_hz=rate, check=False)
+            _same_recording(ref, fast)
+
+
+def test_blocks_decoded_ahead_stop_and_fail_like_the_plain_ones() -> None:
+    import threading
+
+    def items(fail_at=None):
+        for i in range(50):
+            if i == fail_at:
+                raise OSError("damaged page")
+            yield i
+
+    from fingerfit.io import parquet_read
+
+    assert list(parquet_read._ahead(items())) == list(range(50))
+    with pytest.raises(OSError, match="damaged page"):
+        list(parquet_read._ahead(items(fail_at=7)))
+    gen = parquet_read._ahead(items())
+    assert [next(gen) for _ in range(3)] == [0, 1, 2]
+    gen.close()  # the consumer stops early: the thread ends
+    assert not [t for t in threading.enumerate() if t.name == "fingerfit-parquet-ahead"]

@@ -77,3 +77,48 @@ def test_unknown_table_format_is_refused(studies, tmp_path) -> None:
         run_study(dirs, tmp_path / "x", tables_format="xlsx")
     refused(run("study", *dirs, "--out", tmp_path / "y", "--tables", "xlsx"), "field '--tables'")
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_datasets_are_written_as_subjects_arrive(studies, tmp_path, monkeypatch) -> None:
+    """Each subject's rows go to the datasets when its result arrives; once all have
+    arrived nothing is written again (the tables with rows), and the datasets are those of
+    the fixture's study."""
+    from fingerfit.evaluate import gather
+    from fingerfit.io import parquet as iopq
+
+    _, pq_dir, dirs = studies
+    added: list[str] = []
+    real_add = gather.StudyTables.add
+
+    def add(self, order, result):
+        before = {n: set(w) for n, w in self.written.items()}
+        light = real_add(self, order, result)
+        new = {n: set(w) - before.get(n, set()) for n, w in self.written.items()}
+        assert any(result.subject in s for s in new.values())
+        for n, subjects in new.items():
+            for s in subjects:
+                assert self.written[n][s].is_file()
+        added.append(result.subject)
+        return light
+
+    rewritten: list[str] = []
+    real_partitioned = iopq.write_partitioned
+
+    def partitioned(folder, chunks, schema, meta, **kw):
+        rewritten.append(Path(folder).name)
+        return real_partitioned(folder, chunks, schema, meta, **kw)
+
+    monkeypatch.setattr(gather.StudyTables, "add", add)
+    monkeypatch.setattr(iopq, "write_partitioned", partitioned)
+    out = tmp_path / "pq"
+    run_study(dirs, out, FitOptions(method="tang2018"), tables_format="parquet")
+    assert sorted(added) == ["S01", "S02"]
+    for folder in sorted(out.glob("*.parquet")):
+        files = sorted(folder.rglob("*.parquet"))
+        if [f.name for f in files] == ["empty.parquet"]:
+            assert folder.name in rewritten
+            continue
+        assert folder.name not in rewritten, folder.name
+        old = pd.read_parquet(pq_dir / folder.name)
+        new = pd.read_parquet(folder)
+        pd.testing.assert_frame_equal(new, old[list(new.columns)], check_categorical=False)

@@ -147,6 +147,13 @@ STUDY_TABLES = {
 _ALWAYS = {"max_flexion", "axis_quality", "targets", "models"}  # even without rows
 
 
+def typed_columns(table: pd.DataFrame, schema) -> dict[str, object]:
+    """The columns of ``table`` as ``schema`` types them (:func:`fingerfit.io.parquet._typed`)."""
+    from ..io.parquet import _typed
+
+    return _typed(table, schema)
+
+
 def _columns(name: str) -> list[str]:
     field = STUDY_TABLES[name]
     if field is not None:
@@ -189,7 +196,12 @@ class StudyTables(Mapping):
         Subjects per chunk.
     """
 
-    def __init__(self, folder: Path | None = None, chunk: int = 32) -> None:
+    def __init__(
+        self, folder: Path | None = None, chunk: int = 32, datasets: Path | None = None
+    ) -> None:
+        self._datasets = datasets
+        #: table -> subject -> the Parquet file of its rows written by :meth:`add`
+        self.written: dict[str, dict[str, Path]] = {}
         self._file = tempfile.TemporaryFile(prefix=".fingerfit-tables-", dir=folder)
         weakref.finalize(self, self._file.close)
         self._chunk = chunk
@@ -223,7 +235,30 @@ class StudyTables(Mapping):
                 self._applies.add(name)
                 rows[name] = table
         self._subjects[order] = self._write(pickle.dumps(rows, pickle.HIGHEST_PROTOCOL))
+        if self._datasets is not None:
+            for name, table in rows.items():
+                self._write_dataset_part(name, table[_columns(name)])
         return replace(result, **dict.fromkeys(SUBJECT_TABLES))
+
+    def _write_dataset_part(self, name: str, table: pd.DataFrame) -> None:
+        """A subject's rows of table ``name`` as ``<datasets>/<name>.parquet/subject=<id>/
+        part-0.parquet`` now (:func:`~fingerfit.io.parquet.write_partitioned`'s layout);
+        the study checks the column types once all have arrived (:func:`~.study.
+        _write_tables`)."""
+        from ..io.parquet import STUDY_TABLE, TABLE_KEY, ParquetSink, TableMeta, table_schema
+
+        subjects = table["subject"].astype(str).unique()
+        if len(subjects) != 1 or "/" in subjects[0] or subjects[0] in ("", ".", ".."):
+            return  # left to the study's final pass, which names the problem
+        value = str(subjects[0])
+        part = table.drop(columns=["subject"])
+        meta = TableMeta(STUDY_TABLE, time_units=None, extra={TABLE_KEY: name})
+        assert self._datasets is not None
+        path = self._datasets / f"{name}.parquet" / f"subject={value}" / "part-0.parquet"
+        schema = table_schema([part])
+        with ParquetSink(path, meta, schema=schema) as sink:
+            sink.write(typed_columns(part, schema))
+        self.written.setdefault(name, {})[value] = path
 
     def finish(self, orders: Iterable[int]) -> StudyTables:
         """Join the rows of the subjects at ``orders`` (given to :meth:`add`), in that

@@ -12,6 +12,7 @@ import contextlib
 import functools
 import io
 import json
+import shutil
 import warnings
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
@@ -214,7 +215,10 @@ def run_study(
     with staged_directory(out_dir, overwrite=overwrite) as tmp, contextlib.ExitStack() as stack:
         outcomes: list[SubjectOutcome | None] = [None] * len(sessions)
         fig09: dict[int, tuple[str, Path]] = {}
-        gathered = StudyTables(folder=tmp.parent)
+        # Parquet datasets: each subject's rows written as it arrives
+        gathered = StudyTables(
+            folder=tmp.parent, datasets=tmp if tables_format == "parquet" else None
+        )
         subjects = PackedSubjects(folder=tmp.parent)  # as they arrive; selected below
         stored: dict[int, int] = {}  # session -> its place in ``subjects``
         pool = stack.enter_context(study_executor(jobs, scheduler))
@@ -517,27 +521,29 @@ def _write_outputs(
 def _arrow_schema(tables: StudyTables, name: str):
     """The Parquet schema of study table ``name``: text columns (text or categorical in any
     chunk) string, columns integer in every chunk int64, booleans bool, the rest float64."""
-    import pyarrow as pa
+    from ..io.parquet import table_schema
 
-    kinds: dict[str, set[str]] = {}
-    for chunk in [tables.empty(name), *tables.chunks(name)]:
-        for c, t in chunk.dtypes.items():
-            kind = "text" if isinstance(t, pd.CategoricalDtype) or t.kind in "OSU" else t.kind
-            if isinstance(t, pd.StringDtype):
-                kind = "text"
-            if len(chunk) or not kinds.get(str(c)):
-                kinds.setdefault(str(c), set()).add(kind)
-    types = []
-    for c, k in kinds.items():
-        if "text" in k:
-            types.append((c, pa.string()))
-        elif k <= {"i", "u"}:
-            types.append((c, pa.int64()))
-        elif k == {"b"}:
-            types.append((c, pa.bool_()))
-        else:
-            types.append((c, pa.float64()))
-    return pa.schema(types)
+    return table_schema(tables.chunks(name), empty=tables.empty(name))
+
+
+def _parts_written(tables: StudyTables, name: str, out_dir: Path, schema) -> bool:
+    """Whether the Parquet dataset of table ``name`` written subject by subject as they
+    arrived (:meth:`StudyTables.add`) is the whole table: a file for exactly the subjects
+    with rows, each of the table's schema. When not (a subject left out, a column typed
+    otherwise by one subject), the caller writes the dataset again from the table."""
+    import pyarrow.parquet as pq
+
+    written = tables.written.get(name, {})
+    folder = out_dir / f"{name}.parquet"
+    want: set[str] = set()
+    for chunk in tables.chunks(name):
+        want.update(chunk["subject"].astype(str).unique())
+    if not want or set(written) != want or "subject" not in schema.names:
+        return False
+    rest = schema.remove(schema.get_field_index("subject"))
+    if sorted(p for p in folder.rglob("*") if p.is_file()) != sorted(written.values()):
+        return False
+    return all(pq.read_schema(p).remove_metadata().equals(rest) for p in written.values())
 
 
 def _write_tables(tables: StudyTables, out_dir: Path, tables_format: str = "csv") -> None:
@@ -548,10 +554,12 @@ def _write_tables(tables: StudyTables, out_dir: Path, tables_format: str = "csv"
         from ..io.parquet import STUDY_TABLE, TABLE_KEY, TableMeta, write_partitioned
 
         for name in tables:
+            schema = _arrow_schema(tables, name)
+            if _parts_written(tables, name, out_dir, schema):
+                continue
             meta = TableMeta(STUDY_TABLE, time_units=None, extra={TABLE_KEY: name})
-            write_partitioned(
-                out_dir / f"{name}.parquet", tables.chunks(name), _arrow_schema(tables, name), meta
-            )
+            shutil.rmtree(out_dir / f"{name}.parquet", ignore_errors=True)
+            write_partitioned(out_dir / f"{name}.parquet", tables.chunks(name), schema, meta)
         return
     for name in tables:
         with atomic_write(out_dir / f"{name}.csv", newline="") as fh:

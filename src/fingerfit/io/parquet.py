@@ -57,8 +57,13 @@ from .parquet_meta import angles_meta as angles_meta
 from .parquet_meta import joints_meta as joints_meta
 from .parquet_meta import pose_meta as pose_meta
 from .parquet_read import ParquetTable as ParquetTable
+from .parquet_read import _corrupt as _corrupt
+from .parquet_read import _metadata as _metadata
 from .parquet_read import _reason
+from .parquet_read import _text_codes as _text_codes
 from .parquet_read import check_meta as check_meta
+from .parquet_read import float_blocks as float_blocks
+from .parquet_read import open_checked as open_checked
 from .parquet_read import parquet_schema as parquet_schema
 from .parquet_read import read_parquet as read_parquet
 
@@ -370,6 +375,35 @@ def write_partitioned(
                 }
             )
     return folder
+
+
+def table_schema(frames: Iterable[object], empty: object | None = None):
+    """The Parquet schema of a table given in pieces (DataFrames): text columns (text or
+    categorical in any piece) string, columns integer in every piece int64, booleans bool,
+    the rest float64. ``empty``: the table without rows, whose types count only for a
+    column no piece with rows has."""
+    import pandas as pd
+
+    pa, _ = _pa()
+    kinds: dict[str, set[str]] = {}
+    for chunk in [*([] if empty is None else [empty]), *frames]:
+        for c, t in chunk.dtypes.items():
+            kind = "text" if isinstance(t, pd.CategoricalDtype) or t.kind in "OSU" else t.kind
+            if isinstance(t, pd.StringDtype):
+                kind = "text"
+            if len(chunk) or not kinds.get(str(c)):
+                kinds.setdefault(str(c), set()).add(kind)
+    types = []
+    for c, k in kinds.items():
+        if "text" in k:
+            types.append((c, pa.string()))
+        elif k <= {"i", "u"}:
+            types.append((c, pa.int64()))
+        elif k == {"b"}:
+            types.append((c, pa.bool_()))
+        else:
+            types.append((c, pa.float64()))
+    return pa.schema(types)
 
 
 def _typed(table, schema) -> dict[str, object]:

@@ -16,6 +16,8 @@ import numpy as np
 from ..errors import FingerfitError, shown
 from .parquet_meta import FORMAT_KEY, _pa
 
+# --------------------------------------------------------------------------- reading
+
 
 @dataclass
 class ParquetTable:
@@ -125,6 +127,69 @@ def check_meta(meta: Mapping[str, str], path: Path, fmt: str, **expected: str | 
             )
 
 
+def open_checked(
+    path: Path,
+    fmt: str,
+    *,
+    columns: Sequence[str] | Callable[[list[str]], None] | None = None,
+    text: Sequence[str] = (),
+    expect: Mapping[str, str | None] | None = None,
+):
+    """Open a Parquet table of format ``fmt`` and check everything its schema tells (the
+    checks of :func:`read_parquet` before any data is read).
+
+    Returns
+    -------
+    tuple
+        ``(pyarrow.parquet.ParquetFile, open file, pyarrow.Schema)``; the caller closes
+        the file (``with fh:``).
+    """
+    pa, _ = _pa()
+    pf, fh = _open(path)
+    try:
+        try:
+            schema = pf.schema_arrow
+        except Exception as exc:
+            raise _corrupt(path, exc) from None
+        check_meta(_metadata(schema), path, fmt, **(expect or {}))
+        names = list(schema.names)
+        dup = [n for n in names if names.count(n) > 1]
+        if dup:
+            raise FingerfitError("column appears twice", path=path, field=shown(dup[0]))
+        if callable(columns):
+            columns(names)
+        elif columns is not None:
+            for c in columns:
+                if c not in names:
+                    raise FingerfitError(
+                        f"column missing (expected {', '.join(columns)})", path=path, field=c
+                    )
+            for c in names:
+                if c not in columns:
+                    raise FingerfitError(
+                        f"unexpected column (expected {', '.join(columns)})",
+                        path=path,
+                        field=shown(c),
+                    )
+        for f in schema:
+            t = f.type
+            if f.name in text:
+                if pa.types.is_dictionary(t):
+                    t = t.value_type
+                if not (pa.types.is_string(t) or pa.types.is_large_string(t)):
+                    raise FingerfitError(
+                        f"column type {t}, not string", path=path, field=shown(f.name)
+                    )
+            elif t != pa.float64():
+                raise FingerfitError(
+                    f"column type {t}, not float64 (double)", path=path, field=shown(f.name)
+                )
+    except BaseException:
+        fh.close()
+        raise
+    return pf, fh, schema
+
+
 def read_parquet(
     path: str | Path,
     fmt: str,
@@ -163,61 +228,36 @@ def read_parquet(
     """
     pa, _ = _pa()
     path = Path(path)
-    pf, fh = _open(path)
+    pf, fh, schema = open_checked(path, fmt, columns=columns, text=text, expect=expect)
+    names = list(schema.names)
+    floats = [c for c in names if c not in text]
     with fh:
         try:
-            schema = pf.schema_arrow
-        except Exception as exc:
-            raise _corrupt(path, exc) from None
-        check_meta(_metadata(schema), path, fmt, **(expect or {}))
-        names = list(schema.names)
-        dup = [n for n in names if names.count(n) > 1]
-        if dup:
-            raise FingerfitError("column appears twice", path=path, field=shown(dup[0]))
-        if callable(columns):
-            columns(names)
-        elif columns is not None:
-            for c in columns:
-                if c not in names:
-                    raise FingerfitError(
-                        f"column missing (expected {', '.join(columns)})", path=path, field=c
-                    )
-            for c in names:
-                if c not in columns:
-                    raise FingerfitError(
-                        f"unexpected column (expected {', '.join(columns)})",
-                        path=path,
-                        field=shown(c),
-                    )
-        for f in schema:
-            t = f.type
-            if f.name in text:
-                if pa.types.is_dictionary(t):
-                    t = t.value_type
-                if not (pa.types.is_string(t) or pa.types.is_large_string(t)):
-                    raise FingerfitError(
-                        f"column type {t}, not string", path=path, field=shown(f.name)
-                    )
-            elif t != pa.float64():
-                raise FingerfitError(
-                    f"column type {t}, not float64 (double)", path=path, field=shown(f.name)
-                )
-        try:
-            table = pf.read(use_threads=True)
+            n_rows = pf.metadata.num_rows
+            # float columns straight into their final arrays, a row group at a time (no
+            # whole Arrow table beside them)
+            # (one row group: its decoded columns are the arrays, no copy at all)
+            single = pf.num_row_groups == 1
+            out: dict[str, object] = {} if single else {c: np.empty(n_rows) for c in floats}
+            filled = 0
+            for lo, block in float_blocks(pf, floats, n_rows):
+                for c, v in zip(floats, block, strict=True):
+                    if single:
+                        out[c] = v
+                    else:
+                        out[c][lo : lo + v.size] = v
+                filled = lo + (block[0].size if block else 0)
+            if floats and filled != n_rows:
+                raise ValueError(f"{filled} rows read of {n_rows}")
+            texts = pf.read(columns=[c for c in names if c in text], use_threads=True)
         except Exception as exc:  # a damaged data page
             raise _corrupt(path, exc) from None
-    if table.schema.names != names:  # pragma: no cover - pyarrow reads what it described
-        raise _corrupt(path, ValueError("schema changed while reading"))
-    out: dict[str, object] = {}
     try:
         for name in names:
-            col = table.column(name)
             if name in text:
-                out[name] = _text_codes(pa, col)
+                out[name] = _text_codes(pa, texts.column(name))
                 continue
-            v = col.to_numpy()  # a null becomes NaN
-            if v.dtype != np.float64:  # pragma: no cover - checked above
-                v = v.astype(np.float64)
+            v = out[name]
             bad = np.flatnonzero(np.isinf(v))
             if bad.size:
                 raise FingerfitError(
@@ -226,12 +266,104 @@ def read_parquet(
                     line=int(bad[0]) + 1,
                     field=shown(name),
                 )
-            out[name] = v
     except FingerfitError:
         raise
     except Exception as exc:  # inconsistent pages of a damaged file
         raise _corrupt(path, exc) from None
-    return ParquetTable(out, _metadata(schema), table.num_rows, names)
+    return ParquetTable({c: out[c] for c in names}, _metadata(schema), n_rows, names)
+
+
+def float_blocks(
+    pf, columns: Sequence[str], n_rows: int, batch_rows: int | None = None, ahead: bool = False
+):
+    """The float64 columns ``columns`` of an open Parquet file, a block of rows at a time.
+
+    Yields ``(first row, [one (m,) float64 array per column])``: a row group at a time, or
+    batches of ``batch_rows`` rows (a null read as NaN). The arrays are the decoded
+    buffers where Arrow allows (no copy). ``ahead``: the next block is decoded in a
+    thread of its own while the caller works on this one (Arrow decodes without the
+    GIL, so decoding and NumPy's work share the cores).
+    """
+    blocks = _float_blocks(pf, columns, n_rows, batch_rows)
+    if ahead:
+        blocks = _ahead(blocks)
+    yield from blocks
+
+
+def _ahead(items):
+    """``items`` produced one ahead in a thread of its own; its exception re-raised here.
+    Stopped when the consumer stops (closes this generator)."""
+    import queue
+    import threading
+
+    box: queue.Queue = queue.Queue(maxsize=1)
+    stop = threading.Event()
+    done = object()
+
+    def produce() -> None:
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        box.put((item, None), timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            box.put((done, None))
+        except BaseException as exc:  # handed to the consumer
+            box.put((done, exc))
+
+    worker = threading.Thread(target=produce, name="fingerfit-parquet-ahead", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, exc = box.get()
+            if exc is not None:
+                raise exc
+            if item is done:
+                return
+            yield item
+    finally:
+        stop.set()
+        while worker.is_alive():
+            try:
+                box.get(timeout=0.1)
+            except queue.Empty:
+                pass
+        worker.join()
+
+
+def _float_blocks(pf, columns: Sequence[str], n_rows: int, batch_rows: int | None):
+    if not columns:
+        return
+    lo = 0
+    if batch_rows is None:
+        parts = (pf.read_row_group(g, columns=list(columns)) for g in range(pf.num_row_groups))
+    else:
+        parts = pf.iter_batches(batch_size=batch_rows, columns=list(columns), use_threads=True)
+    for part in parts:
+        m = part.num_rows
+        if lo + m > n_rows:
+            raise ValueError(f"more rows than the {n_rows} the file states")
+        block = []
+        for j in range(len(columns)):
+            col = part.column(j)
+            chunks = col.chunks if hasattr(col, "chunks") else [col]
+            if len(chunks) == 1:
+                v = chunks[0].to_numpy(zero_copy_only=False)
+            else:
+                v = np.empty(m)
+                at = 0
+                for ch in chunks:
+                    v[at : at + len(ch)] = ch.to_numpy(zero_copy_only=False)
+                    at += len(ch)
+            if v.dtype != np.float64:  # pragma: no cover - the schema was checked
+                v = v.astype(np.float64)
+            block.append(v)
+        yield lo, block
+        lo += m
 
 
 def _text_codes(pa, col) -> tuple[np.ndarray, list[str]]:

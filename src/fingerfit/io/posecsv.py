@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import csv
 import io
+import threading
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -291,6 +294,10 @@ def _read_parquet(
 
     if scale_to_mm is None and units not in UNITS_TO_MM:
         raise FingerfitError(f"unknown units '{units}'", path=path, field="units")
+    try:
+        return _read_parquet_fast(path, units, rate_hz, scale_to_mm)
+    except Exception:  # _Irregular, a FingerfitError, a damaged page Arrow reports
+        pass  # the reference path below says what is wrong, or reads what is unusual
     table = read_parquet(
         path,
         POSE,
@@ -325,6 +332,196 @@ def _read_parquet(
 
 #: Rows converted to rotation matrices at a time (bounds the temporary memory).
 _BLOCK = 1 << 16
+#: Threads placing the blocks of a pose Parquet file, and the rows of a block.
+_THREADS = 2
+_PARQUET_BLOCK = 1 << 15
+
+
+def _first(rows: slice | np.ndarray) -> int:
+    """The first row of a :func:`~fingerfit.io.fastcsv.rows_where` selection."""
+    return int(rows.start) if isinstance(rows, slice) else int(rows[0])
+
+
+class _Irregular(Exception):
+    """A pose Parquet file the streaming reader does not vouch for (an error somewhere,
+    exact duplicates): read again by the reference path, which names the error."""
+
+
+def _read_parquet_fast(
+    path: Path, units: str, rate_hz: float | None, scale_to_mm: float | None
+) -> Recording:
+    """The common case of a pose Parquet file, streamed into the recording's arrays.
+
+    The time and sensor columns first (the frames, the sampling grid, the sensors), then
+    the numbers :data:`_BLOCK` rows at a time straight into each sensor's positions and
+    rotation matrices: no whole table and no ``(n, 7)`` copy. The same arithmetic as
+    :func:`_assemble` (the same bits); anything :func:`_assemble` would refuse or repair
+    (exact duplicates) raises :class:`_Irregular` or :class:`FingerfitError`, and the
+    caller reads the file by the reference path.
+    """
+    from ..memory import release_freed_memory
+    from ..session import UNITS_TO_MM
+    from .parquet import (
+        POSE,
+        QUAT_ORDER,
+        TRACKER_FRAME,
+        _metadata,
+        _pa,
+        _text_codes,
+        float_blocks,
+        open_checked,
+    )
+
+    pa, _ = _pa()
+    pf, fh, schema = open_checked(
+        path,
+        POSE,
+        columns=HEADER,
+        text=("sensor",),
+        expect={"units": None, "frame": TRACKER_FRAME, "quaternion_order": QUAT_ORDER},
+    )
+    with fh:
+        stated = _metadata(schema)["fingerfit.units"]
+        if stated not in UNITS_TO_MM or (scale_to_mm is None and stated != units):
+            raise _Irregular
+        scale = UNITS_TO_MM[stated] if scale_to_mm is None else scale_to_mm
+        n_rows = pf.metadata.num_rows
+        # time and sensor a row group at a time into their arrays (no whole column twice)
+        time = np.empty(n_rows)
+        code = np.empty(n_rows, dtype=np.int32)
+        code_of: dict[str, int] = {}
+        lo = 0
+        for g in range(pf.num_row_groups):
+            head = pf.read_row_group(g, columns=["time", "sensor"], use_threads=True)
+            m = head.num_rows
+            if lo + m > n_rows:
+                raise _Irregular
+            time[lo : lo + m] = head.column("time").to_numpy()  # a null becomes NaN
+            c, group_names = _text_codes(pa, head.column("sensor"))
+            lut = np.array([code_of.setdefault(v, len(code_of)) for v in group_names], np.int32)
+            code[lo : lo + m] = lut[c] if lut.size else c
+            lo += m
+            del head, c
+        if lo != n_rows:
+            raise _Irregular
+        names = list(code_of)
+        if n_rows == 0 or not np.isfinite(time).all() or (time[1:] < time[:-1]).any():
+            raise _Irregular
+        n_codes = len(names)
+        counts = np.bincount(code, minlength=n_codes)
+        present = [int(k) for k in np.flatnonzero(counts)]
+        if not all(is_sensor_name(names[k]) for k in present):
+            raise _Irregular
+        new = np.empty(n_rows, dtype=bool)
+        new[0] = True
+        np.not_equal(time[1:], time[:-1], out=new[1:])
+        row_of_frame = np.flatnonzero(new)
+        frame_of_row = np.cumsum(new, dtype=np.int64 if n_rows >= 1 << 31 else np.int32)
+        # a sensor twice in a frame (a duplicate): its rows' frames do not increase
+        first_row = {}
+        for k in present:
+            rows = rows_where(code, k)
+            frames = frame_of_row[rows]
+            first_row[k] = _first(rows)
+            if (frames[1:] == frames[:-1]).any():
+                raise _Irregular
+            del rows, frames
+        del frame_of_row
+        frame_times = time[row_of_frame]
+        grid = None
+        frames_note: list[str] = []
+        if rate_hz is not None and frame_times.size > 1:
+            full_time, grid = place_on_grid(frame_times, rate_hz, row_of_frame + 1, path)
+            frames_note = frames_missing_note(full_time.size - frame_times.size)
+            frame_times = full_time
+        n = frame_times.size
+        del time
+        # what the frames and the grid used goes back to the system before the
+        # recording's arrays are allocated (else it counts in the peak beside them)
+        release_freed_memory()
+
+        appear = sorted(present, key=lambda k: first_row[k])
+        pos = {k: np.empty((n, 3)) for k in appear}
+        rot = {k: np.empty((n, 3, 3)) for k in appear}
+        filled = {k: np.zeros(n, dtype=bool) for k in appear}
+        buffers = threading.local()
+
+        def place(lo: int, cols: list[np.ndarray]) -> int:
+            """Check and place rows ``lo:lo + m``; their samples with empty fields."""
+            m = cols[0].size
+            hi = lo + m
+            block = getattr(buffers, "block", None)
+            if block is None or block.shape[0] < m:
+                block = buffers.block = np.empty((max(m, _PARQUET_BLOCK), 7))
+            p = block[:m]
+            for j, v in enumerate(cols):
+                p[:, j] = v
+            del cols
+            partial = 0
+            finite = np.isfinite(p)
+            ok = finite.all(axis=1)
+            if not ok.all():
+                if np.isinf(p).any():
+                    raise _Irregular
+                partial = int(np.count_nonzero(~ok & finite.any(axis=1)))
+            if implausible_rows(p[:, :3], scale).size:
+                raise _Irregular
+            q = p[:, 3:]
+            with np.errstate(over="ignore", invalid="ignore"):
+                norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+            if (ok & (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)).any():
+                raise _Irregular
+            f = np.cumsum(new[lo:hi], dtype=np.int64)  # the rows' frames
+            f += int(np.searchsorted(row_of_frame, lo)) - 1  # frames begun before
+            if grid is not None:
+                f = grid[f]
+            c = code[lo:hi]
+            if not ok.all():
+                c, f, p = c[ok], f[ok], p[ok]
+            for k in np.flatnonzero(np.bincount(c, minlength=n_codes)):
+                r = rows_where(c, k)
+                fk = f[r]
+                put_scaled_rows(pos[int(k)], fk, p[r, :3], scale)
+                put_quat_rows(rot[int(k)], fk, p[r, 3:])
+                put_rows(filled[int(k)], fk, True)
+            return partial
+
+        # Blocks are placed by two threads (NumPy works without the GIL; each block's
+        # rows go to frames of their own) while Arrow decodes the next ones.
+        n_partial = 0
+        rows_read = 0
+        pending: deque = deque()
+        blocks = float_blocks(pf, _NUMERIC[1:], n_rows, batch_rows=_PARQUET_BLOCK, ahead=True)
+        with ThreadPoolExecutor(max_workers=_THREADS) as pool:
+            try:
+                for lo, cols in blocks:
+                    if len(pending) >= _THREADS:
+                        n_partial += pending.popleft().result()
+                    pending.append(pool.submit(place, lo, cols))
+                    rows_read = lo + cols[0].size
+                    del cols
+                while pending:
+                    n_partial += pending.popleft().result()
+            finally:
+                blocks.close()
+                for fut in pending:
+                    fut.cancel()
+        if rows_read != n_rows:
+            raise _Irregular
+    notes: list[str] = []
+    if n_partial:
+        notes.append(f"{n_partial} samples with empty fields treated as missing")
+    notes += frames_note
+    poses: dict[str, PoseSeries] = {}
+    for k in appear:
+        name = names[k]
+        gap = ~filled.pop(k)
+        p_k, r_k = pos.pop(k), rot.pop(k)
+        p_k[gap] = np.nan
+        r_k[gap] = np.nan
+        poses[name] = PoseSeries(p_k, r_k)
+        notes += missing_note(name, int(np.count_nonzero(gap)), n)
+    return Recording(path.name, frame_times, poses, notes)
 
 
 def _assemble(
@@ -555,8 +752,74 @@ def write_pose_csv(path: str | Path, recording: Recording, *, units: str = "mm")
         the same numbers.
     """
     from ..session import UNITS_TO_MM
-    from .parquet import pose_meta, write_table_file
+    from .parquet import is_parquet, pose_meta, write_table_file
 
+    if is_parquet(path):
+        return _write_parquet(Path(path), recording, UNITS_TO_MM[units], pose_meta(units))
     return write_table_file(
         Path(path), _pose_columns(recording, UNITS_TO_MM[units]), pose_meta(units)
     )
+
+
+#: Rotation matrices turned into quaternions at a time by the writers (their temporaries
+#: stay in cache).
+QUAT_BLOCK = 8192
+
+
+def quats_blocked(rotation: np.ndarray) -> np.ndarray:
+    """:func:`~fingerfit.transforms.quat_wxyz_from_matrix` of ``(n, 3, 3)``, a block of
+    :data:`QUAT_BLOCK` at a time (the same bits; an error is the one of the whole array)."""
+    out = np.empty((rotation.shape[0], 4))
+    try:
+        for lo in range(0, rotation.shape[0], QUAT_BLOCK):
+            out[lo : lo + QUAT_BLOCK] = quat_wxyz_from_matrix(rotation[lo : lo + QUAT_BLOCK])
+    except ValueError:
+        quat_wxyz_from_matrix(rotation)  # raises, naming the matrix by its index in all
+        raise
+    return out
+
+
+def _whole_quat_error(recording: Recording) -> None:
+    """Raise the error the whole recording's conversion raises (the first sensor, in
+    order, with a matrix that is not a rotation, that matrix by its frame)."""
+    for s in recording.sensors:
+        quat_wxyz_from_matrix(recording.poses[s].rotation)
+
+
+def _write_parquet(path: Path, recording: Recording, mm_per_unit: float, meta) -> Path:
+    """The long table of :func:`_pose_columns` written a row group of frames at a time
+    (about :data:`fingerfit.io.parquet.ROW_GROUP_ROWS` rows): the same rows and numbers,
+    without the whole table in memory."""
+    from .parquet import ROW_GROUP_ROWS, ParquetSink
+
+    names = recording.sensors
+    n = recording.n_frames
+    step = max(1, ROW_GROUP_ROWS // max(len(names), 1))
+    with ParquetSink(path, meta) as sink:
+        for lo in range(0, max(n, 1), step):
+            hi = min(lo + step, n)
+            pos = np.empty((hi - lo, len(names), 3))
+            quat = np.empty((hi - lo, len(names), 4))
+            for j, s in enumerate(names):
+                pose = recording.poses[s]
+                pos[:, j] = pose.position[lo:hi] / mm_per_unit
+                try:
+                    quat[:, j] = quats_blocked(pose.rotation[lo:hi])
+                except ValueError:
+                    _whole_quat_error(recording)
+                    raise
+            ok = np.isfinite(pos).all(axis=2) & np.isfinite(quat).all(axis=2)
+            frame, sensor = np.nonzero(ok)
+            cols: dict[str, object] = {
+                "time": recording.time[lo:hi][frame],
+                "sensor": (sensor.astype(np.int32), list(names)),
+            }
+            sel = pos[frame, sensor]
+            for j, c in enumerate(("x", "y", "z")):
+                cols[c] = np.ascontiguousarray(sel[:, j])
+            sel = quat[frame, sensor]
+            for j, c in enumerate(("qw", "qx", "qy", "qz")):
+                cols[c] = np.ascontiguousarray(sel[:, j])
+            del pos, quat, sel
+            sink.write(cols)
+    return path

@@ -24,7 +24,10 @@ from __future__ import annotations
 
 import csv
 import io
+import threading
+from collections import deque
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -32,13 +35,14 @@ import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError, shown
-from ..session import UNITS_TO_MM, Recording
-from ..transforms import quat_wxyz_from_matrix
-from .fastcsv import NotPlain, read_header
+from ..session import UNITS_TO_MM, PoseSeries, Recording
+from ..transforms import quat_wxyz_from_matrix, row_norms
+from .fastcsv import NotPlain, put_quat_rows, put_rows, put_scaled_rows, read_header
+from .hygiene import check_recording, implausible_rows, missing_note
 from .posecsv import check_field_counts
 from .wideframes import QUAT_NORM_TOLERANCE as QUAT_NORM_TOLERANCE
 from .wideframes import RATE_TOLERANCE as RATE_TOLERANCE
-from .wideframes import _assemble
+from .wideframes import _assemble, _frame_grid
 from .wideframes import _repeats as _repeats
 from .widelayout import (
     _EULER,
@@ -190,6 +194,10 @@ def read_wide_csv(
         raise FingerfitError("the rate must be positive (Hz)", path=path, field="rate")
     lay = parse_layout(layout) if not isinstance(layout, WideLayout) else layout
     if parquet:
+        try:
+            return _read_parquet_fast(path, lay, sensors, units, rate_hz, check)
+        except Exception:  # _Irregular, a FingerfitError, a damaged page Arrow reports
+            pass  # the reference path below says what is wrong, or reads what is unusual
         vals, tcol, stations, names, notes = _decode_parquet(path, lay, sensors)
         return _assemble(path, vals, tcol, stations, names, notes, lay, units, rate_hz, check, 1)
     first = read_header(path).split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
@@ -245,13 +253,167 @@ def _wide_meta(units: str, lay: WideLayout):
     return TableMeta(WIDE, units=units, frame="tracker", extra={f"fingerfit.{key}": value})
 
 
+class _Irregular(Exception):
+    """A wide Parquet file the streaming reader does not vouch for (an error somewhere,
+    repeated rows, stations updated one at a time, no time column, Euler angles): read
+    again by the reference path, which names the error or repairs the rows."""
+
+
+#: Rows of a wide Parquet file placed at a time by the streaming reader, and its threads.
+_PARQUET_BLOCK = 1 << 15
+_THREADS = 2
+
+
+def _read_parquet_fast(
+    path: Path,
+    lay: WideLayout,
+    sensors: Mapping[int, str] | None,
+    units: str,
+    rate_hz: float | None,
+    check: bool,
+) -> Recording:
+    """The common case of a wide Parquet file, streamed into the recording's arrays.
+
+    The time column first (the frames on the grid, :func:`_frame_grid`), then the values
+    :data:`_PARQUET_BLOCK` rows at a time straight into each station's positions and
+    rotation matrices: no ``(n, stations, keys)`` copy of the table. The arithmetic of
+    :func:`_assemble` (the same bits); whatever :func:`_assemble` would refuse or repair
+    raises, and the caller reads the file by the reference path.
+    """
+    from .parquet import WIDE, float_blocks, open_checked
+
+    if lay.orientation != _QUAT or lay.time is None:
+        raise _Irregular
+    plan: list = []
+
+    def check_columns(header: list[str]) -> None:
+        plan.extend(_header_plan(header, lay, sensors, path))
+        if plan[2]:
+            raise _Irregular
+
+    key, value = _ORIENTATION_META[lay.orientation]
+    pf, fh, _ = open_checked(
+        path, WIDE, columns=check_columns, expect={key: value, "frame": "tracker"}
+    )
+    stations, names, notes = plan
+    n_st, k = len(stations), len(lay.keys)
+    columns = [_column(lay.columns[key], s) for s in stations for key in lay.keys]
+    scale = UNITS_TO_MM[units]
+    with fh:
+        n_rows = pf.metadata.num_rows
+        if n_rows == 0:
+            raise _Irregular
+        tcol = np.empty(n_rows)
+        read = 0
+        for lo, (t,) in float_blocks(pf, [lay.time], n_rows):
+            tcol[lo : lo + t.size] = t
+            read = lo + t.size
+        if read != n_rows or not np.isfinite(tcol).all():
+            raise _Irregular
+        lines = np.arange(n_rows) + 1
+        notes.insert(0, f"{n_rows} rows of {n_st} stations read")
+        time, grid_idx = _frame_grid(tcol, lines, n_rows, n_rows, rate_hz, path, notes)
+        del tcol, lines
+        n = int(grid_idx[-1]) + 1
+        pos = [np.empty((n, 3)) for _ in stations]
+        rot = [np.empty((n, 3, 3)) for _ in stations]
+        filled = [np.zeros(n, dtype=bool) for _ in stations]
+        buffers = threading.local()
+
+        def place(lo: int, block: list[np.ndarray], before: np.ndarray | None) -> tuple[int, int]:
+            """Check and place rows ``lo:lo + m`` (``before``: the row before them, for
+            the repeats); their rows with held values and samples with empty fields."""
+            m = block[0].size
+            ext = getattr(buffers, "ext", None)
+            if ext is None or ext.shape[0] < m + 1:
+                ext = buffers.ext = np.empty((max(m, _PARQUET_BLOCK) + 1, n_st, k))
+            if before is not None:
+                ext[0] = before
+            v = ext[1 : m + 1]
+            for c, col in enumerate(block):
+                v[:, c // k, c % k] = col
+            del block
+            if np.isinf(v).any() or implausible_rows(v[:, :, :3], scale).size:
+                raise _Irregular
+            rep, same = _repeats(ext[: m + 1] if before is not None else v)
+            if before is not None:
+                rep, same = rep[1:], same[1:]
+            if rep.any():
+                raise _Irregular
+            held = int(np.count_nonzero(same.any(axis=1) & ~same.all(axis=1)))
+            del rep, same
+            finite = np.isfinite(v)
+            complete = finite.all(axis=2)
+            empty = int(np.count_nonzero(~complete & finite.any(axis=2)))
+            del finite
+            at_all = grid_idx[lo : lo + m]
+            for j in range(n_st):
+                ok_j = complete[:, j]
+                rows = slice(0, m) if ok_j.all() else np.flatnonzero(ok_j)
+                fv = v[rows, j]
+                at = at_all[rows]
+                put_scaled_rows(pos[j], at, fv[:, :3], scale)
+                with np.errstate(over="ignore"):
+                    norm = row_norms(fv[:, 3:])
+                if (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE).any():
+                    raise _Irregular
+                put_quat_rows(rot[j], at, fv[:, 3:])
+                put_rows(filled[j], at, True)
+            return held, empty
+
+        # Blocks placed by two threads (NumPy works without the GIL; each block's rows go
+        # to frames of their own) while Arrow decodes the next ones.
+        n_partial_rows = n_partial_samples = 0
+        read = 0
+        before = None
+        pending: deque = deque()
+        blocks = float_blocks(pf, columns, n_rows, batch_rows=_PARQUET_BLOCK, ahead=True)
+        with ThreadPoolExecutor(max_workers=_THREADS) as pool:
+            try:
+                for lo, block in blocks:
+                    if len(pending) >= _THREADS:
+                        held, empty = pending.popleft().result()
+                        n_partial_rows += held
+                        n_partial_samples += empty
+                    pending.append(pool.submit(place, lo, block, before))
+                    before = np.array([col[-1] for col in block]).reshape(n_st, k)
+                    read = lo + block[0].size
+                    del block
+                while pending:
+                    held, empty = pending.popleft().result()
+                    n_partial_rows += held
+                    n_partial_samples += empty
+            finally:
+                blocks.close()
+                for fut in pending:
+                    fut.cancel()
+        if read != n_rows or (n_st > 1 and n_partial_rows / n_rows > 0.5):
+            raise _Irregular
+    if n_partial_samples:
+        notes.append(f"{n_partial_samples} samples with empty fields treated as missing")
+    poses: dict[str, PoseSeries] = {}
+    missing: list[str] = []
+    for j, name in enumerate(names):
+        gap = np.flatnonzero(~filled[j])
+        if gap.size:
+            pos[j][gap] = np.nan
+            rot[j][gap] = np.nan
+        missing += missing_note(name, gap.size, n)
+        poses[name] = PoseSeries(pos[j], rot[j])
+    rec = Recording(path.name, np.asarray(time, dtype=float), poses, notes + missing)
+    if check:
+        check_recording(rec, path)
+    return rec
+
+
 def _decode_parquet(
     path: Path, lay: WideLayout, sensors: Mapping[int, str] | None
 ) -> tuple[np.ndarray, np.ndarray | None, list[int], list[str], list[str]]:
     """Values ``(n_rows, n_stations, n_keys)``, time ``(n_rows,)`` (or None), stations,
     sensor names and notes of a wide Parquet file: exactly the layout's columns of its
     stations, float64."""
-    from .parquet import WIDE, read_parquet
+    from .parquet import WIDE, float_blocks, open_checked
+    from .parquet import _corrupt as parquet_corrupt
 
     plan: list = []
 
@@ -268,16 +430,46 @@ def _decode_parquet(
             )
 
     key, value = _ORIENTATION_META[lay.orientation]
-    table = read_parquet(path, WIDE, columns=check_columns, expect={key: value, "frame": "tracker"})
+    pf, fh, schema = open_checked(
+        path, WIDE, columns=check_columns, expect={key: value, "frame": "tracker"}
+    )
     stations, names, notes = plan
-    cols = table.columns
-    if table.n_rows == 0:
+    n_rows = pf.metadata.num_rows
+    # every column straight into its place in the values (and the time), a row group at
+    # a time: no whole Arrow table, no second copy
+    vals = np.empty((n_rows, len(stations), len(lay.keys)))
+    tcol = None if lay.time is None else np.empty(n_rows)
+    targets = [vals[:, j, m] for j in range(len(stations)) for m in range(len(lay.keys))]
+    columns = [_column(lay.columns[key], s) for s in stations for key in lay.keys]
+    if tcol is not None:
+        targets.append(tcol)
+        columns.append(lay.time)
+    with fh:
+        try:
+            read = 0
+            for lo, block in float_blocks(pf, columns, n_rows):
+                for out, v in zip(targets, block, strict=True):
+                    out[lo : lo + v.size] = v
+                read = lo + block[0].size
+            if read != n_rows:
+                raise ValueError(f"{read} rows read of {n_rows}")
+        except Exception as exc:  # a damaged data page
+            raise parquet_corrupt(path, exc) from None
+    # an infinity is refused as read_parquet refuses it: the first column (in the file's
+    # order) holding one, its first row
+    if np.isinf(vals).any() or (tcol is not None and np.isinf(tcol).any()):
+        where = dict(zip(columns, targets, strict=True))
+        for c in schema.names:
+            bad = np.flatnonzero(np.isinf(where[c]))
+            if bad.size:
+                raise FingerfitError(
+                    f"not a finite number: {float(where[c][bad[0]])!r}",
+                    path=path,
+                    line=int(bad[0]) + 1,
+                    field=shown(c),
+                )
+    if n_rows == 0:
         raise FingerfitError("no data rows", path=path)
-    vals = np.empty((table.n_rows, len(stations), len(lay.keys)))
-    for j, s in enumerate(stations):
-        for m, key in enumerate(lay.keys):
-            vals[:, j, m] = cols.pop(_column(lay.columns[key], s))
-    tcol = None if lay.time is None else cols.pop(lay.time)
     return vals, tcol, stations, names, notes
 
 
@@ -345,8 +537,40 @@ def write_wide_csv(
     -------
     Path
     """
-    from .parquet import write_table_file
+    from .parquet import is_parquet, write_table_file
 
     lay = layout or DEFAULT_LAYOUT
+    if is_parquet(path) and lay.orientation == _QUAT:
+        return _write_parquet(Path(path), recording, units, lay)
     table = wide_table(recording, units=units, layout=lay)
     return write_table_file(Path(path), table, _wide_meta(units, lay))
+
+
+def _write_parquet(path: Path, recording: Recording, units: str, lay: WideLayout) -> Path:
+    """The columns of :func:`wide_table` (quaternion layouts) written a row group of
+    frames at a time: the same numbers, without the whole table in memory."""
+    from .parquet import ROW_GROUP_ROWS, ParquetSink
+    from .posecsv import _whole_quat_error, quats_blocked
+
+    n = recording.n_frames
+    with ParquetSink(path, _wide_meta(units, lay)) as sink:
+        for lo in range(0, max(n, 1), ROW_GROUP_ROWS):
+            hi = min(lo + ROW_GROUP_ROWS, n)
+            data: dict[str, np.ndarray] = {}
+            if lay.time is not None:
+                data[lay.time] = recording.time[lo:hi]
+            for s, name in enumerate(recording.sensors, start=1):
+                pose = recording.poses[name]
+                try:
+                    ori = quats_blocked(pose.rotation[lo:hi])
+                except ValueError:
+                    _whole_quat_error(recording)
+                    raise
+                for m, key in enumerate(lay.orientation):
+                    data[_column(lay.columns[key], s)] = np.ascontiguousarray(ori[:, m])
+                for m, key in enumerate(_POS):
+                    data[_column(lay.columns[key], s)] = (
+                        pose.position[lo:hi, m] / UNITS_TO_MM[units]
+                    )
+            sink.write(data)
+    return path

@@ -73,6 +73,61 @@ def _pair_equal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return same.reshape(a.shape[0], -1).all(axis=1)
 
 
+def _frame_grid(
+    f_time: np.ndarray | None,
+    f_lines: np.ndarray,
+    n_frames: int,
+    n_kept: int,
+    rate_hz: float | None,
+    path: Path,
+    notes: list[str],
+) -> tuple[np.ndarray, np.ndarray]:
+    """The recording's time and each frame's place on it (``grid_idx``), from the frames'
+    times ``f_time`` (None: no time column), noting in ``notes`` how they were timed."""
+    if f_time is None:
+        if rate_hz is None:
+            raise FingerfitError(
+                "--rate is needed: the layout has no time column", path=path, field="rate"
+            )
+        time = np.arange(n_frames) / rate_hz
+        grid_idx = np.arange(n_frames)
+        notes.append(f"time = frame / {rate_hz:g} Hz (no time column: lost frames undetectable)")
+    elif rate_hz is None:
+        check_increasing(f_time, f_lines, path, what="time")
+        time, grid_idx = f_time.copy(), np.arange(n_frames)  # not a view of all values
+        notes.append(
+            "no --rate: frames kept at the time column's values, not on a grid"
+            + (" (a logger's clock: give --rate for reliable timing)" if n_frames != n_kept else "")
+        )
+    else:
+        check_increasing(f_time, f_lines, path, what="time")
+        idx = np.rint((f_time - f_time[0]) * rate_hz)
+        off = np.abs(f_time - (f_time[0] + idx / rate_hz))
+        if n_frames < 2 or ((off <= 0.25 / rate_hz).all() and (np.diff(idx) > 0).all()):
+            time, grid_idx = place_on_grid(f_time, rate_hz, f_lines, path)
+            notes += frames_missing_note(time.size - n_frames)
+        else:
+            span = f_time[-1] - f_time[0]
+            implied = (n_frames - 1) / span if span > 0 else np.inf
+            if abs(implied / rate_hz - 1.0) > RATE_TOLERANCE:
+                raise FingerfitError(
+                    f"the time column spans {span:.4g} s for {n_frames} frames ({implied:.4g} Hz), "
+                    f"not {rate_hz:g} Hz: frames lost or wrong --rate",
+                    path=path,
+                    field="rate",
+                )
+            time = f_time[0] + np.arange(n_frames) / rate_hz
+            grid_idx = np.arange(n_frames)
+            lag = f_time - time
+            notes.append(
+                f"time column too irregular for the {rate_hz:g} Hz grid (a logger's clock): "
+                f"frames timed by count from its first value; its span implies "
+                f"{implied:.4g} Hz and its delay varies by up to "
+                f"{1000 * (lag.max() - lag.min()):.0f} ms"
+            )
+    return time, grid_idx
+
+
 def _assemble(
     path: Path,
     vals: np.ndarray,
@@ -159,47 +214,7 @@ def _assemble(
         f_lines = row_lines[first_row]
         f_time = None if t_rows is None else t_rows[first_row]
 
-    if f_time is None:
-        if rate_hz is None:
-            raise FingerfitError(
-                "--rate is needed: the layout has no time column", path=path, field="rate"
-            )
-        time = np.arange(n_frames) / rate_hz
-        grid_idx = np.arange(n_frames)
-        notes.append(f"time = frame / {rate_hz:g} Hz (no time column: lost frames undetectable)")
-    elif rate_hz is None:
-        check_increasing(f_time, f_lines, path, what="time")
-        time, grid_idx = f_time.copy(), np.arange(n_frames)  # not a view of all values
-        notes.append(
-            "no --rate: frames kept at the time column's values, not on a grid"
-            + (" (a logger's clock: give --rate for reliable timing)" if n_frames != n_kept else "")
-        )
-    else:
-        check_increasing(f_time, f_lines, path, what="time")
-        idx = np.rint((f_time - f_time[0]) * rate_hz)
-        off = np.abs(f_time - (f_time[0] + idx / rate_hz))
-        if n_frames < 2 or ((off <= 0.25 / rate_hz).all() and (np.diff(idx) > 0).all()):
-            time, grid_idx = place_on_grid(f_time, rate_hz, f_lines, path)
-            notes += frames_missing_note(time.size - n_frames)
-        else:
-            span = f_time[-1] - f_time[0]
-            implied = (n_frames - 1) / span if span > 0 else np.inf
-            if abs(implied / rate_hz - 1.0) > RATE_TOLERANCE:
-                raise FingerfitError(
-                    f"the time column spans {span:.4g} s for {n_frames} frames ({implied:.4g} Hz), "
-                    f"not {rate_hz:g} Hz: frames lost or wrong --rate",
-                    path=path,
-                    field="rate",
-                )
-            time = f_time[0] + np.arange(n_frames) / rate_hz
-            grid_idx = np.arange(n_frames)
-            lag = f_time - time
-            notes.append(
-                f"time column too irregular for the {rate_hz:g} Hz grid (a logger's clock): "
-                f"frames timed by count from its first value; its span implies "
-                f"{implied:.4g} Hz and its delay varies by up to "
-                f"{1000 * (lag.max() - lag.min()):.0f} ms"
-            )
+    time, grid_idx = _frame_grid(f_time, f_lines, n_frames, n_kept, rate_hz, path, notes)
     n = int(grid_idx[-1]) + 1 if n_frames else 0
 
     scale = UNITS_TO_MM[units]
