@@ -257,15 +257,7 @@ def read_parquet(
             if name in text:
                 out[name] = _text_codes(pa, texts.column(name))
                 continue
-            v = out[name]
-            bad = np.flatnonzero(np.isinf(v))
-            if bad.size:
-                raise FingerfitError(
-                    f"not a finite number: {float(v[bad[0]])!r}",
-                    path=path,
-                    line=int(bad[0]) + 1,
-                    field=shown(name),
-                )
+            refuse_infinite(out[name], name, path)
     except FingerfitError:
         raise
     except Exception as exc:  # inconsistent pages of a damaged file
@@ -377,3 +369,16 @@ def _text_codes(pa, col) -> tuple[np.ndarray, list[str]]:
         names.append("")
         codes = codes.fill_null(len(names) - 1)
     return codes.to_numpy(zero_copy_only=False).astype(np.int32, copy=False), names
+
+
+def refuse_infinite(values: np.ndarray, column: str, path: Path) -> None:
+    """Refuse a float column ``(n,)`` with an infinity: one line naming the file, the
+    column and the 1-based row (NaN is a missing value, not an error)."""
+    bad = np.flatnonzero(np.isinf(values))
+    if bad.size:
+        raise FingerfitError(
+            f"not a finite number: {float(values[bad[0]])!r}",
+            path=path,
+            line=int(bad[0]) + 1,
+            field=shown(column),
+        )

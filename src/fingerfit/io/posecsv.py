@@ -512,15 +512,7 @@ def _read_parquet_fast(
     if n_partial:
         notes.append(f"{n_partial} samples with empty fields treated as missing")
     notes += frames_note
-    poses: dict[str, PoseSeries] = {}
-    for k in appear:
-        name = names[k]
-        gap = ~filled.pop(k)
-        p_k, r_k = pos.pop(k), rot.pop(k)
-        p_k[gap] = np.nan
-        r_k[gap] = np.nan
-        poses[name] = PoseSeries(p_k, r_k)
-        notes += missing_note(name, int(np.count_nonzero(gap)), n)
+    poses = _poses(appear, names, filled, pos, rot, n, notes)
     return Recording(path.name, frame_times, poses, notes)
 
 
@@ -674,15 +666,7 @@ def _assemble(
             put_scaled_rows(pos[int(k)], fk, p[m, :3], scale_to_mm)
             put_quat_rows(rot[int(k)], fk, p[m, 3:])
             put_rows(filled[int(k)], fk, True)
-    poses: dict[str, PoseSeries] = {}
-    for k in appear:
-        name = rows.names[k]
-        gap = ~filled.pop(k)
-        p_k, r_k = pos.pop(k), rot.pop(k)
-        p_k[gap] = np.nan
-        r_k[gap] = np.nan
-        poses[name] = PoseSeries(p_k, r_k)
-        notes += missing_note(name, int(np.count_nonzero(gap)), n)
+    poses = _poses(appear, rows.names, filled, pos, rot, n, notes)
     return Recording(path.name, frame_times, poses, notes)
 
 
@@ -823,3 +807,27 @@ def _write_parquet(path: Path, recording: Recording, mm_per_unit: float, meta) -
             del pos, quat, sel
             sink.write(cols)
     return path
+
+
+def _poses(
+    appear: list[int],
+    names: list[str],
+    filled: dict,
+    pos: dict,
+    rot: dict,
+    n: int,
+    notes: list[str],
+) -> dict[str, PoseSeries]:
+    """Each sensor's poses (in order of first appearance), NaN in the frames it has no
+    sample in; a note per sensor with missing frames is added to ``notes``. The arrays of
+    ``filled`` (frames with a sample), ``pos`` and ``rot`` are taken out of them."""
+    poses: dict[str, PoseSeries] = {}
+    for k in appear:
+        name = names[k]
+        gap = ~filled.pop(k)
+        p_k, r_k = pos.pop(k), rot.pop(k)
+        p_k[gap] = np.nan
+        r_k[gap] = np.nan
+        poses[name] = PoseSeries(p_k, r_k)
+        notes += missing_note(name, int(np.count_nonzero(gap)), n)
+    return poses

@@ -414,6 +414,7 @@ def _decode_parquet(
     stations, float64."""
     from .parquet import WIDE, float_blocks, open_checked
     from .parquet import _corrupt as parquet_corrupt
+    from .parquet_read import refuse_infinite
 
     plan: list = []
 
@@ -460,14 +461,7 @@ def _decode_parquet(
     if np.isinf(vals).any() or (tcol is not None and np.isinf(tcol).any()):
         where = dict(zip(columns, targets, strict=True))
         for c in schema.names:
-            bad = np.flatnonzero(np.isinf(where[c]))
-            if bad.size:
-                raise FingerfitError(
-                    f"not a finite number: {float(where[c][bad[0]])!r}",
-                    path=path,
-                    line=int(bad[0]) + 1,
-                    field=shown(c),
-                )
+            refuse_infinite(where[c], c, path)
     if n_rows == 0:
         raise FingerfitError("no data rows", path=path)
     return vals, tcol, stations, names, notes
