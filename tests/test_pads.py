@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from fingerfit.digits import DIGITS
 from fingerfit.errors import FingerfitError
 from fingerfit.estimate import fit_session
-from fingerfit.estimate.pads import distal_sensor, fit_pads
+from fingerfit.estimate.pads import fit_pads
 from fingerfit.evaluate.pinch import evaluate_pinches
 from fingerfit.evaluate.truth import load_truth
 from fingerfit.io.sessiondir import load_session
@@ -30,7 +31,7 @@ from fingerfit.simulate import write_subject
 
 from .conftest import subject
 
-THUMB, INDEX = distal_sensor("thumb"), distal_sensor("index")
+THUMB, INDEX = DIGITS["thumb"].distal_sensor, DIGITS["index"].distal_sensor
 
 
 def _holds_session(rotations: list[Rotation], pa: np.ndarray, pb: np.ndarray) -> Session:

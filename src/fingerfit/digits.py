@@ -69,6 +69,12 @@ class Digit:
         """Sensor name of a segment, e.g. ``thumb.metacarpal``."""
         return f"{self.name}.{segment}"
 
+    @property
+    def distal_sensor(self) -> str:
+        """The sensor of the distal segment (the child of the last flexion joint), e.g.
+        ``index.distal``: the one that carries the tip and the pad."""
+        return self.sensor(self.segments[-1])
+
     def sensors(self) -> list[str]:
         """The hand sensor and the digit's three segment sensors, proximal to distal."""
         return [HAND_SENSOR, *(self.sensor(s) for s in self.segments)]

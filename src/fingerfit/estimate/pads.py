@@ -97,12 +97,6 @@ class PadFit:
     kept_prior: list[str] = field(default_factory=list)
 
 
-def distal_sensor(digit: str) -> str:
-    """The sensor of a digit's distal segment, e.g. ``index.distal``."""
-    d = DIGITS[digit]
-    return d.sensor(d.segments[-1])
-
-
 def _holds(
     session: Session, digits: set[str]
 ) -> dict[tuple[str, str], list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]]]:
@@ -113,7 +107,7 @@ def _holds(
         if not ev.is_pinch or ev.finger not in digits or ev.target not in digits:
             continue
         rec = session.recording(ev.recording)
-        a, b = rec.pose(distal_sensor(ev.finger)), rec.pose(distal_sensor(ev.target))
+        a, b = rec.pose(DIGITS[ev.finger].distal_sensor), rec.pose(DIGITS[ev.target].distal_sensor)
         k = (rec.time >= ev.start) & (rec.time <= ev.end) & a.valid & b.valid
         if k.any():
             out.setdefault((ev.finger, ev.target), []).append(
@@ -231,7 +225,7 @@ def pinch_pads(session: Session, model: HandModel) -> HandModel:
     for d, fm in model.fingers.items():
         if fm.pad is None:
             continue
-        p0, r0 = model.reference_poses[distal_sensor(d)]
+        p0, r0 = model.reference_poses[DIGITS[d].distal_sensor]
         prior[d] = r0.T @ (fm.pad - p0)
         centre = fm.joints[DIGITS[d].joints[-1]].center
         dorsal[d] = (r0.T @ (centre - p0), r0.T @ fm.frames[fm.segments[-1]].rotation[:, 2])
@@ -241,7 +235,7 @@ def pinch_pads(session: Session, model: HandModel) -> HandModel:
     fingers = dict(model.fingers)
     for d, p in fit.local.items():
         if d not in fit.kept_prior:
-            p0, r0 = model.reference_poses[distal_sensor(d)]
+            p0, r0 = model.reference_poses[DIGITS[d].distal_sensor]
             fingers[d] = replace(fingers[d], pad=r0 @ p + p0, pad_source="pinch")
     model = replace(model, fingers=fingers)
     contacts = []
