@@ -162,6 +162,18 @@ def test_product_of_exponentials_equals_mujoco(subject) -> None:
     )
 
 
+def _off_in_parent(doc: dict, jd: dict, anchor: np.ndarray, axis: np.ndarray) -> float:
+    """How far a truth.json joint (``center_in_parent``, ``axis_in_parent``) is from
+    MuJoCo's anchor (mm) and axis, both carried into its parent sensor's frame."""
+    s = doc["sensors"][jd["parent_sensor"]]
+    pr = matrix_from_quat_wxyz(np.array(s["quat_wxyz"])[None])[0]
+    pp = np.array(s["position"])
+    return max(
+        float(np.linalg.norm(pr.T @ (anchor - pp) - jd["center_in_parent"])),
+        float(np.linalg.norm(pr.T @ axis - jd["axis_in_parent"])),
+    )
+
+
 def test_written_truth_equals_mujoco(subject, tmp_path) -> None:
     """(b) truth.json (centres and axes in the true parent sensor frames, the MP
     ab/adduction line, tips) equals MuJoCo's anchors/axes of the edited model."""
@@ -180,15 +192,7 @@ def test_written_truth_equals_mujoco(subject, tmp_path) -> None:
         anchor = point(data.xanchor[ids])
         axis = ref.fingers[f].sign[:, None] * data.xaxis[ids] @ place.T
         for i, j in zip((0, 2, 3), JOINTS, strict=True):
-            jd = fd["joints"][j]
-            s = doc["sensors"][jd["parent_sensor"]]
-            pr = matrix_from_quat_wxyz(np.array(s["quat_wxyz"])[None])[0]
-            pp = np.array(s["position"])
-            worst = max(
-                worst,
-                np.linalg.norm(pr.T @ (anchor[i] - pp) - jd["center_in_parent"]),
-                np.linalg.norm(pr.T @ axis[i] - jd["axis_in_parent"]),
-            )
+            worst = max(worst, _off_in_parent(doc, fd["joints"][j], anchor[i], axis[i]))
         ab = fd["mp_abduction"]
         worst = max(
             worst,
@@ -308,15 +312,7 @@ def test_thumb_truth_equals_mujoco(thumb_subject, tmp_path) -> None:
     axis = ref.thumb.sign[:, None] * data.xaxis[ids] @ place.T
     worst = np.linalg.norm(point(data.site(mh.THUMB_TIP_SITE).xpos) - td["tip"])
     for i, j in enumerate(mh.THUMB_KEYS):
-        jd = td["joints"][j]
-        s = doc["sensors"][jd["parent_sensor"]]
-        pr = matrix_from_quat_wxyz(np.array(s["quat_wxyz"])[None])[0]
-        pp = np.array(s["position"])
-        worst = max(
-            worst,
-            np.linalg.norm(pr.T @ (anchor[i] - pp) - jd["center_in_parent"]),
-            np.linalg.norm(pr.T @ axis[i] - jd["axis_in_parent"]),
-        )
+        worst = max(worst, _off_in_parent(doc, td["joints"][j], anchor[i], axis[i]))
     assert worst < 1e-9, worst
     assert set(doc["myohand"]["length_factor"]) == {"thumb", *FINGERS}
     # Every pad-to-pad touch (opposition to each finger, tip pinches) holds its gap.
