@@ -61,9 +61,12 @@ def _truth(sim) -> Truth:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--subjects", type=int, default=4)
+    ap.add_argument(
+        "--sta", type=float, default=1.0, help="soft-tissue artefact scale (SimConfig.sta)"
+    )
     args = ap.parse_args()
     rows = []
-    for sim in simulate_cohort(SimConfig(fingers=DIGITS), args.subjects, seed=2026):
+    for sim in simulate_cohort(SimConfig(fingers=DIGITS, sta=args.sta), args.subjects, seed=2026):
         truth = _truth(sim)
         session = sim.session
         landmarks = dict(session.landmarks)

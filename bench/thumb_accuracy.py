@@ -214,12 +214,15 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--keep", type=Path, default=None, help="folder for sessions and the study")
     ap.add_argument("--world", choices=("default", "myohand"), default="default")
+    ap.add_argument(
+        "--sta", type=float, default=1.0, help="soft-tissue artefact scale (SimConfig.sta)"
+    )
     args = ap.parse_args()
     t0 = time.perf_counter()
     if args.world == "myohand":
-        config = SimConfig(fingers=("thumb", "index"), world="myohand", hand="right")
+        config = SimConfig(fingers=("thumb", "index"), world="myohand", hand="right", sta=args.sta)
     else:
-        config = SimConfig(fingers=("thumb", "index"))
+        config = SimConfig(fingers=("thumb", "index"), sta=args.sta)
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         sims = simulate_cohort(config, args.subjects, SEED)
@@ -235,7 +238,8 @@ def main() -> None:
         "python": platform.python_version(),
         "command": "python bench/thumb_accuracy.py "
         f"--subjects {args.subjects} --json {args.json or '-'}"
-        + (f" --world {args.world}" if args.world != "default" else ""),
+        + (f" --world {args.world}" if args.world != "default" else "")
+        + (f" --sta {args.sta:g}" if args.sta != 1.0 else ""),
     }
     print(markdown(res, meta))
     if args.json:
