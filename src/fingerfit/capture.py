@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import multiprocessing as mp
 import queue
+import signal
 import time
 from dataclasses import dataclass, replace
 
@@ -252,7 +253,9 @@ def _evidence_loop(
 ) -> None:
     """The child process of :class:`EvidenceProcess`: joins the blocks it is sent and,
     whenever it is free, at most every :data:`UPDATE_S`, sends ``(rows, n_frames)`` of
-    everything so far; ends at a None block."""
+    everything so far; ends at a None block. Ctrl-C is the parent's to handle (it stops
+    the child), so the child ignores it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     acc = Accumulator(name, sensors)
     done_frames, started = 0, -math.inf
     while True:

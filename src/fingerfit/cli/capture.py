@@ -5,12 +5,17 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from ..errors import FingerfitError, shown
 from .app import Quiet, app, console, notice, out, say, user_errors
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from ..capture import JointEvidence
 
 PROTOCOLS = ("grasp", "thumb")  # fingerfit.capture.PROTOCOLS (without importing NumPy)
 
@@ -261,7 +266,7 @@ def capture(
         notice("note", f"{session_dir / 'landmarks.csv'} is missing: the fit needs it")
 
 
-def _shortfall(r, need: tuple[int, float, float]) -> str:
+def _shortfall(r: JointEvidence, need: tuple[int, float, float]) -> str:
     """What one joint lacks, in a few words."""
     parts = [f"{r.cycles} cycle(s)"]
     parts.append("ROM " + ("n/a" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f} deg"))
@@ -272,7 +277,9 @@ def _shortfall(r, need: tuple[int, float, float]) -> str:
     return f"{r.digit} {r.joint} ({', '.join(parts)})"
 
 
-def _table(rows, need: tuple[int, float, float], frames: int, rate_hz: float):
+def _table(
+    rows: list[JointEvidence], need: tuple[int, float, float], frames: int, rate_hz: float
+) -> Table:
     """The evidence table (rich), one row per joint."""
     from rich.table import Table
 
