@@ -95,10 +95,11 @@ class JointEvidence:
     second_note : str
         What decided ``second``, in a few words: the ab/adduction range (deg) and the
         choice, or the saddle fit's ranges (deg).
-    advice : str
-        The fit's own refusal of the second axis when it refuses it (one line), else "".
     enough : bool
         The joint passes the fit's rules (module docstring).
+    advice : str
+        The fit's own refusal of the second axis when it refuses it (one line), else "";
+        a refused joint is not enough.
     """
 
     digit: str
@@ -192,6 +193,7 @@ def evidence(
                 ok = bool(ident) and ci_ok if second else False
             else:
                 ok = n >= need_cycles and rom >= need_rom and ci_ok and not math.isnan(ci)
+                ok = ok and not advice
             out.append(JointEvidence(d, j, n, rom, ci, ident, note, bool(ok), advice))
     return out
 

@@ -272,7 +272,7 @@ def _shortfall(r: JointEvidence, need: tuple[int, float, float]) -> str:
     parts.append("ROM " + ("n/a" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f} deg"))
     if not math.isnan(r.axis_ci_deg):
         parts.append(f"axis +/-{r.axis_ci_deg:.1f} deg")
-    if r.advice and r.joint == "cmc":
+    if r.advice:
         parts.append(f"second axis not identified: {r.advice}")
     return f"{r.digit} {r.joint} ({', '.join(parts)})"
 
