@@ -4,19 +4,21 @@ own evidence per joint."""
 from __future__ import annotations
 
 import shutil
+import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from fingerfit.capture import evidence, reference_rotations, thresholds
+from fingerfit.capture import EvidenceProcess, evidence, thresholds
 from fingerfit.cli import app
 from fingerfit.estimate import FitOptions
 from fingerfit.estimate.cycles import extract_cycles
-from fingerfit.io import read_pose_csv
+from fingerfit.io import load_session, read_pose_csv
 from fingerfit.io.posecsv import write_pose_csv
 from fingerfit.session import joint_sensors
-from fingerfit.simulate import write_subject
+from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.transforms import relative_pose
 
 from .conftest import subject
@@ -40,7 +42,7 @@ def _start(folder, tmp_path, name):
     return new
 
 
-def _capture(sub, new, source):
+def _capture(sub, new, source, protocol="grasp", digits=DIGITS):
     return CliRunner().invoke(
         app,
         [
@@ -49,7 +51,7 @@ def _capture(sub, new, source):
             "--source",
             source,
             "--protocol",
-            "grasp",
+            protocol,
             "--subject",
             "S01",
             "--hand",
@@ -59,7 +61,7 @@ def _capture(sub, new, source):
             "--rate",
             str(sub.session.rate_hz),
             "--fingers",
-            ",".join(DIGITS),
+            ",".join(digits),
         ],
     )
 
@@ -78,7 +80,7 @@ def _two_cycles(sub) -> int:
 
 def test_thresholds_are_the_fits():
     o = FitOptions()
-    assert thresholds() == (max(o.min_cycles, 2), o.min_rom_deg)
+    assert thresholds() == (max(o.min_cycles, 2), o.min_rom_deg, o.max_axis_ci_deg)
 
 
 def test_full_grasp_is_enough_and_the_folder_fits(simulated, tmp_path):
@@ -89,6 +91,14 @@ def test_full_grasp_is_enough_and_the_folder_fits(simulated, tmp_path):
     assert r.exit_code == 0, r.output
     assert "enough for every joint" in r.output
     assert r.output.count("enough") >= 6  # one row per joint in the table
+    rows = evidence(sub.session, list(DIGITS))
+    assert all(row.enough for row in rows)
+    assert max(row.axis_ci_deg for row in rows) < FitOptions().max_axis_ci_deg
+    assert {row.joint: row.second for row in rows if row.digit == "index"} == {
+        "mp": True,  # the simulated MP turns about two axes and the choice finds them
+        "pip": None,
+        "dip": None,
+    }
     # The same frames as replayed, in the session's format.
     got = read_pose_csv(new / "grasp.csv", units=sub.session.units)
     want = read_pose_csv(grasp, units=sub.session.units)
@@ -127,7 +137,7 @@ def test_two_cycles_are_not_enough_as_the_fit_says(simulated, tmp_path):
     r = _capture(sub, new, f"replay:{short}@1000")
     assert r.exit_code == 0, r.output
     assert "not enough for `fingerfit fit` yet" in r.output
-    rows = evidence(cut, reference_rotations(sub.session.reference, list(DIGITS)), 240.0)
+    rows = evidence(replace(sub.session, grasp=[cut]), list(DIGITS))
     assert not any(row.enough for row in rows)
     assert max(row.cycles for row in rows) <= 2
     res = CliRunner().invoke(app, ["fit", str(new), "-q"])
@@ -142,3 +152,100 @@ def test_a_folder_without_session_toml_needs_a_subject(simulated, tmp_path):
     )
     assert r.exit_code == 2 and "--subject" in r.output
     assert not (new / "grasp.csv").exists()
+
+
+def test_the_axis_confidence_narrows_as_cycles_are_added(simulated):
+    sub, _ = simulated
+    rec = sub.session.grasp[0]
+    n = rec.n_frames
+
+    def ci(frames: int) -> np.ndarray:
+        cut = replace(sub.session, grasp=[rec.slice(slice(0, frames))])
+        rows = evidence(cut, list(DIGITS))
+        return np.array([r.axis_ci_deg for r in rows])
+
+    third, half, full = ci(n // 3), ci(n // 2), ci(n)
+    assert np.isfinite(third).all()
+    assert np.mean(full) < np.mean(half) < np.mean(third)
+
+
+@pytest.fixture(scope="module")
+def with_thumb(tmp_path_factory):
+    sub = simulate_subject(SimConfig(fingers=("thumb", "index")), 3)
+    folder = write_subject(sub, tmp_path_factory.mktemp("capture_thumb") / "S01")
+    return sub, folder
+
+
+def test_thumb_protocol_after_the_grasp_is_enough_and_the_folder_fits(with_thumb, tmp_path):
+    sub, folder = with_thumb
+    digits = ("thumb", "index")
+    new = _start(folder, tmp_path, "P04")
+    r = _capture(sub, new, f"replay:{folder / 'grasp.csv'}@1000", "grasp", digits)
+    assert r.exit_code == 0, r.output
+    # A grasp alone does not turn the thumb's CMC about both axes: the capture says so,
+    # and the fit refuses the CMC for the same reason.
+    assert "thumb cmc" in r.output and "second axis not identified" in r.output
+    res = CliRunner().invoke(app, ["fit", str(new), "-q"])
+    assert res.exit_code == 2 and "cmc" in res.output
+    # The thumb protocol takes the circumduction next (its default name) and pools it
+    # with the grasp, as the fit does.
+    r = _capture(sub, new, f"replay:{folder / 'thumb_circumduction.csv'}@1000", "thumb", digits)
+    assert r.exit_code == 0, r.output
+    assert "enough for every joint" in r.output
+    assert (new / "thumb_circumduction.csv").is_file()
+    session = load_session(new)
+    assert [g.name for g in session.grasp] == ["grasp.csv", "thumb_circumduction.csv"]
+    rows = evidence(session, ["thumb"])
+    assert [r.joint for r in rows if r.enough] == ["cmc", "mcp", "ip"]
+    cmc = rows[0]
+    assert cmc.second is True and cmc.axis_ci_deg < FitOptions().max_axis_ci_deg
+    res = CliRunner().invoke(app, ["fit", str(new), "-q"])
+    assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(
+        app,
+        [
+            "session",
+            str(tmp_path / "assembled"),
+            "--subject",
+            "S01",
+            "--hand",
+            sub.session.hand,
+            "--fingers",
+            ",".join(digits),
+            "--reference",
+            str(new / "reference.csv"),
+            "--grasp",
+            str(new / "grasp.csv"),
+            "--grasp",
+            str(new / "thumb_circumduction.csv"),
+            "--landmarks",
+            str(new / "landmarks.csv"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+
+
+def test_thumb_protocol_needs_a_thumb(simulated, tmp_path):
+    sub, folder = simulated
+    new = _start(folder, tmp_path, "P05")
+    r = _capture(sub, new, f"replay:{folder / 'grasp.csv'}@1000", "thumb")
+    assert r.exit_code == 2 and "--protocol" in r.output
+    assert not (new / "thumb_circumduction.csv").exists()
+
+
+def test_the_evidence_process_reports_what_evidence_gives(simulated):
+    sub, _ = simulated
+    rec = sub.session.grasp[0]
+    base = replace(sub.session, grasp=[])
+    child = EvidenceProcess(base, rec.name, list(rec.poses), list(DIGITS))
+    try:
+        for i in range(0, rec.n_frames, 500):
+            child.add(rec.slice(slice(i, i + 500)))
+        got, deadline = None, time.monotonic() + 300  # a guard, not a measurement
+        while (got is None or got[1] < rec.n_frames) and time.monotonic() < deadline:
+            got = child.latest() or got
+            time.sleep(0.05)
+    finally:
+        child.close()
+    assert got is not None and got[1] == rec.n_frames
+    assert got[0] == evidence(replace(base, grasp=[rec]), list(DIGITS))

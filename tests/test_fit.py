@@ -207,3 +207,41 @@ def test_cli_fit_and_angles_in_session_units(tmp_path) -> None:
         a[["index.tip.x", "index.tip.y", "index.tip.z"]].to_numpy() - true_tip, axis=1
     )
     assert err.mean() < 6.0
+
+
+def test_axis_confidence_gate_is_the_figure_capture_shows(realistic_subject) -> None:
+    """``max_axis_ci_deg`` refuses a joint by ``axis_ci_deg``, the half-angle ``fingerfit
+    capture`` reports; ``force`` fits it with the problem in its notes."""
+    from fingerfit.capture import evidence
+
+    s = realistic_subject.session
+    mp = evidence(s, ["index"])[0]
+    assert mp.joint == "mp" and 0 < mp.axis_ci_deg < FitOptions().max_axis_ci_deg
+    tight = FitOptions(max_axis_ci_deg=mp.axis_ci_deg / 2)
+    with pytest.raises(
+        FitError, match=rf"index mp: the flexion axis is known only to \+/-{mp.axis_ci_deg:.1f} deg"
+    ):
+        fit_session(s, tight)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        model = fit_session(s, replace(tight, force=True))
+    assert any("known only to" in n for n in model.fingers["index"].joints["mp"].quality.notes)
+
+
+def test_leave_one_cycle_out_axes_are_sara_refits(realistic_subject) -> None:
+    """The jackknife's axes are the SARA axis of the other cycles' frames, exactly."""
+    from fingerfit.estimate.bootstrap import Z95, cycle_axis_ci_deg, jackknife_sd
+    from fingerfit.estimate.fit import joint_data, reference_poses
+    from fingerfit.estimate.pooled import leave_one_out_axes, sara_axis
+
+    s = realistic_subject.session
+    data = joint_data(s, "index.proximal", "index.middle", reference_poses(s), "pip")
+    frames = np.concatenate(data.periods)
+    labels = np.concatenate([np.full(p.size, i) for i, p in enumerate(data.periods)])
+    folds = np.arange(len(data.periods))
+    got = leave_one_out_axes(data.rotation[frames], labels, folds)
+    want = np.array([sara_axis(data.rotation[frames[labels != f]])[0] for f in folds])
+    want *= np.sign(np.sum(want * got, axis=1))[:, None]
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    ci = cycle_axis_ci_deg(data.rotation, data.periods)
+    assert ci == pytest.approx(np.degrees(Z95 * jackknife_sd(want)), rel=1e-9)

@@ -1,37 +1,77 @@
 """Guided capture: a protocol recording taken into a session folder, with the evidence
 the fit needs shown per joint while it is recorded (``fingerfit capture``).
 
-The evidence is the fit's own: grasp cycles by :func:`fingerfit.estimate.cycles.extract_cycles`
-on each joint's child-in-parent rotation (from the reference posture), and a joint is
-*enough* when it has at least ``FitOptions.min_cycles`` cycles and their median range of
-motion is at least ``FitOptions.min_rom_deg`` -- the thresholds and the rule below which
-``fingerfit fit`` refuses a joint (:class:`fingerfit.estimate.FitOptions`;
-``docs/capture.md``).
+The evidence is the fit's own, computed by the fit's functions on everything the fit will
+pool -- the folder's calibration (``grasp``) recordings so far and the one being recorded
+(:func:`fingerfit.estimate.fit.digit_data`):
+
+* grasp cycles and their median range of motion (:func:`fingerfit.estimate.cycles.
+  extract_cycles`), against ``FitOptions.min_cycles`` and ``min_rom_deg``;
+* the flexion axis's 95 % confidence half-angle from the spread over the cycles
+  (:func:`fingerfit.estimate.fit.axis_ci_deg`), against ``FitOptions.max_axis_ci_deg``;
+* for a joint with a second axis, whether the data identify it: a finger's MP and the
+  thumb's MCP by the fit's held-out choice (:func:`fingerfit.estimate.methods.
+  second_axis_choice`: two axes chosen, or one), the thumb's CMC by the saddle fit
+  itself (:func:`fingerfit.estimate.fit.saddle_estimate`: both axes turned far enough,
+  or the fit's refusal).
+
+A joint is *enough* when it passes the rules by which ``fingerfit fit`` refuses a joint:
+cycles, range of motion and axis confidence; the thumb's CMC, which the fit takes without
+the cycle rules, when its saddle fit succeeds and its axis confidence passes
+(``docs/capture.md``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+import multiprocessing as mp
+import queue
+import signal
+import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .estimate.cycles import extract_cycles
-from .estimate.fit import FitOptions
-from .session import PoseSeries, Recording, joint_sensors
-from .transforms import FloatArray, relative_pose
+from .digits import DIGITS
+from .errors import FingerfitError
+from .estimate.choice import TWO_AXIS
+from .estimate.fit import (
+    FitOptions,
+    axis_ci_deg,
+    digit_data,
+    digit_direction,
+    reference_poses,
+    saddle_estimate,
+)
+from .estimate.methods import JointData, second_axis_choice
+from .session import PoseSeries, Recording, Session
+from .transforms import FloatArray
 
-#: The protocols ``fingerfit capture`` guides (the recording each one takes).
-PROTOCOLS = ("grasp",)
+#: The protocols ``fingerfit capture`` guides: the digits whose joints it shows (None:
+#: every digit of the session) and the recordings it takes, in the order it proposes them
+#: (``docs/formats.md``). Each is listed under ``grasp`` in ``session.toml``: the fit
+#: pools every calibration recording.
+PROTOCOLS: dict[str, tuple[tuple[str, ...] | None, tuple[str, ...]]] = {
+    "grasp": (None, ("grasp.csv",)),
+    "thumb": (("thumb",), ("thumb_circumduction.csv", "thumb_opposition.csv")),
+}
+#: The ``session.toml`` list every protocol's recording joins.
+RECORDING_LIST = "grasp"
+#: At least this many seconds between the starts of two evidence computations while
+#: recording (:class:`EvidenceProcess`).
+UPDATE_S = 0.5
 
 
-def thresholds(options: FitOptions | None = None) -> tuple[int, float]:
-    """``(cycles, range of motion deg)`` a joint needs: the fit's own (``FitOptions``).
+def thresholds(options: FitOptions | None = None) -> tuple[int, float, float]:
+    """``(cycles, range of motion deg, axis confidence half-angle deg)`` a joint needs:
+    the fit's own (``FitOptions``).
 
-    The fit refuses a joint with fewer than ``max(min_cycles, 2)`` cycles or a median range
-    of motion under ``min_rom_deg`` (``fingerfit.estimate.fit``).
+    The fit refuses a joint with fewer than ``max(min_cycles, 2)`` cycles, a median range
+    of motion under ``min_rom_deg`` or an axis confidence half-angle over
+    ``max_axis_ci_deg`` (``fingerfit.estimate.fit``).
     """
     options = options or FitOptions()
-    return max(options.min_cycles, 2), float(options.min_rom_deg)
+    return max(options.min_cycles, 2), float(options.min_rom_deg), float(options.max_axis_ci_deg)
 
 
 @dataclass(frozen=True)
@@ -42,64 +82,119 @@ class JointEvidence:
     ----------
     digit, joint : str
     cycles : int
-        Grasp cycles found.
+        Movement cycles found over the pooled recordings.
     rom_deg : float
         Median range of motion of those cycles (deg; NaN without a cycle).
+    axis_ci_deg : float
+        95 % confidence half-angle of the flexion axis (deg; NaN below two cycles or
+        when the saddle fit refuses).
+    second : bool or None
+        None for a joint with one axis (PIP, DIP, IP); else whether the data identify the
+        second axis: a finger's MP or the thumb's MCP when the held-out choice takes two
+        axes, the thumb's CMC when its saddle fit succeeds.
+    second_note : str
+        What decided ``second``, in a few words: the ab/adduction range (deg) and the
+        choice, or the saddle fit's ranges (deg).
     enough : bool
-        ``cycles`` and ``rom_deg`` meet :func:`thresholds`.
+        The joint passes the fit's rules (module docstring).
+    advice : str
+        The fit's own refusal of the second axis when it refuses it (one line), else "";
+        a refused joint is not enough.
     """
 
     digit: str
     joint: str
     cycles: int
     rom_deg: float
+    axis_ci_deg: float
+    second: bool | None
+    second_note: str
     enough: bool
+    advice: str = ""
 
 
-def reference_rotations(
-    reference: Recording, digits: list[str]
-) -> dict[tuple[str, str], FloatArray]:
-    """Each joint's child-in-parent rotation at the reference posture, from the mean sensor
-    poses of the reference recording (as the fit computes them)."""
-    out = {}
-    for d in digits:
-        for j, (parent, child) in joint_sensors(d).items():
-            _, pr = reference.pose(parent).mean()
-            _, cr = reference.pose(child).mean()
-            out[(d, j)] = pr.T @ cr
-    return out
+def _second(data: JointData, required: bool) -> tuple[bool, str, str, float]:
+    """``(identified, note, advice, axis CI deg)`` of a joint with a second axis (module
+    docstring)."""
+    if required:
+        try:
+            est = saddle_estimate(data, None, None)
+        except FingerfitError as exc:
+            return False, "refused by the saddle fit", exc.reason, math.nan
+        sf = est.abduction
+        note = f"flexion {sf.flexion_range_deg:.0f}, ab/ad {sf.abduction_range_deg:.0f} deg"
+        return True, note, "", axis_ci_deg(data, sf)
+    if len(data.periods) < 2:
+        return False, "needs 2 cycles", "", math.nan
+    try:
+        tf, choice = second_axis_choice(data)
+    except FingerfitError as exc:
+        return False, "refused by the two-axis fit", exc.reason, math.nan
+    two = choice.chosen == TWO_AXIS
+    note = f"ab/ad {tf.abduction_range_deg:.1f} deg, {'two axes' if two else 'one axis'}"
+    return two, note, "", axis_ci_deg(data, None, choice)
 
 
 def evidence(
-    recording: Recording,
-    references: dict[tuple[str, str], FloatArray],
-    rate_hz: float,
+    session: Session,
+    digits: list[str],
     options: FitOptions | None = None,
+    *,
+    second: bool = True,
 ) -> list[JointEvidence]:
-    """The evidence of every joint in ``recording`` (one grasp recording), as the fit sees it.
+    """The evidence of every joint of ``digits`` over the session's ``grasp`` recordings.
 
     Parameters
     ----------
-    recording : Recording
-        What has been recorded so far (mm, tracker frame).
-    references : dict
-        :func:`reference_rotations`.
-    rate_hz : float
-        The session's sampling rate.
+    session : Session
+        The reference recording, every calibration recording so far in ``grasp`` (mm,
+        tracker frame) and the landmarks when there are any (they start the MP's second
+        axis as in the fit; without them the fit's landmark-free starts are used).
+    digits : list of str
+        Digits whose joints to report.
+    options : FitOptions, optional
+        The thresholds (default: the fit's defaults).
+    second : bool
+        Evaluate the second axes (the held-out choice, the saddle fit: tenths of a
+        second to seconds); without it ``second`` is None and a joint's axis confidence is
+        that of its SARA hinge axis.
+
+    Returns
+    -------
+    list of JointEvidence
+        Proximal to distal per digit.
     """
-    need_cycles, need_rom = thresholds(options)
+    options = options or FitOptions()
+    need_cycles, need_rom, max_ci = thresholds(options)
+    reference = reference_poses(session)
     out = []
-    for (d, j), ref in references.items():
-        parent, child = joint_sensors(d)[j]
-        if parent not in recording.poses or child not in recording.poses:
-            out.append(JointEvidence(d, j, 0, float("nan"), False))
+    for d in digits:
+        digit = DIGITS[d]
+        if any(s not in reference for s in digit.sensors()) or not session.grasp:
+            out += [
+                JointEvidence(d, j, 0, math.nan, math.nan, None, "", False) for j in digit.joints
+            ]
             continue
-        p, c = recording.poses[parent], recording.poses[child]
-        r, _ = relative_pose(p.rotation, p.position, c.rotation, c.position)
-        cyc = extract_cycles(r, ref, rate_hz)
-        rom = float(np.degrees(np.median(cyc.rom))) if cyc.count else float("nan")
-        ok = cyc.count >= need_cycles and rom >= need_rom
-        out.append(JointEvidence(d, j, cyc.count, rom, bool(ok)))
+        try:
+            along = digit_direction(session, d)
+        except FingerfitError:  # no landmarks yet
+            along = None
+        for j, data in digit_data(session, d, reference, along).items():
+            n = len(data.periods)
+            rom = float(np.degrees(np.median(data.rom))) if n else math.nan
+            required = j in digit.required_second
+            ident, note, advice = None, "", ""
+            if second and j in digit.second_axes:
+                ident, note, advice, ci = _second(data, required)
+            else:
+                ci = axis_ci_deg(data)
+            ci_ok = not ci > max_ci  # NaN: the cycle rule decides
+            if required:
+                ok = bool(ident) and ci_ok if second else False
+            else:
+                ok = n >= need_cycles and rom >= need_rom and ci_ok and not math.isnan(ci)
+                ok = ok and not advice
+            out.append(JointEvidence(d, j, n, rom, ci, ident, note, bool(ok), advice))
     return out
 
 
@@ -147,3 +242,113 @@ class Accumulator:
             for s in self.sensors
         }
         return Recording(self.name, np.concatenate(self._time), poses)
+
+
+def _evidence_loop(
+    base: Session,
+    name: str,
+    sensors: list[str],
+    digits: list[str],
+    options: FitOptions | None,
+    blocks: mp.Queue,
+    results: mp.Queue,
+) -> None:
+    """The child process of :class:`EvidenceProcess`: joins the blocks it is sent and,
+    whenever it is free, at most every :data:`UPDATE_S`, sends ``(rows, n_frames)`` of
+    everything so far; ends at a None block. Ctrl-C is the parent's to handle (it stops
+    the child), so the child ignores it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    acc = Accumulator(name, sensors)
+    done_frames, started = 0, -math.inf
+    while True:
+        try:  # wait for a block only when there is nothing new to evaluate
+            wait = acc.n_frames == done_frames
+            items = [
+                blocks.get(
+                    timeout=None if wait else max(0.0, started + UPDATE_S - time.monotonic())
+                )
+            ]
+        except queue.Empty:
+            items = []
+        while True:
+            try:
+                items.append(blocks.get_nowait())
+            except queue.Empty:
+                break
+        for item in items:
+            if item is None:
+                return
+            acc.add(item)
+        if acc.n_frames > done_frames and time.monotonic() - started >= UPDATE_S:
+            started = time.monotonic()
+            rec = acc.recording()
+            session = replace(base, grasp=[*base.grasp, rec])
+            results.put((evidence(session, digits, options), rec.n_frames))
+            done_frames = rec.n_frames
+
+
+class EvidenceProcess:
+    """The evidence of a recording in progress, computed in a child process beside the
+    recording loop.
+
+    The loop only hands each block over (:meth:`add`: a few frames pickled onto a
+    queue) and picks up the newest result (:meth:`latest`); the child joins the blocks
+    and evaluates everything so far whenever it is free, at most every :data:`UPDATE_S`.
+    In its own process the evaluation (the thumb's saddle fit takes seconds) shares neither
+    the loop's interpreter lock nor its BLAS threads, so the loop keeps up with the source.
+
+    Parameters
+    ----------
+    base : Session
+        The session without the recording in progress: reference, the calibration
+        recordings so far in ``grasp``, landmarks (mm).
+    name : str
+        File name of the recording in progress.
+    sensors : list of str
+        Its sensors (:class:`Accumulator`).
+    digits : list of str
+        Digits to report (:func:`evidence`).
+    options : FitOptions, optional
+    """
+
+    def __init__(
+        self,
+        base: Session,
+        name: str,
+        sensors: list[str],
+        digits: list[str],
+        options: FitOptions | None = None,
+    ) -> None:
+        ctx = mp.get_context("spawn")
+        self._blocks = ctx.Queue()
+        self._results = ctx.Queue()
+        self._proc = ctx.Process(
+            target=_evidence_loop,
+            args=(base, name, sensors, digits, options, self._blocks, self._results),
+            daemon=True,
+        )
+        self._proc.start()
+
+    def add(self, block: Recording) -> None:
+        """Hand a block of frames over (as :meth:`Accumulator.add` takes it)."""
+        if block.n_frames:
+            self._blocks.put(block)
+
+    def latest(self) -> tuple[list[JointEvidence], int] | None:
+        """The newest result not yet taken, ``(rows, frames it covers)``, or None."""
+        out = None
+        while True:
+            try:
+                out = self._results.get_nowait()
+            except queue.Empty:
+                return out
+
+    def close(self, timeout_s: float = 1.0) -> None:
+        """Stop the child: at once after ``timeout_s`` if it is still evaluating."""
+        self._blocks.put(None)
+        self._proc.join(timeout_s)
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join()
+        self._blocks.cancel_join_thread()
+        self._results.cancel_join_thread()

@@ -4,18 +4,20 @@ from __future__ import annotations
 
 import json
 import math
-import time
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from ..errors import FingerfitError, shown
 from .app import Quiet, app, console, notice, out, say, user_errors
 
-PROTOCOLS = ("grasp",)  # fingerfit.capture.PROTOCOLS (without importing NumPy)
-#: Seconds between two updates of the evidence while recording.
-UPDATE_S = 0.5
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from ..capture import JointEvidence
+
+PROTOCOLS = ("grasp", "thumb")  # fingerfit.capture.PROTOCOLS (without importing NumPy)
 
 
 @app.command()
@@ -39,7 +41,11 @@ def capture(
     ] = "grasp",
     name: Annotated[
         str | None,
-        typer.Option(help="File name of the recording in the folder (default: PROTOCOL.csv)."),
+        typer.Option(
+            help="File name of the recording in the folder (default: the protocol's first "
+            "recording the folder lacks: grasp.csv; thumb_circumduction.csv, then "
+            "thumb_opposition.csv)."
+        ),
     ] = None,
     duration: Annotated[
         float | None,
@@ -88,21 +94,34 @@ def capture(
     ] = False,
     quiet: Quiet = False,
 ) -> None:
-    """Record a protocol (grasp) into a session folder, showing per joint the cycles and
-    range of motion found so far and when each has enough for `fingerfit fit`."""
-    from ..capture import Accumulator, evidence, reference_rotations, thresholds
+    """Record a protocol (grasp, thumb) into a session folder, showing per joint the
+    cycles, range of motion, axis confidence and second axis found so far (over every
+    calibration recording of the folder) and when each has enough for `fingerfit fit`."""
+    from dataclasses import replace
+
+    from ..capture import PROTOCOLS as PLAN
+    from ..capture import RECORDING_LIST, Accumulator, EvidenceProcess, evidence, thresholds
     from ..io import read_pose_csv
     from ..io.atomic import check_target
     from ..io.posecsv import write_pose_csv
+    from ..io.sessiondir import read_landmarks
     from ..live import sources as src
-    from ..session import digit_sensors
+    from ..session import Session, digit_sensors
 
     if protocol not in PROTOCOLS:
         raise FingerfitError(f"must be one of {', '.join(PROTOCOLS)}", field="--protocol")
-    name = name or f"{protocol}.csv"
+    meta = _meta(session_dir, subject, hand, units, rate, fingers)
+    listed = meta["recordings"].get(RECORDING_LIST, [])
+    listed = [listed] if isinstance(listed, str) else list(listed)
+    if name is None:
+        todo = [f for f in PLAN[protocol][1] if f not in listed and not (session_dir / f).exists()]
+        if not todo:
+            raise FingerfitError(
+                f"the folder has {' and '.join(PLAN[protocol][1])}: give --name", field="--name"
+            )
+        name = todo[0]
     if "/" in name or "\\" in name or not name.endswith(".csv") or name.startswith("."):
         raise FingerfitError("must be a file name ending in .csv", field="--name")
-    meta = _meta(session_dir, subject, hand, units, rate, fingers)
     target = session_dir / name
     copies = {}
     for given, file in ((reference, meta["recordings"]["reference"]), (landmarks, "landmarks.csv")):
@@ -132,7 +151,34 @@ def capture(
             path=session_dir / meta["recordings"]["reference"],
         )
     meta["fingers"] = digits
-    refs = reference_rotations(reference, digits)
+    shown_digits = [d for d in digits if d in (PLAN[protocol][0] or digits)]
+    if not shown_digits:
+        raise FingerfitError(
+            f"protocol '{protocol}' is for the {', '.join(PLAN[protocol][0] or ())}, which "
+            "the session does not have",
+            field="--protocol",
+        )
+    # What the fit will pool with the new recording: the folder's calibration recordings
+    # (the one being replaced left out) and its landmarks when it has them.
+    prior = [
+        read_pose_csv(session_dir / f, units=meta["units"], rate_hz=meta["rate_hz"])
+        for f in listed
+        if f != name
+    ]
+    lm_path = session_dir / "landmarks.csv"
+    lm = read_landmarks(lm_path, units=meta["units"]) if lm_path.is_file() else {}
+
+    base = Session(
+        str(meta.get("subject", session_dir.name)),
+        str(meta.get("hand", "left")),
+        "mm",
+        meta["rate_hz"],
+        digits,
+        reference,
+        prior,
+        lm,
+    )
+
     sensors = list(dict.fromkeys(s for d in digits for s in digit_sensors(d)))
     kind = src.split_spec(source)[0]
     if kind == "replay":
@@ -153,29 +199,31 @@ def capture(
             f"unknown source '{shown(source)}': replay:FILE, liberty:PORT or lsl:NAME",
             field="--source",
         )
-    need_cycles, need_rom = thresholds()
+    need = thresholds()
     acc = Accumulator(name, sensors)
-    rows = evidence(acc.recording(), refs, meta["rate_hz"])
+    rows = evidence(base, shown_digits, second=False)
     live = None
     if not quiet and console.is_terminal:
         from rich.live import Live
 
-        live = Live(_table(rows, need_cycles, need_rom, 0, meta["rate_hz"]), console=console)
+        live = Live(_table(rows, need, 0, meta["rate_hz"]), console=console)
         live.start()
     interrupted = False
+    # The evidence is computed beside the recording, in a child process: the loop only
+    # collects frames, so it keeps up with the source whatever the evidence costs.
+    child = EvidenceProcess(base, name, sensors, shown_digits)
     try:
-        last = time.monotonic()
         for block in the_source.blocks():
             if block is not None:
                 acc.add(block.recording)
-            now = time.monotonic()
+                child.add(block.recording)
             seconds = acc.n_frames / meta["rate_hz"]
             done = duration is not None and seconds >= duration
-            if now - last >= UPDATE_S or done:
-                last = now
-                rows = evidence(acc.recording(), refs, meta["rate_hz"])
+            result = child.latest()
+            if result is not None:
+                rows, frames = result
                 if live is not None:
-                    live.update(_table(rows, need_cycles, need_rom, acc.n_frames, meta["rate_hz"]))
+                    live.update(_table(rows, need, frames, meta["rate_hz"]))
                 if until_enough and all(r.enough for r in rows):
                     break
             if done:
@@ -184,6 +232,7 @@ def capture(
         interrupted = True  # stop recording; what was recorded is kept
     finally:
         the_source.close()
+        child.close()
         if live is not None:
             live.stop()
     rec = acc.recording()
@@ -191,10 +240,10 @@ def capture(
         rec = rec.slice(slice(0, min(rec.n_frames, math.ceil(duration * meta["rate_hz"]))))
     if rec.n_frames == 0:
         raise FingerfitError("nothing was recorded; no file written", field="--source")
-    rows = evidence(rec, refs, meta["rate_hz"])
-    out.print(_table(rows, need_cycles, need_rom, rec.n_frames, meta["rate_hz"]))
+    rows = evidence(replace(base, grasp=[*prior, rec]), shown_digits)
+    out.print(_table(rows, need, rec.n_frames, meta["rate_hz"]))
     write_pose_csv(target, rec, units=meta["units"])
-    toml = _write_meta(session_dir, meta, name, protocol)
+    toml = _write_meta(session_dir, meta, name, RECORDING_LIST)
     say(
         "{} frames ({} s){} -> [bold]{}[/]; {} lists it",
         rec.n_frames,
@@ -205,39 +254,53 @@ def capture(
     )
     short = [r for r in rows if not r.enough]
     if short:
-        say(
-            "not enough for `fingerfit fit` yet: {}",
-            "; ".join(
-                f"{r.digit} {r.joint} ({r.cycles} cycle(s), ROM "
-                + ("n/a" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f} deg")
-                + ")"
-                for r in short
-            ),
-        )
+        say("not enough for `fingerfit fit` yet: {}", "; ".join(_shortfall(r, need) for r in short))
     else:
         say(
-            "enough for every joint ({} cycles, {} deg median ROM each)",
-            need_cycles,
-            f"{need_rom:g}",
+            "enough for every joint ({} cycles, {} deg median ROM, axis within +/-{} deg each)",
+            need[0],
+            f"{need[1]:g}",
+            f"{need[2]:g}",
         )
     if not (session_dir / "landmarks.csv").is_file():
         notice("note", f"{session_dir / 'landmarks.csv'} is missing: the fit needs it")
 
 
-def _table(rows, need_cycles: int, need_rom: float, frames: int, rate_hz: float):
+def _shortfall(r: JointEvidence, need: tuple[int, float, float]) -> str:
+    """What one joint lacks, in a few words."""
+    parts = [f"{r.cycles} cycle(s)"]
+    parts.append("ROM " + ("n/a" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f} deg"))
+    if not math.isnan(r.axis_ci_deg):
+        parts.append(f"axis +/-{r.axis_ci_deg:.1f} deg")
+    if r.advice:
+        parts.append(f"second axis not identified: {r.advice}")
+    return f"{r.digit} {r.joint} ({', '.join(parts)})"
+
+
+def _table(
+    rows: list[JointEvidence], need: tuple[int, float, float], frames: int, rate_hz: float
+) -> Table:
     """The evidence table (rich), one row per joint."""
     from rich.table import Table
 
     t = Table(
-        title=f"{frames} frames ({frames / rate_hz:.1f} s); the fit needs {need_cycles} cycles "
-        f"and {need_rom:g} deg median range of motion per joint",
+        title=f"{frames} frames ({frames / rate_hz:.1f} s); the fit needs {need[0]} cycles, "
+        f"{need[1]:g} deg median range of motion and the axis within +/-{need[2]:g} deg "
+        "(95 %) per joint",
         title_justify="left",
     )
-    for col in ("digit", "joint", "cycles", "ROM (deg)", ""):
-        t.add_column(col, justify="right" if col in ("cycles", "ROM (deg)") else "left")
+    for col in ("digit", "joint", "cycles", "ROM (deg)", "axis +/- (deg)", "2nd axis", ""):
+        t.add_column(
+            col, justify="right" if col in ("cycles", "ROM (deg)", "axis +/- (deg)") else "left"
+        )
     for r in rows:
         rom = "-" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f}"
-        t.add_row(r.digit, r.joint, str(r.cycles), rom, "enough" if r.enough else "more")
+        ci = "-" if math.isnan(r.axis_ci_deg) else f"{max(r.axis_ci_deg, 0.1):.1f}"
+        ci = "<" + ci if r.axis_ci_deg < 0.05 else ci
+        second = "-" if r.second is None else ("yes: " if r.second else "no: ") + r.second_note
+        t.add_row(
+            r.digit, r.joint, str(r.cycles), rom, ci, second, "enough" if r.enough else "more"
+        )
     return t
 
 
@@ -290,7 +353,8 @@ def _meta(
 
 
 def _write_meta(folder: Path, meta: dict, name: str, protocol: str) -> Path:
-    """``session.toml`` with the new recording listed under ``protocol`` (atomically)."""
+    """``session.toml`` with the new recording listed under ``protocol``, a key of
+    ``[recordings]`` (atomically)."""
     from ..io.atomic import atomic_write
 
     recs = dict(meta["recordings"])

@@ -1,15 +1,66 @@
-"""Block bootstrap of a fitted joint: the spread of the axis direction and of a ball
-joint's centre over resamples of contiguous time blocks (seeded, reproducible)."""
+"""The spread of a fitted joint: block bootstrap of the axis direction and of a ball joint's
+centre over resamples of contiguous time blocks (seeded, reproducible), and the
+leave-one-cycle-out jackknife of a hinge axis over grasp cycles
+(:func:`cycle_axis_ci_deg`, the axis confidence of ``fingerfit fit`` and
+``fingerfit capture``)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..transforms import FloatArray, angle_between_axes
+from .cycles import period_labels
+from .pooled import leave_one_out_axes
 
 #: Block bootstrap of the axis direction: resamples and blocks (contiguous in time).
 BOOTSTRAP_RESAMPLES = 200
 BOOTSTRAP_BLOCKS = 20
+#: Half-width of a two-sided 95 % normal interval in SDs: an axis's 95 % confidence
+#: half-angle is this many jackknife SDs of its direction.
+Z95 = 1.96
+
+
+def jackknife_sd(values: FloatArray) -> float:
+    """Delete-one jackknife SD of an estimate from its ``G`` leave-one-out values
+    ``(G,)`` or ``(G, k)``: ``sqrt((G - 1) / G * sum_g |x_g - mean|^2)``, in their unit (NaN
+    below two). For unit axes ``(G, 3)`` (signed alike) it is the RMS angle (rad) by which
+    the axis is expected to be off, both directions across it together."""
+    values = np.asarray(values, dtype=float)
+    g = values.shape[0]
+    if g < 2:
+        return float("nan")
+    dev = values - values.mean(axis=0)
+    return float(np.sqrt((g - 1) / g * np.sum(dev * dev)))
+
+
+def cycle_axis_ci_deg(rotation: FloatArray, periods: list[np.ndarray]) -> float:
+    """95 % confidence half-angle (deg) of a joint's hinge axis from its grasp cycles.
+
+    The SARA axis (:func:`.pooled.sara_axis`) is refitted without each cycle in turn
+    (:func:`.pooled.leave_one_out_axes`: one batched 3 x 3 SVD, whatever the length) and
+    the half-angle is ``Z95`` times the jackknife SD of those axes (:func:`jackknife_sd`).
+    It sees what differs from cycle to cycle (noise, a slipping sensor, ab/adduction that
+    varies between cycles), not a bias every cycle shares (soft-tissue artefact that
+    follows the angles, the tracker's distortion field: ``docs/accuracy.md``).
+
+    Parameters
+    ----------
+    rotation : ndarray, shape (n, 3, 3)
+        Child-in-parent rotations of the joint (frames the periods index; NaN elsewhere
+        allowed).
+    periods : list of ndarray
+        Frame indices of each cycle's movement period (``Cycles.periods``; no NaN frames).
+
+    Returns
+    -------
+    float
+        Degrees; NaN with fewer than two cycles.
+    """
+    if len(periods) < 2:
+        return float("nan")
+    frames = np.concatenate(periods)
+    axes = leave_one_out_axes(rotation[frames], period_labels(periods), np.arange(len(periods)))
+    return float(np.degrees(Z95 * jackknife_sd(axes)))
 
 
 def _block_sums(values: FloatArray, n_blocks: int) -> FloatArray:

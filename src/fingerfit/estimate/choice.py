@@ -58,6 +58,8 @@ from scipy.stats import binomtest
 from ..angles import twist_angle, two_axis_angles
 from ..digits import ABDUCTION_FIRST, FLEXION_FIRST
 from ..transforms import FloatArray, axis_angle_matrix, orthonormal_basis, unit
+from .bootstrap import Z95, jackknife_sd
+from .pooled import leave_one_out_axes
 from .twoaxis import MAX_FRAMES, TwoAxisFit, direction_jacobian
 
 HINGE = "hinge"
@@ -102,6 +104,10 @@ class ModelChoice:
         parameters; what tells them apart is how the two rotations compose).
     fold_orientation_by_order_deg : dict[str, tuple of float]
         The same per cycle (deg).
+    axis_ci_deg : float
+        95 % confidence half-angle (deg) of the chosen model's flexion axis: ``Z95`` times
+        the jackknife SD (:func:`.bootstrap.jackknife_sd`) of the axes refitted without
+        each cycle above (the hinge's SARA axes, or the chosen order's one-step refits).
     """
 
     chosen: str
@@ -115,6 +121,7 @@ class ModelChoice:
     two_axis_by_order_mm: dict[str, float] = field(default_factory=dict)
     orientation_by_order_deg: dict[str, float] = field(default_factory=dict)
     fold_orientation_by_order_deg: dict[str, tuple[float, ...]] = field(default_factory=dict)
+    axis_ci_deg: float = float("nan")
 
     @property
     def note(self) -> str:
@@ -148,18 +155,6 @@ class ModelChoice:
 
 
 _PROXIMAL = {ABDUCTION_FIRST: "ab/adduction", FLEXION_FIRST: "flexion"}
-
-
-def _hinge_axes(rotation: FloatArray, labels: np.ndarray, folds: np.ndarray) -> FloatArray:
-    """SARA axis (parent frame) without each fold: leading left singular vector of the sum
-    of the child-in-parent rotations less the fold's. Returns ``(n_folds, 3)``."""
-    s_all = rotation.sum(axis=0)
-    s_fold = np.zeros((folds.size, 3, 3))
-    np.add.at(s_fold, np.searchsorted(folds, labels), rotation)
-    u, _, _ = np.linalg.svd(s_all[None] - s_fold)
-    axes = u[:, :, 0]
-    ref = np.linalg.svd(s_all)[0][:, 0]
-    return axes * np.sign(axes @ ref)[:, None]
 
 
 def _two_axis_directions(
@@ -290,7 +285,7 @@ def choose_joint_model(
     rot, t, lab = rotation[::stride], translation[::stride], np.asarray(labels)[::stride]
     folds = np.unique(lab)
     q = rot @ reference_rotation.T
-    hinge_axes = _hinge_axes(rot, lab, folds)
+    hinge_axes = leave_one_out_axes(rot, lab, folds)
     sq: dict[str, list[FloatArray]] = {HINGE: []}
     eye = np.eye(3)[None]
     for i, f in enumerate(folds):
@@ -301,9 +296,11 @@ def choose_joint_model(
         design = (eye - rot_a) @ orthonormal_basis(a)[:2].T
         sq[HINGE].append(_held_out_sq(t - rot_a @ reference_offset, design, out))
     turn: dict[str, list[FloatArray]] = {}
+    fold_axes = {HINGE: hinge_axes}
     for order, fit in two_axis.items():
         sq[order], turn[order] = [], []
         per_fold = _two_axis_folds(q, lab, folds, fit, order, reference_rotation)
+        fold_axes[order] = np.array([a for a, *_ in per_fold])  # signed as the fit's axis
         for f, (a, b, rot_a, rot_b) in zip(folds, per_fold, strict=True):
             out = lab == f
             ca, cb = orthonormal_basis(a)[:2].T, orthonormal_basis(b)[:2].T
@@ -326,6 +323,7 @@ def choose_joint_model(
     candidates = [o for o, fit in two_axis.items() if fit.interior]
     best = _order(turn, candidates, usual)
     better = best in candidates and rms[best] < rms[HINGE] - ROUNDING_MM
+    ci = Z95 * jackknife_sd(fold_axes[best if better else HINGE])
     return ModelChoice(
         TWO_AXIS if better else HINGE,
         rms[HINGE],
@@ -340,6 +338,7 @@ def choose_joint_model(
         fold_orientation_by_order_deg={
             k: tuple(float(np.degrees(np.sqrt(np.mean(x)))) for x in v) for k, v in turn.items()
         },
+        axis_ci_deg=float(np.degrees(ci)),
     )
 
 

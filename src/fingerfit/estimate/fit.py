@@ -37,6 +37,8 @@ from ..model import (
 from ..session import HAND_SENSOR, JOINTS, Session
 from ..transforms import FloatArray, relative_pose, rotation_vector
 from .axis import AxisFit, orient_flexion
+from .bootstrap import Z95, cycle_axis_ci_deg
+from .choice import ModelChoice
 from .cycles import extract_cycles
 from .methods import (
     ANGLE_SUMMARY,
@@ -50,8 +52,9 @@ from .methods import (
 )
 from .pads import pinch_pads
 from .plausibility import check_model, check_session, enforce
-from .saddle import fit_saddle
+from .saddle import SaddleFit, fit_saddle
 from .sagittal import intersect, sagittal_plane
+from .twoaxis import TwoAxisFit
 
 
 class FitWarning(UserWarning):
@@ -86,6 +89,12 @@ class FitOptions:
     min_conditioning : float
         Pooled methods: a pooled ``s5/s6`` below this -- rotation about the best
         axis less than this many times the rotation off it -- refuses the joint.
+    max_axis_ci_deg : float
+        A flexion axis whose 95 % confidence half-angle over the grasp cycles
+        (:func:`axis_ci_deg`) exceeds this refuses the joint (deg): its direction is known
+        less well than people's axes differ (9 deg: the mean deviation of 24 subjects'
+        thumb CMC flexion axes from their mean in vivo, Chang & Pollard 2008;
+        ``docs/capture.md``). ``fingerfit capture`` shows the same figure against it.
     """
 
     method: str = DEFAULT_METHOD
@@ -96,6 +105,7 @@ class FitOptions:
     fingers: tuple[str, ...] | None = None
     angle_method: str | None = None
     min_conditioning: float = 3.0
+    max_axis_ci_deg: float = 9.0
 
 
 def joint_data(
@@ -124,6 +134,60 @@ def joint_data(
         pr.T @ (cp - pp),
         joint,
     )
+
+
+def digit_direction(session: Session, finger: str) -> FloatArray:
+    """Unit direction ``(3,)`` of the stretched digit, tracker frame at the reference
+    posture: the least-squares line through its dorsal landmarks, proximal to distal."""
+    landmarks = np.array([session.landmark(f"{finger}.{k}") for k in DIGITS[finger].landmarks])
+    _, _, vt = np.linalg.svd(landmarks - landmarks.mean(axis=0))
+    return vt[0] if vt[0] @ (landmarks[-1] - landmarks[0]) > 0 else -vt[0]
+
+
+def digit_data(
+    session: Session, finger: str, reference: dict, along: FloatArray | None
+) -> dict[str, JointData]:
+    """Every joint's :class:`JointData` of one digit as the estimators get it.
+
+    Parameters
+    ----------
+    session : Session
+    finger : str
+    reference : dict
+        :func:`reference_poses`.
+    along : ndarray, shape (3,), optional
+        :func:`digit_direction` (tracker frame); ``finger_direction`` stays None without it.
+    """
+    digit = DIGITS[finger]
+    out = {}
+    for j, (parent, child) in digit.joint_sensors().items():
+        data = joint_data(session, parent, child, reference, j)
+        fd = None if along is None else reference[parent][1].T @ along
+        order = digit.order.get(j) if j in digit.second_axes else None
+        out[j] = replace(data, finger_direction=fd, second_axis=order)
+    return out
+
+
+def axis_ci_deg(
+    data: JointData,
+    abduction: TwoAxisFit | SaddleFit | None = None,
+    choice: ModelChoice | None = None,
+) -> float:
+    """95 % confidence half-angle (deg) of a joint's flexion axis from its cycles: the
+    figure ``FitOptions.max_axis_ci_deg`` bounds, in ``fingerfit fit`` and ``capture``.
+
+    ``Z95`` times a delete-one jackknife SD (:func:`.bootstrap.jackknife_sd`): of the
+    saddle fit's flexion axis over its clusters (the thumb's CMC, ``abduction`` a
+    :class:`SaddleFit`); of the held-out choice's axis refitted without each cycle (a joint
+    that may have a second axis, ``choice``: :attr:`.choice.ModelChoice.axis_ci_deg`);
+    otherwise of the SARA axis refitted without each cycle
+    (:func:`.bootstrap.cycle_axis_ci_deg`). NaN with fewer than two cycles.
+    """
+    if isinstance(abduction, SaddleFit):
+        return float(Z95 * abduction.flexion_sd_deg)
+    if choice is not None:
+        return choice.axis_ci_deg
+    return cycle_axis_ci_deg(data.rotation, data.periods)
 
 
 def reference_poses(session: Session) -> dict[str, tuple[FloatArray, FloatArray]]:
@@ -192,7 +256,7 @@ def _quality(data: JointData, est: AxisEstimate, notes: list[str]) -> JointQuali
     )
 
 
-def _saddle(
+def saddle_estimate(
     data: JointData, flexion_guess: FloatArray | None, abduction_guess: FloatArray | None
 ) -> AxisEstimate:
     """A joint that always has two axes (the thumb's CMC): :func:`.saddle.fit_saddle` over
@@ -239,15 +303,13 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
     fitted: dict[str, tuple[str, str, FloatArray, FloatArray, AxisEstimate, JointData, list[str]]]
     fitted = {}
     landmarks = np.array([session.landmark(f"{finger}.{k}") for k in digit.landmarks])
-    _, _, vt = np.linalg.svd(landmarks - landmarks.mean(axis=0))
-    along = vt[0] if vt[0] @ (landmarks[-1] - landmarks[0]) > 0 else -vt[0]
+    along = digit_direction(session, finger)
+    joints_data = digit_data(session, finger, reference, along)
     # Joints that always have two axes last: the next joint's flexion axis guides them.
     for j, (parent, child) in sorted(
         digit.joint_sensors().items(), key=lambda item: item[0] in digit.required_second
     ):
-        data = joint_data(session, parent, child, reference, j)
-        order = digit.order.get(j) if j in digit.second_axes else None
-        data = replace(data, finger_direction=reference[parent][1].T @ along, second_axis=order)
+        data = joints_data[j]
         if j in digit.required_second:
             # Guesses: the next joint's flexion axis, and the digit direction x that axis
             # (the sense positive ab/adduction turns about, below), in the parent frame.
@@ -255,13 +317,19 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             side = 1.0 if session.hand == "right" else -1.0
             guesses = np.stack([nxt, side * np.cross(along, nxt)]) @ reference[parent][1]
             try:
-                est, notes = _saddle(data, guesses[0], guesses[1]), []
+                est, notes = saddle_estimate(data, guesses[0], guesses[1]), []
             except FingerfitError as exc:
                 raise FitError(f"{finger} {j}: {exc.reason}") from None
         else:
             notes = _check(finger, j, data, options)
             est = estimator(data)
         problems = _conditioning_problem(est, options)
+        ci = axis_ci_deg(data, est.abduction, est.choice)
+        if ci > options.max_axis_ci_deg:
+            problems.append(
+                f"the flexion axis is known only to +/-{ci:.1f} deg (95 %, from the spread "
+                f"over the cycles; need <= {options.max_axis_ci_deg:g} deg): record more cycles"
+            )
         if est.axis.null_agreement_deg > options.max_null_disagreement_deg:
             problems.append(
                 f"the per-cycle centres do not spread along one axis (fitted axis "

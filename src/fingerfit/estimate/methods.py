@@ -221,7 +221,7 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
     choice = None
     name = data.joint.upper() or "joint"
     if two_axis and data.second_axis is not None:
-        tf, choice = _second_axis(data)
+        tf, choice = second_axis_choice(data)
         if choice.chosen == TWO_AXIS:
             abduction = tf
             point, direction = tf.flexion_point, tf.flexion_axis
@@ -270,7 +270,7 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
     )
 
 
-def _second_axis(data: JointData) -> tuple[TwoAxisFit, ModelChoice]:
+def second_axis_choice(data: JointData) -> tuple[TwoAxisFit, ModelChoice]:
     """The two-axis candidate of a joint that may have a second axis, and the choice.
 
     A candidate of each order is fitted to every movement frame of every cycle with

@@ -131,4 +131,31 @@ def pooled_hinge(
     return PooledHinge(a_p, a_c, u_p, u_c, sv, axis_res, centre_res)
 
 
-__all__ = ["PooledHinge", "pooled_hinge", "sara_axis"]
+def leave_one_out_axes(rotation: FloatArray, labels: np.ndarray, folds: np.ndarray) -> FloatArray:
+    """SARA axis (parent frame) without each fold: the leading left singular vector of the
+    sum of the child-in-parent rotations less the fold's (one batched 3 x 3 SVD).
+
+    Parameters
+    ----------
+    rotation : ndarray, shape (n, 3, 3)
+        Child-in-parent rotations (no NaN).
+    labels : ndarray of int, shape (n,)
+        Fold of each frame (e.g. its grasp cycle).
+    folds : ndarray of int, shape (n_folds,)
+        The folds, sorted (``np.unique(labels)``).
+
+    Returns
+    -------
+    ndarray, shape (n_folds, 3)
+        Unit axes, signed towards the SARA axis of every frame.
+    """
+    s_all = rotation.sum(axis=0)
+    s_fold = np.zeros((folds.size, 3, 3))
+    np.add.at(s_fold, np.searchsorted(folds, labels), rotation)
+    u, _, _ = np.linalg.svd(s_all[None] - s_fold)
+    axes = u[:, :, 0]
+    ref = np.linalg.svd(s_all)[0][:, 0]
+    return axes * np.sign(axes @ ref)[:, None]
+
+
+__all__ = ["PooledHinge", "leave_one_out_axes", "pooled_hinge", "sara_axis"]

@@ -61,6 +61,7 @@ from scipy.optimize import least_squares
 from ..angles import two_axis_angles
 from ..errors import FingerfitError
 from ..transforms import FloatArray, angle_between_axes, orthonormal_basis, rotation_vector, unit
+from .bootstrap import jackknife_sd
 from .migration import fit_axis_points
 from .pooled import sara_axis
 from .twoaxis_residual import _skew_residual
@@ -479,8 +480,8 @@ def _jackknife(
     (deg) and of the offset (mm), and the number of clusters (NaN SDs below two).
 
     Without each cluster the directions are refitted from the full solution ``(p, d)``,
-    then the angles, points and offset; the SD is ``sqrt((G - 1) / G sum |x_g - mean|^2)``
-    (for an axis, of the 3-vector: the RMS angle off in both directions across it).
+    then the angles, points and offset; the SD is :func:`.bootstrap.jackknife_sd` (for an
+    axis, of the 3-vector: the RMS angle off in both directions across it).
     """
     uniq, idx = np.unique(labels, return_inverse=True)
     q = rotation @ reference_rotation.T
@@ -502,12 +503,12 @@ def _jackknife(
     g = len(off)
     if g < 2:
         return float("nan"), float("nan"), float("nan"), g
-
-    def sd(values: list) -> float:
-        dev = np.asarray(values) - np.mean(values, axis=0)
-        return float(np.sqrt((g - 1) / g * np.sum(dev * dev)))
-
-    return float(np.degrees(sd(fl))), float(np.degrees(sd(ab))), sd(off), g
+    return (
+        float(np.degrees(jackknife_sd(np.array(fl)))),
+        float(np.degrees(jackknife_sd(np.array(ab)))),
+        jackknife_sd(np.array(off)),
+        g,
+    )
 
 
 def _line_angle(u: FloatArray, v: FloatArray) -> float:
