@@ -51,6 +51,13 @@ def test_thumb_mcp_second_axis_seen_only_in_pinches_is_kept(tmp_path) -> None:
     choice = thumb.joints["mcp"].quality.model_choice
     assert choice["chosen"] == "two_axis"
     assert choice["held_out_two_axis_mm"] < choice["held_out_hinge_mm"]
+    # The hinge rejects the cycles that carry the ab/adduction; with two axes they are
+    # kept, and not called sensor slips.
+    assert hinge.fingers["thumb"].joints["mcp"].quality.rejected_cycles
+    quality = thumb.joints["mcp"].quality
+    assert quality.rejected_cycles == []
+    assert not any("sensor slip" in n for n in quality.notes)
+    assert any("two axes explain them" in n for n in quality.notes)
     # Measured: 0.90 mm (two axes) vs 2.71 mm (the hinge the outlier step left).
     err, err_hinge = tip_error_mm(sim, model, "thumb"), tip_error_mm(sim, hinge, "thumb")
     assert err < 1.3, err

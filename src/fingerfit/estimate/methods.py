@@ -210,11 +210,8 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
     centres = _cycle_centres(data, rh.kept_cycles)
     point, direction = est.point, est.axis
     notes = []
-    if rh.rejected_cycles:
-        notes.append(
-            f"cycles {', '.join(str(i + 1) for i in rh.rejected_cycles)} rejected as "
-            "inconsistent with the others (sensor slip?)"
-        )
+    rejected_cycles = rh.rejected_cycles
+    listed = ", ".join(str(i + 1) for i in rejected_cycles)
     if rh.rejected_frames:
         notes.append(f"{rh.rejected_frames} outlier frame(s) rejected")
     abduction = None
@@ -225,6 +222,12 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
         if choice.chosen == TWO_AXIS:
             abduction = tf
             point, direction = tf.flexion_point, tf.flexion_axis
+            if rejected_cycles:
+                # The two-axis fit uses every cycle: those off one axis are not slips.
+                notes.append(
+                    f"cycles {listed} are off one axis and kept: the two axes explain them"
+                )
+                rejected_cycles = []
             notes.append(
                 f"two-axis {name}: ab/adduction spans {tf.abduction_range_deg:.1f} deg; rotation "
                 f"off the model {np.degrees(tf.rms_hinge_rad):.2f} -> "
@@ -232,6 +235,8 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
             )
             notes.extend(tf.stability_notes())
         notes.append(f"{name}: {choice.note}")
+    if rejected_cycles:
+        notes.insert(0, f"cycles {listed} rejected as inconsistent with the others (sensor slip?)")
     mig = None
     if migration and not (
         abduction is not None and choice is not None and choice.order == FLEXION_FIRST
@@ -264,7 +269,7 @@ def _robust_family(data: JointData, *, two_axis: bool, migration: bool) -> AxisE
         migration=mig,
         pooled_conditioning=est.conditioning,
         rejected_frames=rh.rejected_frames,
-        rejected_cycles=rh.rejected_cycles,
+        rejected_cycles=rejected_cycles,
         notes=notes,
         choice=choice,
     )
