@@ -187,6 +187,7 @@ def test_stream_view_save_has_every_frame_and_the_angles_tips(simulated, tmp_pat
     assert out.is_file() and not list(out.parent.glob(".*part*"))
     rows, static = _read(out)
     n = sub.session.grasp[0].n_frames
+    assert f"view {n} logged, 0 dropped" in r.output, r.output  # --view-save: every frame
     expected = ["/person/skeleton", "/person/joints", "/person/axes", "/person/tips"]
     expected += ["/person/pads", "/person/orthogonal/tips", "/sensors"]
     expected += ["/robot/skeleton", "/robot/joints", "/robot/tips"]
@@ -231,14 +232,12 @@ def test_view_robot_follows_the_robot_lane_when_the_data_lane_has_no_robot(simul
     pytest.importorskip("mujoco")
     from fingerfit.live.sources import Block
     from fingerfit.live.stream import Streamer
-    from fingerfit.retarget import Retargeter, resolve, setup
-    from fingerfit.view import LiveView, RobotPlacement
+    from fingerfit.retarget import Retargeter, resolve
+    from fingerfit.view import LiveView
 
     model, sub, _, _ = simulated
     rec = sub.session.grasp[0].slice(slice(0, 60))
     robot, rmap = resolve("shadow", None, model.hand)
-    robot3, rmap3 = resolve("shadow", None, model.hand)
-    placement = RobotPlacement(model, robot3, rmap3, setup(model, robot3, rmap3))
     out = tmp_path / "lane.rrd"
     outlet = _Outlet()
     streamer = Streamer(
@@ -246,7 +245,7 @@ def test_view_robot_follows_the_robot_lane_when_the_data_lane_has_no_robot(simul
         lsl=outlet,
         retargeter=Retargeter(model, robot, rmap, "tip"),
         max_age=60.0,
-        view=LiveView(model, out, placement),
+        view=LiveView(model, out, ("shadow", None)),
     )
     # Blocks of 1, 2 and 3 frames: the robot lane sends the newest of each.
     sizes = [1, 2, 3] * 10
@@ -263,6 +262,46 @@ def test_view_robot_follows_the_robot_lane_when_the_data_lane_has_no_robot(simul
     series = {k.replace("\\", ""): v for k, v in rows.items()}  # entity paths escape ':'
     got = [v[0] for _, v in sorted(series[f"/robot_angles/{name}"]["Scalars:scalars"])]
     np.testing.assert_allclose(got, np.degrees([q[-1] for q in outlet.robot]), atol=1e-9)
+
+
+def test_live_view_drop_policy_counts_what_it_dropped(simulated, tmp_path):
+    """``drop`` (the policy of ``--view``): whatever the view's process kept up with, the
+    frames logged and dropped add up to those pushed, and the logged ones keep the
+    stream's frame numbers and the angles' tips."""
+    pytest.importorskip("rerun")
+    from fingerfit.view import VIEW_QUEUE_BLOCKS, LiveView
+
+    model, sub, _, _ = simulated
+    rec = sub.session.grasp[0].slice(slice(0, 4 * VIEW_QUEUE_BLOCKS))
+    out = tmp_path / "drop.rrd"
+    view = LiveView(model, out, policy="drop")
+    for i in range(rec.n_frames):  # one frame a block: as fast as the loop goes
+        view.push(rec.slice(slice(i, i + 1)))
+    view.close()
+    assert view.frames == rec.n_frames
+    assert view.logged + view.dropped == rec.n_frames
+    rows, _ = _read(out)
+    frames = sorted(rows["/person/tips"]["frame"])
+    assert len(frames) == view.logged and set(frames) <= set(range(rec.n_frames))
+    want = compute_kinematics(model, rec).motions["user_axis"]
+    got = dict(rows["/person/tips"]["tip_mm"])
+    for f in frames:
+        tips = np.stack([want[d].tip[f] for d in model.fingers])
+        np.testing.assert_allclose(np.reshape(got[f], tips.shape), tips, rtol=0, atol=1e-6)
+
+
+def test_live_view_process_errors_reach_the_stream(simulated, tmp_path):
+    """A robot the view's process cannot resolve: the error it raised, in this process,
+    and no file left behind."""
+    pytest.importorskip("rerun")
+    from fingerfit.errors import FingerfitError
+    from fingerfit.view import LiveView
+
+    model = simulated[0]
+    out = tmp_path / "bad.rrd"
+    with pytest.raises(FingerfitError, match="no-such-robot"):
+        LiveView(model, out, ("no-such-robot", None))
+    assert not list(tmp_path.iterdir())
 
 
 def test_stream_view_refusals_are_one_line(simulated, tmp_path, monkeypatch):
