@@ -185,8 +185,9 @@ class DataLane:
         if self.view is not None:
             self.view.push(rec, robot)
             s.view_dropped = self.view.dropped
-        s.data_compute.append(compute)
-        s.data_sizes.append(rec.n_frames)
+        if self.computes:  # (a view alone computes nothing here: no time to report)
+            s.data_compute.append(compute)
+            s.data_sizes.append(rec.n_frames)
         if len(s.data_compute) >= 4096:
             s.data_compute = [_join(s.data_compute)]
             s.data_sizes = [_join(s.data_sizes)]
