@@ -19,7 +19,8 @@ keep the figures). Two parts, in one run:
    per frame, receipt minus the frame's arrival at fingerfit (LSL: ``local_clock()``
    minus the sample timestamp; DDS: ``time.time()`` minus ``header.stamp``), the frames
    each consumer missed, and the stream process's CPU time over the streaming period
-   (``/proc/PID/stat``) as a share of one core. With ``--retarget`` the LSL consumer
+   (``/proc/PID/stat``) as a share of one core, and that of its child processes (the
+   live view's, with ``--view-save``). With ``--retarget`` the LSL consumer
    reads the ``PREFIX-robot`` outlet and the DDS reader the robot's ``JointState``.
 3. **Overload** (``--overload SPEED,...``, default 4): the whole hand with ``--retarget
    shadow``, ``--lsl --ros2 --record``, replayed ``SPEED`` times faster than real time,
@@ -38,7 +39,8 @@ keep the figures). Two parts, in one run:
 5. **The robot lane with and without the view** (``--view-compare``, alone): part 2's end
    to end run of the whole hand with ``--retarget shadow``, once as is and once with
    ``--view-save OUT.rrd`` (the live view of ``--view``, written to a file: the data
-   lane logs every frame to Rerun, the robot lane's sent joints pose its robot),
+   lane hands every frame to the view's own process, which logs it to Rerun; the robot
+   lane's sent joints pose its robot),
    alternately (``--view-rounds`` rounds, the order swapped each round); per run the
    consumers' latency (LSL, DDS) and the stream's own arrival -> sent, and the ratios
    with / without of the medians over the rounds.
@@ -143,6 +145,26 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` now (the live view's process of
+    ``--view-save``, multiprocessing's resource tracker)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError, IndexError, ValueError):
+            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(stat.parent.name))
+    return found
+
+
+def total_cpu_seconds(pids: list[int]) -> float:
+    """User + system CPU time (s) of these processes (those ended: not counted)."""
+    total = 0.0
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            total += cpu_seconds(pid)
+    return total
+
+
 def stream_counts(line: str) -> dict[str, float]:
     """The counts and the age at send of ``fingerfit stream``'s last line."""
     out: dict[str, float] = {
@@ -197,6 +219,7 @@ def end_to_end(
     lsl_lat: list[float] = []
     dds_lat: list[float] = []
     marks: dict[str, float] = {}
+    kids: list[int] = []  # the stream's child processes, found at its first frame
     seconds = n / 240.0 / speed
     deadline = time.monotonic() + seconds + 90
 
@@ -214,9 +237,12 @@ def end_to_end(
             lsl_lat.append(pylsl.local_clock() - ts)
             if len(lsl_lat) == 1:
                 marks["cpu0"], marks["t0"] = cpu_seconds(proc.pid), time.monotonic()
+                kids.extend(children(proc.pid))  # the view's process is up before the stream
+                marks["kids0"] = total_cpu_seconds(kids)
             elif len(lsl_lat) % 64 == 0 or len(lsl_lat) == n - 1:  # the last before the end
                 with contextlib.suppress(OSError):
                     marks["cpu1"], marks["t1"] = cpu_seconds(proc.pid), time.monotonic()
+                    marks["kids1"] = total_cpu_seconds(kids)
 
     def dds_consumer() -> None:
         while len(dds_lat) < n and time.monotonic() < deadline:
@@ -238,7 +264,10 @@ def end_to_end(
     out, err = proc.communicate(timeout=60)
     summary = [ln for ln in out.splitlines() if "frames received" in ln]
     lsl_ms, dds_ms = 1e3 * np.array(lsl_lat), 1e3 * np.array(dds_lat)
-    cpu = (marks["cpu1"] - marks["cpu0"]) / (marks["t1"] - marks["t0"]) if "t1" in marks else None
+    cpu = kids_cpu = None
+    if "t1" in marks:
+        cpu = (marks["cpu1"] - marks["cpu0"]) / (marks["t1"] - marks["t0"])
+        kids_cpu = (marks["kids1"] - marks["kids0"]) / (marks["t1"] - marks["t0"])
 
     def stats(x: np.ndarray) -> dict[str, float]:
         if not x.size:
@@ -256,6 +285,7 @@ def end_to_end(
         "lsl": stats(lsl_ms) | {"received": int(lsl_ms.size), "lost": sent - int(lsl_ms.size)},
         "dds": stats(dds_ms) | {"received": int(dds_ms.size), "lost": sent - int(dds_ms.size)},
         "cpu_share_of_one_core": cpu,
+        "children_cpu_share_of_one_core": kids_cpu,
         "stream_summary": summary[0] if summary else (out + err)[-500:],
     }
     if record is not None:
@@ -392,6 +422,7 @@ def view_compare(seconds: float, rounds: int) -> dict:
                 row = {k: e2e[a].get(b, float("nan")) for k, (a, b) in keys.items()}
                 row["lsl_lost"], row["dds_lost"] = e2e["lsl"]["lost"], e2e["dds"]["lost"]
                 row["cpu_share_of_one_core"] = e2e["cpu_share_of_one_core"]
+                row["view_process_cpu_share"] = e2e["children_cpu_share_of_one_core"]
                 row["recorded"] = e2e["counts"].get("recorded", 0)
                 if label == "with":
                     row["rrd_mb"] = rrd.stat().st_size / 1e6 if rrd.exists() else None

@@ -187,6 +187,7 @@ def test_stream_view_save_has_every_frame_and_the_angles_tips(simulated, tmp_pat
     assert out.is_file() and not list(out.parent.glob(".*part*"))
     rows, static = _read(out)
     n = sub.session.grasp[0].n_frames
+    assert f"view {n} logged, 0 dropped" in r.output, r.output  # --view-save: every frame
     expected = ["/person/skeleton", "/person/joints", "/person/axes", "/person/tips"]
     expected += ["/person/pads", "/person/orthogonal/tips", "/sensors"]
     expected += ["/robot/skeleton", "/robot/joints", "/robot/tips"]
@@ -231,14 +232,12 @@ def test_view_robot_follows_the_robot_lane_when_the_data_lane_has_no_robot(simul
     pytest.importorskip("mujoco")
     from fingerfit.live.sources import Block
     from fingerfit.live.stream import Streamer
-    from fingerfit.retarget import Retargeter, resolve, setup
-    from fingerfit.view import LiveView, RobotPlacement
+    from fingerfit.retarget import Retargeter, resolve
+    from fingerfit.view import LiveView
 
     model, sub, _, _ = simulated
     rec = sub.session.grasp[0].slice(slice(0, 60))
     robot, rmap = resolve("shadow", None, model.hand)
-    robot3, rmap3 = resolve("shadow", None, model.hand)
-    placement = RobotPlacement(model, robot3, rmap3, setup(model, robot3, rmap3))
     out = tmp_path / "lane.rrd"
     outlet = _Outlet()
     streamer = Streamer(
@@ -246,7 +245,7 @@ def test_view_robot_follows_the_robot_lane_when_the_data_lane_has_no_robot(simul
         lsl=outlet,
         retargeter=Retargeter(model, robot, rmap, "tip"),
         max_age=60.0,
-        view=LiveView(model, out, placement),
+        view=LiveView(model, out, ("shadow", None)),
     )
     # Blocks of 1, 2 and 3 frames: the robot lane sends the newest of each.
     sizes = [1, 2, 3] * 10
@@ -263,6 +262,46 @@ def test_view_robot_follows_the_robot_lane_when_the_data_lane_has_no_robot(simul
     series = {k.replace("\\", ""): v for k, v in rows.items()}  # entity paths escape ':'
     got = [v[0] for _, v in sorted(series[f"/robot_angles/{name}"]["Scalars:scalars"])]
     np.testing.assert_allclose(got, np.degrees([q[-1] for q in outlet.robot]), atol=1e-9)
+
+
+def test_live_view_drop_policy_counts_what_it_dropped(simulated, tmp_path):
+    """``drop`` (the policy of ``--view``): whatever the view's process kept up with, the
+    frames logged and dropped add up to those pushed, and the logged ones keep the
+    stream's frame numbers and the angles' tips."""
+    pytest.importorskip("rerun")
+    from fingerfit.view import VIEW_QUEUE_BLOCKS, LiveView
+
+    model, sub, _, _ = simulated
+    rec = sub.session.grasp[0].slice(slice(0, 4 * VIEW_QUEUE_BLOCKS))
+    out = tmp_path / "drop.rrd"
+    view = LiveView(model, out, policy="drop")
+    for i in range(rec.n_frames):  # one frame a block: as fast as the loop goes
+        view.push(rec.slice(slice(i, i + 1)))
+    view.close()
+    assert view.frames == rec.n_frames
+    assert view.logged + view.dropped == rec.n_frames
+    rows, _ = _read(out)
+    frames = sorted(rows["/person/tips"]["frame"])
+    assert len(frames) == view.logged and set(frames) <= set(range(rec.n_frames))
+    want = compute_kinematics(model, rec).motions["user_axis"]
+    got = dict(rows["/person/tips"]["tip_mm"])
+    for f in frames:
+        tips = np.stack([want[d].tip[f] for d in model.fingers])
+        np.testing.assert_allclose(np.reshape(got[f], tips.shape), tips, rtol=0, atol=1e-6)
+
+
+def test_live_view_process_errors_reach_the_stream(simulated, tmp_path):
+    """A robot the view's process cannot resolve: the error it raised, in this process,
+    and no file left behind."""
+    pytest.importorskip("rerun")
+    from fingerfit.errors import FingerfitError
+    from fingerfit.view import LiveView
+
+    model = simulated[0]
+    out = tmp_path / "bad.rrd"
+    with pytest.raises(FingerfitError, match="no-such-robot"):
+        LiveView(model, out, ("no-such-robot", None))
+    assert not list(tmp_path.iterdir())
 
 
 def test_stream_view_refusals_are_one_line(simulated, tmp_path, monkeypatch):
@@ -291,3 +330,62 @@ def test_stream_view_refusals_are_one_line(simulated, tmp_path, monkeypatch):
     assert r.exit_code == 2 and "pip install fingerfit[view]" in r.output, r.output
     assert len(r.output.strip().splitlines()) == 1
     assert not (tmp_path / "v.rrd").exists()
+
+
+# --- fingerfit view --web: the web viewer, and a screenshot of it in headless Chromium ------
+
+
+@pytest.fixture(scope="module")
+def web_view(simulated):
+    """``fingerfit view MODEL GRASP --web`` serving, on free ports; its address."""
+    pytest.importorskip("rerun")
+    from fingerfit.view.webshot import served_view
+
+    _, sub, folder, model_path = simulated
+    grasp = folder / sub.session.grasp[0].name
+    with served_view([str(model_path), str(grasp)]) as url:
+        yield url
+
+
+def test_web_view_serves_the_viewer_and_the_data(web_view):
+    from urllib.parse import parse_qs, urlsplit
+    from urllib.request import urlopen
+
+    parts = urlsplit(web_view)
+    assert parts.scheme == "http" and parts.hostname == "localhost", web_view
+    data = parse_qs(parts.query)["url"][0]
+    assert data.startswith("rerun+http://127.0.0.1:") and data.endswith("/proxy"), data
+    with urlopen(web_view, timeout=60) as page:  # the viewer's page, from this machine
+        assert page.status == 200 and b"re_viewer" in page.read()
+
+
+def test_web_view_renders_in_headless_chromium(web_view, tmp_path):
+    """The web viewer draws the hand: a screenshot that is not blank, with the hand's
+    coloured axes, tips and labels in the 3D view (``fingerfit.view.webshot``)."""
+    from fingerfit.view.webshot import (
+        SCENE_BOX,
+        HeadlessChromium,
+        coloured_share,
+        find_chromium,
+        png_pixels,
+        shoot,
+    )
+
+    binary = find_chromium()
+    if binary is None:
+        pytest.skip(
+            "Debian chromium is not installed (make test installs it when apt-get is available)"
+        )
+    with HeadlessChromium(binary, (1400, 800)) as browser:
+        if not browser.webgl():
+            pytest.skip(
+                "no WebGL in headless Chromium here (SwiftShader unavailable): the screenshot "
+                "check is skipped; the page and data are checked by "
+                "test_web_view_serves_the_viewer_and_the_data"
+            )
+        png = shoot(browser, web_view, lambda p: coloured_share(p, SCENE_BOX) > 0.005)
+    (tmp_path / "web.png").write_bytes(png)  # kept by pytest's tmp_path, to look at
+    pixels = png_pixels(png)
+    assert pixels.shape == (800, 1400, 3)
+    assert pixels.std() > 0.05  # not a blank page
+    assert coloured_share(pixels, SCENE_BOX) > 0.005  # the hand, drawn in the 3D view

@@ -302,14 +302,6 @@ def stream(
             bag_retargeter = Retargeter(
                 model, robot2, rmap2, method, variant, contact_mm=contact_mm
             )
-    placement = None
-    if retargeter is not None and (view or view_save is not None):
-        # The view poses its robot on the data lane's thread: a robot of its own.
-        from ..retarget import setup
-        from ..view import RobotPlacement
-
-        robot3, rmap3 = resolve_robot(retarget, map_path, model.hand, "--retarget")
-        placement = RobotPlacement(model, robot3, rmap3, setup(model, robot3, rmap3))
     if not verbose and (lsl or kind == "lsl"):
         from ..live import quiet_lsl
 
@@ -367,7 +359,9 @@ def stream(
         if view or view_save is not None:
             from ..view import LiveView
 
-            live_view = LiveView(model, view_save, placement)
+            # The view's process poses its robot on a robot of its own.
+            view_robot = (retarget, map_path) if retarget is not None else None
+            live_view = LiveView(model, view_save, view_robot)
         streamer = Streamer(
             model,
             lsl=lsl_out,
@@ -417,7 +411,12 @@ def stream(
     say(
         "{}",
         summary_line(
-            summary, streamer.live, streamer.data is not None, max_age, retargeter is not None
+            summary,
+            streamer.live,
+            streamer.data is not None,
+            max_age,
+            retargeter is not None,
+            view=live_view is not None,
         ),
     )
     if retargeter is not None and (retargeter.missing or retargeter.held):
@@ -458,7 +457,12 @@ def check_view_save(path: Path, view: bool, record: Path | None) -> None:
 
 
 def summary_line(
-    summary, live: bool, files: bool, max_age_ms: float, retargets: bool = False
+    summary,
+    live: bool,
+    files: bool,
+    max_age_ms: float,
+    retargets: bool = False,
+    view: bool = False,
 ) -> str:
     """The last line: the lanes' counts (which add up: received = sent + skipped +
     stale with a live output, recorded = received with a file output), then the robot
@@ -473,6 +477,9 @@ def summary_line(
         ``--max-age`` (ms).
     retargets : bool
         The robot lane computes a robot's joints (``--retarget``).
+    view : bool
+        The stream has a live view (``--view``, ``--view-save``): the frames its process
+        logged and those dropped while it was behind.
     """
     import numpy as np
 
@@ -484,6 +491,8 @@ def summary_line(
         )
     if files:
         counts.append(f"{s.recorded} recorded")
+    if view:
+        counts.append(f"view {s.view_logged} logged, {s.view_dropped} dropped")
     text = f"{s.received} frames received in {s.seconds:.1f} s"
     if counts:
         text += ": " + ", ".join(counts)

@@ -52,8 +52,9 @@ class DataLane:
         The bag's and the view's robot joints (its own instance: its warm start follows
         every frame).
     view : fingerfit.view.LiveView, optional
-        Gets every block's frames and kinematics (and the robot's joints, with a
-        ``retargeter``), after the files.
+        Gets every block's frames (and the robot's joints, with a ``retargeter``), after
+        the files: a hand-off to the view's own process, which computes and logs them
+        (``summary.view_dropped`` and ``view_logged`` count what it dropped and logged).
     wall_offset : float
         System clock minus ``time.monotonic()`` (s), for the bag's stamps.
     """
@@ -77,11 +78,13 @@ class DataLane:
         self.record_units = record_units
         self.channels, self.sensors = channels, sensors
         self.retargeter = retargeter if bag is not None or view is not None else None
-        both = record is not None or view is not None  # the angles CSV, the view's tips
-        variants = ["user_axis"] + (["orthogonal"] if both else [])
+        # The angles CSV has both models' tips; the view computes its own, in its process.
+        variants = ["user_axis"] + (["orthogonal"] if record is not None else [])
         if self.retargeter is not None and self.retargeter.variant not in variants:
             variants.append(self.retargeter.variant)
         self.variants = tuple(variants)
+        # Only the view: no kinematics here at all.
+        self.computes = record is not None or bag is not None or self.retargeter is not None
         self.plan = (
             KinematicsPlan(model, self.variants) if model.angle_method == "swing_twist" else None
         )
@@ -137,6 +140,9 @@ class DataLane:
                     o.close(ok)
                 except BaseException as exc:
                     self.error = self.error or exc
+        if self.view is not None:
+            self.summary.view_logged = self.view.logged
+            self.summary.view_dropped = self.view.dropped
 
     def _write(self, blocks: list[Block]) -> None:
         if not blocks:
@@ -152,7 +158,9 @@ class DataLane:
     def _write_one(self, block: Block) -> None:
         rec, s = block.recording, self.summary
         t = time.perf_counter()
-        if self.plan is not None and rec.n_frames:
+        if not self.computes:
+            kin = None
+        elif self.plan is not None and rec.n_frames:
             kin = self.plan.run(rec)
         else:
             kin = compute_kinematics(self.model, rec, self.variants)
@@ -175,9 +183,11 @@ class DataLane:
                 self._last = joints[-1]
             self.bag.push(joints, block.arrival + self.wall_offset)
         if self.view is not None:
-            self.view.push(rec, kin, robot)
-        s.data_compute.append(compute)
-        s.data_sizes.append(rec.n_frames)
+            self.view.push(rec, robot)
+            s.view_dropped = self.view.dropped
+        if self.computes:  # (a view alone computes nothing here: no time to report)
+            s.data_compute.append(compute)
+            s.data_sizes.append(rec.n_frames)
         if len(s.data_compute) >= 4096:
             s.data_compute = [_join(s.data_compute)]
             s.data_sizes = [_join(s.data_sizes)]

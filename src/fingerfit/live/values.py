@@ -349,6 +349,10 @@ class Summary:
         and the batch sizes (frames).
     data_lag : float
         Data lane: the longest time (s) from a frame's arrival to its batch being written.
+    view_dropped, view_logged : int
+        The live view (``--view``, ``--view-save``): frames the data lane dropped because
+        the view's process was behind (``--view`` only), and frames that process logged
+        (known when the stream has ended; ``view_logged + view_dropped = recorded``).
     window : list of ndarray
         Latencies since the status line last read them.
     compute_window : list of float
@@ -376,6 +380,8 @@ class Summary:
     data_compute: list = field(default_factory=list)
     data_sizes: list = field(default_factory=list)
     data_lag: float = 0.0
+    view_dropped: int = 0
+    view_logged: int = 0
     seconds: float = 0.0
     interrupted: bool = False
     window: list = field(default_factory=list)

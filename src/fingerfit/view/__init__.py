@@ -15,13 +15,22 @@ person's palm frame and moves with the hand. Rerun (the extra ``view``) is impor
 
 Modules: :mod:`.scene` (what the view shows, computed over whole recordings),
 :mod:`.rerunlog` (the scene into a Rerun stream or ``.rrd``), :mod:`.live` (the view of a
-live stream); every name is importable from here.
+live stream, logged by a process of its own); every name is importable from here.
 """
 
 from __future__ import annotations
 
 from .live import (
+    VIEW_NICE as VIEW_NICE,
+)
+from .live import (
+    VIEW_QUEUE_BLOCKS as VIEW_QUEUE_BLOCKS,
+)
+from .live import (
     LiveView as LiveView,
+)
+from .live import (
+    RobotSpec as RobotSpec,
 )
 from .rerunlog import (
     _arrows as _arrows,
