@@ -16,6 +16,9 @@ person's palm frame and moves with the hand. Rerun (the extra ``view``) is impor
 Modules: :mod:`.scene` (what the view shows, computed over whole recordings),
 :mod:`.rerunlog` (the scene into a Rerun stream or ``.rrd``), :mod:`.live` (the view of a
 live stream, logged by a process of its own); every name is importable from here.
+:mod:`.webserve` (``--web``: the web viewer to the browser from ``127.0.0.1`` with a
+Content-Security-Policy) and :mod:`.webshot` (a screenshot of it in headless Chromium)
+are imported by their own names.
 """
 
 from __future__ import annotations
