@@ -35,8 +35,8 @@ def view(
         bool,
         typer.Option(
             "--web",
-            help="Serve the view and Rerun's web viewer from this machine and print the "
-            "address to open (until Ctrl-C).",
+            help="Serve the view and Rerun's web viewer on 127.0.0.1 (the page may reach "
+            "nothing else) and print the address to open (until Ctrl-C).",
         ),
     ] = False,
     web_port: Annotated[
