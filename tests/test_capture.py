@@ -42,7 +42,7 @@ def _start(folder, tmp_path, name):
     return new
 
 
-def _capture(sub, new, source, protocol="grasp", digits=DIGITS):
+def _capture(sub, new, source, protocol="grasp", digits=DIGITS, extra=()):
     return CliRunner().invoke(
         app,
         [
@@ -62,6 +62,7 @@ def _capture(sub, new, source, protocol="grasp", digits=DIGITS):
             str(sub.session.rate_hz),
             "--fingers",
             ",".join(digits),
+            *extra,
         ],
     )
 
@@ -249,3 +250,84 @@ def test_the_evidence_process_reports_what_evidence_gives(simulated):
         child.close()
     assert got is not None and got[1] == rec.n_frames
     assert got[0] == evidence(replace(base, grasp=[rec]), list(DIGITS))
+
+
+def _newest(series):
+    """The value of a ``(frame, value)`` list at its last frame (the row logged last)."""
+    return max(enumerate(series), key=lambda iv: (iv[1][0], iv[0]))[1]
+
+
+def test_view_save_has_the_evidence_capture_prints_and_the_recording_is_whole(simulated, tmp_path):
+    """``capture --view-save``: per joint the series, the bounds, the table and the
+    sensors, the last update equal to the printed table; the recording the same as
+    without the view."""
+    pytest.importorskip("rerun")
+    from fingerfit.capture import table_cells
+    from fingerfit.session import digit_sensors
+
+    from .test_view import _read
+
+    sub, folder = simulated
+    grasp = folder / sub.session.grasp[0].name
+    plain, viewed = _start(folder, tmp_path, "P06"), _start(folder, tmp_path, "P07")
+    rrd = tmp_path / "evidence.rrd"
+    r = _capture(sub, plain, f"replay:{grasp}@1000")
+    assert r.exit_code == 0, r.output
+    r = _capture(sub, viewed, f"replay:{grasp}@1000", extra=["--view-save", str(rrd)])
+    assert r.exit_code == 0, r.output
+    assert f"view -> {rrd}" in r.output.replace("\n", "")
+    # The recording is whole: the view takes nothing from it.
+    assert (viewed / "grasp.csv").read_bytes() == (plain / "grasp.csv").read_bytes()
+    rec = read_pose_csv(viewed / "grasp.csv", units=sub.session.units)
+    last = rec.n_frames - 1
+
+    rows, static = _read(rrd)
+    printed = {}  # (digit, joint) -> the cells of the table's first line of the joint
+    for line in r.output.splitlines():
+        cells = [c.strip() for c in line.strip("│ ").split("│")]
+        if len(cells) == 7 and cells[0] in DIGITS:
+            printed[cells[0], cells[1]] = cells
+    want = evidence(load_session(viewed), list(DIGITS))  # what capture printed
+    assert set(printed) == {(w.digit, w.joint) for w in want}
+    need = thresholds()
+    for series, limit, value in (("axis_deg", "bound", need[2]), ("cycles", "needed", need[0]),
+                                 ("rom_deg", "needed", need[1])):  # fmt: skip
+        entity = f"/evidence/{series}/{limit}"
+        assert "SeriesLines:names" in static[entity]
+        assert _newest(rows[entity]["Scalars:scalars"]) == (last, [value])
+    for w in want:
+        got = {
+            s: _newest(rows[f"/evidence/{s}/{w.digit}/{w.joint}"]["Scalars:scalars"])
+            for s in ("axis_deg", "cycles", "rom_deg")
+        }
+        assert {v[0] for v in got.values()} == {last}  # the last update: the last frame
+        shown = replace(
+            w,
+            cycles=int(got["cycles"][1][0]),
+            rom_deg=got["rom_deg"][1][0],
+            axis_ci_deg=got["axis_deg"][1][0],
+        )
+        cells = table_cells(shown)
+        assert cells[2:5] == printed[w.digit, w.joint][2:5], (cells, printed)
+        assert cells[6] == printed[w.digit, w.joint][6]
+    frame, (text,) = _newest(rows["/evidence/table"]["TextDocument:text"])
+    assert frame == last and text.startswith(f"**{rec.n_frames} frames")
+    for w in want:  # the panel's rows: the printed cells, enough or more
+        assert "| " + " | ".join(table_cells(w)) + " |" in text
+    # The sensors' axes at the last frame, mm in the tracker frame.
+    sensors = list(dict.fromkeys(s for d in DIGITS for s in digit_sensors(d)))
+    frame, origins = _newest(rows["/sensors"]["Arrows3D:origins"])
+    assert frame == last and len(origins) == 3 * len(sensors)
+    expect = np.repeat([rec.poses[s].position[last] for s in sensors], 3, axis=0)
+    np.testing.assert_allclose(np.array(origins), expect, atol=1e-3)
+
+
+def test_view_options_are_refused_in_one_line(simulated, tmp_path):
+    sub, folder = simulated
+    new = _start(folder, tmp_path, "P08")
+    grasp = f"replay:{folder / 'grasp.csv'}@1000"
+    r = _capture(sub, new, grasp, extra=["--view-save", str(tmp_path / "x.txt")])
+    assert r.exit_code == 2 and ".rrd" in r.output
+    r = _capture(sub, new, grasp, extra=["--view", "--view-save", str(tmp_path / "x.rrd")])
+    assert r.exit_code == 2 and "--view" in r.output
+    assert not (new / "grasp.csv").exists()

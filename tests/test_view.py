@@ -6,6 +6,7 @@ import sys
 import time
 import warnings
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -347,21 +348,51 @@ def web_view(simulated):
         yield url
 
 
+def _listening_on(port: int) -> set[str]:
+    """The IPv4/IPv6 addresses a TCP port listens on here, as ``/proc/net/tcp*`` writes
+    them (hex); empty where there is no ``/proc``."""
+    found = set()
+    for name in ("tcp", "tcp6"):
+        table = Path("/proc/net") / name
+        if not table.exists():
+            continue
+        for line in table.read_text().splitlines()[1:]:
+            local, state = line.split()[1], line.split()[3]
+            address, hexport = local.split(":")
+            if state == "0A" and int(hexport, 16) == port:  # 0A: LISTEN
+                found.add(address)
+    return found
+
+
 def test_web_view_serves_the_viewer_and_the_data(web_view):
     from urllib.parse import parse_qs, urlsplit
     from urllib.request import urlopen
 
     parts = urlsplit(web_view)
-    assert parts.scheme == "http" and parts.hostname == "localhost", web_view
+    assert parts.scheme == "http" and parts.hostname == "127.0.0.1", web_view
     data = parse_qs(parts.query)["url"][0]
     assert data.startswith("rerun+http://127.0.0.1:") and data.endswith("/proxy"), data
     with urlopen(web_view, timeout=60) as page:  # the viewer's page, from this machine
         assert page.status == 200 and b"re_viewer" in page.read()
+        policy = page.headers["Content-Security-Policy"]
+    grpc_port = urlsplit(data).port
+    assert f"connect-src 'self' http://127.0.0.1:{grpc_port} " in policy, policy
+    assert "https:" not in policy and "*" not in policy, policy
+    if Path("/proc/net/tcp").exists():  # both ports we print listen on 127.0.0.1 only
+        for port in (parts.port, grpc_port):
+            assert _listening_on(port) == {"0100007F"}, (port, _listening_on(port))
 
 
-def test_web_view_renders_in_headless_chromium(web_view, tmp_path):
+def test_web_view_renders_in_headless_chromium_and_asks_nothing_beyond_this_machine(
+    web_view, tmp_path
+):
     """The web viewer draws the hand: a screenshot that is not blank, with the hand's
-    coloured axes, tips and labels in the 3D view (``fingerfit.view.webshot``)."""
+    coloured axes, tips and labels in the 3D view (``fingerfit.view.webshot``); and every
+    request the page makes to another host is refused by its Content-Security-Policy
+    before it is sent (Chromium's resolver, which maps other hosts to nothing, would
+    fail them otherwise with another reason)."""
+    from urllib.parse import urlsplit
+
     from fingerfit.view.webshot import (
         SCENE_BOX,
         HeadlessChromium,
@@ -377,14 +408,20 @@ def test_web_view_renders_in_headless_chromium(web_view, tmp_path):
             "Debian chromium is not installed (make test installs it when apt-get is available)"
         )
     with HeadlessChromium(binary, (1400, 800)) as browser:
-        if not browser.webgl():
-            pytest.skip(
-                "no WebGL in headless Chromium here (SwiftShader unavailable): the screenshot "
-                "check is skipped; the page and data are checked by "
-                "test_web_view_serves_the_viewer_and_the_data"
-            )
-        png = shoot(browser, web_view, lambda p: coloured_share(p, SCENE_BOX) > 0.005)
+        webgl = browser.webgl()
+        browser.record_requests()
+        png = shoot(browser, web_view, lambda p: not webgl or coloured_share(p, SCENE_BOX) > 0.005)
+        requests = browser.requests()
+    local = [r for r in requests if urlsplit(r["url"]).hostname in ("127.0.0.1", "localhost")]
+    assert local and all(r["blocked"] is None for r in local), local  # the page, its data
+    away = [r for r in requests if r not in local]
+    assert all(r["blocked"] == "csp" for r in away), away  # refused, none sent
     (tmp_path / "web.png").write_bytes(png)  # kept by pytest's tmp_path, to look at
+    if not webgl:
+        pytest.skip(
+            "no WebGL in headless Chromium here (SwiftShader unavailable): the drawing check "
+            "is skipped; the page, its data and its requests are checked"
+        )
     pixels = png_pixels(png)
     assert pixels.shape == (800, 1400, 3)
     assert pixels.std() > 0.05  # not a blank page

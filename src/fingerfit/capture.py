@@ -29,6 +29,8 @@ import queue
 import signal
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +62,9 @@ RECORDING_LIST = "grasp"
 #: At least this many seconds between the starts of two evidence computations while
 #: recording (:class:`EvidenceProcess`).
 UPDATE_S = 0.5
+#: Seconds between checks that the evidence process is alive while waiting on it (a
+#: check of liveness only: nothing waits this long when it answers).
+_POLL_S = 0.5
 
 
 def thresholds(options: FitOptions | None = None) -> tuple[int, float, float]:
@@ -111,6 +116,33 @@ class JointEvidence:
     second_note: str
     enough: bool
     advice: str = ""
+
+
+#: The evidence table's columns (``fingerfit capture``'s table, the view's panel); the
+#: numeric ones are right-aligned.
+TABLE_COLUMNS = ("digit", "joint", "cycles", "ROM (deg)", "axis +/- (deg)", "2nd axis", "")
+NUMERIC_COLUMNS = ("cycles", "ROM (deg)", "axis +/- (deg)")
+
+
+def table_title(need: tuple[int, float, float], frames: int, rate_hz: float) -> str:
+    """The evidence table's title: the frames (and seconds at ``rate_hz`` Hz) it covers
+    and what the fit needs (:func:`thresholds`)."""
+    return (
+        f"{frames} frames ({frames / rate_hz:.1f} s); the fit needs {need[0]} cycles, "
+        f"{need[1]:g} deg median range of motion and the axis within +/-{need[2]:g} deg "
+        "(95 %) per joint"
+    )
+
+
+def table_cells(r: JointEvidence) -> list[str]:
+    """One joint's row of the evidence table (:data:`TABLE_COLUMNS`), as printed: the ROM
+    to the degree, the axis confidence to a tenth of a degree (``<0.1`` below), ``-``
+    for what is not known, ``enough`` or ``more``."""
+    rom = "-" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f}"
+    ci = "-" if math.isnan(r.axis_ci_deg) else f"{max(r.axis_ci_deg, 0.1):.1f}"
+    ci = "<" + ci if r.axis_ci_deg < 0.05 else ci
+    second = "-" if r.second is None else ("yes: " if r.second else "no: ") + r.second_note
+    return [r.digit, r.joint, str(r.cycles), rom, ci, second, "enough" if r.enough else "more"]
 
 
 def _second(data: JointData, required: bool) -> tuple[bool, str, str, float]:
@@ -250,14 +282,29 @@ def _evidence_loop(
     sensors: list[str],
     digits: list[str],
     options: FitOptions | None,
+    view: tuple[bool, Path | None],
     blocks: mp.Queue,
     results: mp.Queue,
 ) -> None:
     """The child process of :class:`EvidenceProcess`: joins the blocks it is sent and,
-    whenever it is free, at most every :data:`UPDATE_S`, sends ``(rows, n_frames)`` of
-    everything so far; ends at a None block. Ctrl-C is the parent's to handle (it stops
-    the child), so the child ignores it."""
+    whenever it is free, at most every :data:`UPDATE_S`, sends ``("evidence", rows,
+    n_frames)`` of everything so far (and logs it to the view, when ``view[0]``); ends at
+    ``("end", final)``, logging ``final`` (``(rows, n_frames)``, or None) to the view and
+    closing it. Ctrl-C is the parent's to handle (it stops the child), so the child
+    ignores it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    shown = None
+    if view[0]:
+        try:
+            from .view.evidence import EvidenceView
+
+            shown = EvidenceView(sensors, base.rate_hz, view[1])
+        except BaseException as exc:
+            from .view.live import _portable
+
+            results.put(("error", _portable(exc)))
+            return
+        results.put(("ready", None))
     acc = Accumulator(name, sensors)
     done_frames, started = 0, -math.inf
     while True:
@@ -276,14 +323,23 @@ def _evidence_loop(
             except queue.Empty:
                 break
         for item in items:
-            if item is None:
+            if isinstance(item, tuple):  # ("end", final)
+                if shown is not None:
+                    final = item[1]
+                    if final is not None:
+                        shown.log(final[0], acc.recording(), final[1])
+                    shown.close(final is not None)
+                    results.put(("closed", shown.updates))
                 return
             acc.add(item)
         if acc.n_frames > done_frames and time.monotonic() - started >= UPDATE_S:
             started = time.monotonic()
             rec = acc.recording()
             session = replace(base, grasp=[*base.grasp, rec])
-            results.put((evidence(session, digits, options), rec.n_frames))
+            rows = evidence(session, digits, options)
+            results.put(("evidence", rows, rec.n_frames))
+            if shown is not None:
+                shown.log(rows, rec, rec.n_frames)
             done_frames = rec.n_frames
 
 
@@ -296,12 +352,15 @@ class EvidenceProcess:
     and evaluates everything so far whenever it is free, at most every :data:`UPDATE_S`.
     In its own process the evaluation (the thumb's saddle fit takes seconds) shares neither
     the loop's interpreter lock nor its BLAS threads, so the loop keeps up with the source.
+    With a view (``capture --view`` / ``--view-save``) the child also logs each result to
+    Rerun (:class:`fingerfit.view.evidence.EvidenceView`), and at :meth:`close` the final
+    evidence.
 
     Parameters
     ----------
     base : Session
         The session without the recording in progress: reference, the calibration
-        recordings so far in ``grasp``, landmarks (mm).
+        recordings so far in ``grasp``, landmarks (mm), rate.
     name : str
         File name of the recording in progress.
     sensors : list of str
@@ -309,6 +368,16 @@ class EvidenceProcess:
     digits : list of str
         Digits to report (:func:`evidence`).
     options : FitOptions, optional
+    view : bool
+        Show the evidence in the native Rerun viewer (spawned by the child).
+    view_save : Path, optional
+        Write the view to this Rerun file instead (complete once :meth:`close` returns
+        with a final result).
+
+    Raises
+    ------
+    FingerfitError, ModuleNotFoundError
+        The child could not open its viewer or file.
     """
 
     def __init__(
@@ -318,16 +387,51 @@ class EvidenceProcess:
         sensors: list[str],
         digits: list[str],
         options: FitOptions | None = None,
+        view: bool = False,
+        view_save: Path | None = None,
     ) -> None:
         ctx = mp.get_context("spawn")
+        self.has_view = view or view_save is not None
         self._blocks = ctx.Queue()
         self._results = ctx.Queue()
         self._proc = ctx.Process(
             target=_evidence_loop,
-            args=(base, name, sensors, digits, options, self._blocks, self._results),
+            args=(
+                base,
+                name,
+                sensors,
+                digits,
+                options,
+                (self.has_view, view_save),
+                self._blocks,
+                self._results,
+            ),
             daemon=True,
         )
         self._proc.start()
+        if self.has_view:
+            try:
+                self._wait("ready")
+            except BaseException:
+                self._proc.join()
+                raise
+
+    def _wait(self, kind: str) -> Any:
+        """The child's next answer ``kind`` (evidence in between is dropped); its error
+        raised, or that it ended without the answer."""
+        while True:
+            try:
+                got = self._results.get(timeout=_POLL_S)
+            except queue.Empty:
+                if self._proc.exitcode is not None and self._results.empty():
+                    raise FingerfitError(
+                        f"the evidence process ended (exit code {self._proc.exitcode})"
+                    ) from None
+                continue
+            if got[0] == "error":
+                raise got[1]
+            if got[0] == kind:
+                return got[1]
 
     def add(self, block: Recording) -> None:
         """Hand a block of frames over (as :meth:`Accumulator.add` takes it)."""
@@ -339,16 +443,35 @@ class EvidenceProcess:
         out = None
         while True:
             try:
-                out = self._results.get_nowait()
+                got = self._results.get_nowait()
             except queue.Empty:
                 return out
+            if got[0] == "error":
+                raise got[1]
+            out = (got[1], got[2])
 
-    def close(self, timeout_s: float = 1.0) -> None:
-        """Stop the child: at once after ``timeout_s`` if it is still evaluating."""
-        self._blocks.put(None)
-        self._proc.join(timeout_s)
-        if self._proc.is_alive():
-            self._proc.terminate()
-            self._proc.join()
-        self._blocks.cancel_join_thread()
-        self._results.cancel_join_thread()
+    def close(
+        self, final: tuple[list[JointEvidence], int] | None = None, timeout_s: float = 1.0
+    ) -> int:
+        """Stop the child. Without a view: at once after ``timeout_s`` if it is still
+        evaluating. With one: once it has logged ``final`` (the evidence the capture
+        prints and the frames it covers; None: the file is not kept) and closed the view.
+
+        Returns
+        -------
+        int
+            Updates the view logged (0 without a view).
+        """
+        self._blocks.put(("end", final))
+        updates = 0
+        try:
+            if self.has_view:
+                updates = int(self._wait("closed"))
+        finally:
+            self._proc.join(None if self.has_view else timeout_s)
+            if self._proc.is_alive():
+                self._proc.terminate()
+                self._proc.join()
+            self._blocks.cancel_join_thread()
+            self._results.cancel_join_thread()
+        return updates

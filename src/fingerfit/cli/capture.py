@@ -92,6 +92,23 @@ def capture(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace the recording if it exists.")
     ] = False,
+    view: Annotated[
+        bool,
+        typer.Option(
+            "--view",
+            help="Show the evidence live in the Rerun viewer too (series per joint, the "
+            "table, the sensors; a display is needed).",
+        ),
+    ] = False,
+    view_save: Annotated[
+        Path | None,
+        typer.Option(
+            "--view-save",
+            metavar="OUT.rrd",
+            help="Write that view to this Rerun file instead of a window (complete when "
+            "the capture ends).",
+        ),
+    ] = None,
     quiet: Quiet = False,
 ) -> None:
     """Record a protocol (grasp, thumb) into a session folder, showing per joint the
@@ -110,6 +127,7 @@ def capture(
 
     if protocol not in PROTOCOLS:
         raise FingerfitError(f"must be one of {', '.join(PROTOCOLS)}", field="--protocol")
+    _check_view(view, view_save)
     meta = _meta(session_dir, subject, hand, units, rate, fingers)
     listed = meta["recordings"].get(RECORDING_LIST, [])
     listed = [listed] if isinstance(listed, str) else list(listed)
@@ -210,37 +228,51 @@ def capture(
         live.start()
     interrupted = False
     # The evidence is computed beside the recording, in a child process: the loop only
-    # collects frames, so it keeps up with the source whatever the evidence costs.
-    child = EvidenceProcess(base, name, sensors, shown_digits)
+    # collects frames, so it keeps up with the source whatever the evidence costs (or
+    # the view, which the same child logs).
     try:
-        for block in the_source.blocks():
-            if block is not None:
-                acc.add(block.recording)
-                child.add(block.recording)
-            seconds = acc.n_frames / meta["rate_hz"]
-            done = duration is not None and seconds >= duration
-            result = child.latest()
-            if result is not None:
-                rows, frames = result
-                if live is not None:
-                    live.update(_table(rows, need, frames, meta["rate_hz"]))
-                if until_enough and all(r.enough for r in rows):
-                    break
-            if done:
-                break
-    except KeyboardInterrupt:
-        interrupted = True  # stop recording; what was recorded is kept
-    finally:
+        child = EvidenceProcess(base, name, sensors, shown_digits, view=view, view_save=view_save)
+    except BaseException:
         the_source.close()
-        child.close()
         if live is not None:
             live.stop()
-    rec = acc.recording()
-    if duration is not None:
-        rec = rec.slice(slice(0, min(rec.n_frames, math.ceil(duration * meta["rate_hz"]))))
-    if rec.n_frames == 0:
-        raise FingerfitError("nothing was recorded; no file written", field="--source")
-    rows = evidence(replace(base, grasp=[*prior, rec]), shown_digits)
+        raise
+    final = None
+    try:
+        try:
+            for block in the_source.blocks():
+                if block is not None:
+                    acc.add(block.recording)
+                    child.add(block.recording)
+                seconds = acc.n_frames / meta["rate_hz"]
+                done = duration is not None and seconds >= duration
+                result = child.latest()
+                if result is not None:
+                    rows, frames = result
+                    if live is not None:
+                        live.update(_table(rows, need, frames, meta["rate_hz"]))
+                    if until_enough and all(r.enough for r in rows):
+                        break
+                if done:
+                    break
+        except KeyboardInterrupt:
+            interrupted = True  # stop recording; what was recorded is kept
+        finally:
+            the_source.close()
+            if not child.has_view:
+                child.close()
+            if live is not None:
+                live.stop()
+        rec = acc.recording()
+        if duration is not None:
+            rec = rec.slice(slice(0, min(rec.n_frames, math.ceil(duration * meta["rate_hz"]))))
+        if rec.n_frames == 0:
+            raise FingerfitError("nothing was recorded; no file written", field="--source")
+        rows = evidence(replace(base, grasp=[*prior, rec]), shown_digits)
+        final = (rows, rec.n_frames)
+    finally:
+        if child.has_view:
+            child.close(final)  # the view logs the final evidence and closes its file
     out.print(_table(rows, need, rec.n_frames, meta["rate_hz"]))
     write_pose_csv(target, rec, units=meta["units"])
     toml = _write_meta(session_dir, meta, name, RECORDING_LIST)
@@ -262,8 +294,30 @@ def capture(
             f"{need[1]:g}",
             f"{need[2]:g}",
         )
+    if view_save is not None:
+        say("view -> [bold]{}[/]", view_save)
     if not (session_dir / "landmarks.csv").is_file():
         notice("note", f"{session_dir / 'landmarks.csv'} is missing: the fit needs it")
+
+
+def _check_view(view: bool, view_save: Path | None) -> None:
+    """``--view`` needs a display, ``--view-save`` a new .rrd file (not both); either
+    needs Rerun (one line naming the extra), checked before anything is recorded."""
+    if view_save is not None:
+        from .stream import check_view_save
+
+        check_view_save(view_save, view, None)
+    if view:
+        from ..view import has_display
+
+        if not has_display():
+            raise FingerfitError(
+                "no display to open the viewer on: give --view-save OUT.rrd", field="--view"
+            )
+    if view or view_save is not None:
+        from ..view import require_rerun
+
+        require_rerun()
 
 
 def _shortfall(r: JointEvidence, need: tuple[int, float, float]) -> str:
@@ -283,24 +337,13 @@ def _table(
     """The evidence table (rich), one row per joint."""
     from rich.table import Table
 
-    t = Table(
-        title=f"{frames} frames ({frames / rate_hz:.1f} s); the fit needs {need[0]} cycles, "
-        f"{need[1]:g} deg median range of motion and the axis within +/-{need[2]:g} deg "
-        "(95 %) per joint",
-        title_justify="left",
-    )
-    for col in ("digit", "joint", "cycles", "ROM (deg)", "axis +/- (deg)", "2nd axis", ""):
-        t.add_column(
-            col, justify="right" if col in ("cycles", "ROM (deg)", "axis +/- (deg)") else "left"
-        )
+    from ..capture import NUMERIC_COLUMNS, TABLE_COLUMNS, table_cells, table_title
+
+    t = Table(title=table_title(need, frames, rate_hz), title_justify="left")
+    for col in TABLE_COLUMNS:
+        t.add_column(col, justify="right" if col in NUMERIC_COLUMNS else "left")
     for r in rows:
-        rom = "-" if math.isnan(r.rom_deg) else f"{r.rom_deg:.0f}"
-        ci = "-" if math.isnan(r.axis_ci_deg) else f"{max(r.axis_ci_deg, 0.1):.1f}"
-        ci = "<" + ci if r.axis_ci_deg < 0.05 else ci
-        second = "-" if r.second is None else ("yes: " if r.second else "no: ") + r.second_note
-        t.add_row(
-            r.digit, r.joint, str(r.cycles), rom, ci, second, "enough" if r.enough else "more"
-        )
+        t.add_row(*table_cells(r))
     return t
 
 

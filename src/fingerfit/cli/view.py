@@ -35,8 +35,8 @@ def view(
         bool,
         typer.Option(
             "--web",
-            help="Serve the view and Rerun's web viewer from this machine and print the "
-            "address to open (until Ctrl-C).",
+            help="Serve the view and Rerun's web viewer on 127.0.0.1 (the page may reach "
+            "nothing else) and print the address to open (until Ctrl-C).",
         ),
     ] = False,
     web_port: Annotated[
@@ -131,34 +131,32 @@ def _scene(model, rec, recording: Path, robot, map_path, method, orthogonal, qui
 
 
 def _serve_web(scene, what: str, web_port: int, grpc_port: int) -> None:
-    """Serve the scene over gRPC and the web viewer over HTTP, both on this machine."""
+    """Serve the scene over gRPC and the web viewer over HTTP, both on ``127.0.0.1``;
+    the browser gets the viewer through :class:`fingerfit.view.webserve.ViewerProxy`
+    (its Content-Security-Policy keeps the page on this machine)."""
     import time
-    from urllib.parse import quote
 
     import rerun as rr
 
     from ..view import blueprint, log_scene, new_stream, no_usage_reporting
+    from ..view.webserve import ViewerProxy, free_port, serve_grpc_local
 
     with no_usage_reporting():
         stream = new_stream()
         try:
-            uri = stream.serve_grpc(
-                grpc_port=grpc_port, default_blueprint=blueprint(scene.robot is not None)
-            )
+            uri = serve_grpc_local(stream, grpc_port, blueprint(scene.robot is not None))
+            proxy = ViewerProxy(web_port, free_port(), grpc_port)
             log_scene(scene, stream)
             stream.flush()
-            rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=uri)
+            rr.serve_web_viewer(web_port=proxy.upstream_port, open_browser=False, connect_to=uri)
         except (OSError, RuntimeError) as exc:
             raise FingerfitError(f"cannot serve the viewer ({exc})", field="--web") from None
-        say(
-            "{}: open [bold]{}[/] (Ctrl-C to stop)",
-            what,
-            f"http://localhost:{web_port}/?url={quote(uri, safe='')}",
-        )
+        say("{}: open [bold]{}[/] (Ctrl-C to stop)", what, proxy.url(uri))
         try:
             while True:
                 time.sleep(1.0)
         except KeyboardInterrupt:
+            proxy.close()
             stream.disconnect()
 
 

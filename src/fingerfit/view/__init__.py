@@ -16,6 +16,10 @@ person's palm frame and moves with the hand. Rerun (the extra ``view``) is impor
 Modules: :mod:`.scene` (what the view shows, computed over whole recordings),
 :mod:`.rerunlog` (the scene into a Rerun stream or ``.rrd``), :mod:`.live` (the view of a
 live stream, logged by a process of its own); every name is importable from here.
+:mod:`.evidence` (``capture --view``: the capture's evidence, logged by its evidence
+process), :mod:`.webserve` (``--web``: the web viewer to the browser from ``127.0.0.1`` with a
+Content-Security-Policy) and :mod:`.webshot` (a screenshot of it in headless Chromium)
+are imported by their own names.
 """
 
 from __future__ import annotations
@@ -57,6 +61,9 @@ from .rerunlog import (
     blueprint as blueprint,
 )
 from .rerunlog import (
+    close_view as close_view,
+)
+from .rerunlog import (
     log_frames as log_frames,
 )
 from .rerunlog import (
@@ -73,6 +80,9 @@ from .rerunlog import (
 )
 from .rerunlog import (
     new_stream as new_stream,
+)
+from .rerunlog import (
+    open_view as open_view,
 )
 from .rerunlog import (
     save_rrd as save_rrd,

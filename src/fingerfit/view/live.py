@@ -38,16 +38,16 @@ from ..session import Recording
 from ..transforms import FloatArray
 from .rerunlog import (
     blueprint,
+    close_view,
     log_frames,
     log_robot_frames,
     log_robot_static,
     log_static,
-    new_stream,
+    open_view,
 )
 from .scene import (
     RobotPlacement,
     hand_scene,
-    no_usage_reporting,
     require_rerun,
 )
 
@@ -259,8 +259,6 @@ class _Logger:
     """The view's process side: the Rerun stream, the robot's placement, frames logged."""
 
     def __init__(self, model: HandModel, save: Path | None, robot: RobotSpec | None) -> None:
-        from ..io.atomic import atomic_path
-
         require_rerun()
         self.model = model
         self.placement = None
@@ -270,15 +268,7 @@ class _Logger:
             bot, rmap = resolve(robot[0], robot[1], model.hand)
             self.placement = RobotPlacement(model, bot, rmap, setup(model, bot, rmap))
         self.frames = 0
-        self.stack = contextlib.ExitStack()
-        self.stream = new_stream()
-        layout = blueprint(robot is not None)
-        if save is not None:
-            tmp = self.stack.enter_context(atomic_path(save, suffix=".part.rrd"))
-            self.stream.save(tmp, default_blueprint=layout)
-        else:
-            with no_usage_reporting():
-                self.stream.spawn(default_blueprint=layout)
+        self.stream, self.stack = open_view(save, blueprint(robot is not None))
         self._started = False
 
     def log(
@@ -304,15 +294,7 @@ class _Logger:
 
     def close(self, ok: bool) -> None:
         """Flush the stream; the file is kept when ``ok``, else removed."""
-        try:
-            self.stream.flush()
-            self.stream.disconnect()
-        finally:
-            if ok:
-                self.stack.close()
-            else:
-                with contextlib.suppress(BaseException):
-                    self.stack.__exit__(RuntimeError, RuntimeError("stream failed"), None)
+        close_view(self.stream, self.stack, ok)
 
 
 def _portable(exc: BaseException) -> BaseException:

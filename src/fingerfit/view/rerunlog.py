@@ -4,6 +4,7 @@ the ``.rrd`` file."""
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -275,3 +276,39 @@ def save_rrd(scene: Scene, path: str | Path) -> Path:
         stream.flush()
         stream.disconnect()
     return path
+
+
+def open_view(save: Path | None, layout) -> tuple:
+    """A new recording stream to a Rerun file written atomically (``save``) or to a
+    spawned native viewer (its usage reporting off), with the default ``layout``.
+
+    Returns
+    -------
+    (rerun.RecordingStream, contextlib.ExitStack)
+        The stream, and what :func:`close_view` ends (the file's atomic write).
+    """
+    from ..io.atomic import atomic_path
+
+    stack = contextlib.ExitStack()
+    stream = new_stream()
+    if save is not None:
+        tmp = stack.enter_context(atomic_path(Path(save), suffix=".part.rrd"))
+        stream.save(tmp, default_blueprint=layout)
+    else:
+        with no_usage_reporting():
+            stream.spawn(default_blueprint=layout)
+    return stream, stack
+
+
+def close_view(stream, stack: contextlib.ExitStack, ok: bool) -> None:
+    """Flush and disconnect a stream of :func:`open_view`; its file is kept when ``ok``,
+    else removed."""
+    try:
+        stream.flush()
+        stream.disconnect()
+    finally:
+        if ok:
+            stack.close()
+        else:
+            with contextlib.suppress(BaseException):
+                stack.__exit__(RuntimeError, RuntimeError("view not complete"), None)

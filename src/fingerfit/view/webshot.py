@@ -21,7 +21,6 @@ import json
 import os
 import re
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -31,6 +30,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .webserve import free_port
 
 #: Chromium's switches: headless, the software WebGL, nothing fetched but this machine.
 CHROMIUM_FLAGS = (
@@ -61,13 +62,6 @@ _LAUNCH = (
 
 #: The line ``fingerfit view --web`` prints: the address to open.
 _OPEN = re.compile(r"open (http://\S+)")
-
-
-def free_port() -> int:
-    """A TCP port free on this machine now (the system's pick)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @contextlib.contextmanager
@@ -151,6 +145,9 @@ class HeadlessChromium:
         os.close(from_browser)
         self._buffer = b""
         self._id = 0
+        #: DevTools events kept (their method in :attr:`watch`), in order of arrival.
+        self.events: list[dict] = []
+        self.watch: set[str] = set()
         targets = self.call("Target.getTargets")["targetInfos"]
         page = next(t["targetId"] for t in targets if t["type"] == "page")
         attached = self.call("Target.attachToTarget", targetId=page, flatten=True)
@@ -175,7 +172,9 @@ class HeadlessChromium:
         os.write(self._out, json.dumps(message).encode() + b"\0")
         while True:
             reply = self._read()
-            if reply.get("id") == self._id:
+            if reply.get("method") in self.watch:
+                self.events.append(reply)
+            elif reply.get("id") == self._id:
                 if "error" in reply:
                     raise RuntimeError(f"{method}: {reply['error'].get('message')}")
                 return reply.get("result", {})
@@ -200,6 +199,37 @@ class HeadlessChromium:
         """Whether the page gets a WebGL 2 context (what Rerun's web viewer draws with)."""
         probe = "!!document.createElement('canvas').getContext('webgl2')"
         return bool(self.evaluate(probe))
+
+    def record_requests(self) -> None:
+        """Keep, from now on, every request the page makes and how it failed, in
+        :attr:`events`: ``Network.requestWillBeSent`` (asked for; a request a
+        Content-Security-Policy refuses is asked for too, then fails),
+        ``Network.loadingFailed`` (with ``blockedReason`` ``"csp"`` when the page's policy
+        refused it before anything was sent) and the console's ``Log.entryAdded``
+        (where Chromium reports each violation of the policy). The events are read
+        with each command's reply (:meth:`requests`)."""
+        self.watch |= {"Network.requestWillBeSent", "Network.loadingFailed", "Log.entryAdded"}
+        self.call("Network.enable", session=self.session)
+        self.call("Log.enable", session=self.session)
+
+    def requests(self) -> list[dict]:
+        """The page's requests since :meth:`record_requests`, each ``{"url", "failed",
+        "blocked"}``: ``failed`` the error text (None if it did not fail), ``blocked`` the
+        reason Chromium refused to send it (``"csp"``: the page's policy; None if sent)."""
+        self.call("Browser.getVersion")  # reads the events that came before its reply
+        found: dict[str, dict] = {}
+        for e in self.events:
+            p = e["params"]
+            if e["method"] == "Network.requestWillBeSent":
+                found[p["requestId"]] = {
+                    "url": p["request"]["url"],
+                    "failed": None,
+                    "blocked": None,
+                }
+            elif e["method"] == "Network.loadingFailed" and p["requestId"] in found:
+                found[p["requestId"]]["failed"] = p.get("errorText")
+                found[p["requestId"]]["blocked"] = p.get("blockedReason")
+        return list(found.values())
 
     def open(self, url: str) -> None:
         """Navigate the page to ``url``."""
