@@ -23,11 +23,13 @@ the cycle rules, when its saddle fit succeeds and its axis confidence passes
 
 from __future__ import annotations
 
+import functools
 import math
 import multiprocessing as mp
 import queue
 import signal
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -143,6 +145,19 @@ def table_cells(r: JointEvidence) -> list[str]:
     ci = "<" + ci if r.axis_ci_deg < 0.05 else ci
     second = "-" if r.second is None else ("yes: " if r.second else "no: ") + r.second_note
     return [r.digit, r.joint, str(r.cycles), rom, ci, second, "enough" if r.enough else "more"]
+
+
+def markdown_table(
+    rows: list[JointEvidence], frames: int, need: tuple[int, float, float], rate_hz: float
+) -> str:
+    """The evidence table as Markdown (the view's panel): :func:`table_title`, then one
+    row per joint with the cells the terminal shows (:func:`table_cells`)."""
+    head = [c or "fit" for c in TABLE_COLUMNS]
+    align = ["---:" if c in NUMERIC_COLUMNS else "---" for c in TABLE_COLUMNS]
+    lines = [f"**{table_title(need, frames, rate_hz)}**", ""]
+    for cells in (head, align, *(table_cells(r) for r in rows)):
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def _second(data: JointData, required: bool) -> tuple[bool, str, str, float]:
@@ -282,23 +297,27 @@ def _evidence_loop(
     sensors: list[str],
     digits: list[str],
     options: FitOptions | None,
-    view: tuple[bool, Path | None],
+    view: tuple[Callable[..., Any] | None, Path | None],
     blocks: mp.Queue,
     results: mp.Queue,
 ) -> None:
     """The child process of :class:`EvidenceProcess`: joins the blocks it is sent and,
     whenever it is free, at most every :data:`UPDATE_S`, sends ``("evidence", rows,
-    n_frames)`` of everything so far (and logs it to the view, when ``view[0]``); ends at
+    n_frames)`` of everything so far (and logs it to the view ``view[0]`` makes, if any); ends at
     ``("end", final)``, logging ``final`` (``(rows, n_frames)``, or None) to the view and
     closing it. Ctrl-C is the parent's to handle (it stops the child), so the child
     ignores it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     shown = None
-    if view[0]:
+    if view[0] is not None:
         try:
-            from .view.evidence import EvidenceView
-
-            shown = EvidenceView(sensors, base.rate_hz, view[1])
+            need = thresholds()
+            shown = view[0](
+                sensors,
+                need,
+                functools.partial(markdown_table, need=need, rate_hz=base.rate_hz),
+                view[1],
+            )
         except BaseException as exc:
             from .view.live import _portable
 
@@ -353,8 +372,8 @@ class EvidenceProcess:
     In its own process the evaluation (the thumb's saddle fit takes seconds) shares neither
     the loop's interpreter lock nor its BLAS threads, so the loop keeps up with the source.
     With a view (``capture --view`` / ``--view-save``) the child also logs each result to
-    Rerun (:class:`fingerfit.view.evidence.EvidenceView`), and at :meth:`close` the final
-    evidence.
+    Rerun (``viewer``, :class:`fingerfit.view.evidence.EvidenceView`), and at :meth:`close`
+    the final evidence.
 
     Parameters
     ----------
@@ -368,11 +387,13 @@ class EvidenceProcess:
     digits : list of str
         Digits to report (:func:`evidence`).
     options : FitOptions, optional
-    view : bool
-        Show the evidence in the native Rerun viewer (spawned by the child).
+    viewer : callable, optional
+        ``viewer(sensors, thresholds, table, save)`` makes the child's view of the evidence
+        (:class:`fingerfit.view.evidence.EvidenceView`, passed in by the command so that
+        this module does not import the viewer); None: no view.
     view_save : Path, optional
-        Write the view to this Rerun file instead (complete once :meth:`close` returns
-        with a final result).
+        With ``viewer``: write the view to this Rerun file instead of the native viewer
+        (complete once :meth:`close` returns with a final result).
 
     Raises
     ------
@@ -387,11 +408,11 @@ class EvidenceProcess:
         sensors: list[str],
         digits: list[str],
         options: FitOptions | None = None,
-        view: bool = False,
+        viewer: Callable[..., Any] | None = None,
         view_save: Path | None = None,
     ) -> None:
         ctx = mp.get_context("spawn")
-        self.has_view = view or view_save is not None
+        self.has_view = viewer is not None
         self._blocks = ctx.Queue()
         self._results = ctx.Queue()
         self._proc = ctx.Process(
@@ -402,7 +423,7 @@ class EvidenceProcess:
                 sensors,
                 digits,
                 options,
-                (self.has_view, view_save),
+                (viewer, view_save),
                 self._blocks,
                 self._results,
             ),

@@ -231,7 +231,14 @@ def capture(
     # collects frames, so it keeps up with the source whatever the evidence costs (or
     # the view, which the same child logs).
     try:
-        child = EvidenceProcess(base, name, sensors, shown_digits, view=view, view_save=view_save)
+        viewer = None
+        if view or view_save is not None:
+            from ..view.evidence import EvidenceView
+
+            viewer = EvidenceView
+        child = EvidenceProcess(
+            base, name, sensors, shown_digits, viewer=viewer, view_save=view_save
+        )
     except BaseException:
         the_source.close()
         if live is not None:

@@ -24,6 +24,7 @@ NaN, which the viewer leaves out of its line.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -66,20 +67,6 @@ def evidence_blueprint():
     )
 
 
-def markdown_table(rows: list[JointEvidence], need: tuple[int, float, float], frames: int,
-                   rate_hz: float) -> str:  # fmt: skip
-    """The capture's evidence table as Markdown: its title, then one row per joint with
-    the cells the terminal shows (:func:`fingerfit.capture.table_cells`)."""
-    from ..capture import NUMERIC_COLUMNS, TABLE_COLUMNS, table_cells, table_title
-
-    head = [c or "fit" for c in TABLE_COLUMNS]
-    align = ["---:" if c in NUMERIC_COLUMNS else "---" for c in TABLE_COLUMNS]
-    lines = [f"**{table_title(need, frames, rate_hz)}**", ""]
-    for cells in (head, align, *(table_cells(r) for r in rows)):
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return "\n".join(lines) + "\n"
-
-
 class EvidenceView:
     """The Rerun stream of a capture's evidence (module docstring).
 
@@ -87,8 +74,12 @@ class EvidenceView:
     ----------
     sensors : list of str
         The recording's sensors, drawn in this order.
-    rate_hz : float
-        The recording's rate (the table's seconds).
+    need : tuple of (int, float, float)
+        The thresholds the series are drawn against: cycles, median range of motion
+        (deg), axis confidence half-angle (deg) (:func:`fingerfit.capture.thresholds`).
+    table : callable
+        ``table(rows, frames)``: the evidence table of an update as Markdown (the
+        capture's own, :func:`fingerfit.capture.markdown_table`).
     save : Path, optional
         Write a Rerun file (atomically, kept by :meth:`close` with ``ok``); otherwise the
         native viewer is spawned, its usage reporting off.
@@ -99,13 +90,17 @@ class EvidenceView:
         Rerun (the extra ``view``) is not installed.
     """
 
-    def __init__(self, sensors: list[str], rate_hz: float, save: Path | None = None) -> None:
-        from ..capture import thresholds
-
+    def __init__(
+        self,
+        sensors: list[str],
+        need: tuple[int, float, float],
+        table: Callable[[list[JointEvidence], int], str],
+        save: Path | None = None,
+    ) -> None:
         rr = require_rerun()
         self.sensors = list(sensors)
-        self.rate_hz = float(rate_hz)
-        self.need = thresholds()
+        self.need = need
+        self.table = table
         self.updates = 0
         self.stream, self.stack = open_view(save, evidence_blueprint())
         _static(rr, self.stream, "/", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
@@ -144,7 +139,7 @@ class EvidenceView:
             for r, v in zip(rows, got, strict=True):
                 self._scalar(rr, f"evidence/{entity}/{r.digit}/{r.joint}", idx, v)
             self._scalar(rr, f"evidence/{entity}/{limit}", idx, needed)
-        table = markdown_table(rows, self.need, frames, self.rate_hz)
+        table = self.table(rows, frames)
         rr.send_columns(
             "evidence/table",
             indexes=idx,
