@@ -12,9 +12,9 @@ with ``a`` and ``b`` in the parent (hand) sensor frame at the reference posture.
 in closed form from :func:`fingerfit.angles.two_axis_angles` (the same
 decomposition the angles use later), and the residual is the small rotation
 ``vee(E - E^T) / 2`` of ``E = Rot(a, theta)^T Rot(b, beta)^T Q`` (rad).
-``scipy.optimize.least_squares`` minimises it, first with ``b`` held perpendicular
-to ``a`` (three parameters), then with the tilt of ``b`` towards ``a`` freed only as far
-as the grasp cycles determine it (:mod:`.shrink`; the tilt is seen only at second order
+``scipy.optimize.least_squares`` minimises it (with its analytic Jacobian), first with
+``b`` held perpendicular to ``a`` (three parameters), then with the tilt of ``b`` towards
+``a`` freed only as far as the grasp cycles determine it (:mod:`.shrink`; the tilt is seen only at second order
 and otherwise wanders along a flat valley: ``docs/methods.md``, "Numerical
 stability"). Starts: the pooled hinge axis and, for ``b``, the dorsal direction
 (finger direction x hinge axis, from the landmarks) -- or, without landmarks, both the
@@ -69,7 +69,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..angles import two_axis_angles
-from ..transforms import FloatArray, orthonormal_basis, unit
+from ..transforms import FloatArray, orthonormal_basis, skew, unit
 from .migration import fit_axis_points
 from .rest_abduction import REST_SPREAD_CONFIDENCE as REST_SPREAD_CONFIDENCE
 from .rest_abduction import REST_SPREAD_RATIO as REST_SPREAD_RATIO
@@ -81,6 +81,7 @@ from .twoaxis_residual import (
     _skew_residual,
     _tangent_coords,
     direction_jacobian,
+    skew_residual_jacobian,
 )
 
 MAX_RESIDUAL_RATIO = 0.5
@@ -221,6 +222,47 @@ class TwoAxisDirections:
     data_condition: float
 
 
+def _turned(v0: FloatArray, e: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``unit(v0 + x[0] e[0] + x[1] e[1])`` ``(3,)`` and its derivative ``(2, 3)`` by ``x``."""
+    v = v0 + x[0] * e[0] + x[1] * e[1]
+    norm = np.linalg.norm(v)
+    u = v / norm
+    return u, (e[:2] - np.outer(e[:2] @ u, u)) / norm
+
+
+def _free_axes(
+    x: FloatArray, a0: FloatArray, ea: FloatArray, b0: FloatArray, eb: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Stage 2's axes: ``a`` turned from ``a0`` by ``x[:2]`` along ``ea[:2]``, ``b`` from
+    ``b0`` by ``x[2:]`` along ``eb[:2]`` (:func:`_turned`), and their derivatives ``(4, 3)``
+    each by the four parameters."""
+    a, da = _turned(a0, ea, x[:2])
+    b, db = _turned(b0, eb, x[2:])
+    zero = np.zeros((2, 3))
+    return a, b, np.concatenate([da, zero]), np.concatenate([zero, db])
+
+
+def _perpendicular_axes(
+    y: FloatArray, a0: FloatArray, ea: FloatArray, b0: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Stage 1's axes: ``a`` turned from ``a0`` by ``y[:2]`` (:func:`_turned`), ``b``
+    perpendicular to it, turned by ``y[2]`` (rad) about ``a`` from ``b0``'s part
+    perpendicular to ``a``; with their derivatives ``(3, 3)`` each by the three parameters."""
+    a, da = _turned(a0, ea, y[:2])
+    w = b0 - (b0 @ a) * a
+    norm = np.linalg.norm(w)
+    u = w / norm
+    dw = -np.outer(da @ b0, a) - (b0 @ a) * da
+    du = (dw - np.outer(dw @ u, u)) / norm
+    c, s = np.cos(y[2]), np.sin(y[2])
+    ka = skew(a)
+    axu = ka @ u
+    b = c * u + s * axu
+    # rows: d(a x u) = da x u + a x du
+    db = np.vstack([c * du + s * (da @ skew(u) + du @ ka.T), -s * u + c * axu])
+    return a, b, np.vstack([da, np.zeros(3)]), db
+
+
 def fit_two_axis_directions(
     q: FloatArray,
     flexion_guess: FloatArray,
@@ -278,39 +320,43 @@ def fit_two_axis_directions(
         starts = [unit(np.cross(finger_direction, a0))]
     ea = orthonormal_basis(a0)
     lim = np.array([_BOUNDS[0], _BOUNDS[1], np.radians(MAX_ABDUCTION_TURN_DEG)])
+
+    def data_resid(a: FloatArray, b: FloatArray, *_: FloatArray) -> FloatArray:
+        return (_skew_residual(q, a, b) * sw[:, None]).ravel()
+
+    def data_jac(a: FloatArray, b: FloatArray, da: FloatArray, db: FloatArray) -> FloatArray:
+        return (skew_residual_jacobian(q, a, b, da, db) * sw[:, None, None]).reshape(-1, len(da))
+
     best = None
     for b0 in starts:
         eb = orthonormal_basis(b0)
 
         def dirs(x: FloatArray, b0: FloatArray = b0, eb: FloatArray = eb) -> tuple:
-            a = unit(a0 + x[0] * ea[0] + x[1] * ea[1])
-            b = unit(b0 + x[2] * eb[0] + x[3] * eb[1])
-            return a, b
+            return _free_axes(x, a0, ea, b0, eb)
 
         def perp(y: FloatArray, b0: FloatArray = b0) -> tuple:
-            # Stage 1: b perpendicular to a, turned by y[2] (rad) about a from b0.
-            a = unit(a0 + y[0] * ea[0] + y[1] * ea[1])
-            u = unit(b0 - (b0 @ a) * a)
-            return a, np.cos(y[2]) * u + np.sin(y[2]) * np.cross(a, u)
-
-        def data_resid(a: FloatArray, b: FloatArray) -> FloatArray:
-            return (_skew_residual(q, a, b) * sw[:, None]).ravel()
+            return _perpendicular_axes(y, a0, ea, b0)
 
         s1 = least_squares(
             lambda y, perp=perp: data_resid(*perp(y)),
             np.zeros(3),
+            jac=lambda y, perp=perp: data_jac(*perp(y)),
             bounds=(-lim, lim),
             x_scale=0.05,
             xtol=1e-10,
             ftol=1e-12,
         )
-        a1, b1 = perp(s1.x)
+        a1, b1, _, _ = perp(s1.x)
         x1 = np.concatenate([_tangent_coords(a1, a0, ea), _tangent_coords(b1, b0, eb)])
         x1 = np.clip(x1, -0.99 * _BOUNDS, 0.99 * _BOUNDS)
 
         def resid(x: FloatArray, lam: float, dirs=dirs) -> FloatArray:
-            a, b = dirs(x)
+            a, b, _, _ = dirs(x)
             return np.append(data_resid(a, b), lam * (a @ b))
+
+        def resid_jac(x: FloatArray, lam: float, dirs=dirs) -> FloatArray:
+            a, b, da, db = dirs(x)
+            return np.vstack([data_jac(a, b, da, db), lam * (da @ b + db @ a)])
 
         # How well the data alone see the tilt of b towards a (cluster-robust, per
         # cycle), first at the perpendicular solution, then once more at the fit it
@@ -331,13 +377,14 @@ def fit_two_axis_directions(
             sol = least_squares(
                 resid,
                 x1,
+                jac=resid_jac,
                 bounds=(-_BOUNDS, _BOUNDS),
                 x_scale=0.05,
                 xtol=1e-12,
                 ftol=1e-14,
                 kwargs={"lam": lam},
             )
-            a, b = dirs(sol.x)
+            a, b, _, _ = dirs(sol.x)
         if share < MIN_DATA_SHARE:
             # The data do not determine the tilt: b stays perpendicular to a.
             a, b, cost = a1, b1, s1.cost

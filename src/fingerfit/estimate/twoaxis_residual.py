@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..angles import two_axis_angles
-from ..transforms import FloatArray, orthonormal_basis, skew, unit
+from ..transforms import FloatArray, orthonormal_basis, skew
 from .shrink import cluster_score_outer
 
 # L_k = skew(e_k)^T: tr(M L_k) = M[r, c] - M[c, r] for (r, c) = (2, 1), (0, 2), (1, 0).
@@ -41,6 +41,93 @@ def _skew_residual(q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
     return (u[0] - np.sin(theta) * u[1] + (1.0 - np.cos(theta)) * u[2]).T
 
 
+def _vee2(m: FloatArray) -> FloatArray:
+    """``vee(M - M^T)`` ``(n, 3)`` of ``m (n, 3, 3)``: ``tr(M K_v^T) = v . vee(M - M^T)``."""
+    return np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]], 1)
+
+
+def _left(k: FloatArray, m: FloatArray) -> FloatArray:
+    """``k @ m[i]`` for every ``i``: ``(n, 3, 3)`` from ``k (3, 3)`` and ``m (n, 3, 3)``, one
+    matrix product."""
+    n = m.shape[0]
+    return (k @ np.swapaxes(m, 0, 1).reshape(3, 3 * n)).reshape(3, n, 3).swapaxes(0, 1)
+
+
+def skew_residual_jacobian(
+    q: FloatArray, a: FloatArray, b: FloatArray, da: FloatArray, db: FloatArray
+) -> FloatArray:
+    """Derivative of :func:`_skew_residual` along moves of the two axes, analytically.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n, 3, 3)
+        ``R(k) R_ref^T`` (parent frame).
+    a, b : ndarray, shape (3,)
+        Unit flexion and ab/adduction axes (parent frame).
+    da, db : ndarray, shape (p, 3)
+        Per parameter, the rate of change of ``a`` and of ``b`` (per unit of the
+        parameter; each row perpendicular to its axis: unit vectors stay unit).
+
+    Returns
+    -------
+    ndarray, shape (n, 3, p)
+        ``d r(k) / d x_p`` (rad per unit of the parameter), ``r`` the residual
+        ``vee(E - E^T) / 2`` of ``E = Rot(a, -theta) Rot(b, -beta) Q`` with the angles of
+        :func:`fingerfit.angles.two_axis_angles` carried along (variable projection: the
+        angles are closed-form functions of the axes, not minimisers of the residual).
+
+    Notes
+    -----
+    Every rotation moves by a small rotation of its own: ``d Rot(u, phi) =
+    [w]x Rot(u, phi)`` with ``w = u dphi + sin(phi) du + (1 - cos(phi)) u x du`` (``u``
+    unit, ``du`` perpendicular to it). With ``M = Rot(b, -beta) Q`` and ``E = Rot(a,
+    -theta) M`` that gives ``dM = -[nu]x M``, ``nu = Rot(b, -beta) w_b``, and ``dE =
+    -[Omega]x E``, ``Omega = Rot(a, -theta) (w_a + nu)``; then ``dr = -(tr(E) I - E)
+    Omega / 2`` (``[w]x E + E^T [w]x = [(tr(E) I - E) w]x``). The angles' own
+    derivatives follow from their formulas: ``beta = atan2(Qa . (b x a), Qa . a_perp)``
+    (``a_perp = a - (a . b) b``) and ``theta = 2 atan2(a . vee(M - M^T), 1 + tr M)``.
+    """
+    beta, theta = two_axis_angles(q, a, b)
+    ka, kb = skew(a), skew(b)
+    ab = a @ b
+    ba, ap = kb @ a, a - ab * b
+    # beta = atan2(s1, c1): s1 = Qa . (b x a), c1 = Qa . a_perp; Q a and Q da at once.
+    n, k = q.shape[0], da.shape[0] + 1
+    qx = (q.reshape(3 * n, 3) @ np.vstack([a, da]).T).reshape(n, 3, k)
+    s1, c1 = ba @ qx, ap @ qx  # (n, 1 + p): the value, then Q da's part of the derivative
+    d_ba = db @ ka - da @ kb  # db x a + b x da
+    d_ap = da - np.outer(da @ b + db @ a, b) - ab * db
+    ds1 = s1[:, 1:] + qx[:, :, 0] @ d_ba.T
+    dc1 = c1[:, 1:] + qx[:, :, 0] @ d_ap.T
+    s1, c1 = s1[:, :1], c1[:, :1]
+    dbeta = (c1 * ds1 - s1 * dc1) / (s1 * s1 + c1 * c1)
+    # d Rot(b, beta) = [w_b]x Rot(b, beta); nu = Rot(b, -beta) w_b = b dbeta + sin(beta) db
+    # - (1 - cos(beta)) b x db (rows, (n, p, 3)); M = Rot(b, -beta) Q.
+    sb, cb = np.sin(beta)[:, None, None], (1.0 - np.cos(beta))[:, None, None]
+    nu = dbeta[:, :, None] * b + sb * db - cb * (db @ kb.T)
+    kbq = _left(kb, q)
+    m = q - sb * kbq + cb * _left(kb, kbq)
+    vm, trm = _vee2(m), m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    # theta = 2 atan2(S, C): S = a . vee(M - M^T), C = 1 + tr M; dM = -[nu]x M gives
+    # dC = nu . vee(M - M^T) and dS = da . vee(M - M^T) + nu . (M^T a - tr(M) a).
+    big_s, big_c = (vm @ a)[:, None], (1.0 + trm)[:, None]
+    g = nu @ np.stack([vm, a @ m - trm[:, None] * a], axis=2)
+    dc, ds = g[:, :, 0], vm @ da.T + g[:, :, 1]
+    dtheta = 2.0 * (big_c * ds - big_s * dc) / (big_s * big_s + big_c * big_c)
+    # E = Rot(a, -theta) M, dE = -[Omega]x E: Omega = Rot(a, -theta) (w_a + nu), and
+    # Rot(a, -theta) w_a = a dtheta + sin(theta) da - (1 - cos(theta)) a x da.
+    st, ct = np.sin(theta)[:, None, None], (1.0 - np.cos(theta))[:, None, None]
+    kam = _left(ka, m)
+    e = m - st * kam + ct * _left(ka, kam)
+    nu_k = (nu.reshape(-1, 3) @ np.hstack([ka.T, (ka @ ka).T])).reshape(n, k - 1, 6)
+    nu_a = nu - st * nu_k[:, :, :3] + ct * nu_k[:, :, 3:]  # Rot(a, -theta) nu, rows
+    omega = dtheta[:, :, None] * a + st * da - ct * (da @ ka.T) + nu_a
+    tre = e[:, 0, 0] + e[:, 1, 1] + e[:, 2, 2]
+    # dr = -(tr(E) I - E) Omega / 2, rows (n, p, 3) turned to (n, 3, p).
+    dr = omega @ np.swapaxes(e, 1, 2) - tre[:, None, None] * omega
+    return 0.5 * np.swapaxes(dr, 1, 2)
+
+
 def _hinge_residual(q: FloatArray, a: FloatArray) -> FloatArray:
     """Per-frame rotation off the hinge axis ``a`` (rad): ``|Q a - a|``."""
     return np.linalg.norm(q @ a - a, axis=1)
@@ -58,18 +145,15 @@ def direction_jacobian(
 
     The four coordinates turn ``a`` and ``b`` (rad) towards the two vectors of
     :func:`orthonormal_basis` perpendicular to each; returned with those vectors
-    ``(4, 3)`` (two for ``a``, then two for ``b``).
+    ``(4, 3)`` (two for ``a``, then two for ``b``). The Jacobian is analytic
+    (:func:`skew_residual_jacobian`); ``sw (n,)`` weighs each frame's three rows.
     """
     ta, tb = orthonormal_basis(a), orthonormal_basis(b)
-
-    def res(z: FloatArray) -> FloatArray:
-        aa = unit(a + z[0] * ta[0] + z[1] * ta[1])
-        bb = unit(b + z[2] * tb[0] + z[3] * tb[1])
-        return (_skew_residual(q, aa, bb) * sw[:, None]).ravel()
-
-    h = 1e-6
-    jac = np.stack([(res(h * e) - res(-h * e)) / (2 * h) for e in np.eye(4)], axis=1)
-    return res(np.zeros(4)), jac, np.concatenate([ta[:2], tb[:2]])
+    zero = np.zeros((2, 3))
+    da, db = np.concatenate([ta[:2], zero]), np.concatenate([zero, tb[:2]])
+    jac = skew_residual_jacobian(q, a, b, da, db) * sw[:, None, None]
+    r = _skew_residual(q, a, b) * sw[:, None]
+    return r.ravel(), jac.reshape(-1, 4), np.concatenate([ta[:2], tb[:2]])
 
 
 def _cluster_covariance(
