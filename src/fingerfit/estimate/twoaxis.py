@@ -69,7 +69,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..angles import two_axis_angles
-from ..transforms import FloatArray, orthonormal_basis, skew, unit
+from ..transforms import FloatArray, cross3, orthonormal_basis, skew, unit
 from .migration import fit_axis_points
 from .rest_abduction import REST_SPREAD_CONFIDENCE as REST_SPREAD_CONFIDENCE
 from .rest_abduction import REST_SPREAD_RATIO as REST_SPREAD_RATIO
@@ -315,9 +315,9 @@ def fit_two_axis_directions(
     swing = np.cross(a0, q @ a0) * sw[:, None]
     _, _, vt = np.linalg.svd(swing, full_matrices=False)
     pca = unit(vt[0] - (vt[0] @ a0) * a0)
-    starts = [pca, np.cross(a0, pca)]
-    if finger_direction is not None and np.linalg.norm(np.cross(finger_direction, a0)) > 0.1:
-        starts = [unit(np.cross(finger_direction, a0))]
+    starts = [pca, cross3(a0, pca)]
+    if finger_direction is not None and np.linalg.norm(cross3(finger_direction, a0)) > 0.1:
+        starts = [unit(cross3(finger_direction, a0))]
     ea = orthonormal_basis(a0)
     lim = np.array([_BOUNDS[0], _BOUNDS[1], np.radians(MAX_ABDUCTION_TURN_DEG)])
 
@@ -394,7 +394,7 @@ def fit_two_axis_directions(
             interior = bool(np.all(np.abs(sol.x) < 0.98 * _BOUNDS))
         # Interior optima beat boundary ones; then the lower cost wins.
         if best is None or (interior, -cost) > (best[3], -best[2]):
-            phi = np.concatenate([[0.0, 0.0], unit(basis[2:] @ np.cross(a, b))])
+            phi = np.concatenate([[0.0, 0.0], unit(basis[2:] @ cross3(a, b))])
             best = (a, b, cost, interior, var_tilt, cov, share, float(phi @ cov @ phi))
     a, b, cost, interior, var_tilt, cov1, share, var_phi = best
     _, jac, _ = direction_jacobian(q, a, b, sw)
