@@ -51,7 +51,8 @@ def test_skew_residual_jacobian_matches_finite_differences(
         return _skew_residual(q, unit(a + x @ da), unit(b + x @ db)).ravel()
 
     want = _central(res, 5)
-    got = skew_residual_jacobian(q, a, b, da, db)
+    r, got = skew_residual_jacobian(q, a, b, da, db)
+    np.testing.assert_allclose(r, _skew_residual(q, a, b), rtol=0, atol=1e-15)
     assert got.shape == (300, 3, 5)
     scale = np.abs(want).max()
     assert scale > 0.1
@@ -101,5 +102,5 @@ def test_search_parametrisations_differentiate_right(stage: str) -> None:
     want_dirs = _central(lambda d: np.concatenate(axes(x0 + d)[:2]), p)
     np.testing.assert_allclose(np.vstack([da.T, db.T]), want_dirs, rtol=0, atol=1e-8)
     want = _central(lambda d: _skew_residual(q, *axes(x0 + d)[:2]).ravel(), p)
-    got = skew_residual_jacobian(q, av, bv, da, db).reshape(-1, p)
+    got = skew_residual_jacobian(q, av, bv, da, db)[1].reshape(-1, p)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 * np.abs(want).max())

@@ -63,6 +63,7 @@ from here too.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,11 +79,11 @@ from .shrink import MIN_DATA_SHARE, data_share
 from .twoaxis_residual import (
     _cluster_covariance,
     _hinge_residual,
-    _skew_residual,
     _tangent_coords,
     direction_jacobian,
     skew_residual_jacobian,
 )
+from .twoaxis_residual import _skew_residual as _skew_residual
 
 MAX_RESIDUAL_RATIO = 0.5
 MIN_RANGE_DEG = 1.5
@@ -263,6 +264,28 @@ def _perpendicular_axes(
     return a, b, np.vstack([da, np.zeros(3)]), db
 
 
+class _Evaluations:
+    """``fun`` and ``jac`` for :func:`scipy.optimize.least_squares` from one function of the
+    parameters returning both (residual ``(m,)``, Jacobian ``(m, p)``): the Jacobian
+    computed with a residual is handed back when asked for at the same parameters (the
+    solver asks for it at each step it accepts, right after the residual)."""
+
+    def __init__(self, both: Callable[..., tuple[FloatArray, FloatArray]]) -> None:
+        self.both = both
+        self.x: FloatArray | None = None
+        self.j = np.zeros((0, 0))
+
+    def fun(self, x: FloatArray, **kwargs: float) -> FloatArray:
+        r, self.j = self.both(x, **kwargs)
+        self.x = x.copy()
+        return r
+
+    def jac(self, x: FloatArray, **kwargs: float) -> FloatArray:
+        if self.x is None or not np.array_equal(x, self.x):
+            self.fun(x, **kwargs)
+        return self.j
+
+
 def fit_two_axis_directions(
     q: FloatArray,
     flexion_guess: FloatArray,
@@ -321,11 +344,10 @@ def fit_two_axis_directions(
     ea = orthonormal_basis(a0)
     lim = np.array([_BOUNDS[0], _BOUNDS[1], np.radians(MAX_ABDUCTION_TURN_DEG)])
 
-    def data_resid(a: FloatArray, b: FloatArray, *_: FloatArray) -> FloatArray:
-        return (_skew_residual(q, a, b) * sw[:, None]).ravel()
-
-    def data_jac(a: FloatArray, b: FloatArray, da: FloatArray, db: FloatArray) -> FloatArray:
-        return (skew_residual_jacobian(q, a, b, da, db) * sw[:, None, None]).reshape(-1, len(da))
+    def data(a: FloatArray, b: FloatArray, da: FloatArray, db: FloatArray) -> tuple:
+        # Weighted residual (3n,) and Jacobian (3n, p).
+        r, jac = skew_residual_jacobian(q, a, b, da, db)
+        return (r * sw[:, None]).ravel(), (jac * sw[:, None, None]).reshape(-1, len(da))
 
     best = None
     for b0 in starts:
@@ -337,10 +359,11 @@ def fit_two_axis_directions(
         def perp(y: FloatArray, b0: FloatArray = b0) -> tuple:
             return _perpendicular_axes(y, a0, ea, b0)
 
+        stage1 = _Evaluations(lambda y, perp=perp: data(*perp(y)))
         s1 = least_squares(
-            lambda y, perp=perp: data_resid(*perp(y)),
+            stage1.fun,
             np.zeros(3),
-            jac=lambda y, perp=perp: data_jac(*perp(y)),
+            jac=stage1.jac,
             bounds=(-lim, lim),
             x_scale=0.05,
             xtol=1e-10,
@@ -350,13 +373,13 @@ def fit_two_axis_directions(
         x1 = np.concatenate([_tangent_coords(a1, a0, ea), _tangent_coords(b1, b0, eb)])
         x1 = np.clip(x1, -0.99 * _BOUNDS, 0.99 * _BOUNDS)
 
-        def resid(x: FloatArray, lam: float, dirs=dirs) -> FloatArray:
-            a, b, _, _ = dirs(x)
-            return np.append(data_resid(a, b), lam * (a @ b))
-
-        def resid_jac(x: FloatArray, lam: float, dirs=dirs) -> FloatArray:
+        def resid(x: FloatArray, lam: float, dirs=dirs) -> tuple:
+            # The data rows and the prior row on a . b.
             a, b, da, db = dirs(x)
-            return np.vstack([data_jac(a, b, da, db), lam * (da @ b + db @ a)])
+            r, jac = data(a, b, da, db)
+            return np.append(r, lam * (a @ b)), np.vstack([jac, lam * (da @ b + db @ a)])
+
+        stage2 = _Evaluations(resid)
 
         # How well the data alone see the tilt of b towards a (cluster-robust, per
         # cycle), first at the perpendicular solution, then once more at the fit it
@@ -375,9 +398,9 @@ def fit_two_axis_directions(
             curv = 1.0 / max(float(e @ h_inv @ e), 1e-300)
             lam = np.sqrt(curv * (1.0 - share) / share)
             sol = least_squares(
-                resid,
+                stage2.fun,
                 x1,
-                jac=resid_jac,
+                jac=stage2.jac,
                 bounds=(-_BOUNDS, _BOUNDS),
                 x_scale=0.05,
                 xtol=1e-12,

@@ -55,8 +55,8 @@ def _left(k: FloatArray, m: FloatArray) -> FloatArray:
 
 def skew_residual_jacobian(
     q: FloatArray, a: FloatArray, b: FloatArray, da: FloatArray, db: FloatArray
-) -> FloatArray:
-    """Derivative of :func:`_skew_residual` along moves of the two axes, analytically.
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`_skew_residual` and its derivative along moves of the two axes, analytically.
 
     Parameters
     ----------
@@ -70,7 +70,9 @@ def skew_residual_jacobian(
 
     Returns
     -------
-    ndarray, shape (n, 3, p)
+    r : ndarray, shape (n, 3)
+        The residual (rad; :func:`_skew_residual`'s up to rounding, from the ``E`` below).
+    jac : ndarray, shape (n, 3, p)
         ``d r(k) / d x_p`` (rad per unit of the parameter), ``r`` the residual
         ``vee(E - E^T) / 2`` of ``E = Rot(a, -theta) Rot(b, -beta) Q`` with the angles of
         :func:`fingerfit.angles.two_axis_angles` carried along (variable projection: the
@@ -125,7 +127,7 @@ def skew_residual_jacobian(
     tre = e[:, 0, 0] + e[:, 1, 1] + e[:, 2, 2]
     # dr = -(tr(E) I - E) Omega / 2, rows (n, p, 3) turned to (n, 3, p).
     dr = omega @ np.swapaxes(e, 1, 2) - tre[:, None, None] * omega
-    return 0.5 * np.swapaxes(dr, 1, 2)
+    return 0.5 * _vee2(e), 0.5 * np.swapaxes(dr, 1, 2)
 
 
 def _hinge_residual(q: FloatArray, a: FloatArray) -> FloatArray:
@@ -151,8 +153,8 @@ def direction_jacobian(
     ta, tb = orthonormal_basis(a), orthonormal_basis(b)
     zero = np.zeros((2, 3))
     da, db = np.concatenate([ta[:2], zero]), np.concatenate([zero, tb[:2]])
-    jac = skew_residual_jacobian(q, a, b, da, db) * sw[:, None, None]
-    r = _skew_residual(q, a, b) * sw[:, None]
+    r, jac = skew_residual_jacobian(q, a, b, da, db)
+    r, jac = r * sw[:, None], jac * sw[:, None, None]
     return r.ravel(), jac.reshape(-1, 4), np.concatenate([ta[:2], tb[:2]])
 
 
