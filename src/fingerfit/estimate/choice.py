@@ -150,13 +150,18 @@ class ModelChoice:
 _PROXIMAL = {ABDUCTION_FIRST: "ab/adduction", FLEXION_FIRST: "flexion"}
 
 
+def _one_hot(rows: np.ndarray, count: int) -> FloatArray:
+    """``(count, len(rows))``: 1 where column ``k`` belongs to fold ``rows[k]``; times a
+    matrix of per-row values it sums them by fold."""
+    return (rows[None, :] == np.arange(count)[:, None]).astype(float)
+
+
 def _hinge_axes(rotation: FloatArray, labels: np.ndarray, folds: np.ndarray) -> FloatArray:
     """SARA axis (parent frame) without each fold: leading left singular vector of the sum
     of the child-in-parent rotations less the fold's. Returns ``(n_folds, 3)``."""
     s_all = rotation.sum(axis=0)
-    s_fold = np.zeros((folds.size, 3, 3))
-    np.add.at(s_fold, np.searchsorted(folds, labels), rotation)
-    u, _, _ = np.linalg.svd(s_all[None] - s_fold)
+    s_fold = _one_hot(np.searchsorted(folds, labels), folds.size) @ rotation.reshape(-1, 9)
+    u, _, _ = np.linalg.svd(s_all[None] - s_fold.reshape(-1, 3, 3))
     axes = u[:, :, 0]
     ref = np.linalg.svd(s_all)[0][:, 0]
     return axes * np.sign(axes @ ref)[:, None]
@@ -176,11 +181,9 @@ def _two_axis_directions(
     if fit.tilt_data_share < 0.5:
         e = np.concatenate([[0.0, 0.0], unit(basis[2:] @ a)])
         h = h + _HELD * np.trace(h) * np.outer(e, e)
-    rows = np.repeat(np.searchsorted(folds, labels), 3)
-    hf = np.zeros((folds.size, 4, 4))
-    np.add.at(hf, rows, jac[:, :, None] * jac[:, None, :])
-    gf = np.zeros((folds.size, 4))
-    np.add.at(gf, rows, jac * r[:, None])
+    one_hot = _one_hot(np.repeat(np.searchsorted(folds, labels), 3), folds.size)
+    hf = (one_hot @ (jac[:, :, None] * jac[:, None, :]).reshape(-1, 16)).reshape(-1, 4, 4)
+    gf = one_hot @ (jac * r[:, None])
     dx = -np.linalg.solve(h[None] - hf, (g[None] - gf)[..., None])[..., 0]
     fa = a + dx[:, :2] @ basis[:2]
     fb = b + dx[:, 2:] @ basis[2:]
@@ -191,15 +194,34 @@ def _two_axis_directions(
 
 
 def _held_out_sq(y: FloatArray, design: FloatArray, out: np.ndarray) -> FloatArray:
-    """Squared prediction errors ``(n_out,)`` (mm^2) of the frames ``out`` (bool, ``(n,)``).
+    """Squared prediction errors ``(F, n)`` (mm^2) of every frame by each fold's axis points.
 
-    The axis points ``z`` are fitted to the other frames by least squares on
-    ``y(k) = design(k) z``: ``y (n, 3)`` mm, ``design (n, 3, p)``.
+    Fold ``f``'s points ``z_f`` are fitted to the frames not in ``out[f]`` by least squares
+    on ``y_f(k) = design_f(k) z_f``.
+
+    Parameters
+    ----------
+    y : ndarray, shape (F, n, 3)
+        Per fold and frame, what the points must explain (mm, parent frame).
+    design : ndarray, shape (F, n, 3, p)
+    out : ndarray of bool, shape (F, n)
+        The frames each fold holds out.
     """
-    k = design.shape[2]
-    z = np.linalg.lstsq(design[~out].reshape(-1, k), y[~out].ravel(), rcond=1e-9)[0]
-    err = y[out] - design[out] @ z
-    return np.einsum("ni,ni->n", err, err)
+    p = design.shape[3]
+    z = np.stack(
+        [
+            np.linalg.lstsq(d[~o].reshape(-1, p), v[~o].ravel(), rcond=1e-9)[0]
+            for d, v, o in zip(design, y, out, strict=True)
+        ]
+    )
+    err = y - (design @ z[:, None, :, None])[..., 0]
+    return np.einsum("fni,fni->fn", err, err)
+
+
+def _bases(axes: FloatArray) -> FloatArray:
+    """``(F, 1, 3, 2)``: per axis ``(F, 3)``, the two unit vectors perpendicular to it
+    (:func:`orthonormal_basis`) as columns, to multiply every frame's ``(3, 3)``."""
+    return np.stack([orthonormal_basis(a)[:2].T for a in axes])[:, None]
 
 
 def _two_axis_folds(
@@ -209,28 +231,29 @@ def _two_axis_folds(
     fit: TwoAxisFit,
     order: str,
     reference_rotation: FloatArray,
-) -> list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]]:
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Per fold, the refitted axes and every frame's rotations about them, parent frame:
-    ``(a (3,), b (3,), Rot_a (n, 3, 3), Rot_b (n, 3, 3))``; ``Q = Rot_b Rot_a``
-    (ab/adduction first) or ``Q = Rot_a Rot_b`` (flexion first)."""
+    ``a, b (F, 3)`` and ``Rot_a, Rot_b (F, n, 3, 3)``; ``Q = Rot_b Rot_a`` (ab/adduction
+    first) or ``Q = Rot_a Rot_b`` (flexion first)."""
     if order == ABDUCTION_FIRST:
         fa, fb = _two_axis_directions(q, labels, folds, fit)
-        out = []
-        for a, b in zip(fa, fb, strict=True):
-            beta, theta = two_axis_angles(q, a, b)
-            out.append((a, b, axis_angle_matrix(a, theta), axis_angle_matrix(b, beta)))
-        return out
-    # Seen from the child: Q' = R^T R_ref = R_ref^T Q^T R_ref = Rot(b', -beta) Rot(a', -theta)
-    # with a' = R_ref^T a, b' = R_ref^T b.
-    ref = reference_rotation
-    q_child = ref.T @ np.swapaxes(q, 1, 2) @ ref
-    fa, fb = _two_axis_directions(q_child, labels, folds, fit)
-    out = []
-    for a_c, b_c in zip(fa, fb, strict=True):
-        beta, theta = two_axis_angles(q_child, a_c, b_c)
-        a, b = ref @ a_c, ref @ b_c
-        out.append((a, b, axis_angle_matrix(a, -theta), axis_angle_matrix(b, -beta)))
-    return out
+        angles = [two_axis_angles(q, a, b) for a, b in zip(fa, fb, strict=True)]
+        sign = 1.0
+    else:
+        # Seen from the child: Q' = R^T R_ref = R_ref^T Q^T R_ref = Rot(b', -beta)
+        # Rot(a', -theta) with a' = R_ref^T a, b' = R_ref^T b.
+        ref = reference_rotation
+        q_child = ref.T @ np.swapaxes(q, 1, 2) @ ref
+        fa, fb = _two_axis_directions(q_child, labels, folds, fit)
+        angles = [two_axis_angles(q_child, a, b) for a, b in zip(fa, fb, strict=True)]
+        fa, fb, sign = fa @ ref.T, fb @ ref.T, -1.0
+    rot_a = np.stack(
+        [axis_angle_matrix(a, sign * th) for a, (_, th) in zip(fa, angles, strict=True)]
+    )
+    rot_b = np.stack(
+        [axis_angle_matrix(b, sign * be) for b, (be, _) in zip(fb, angles, strict=True)]
+    )
+    return fa, fb, rot_a, rot_b
 
 
 def _order(turn: dict[str, list[FloatArray]], candidates: list[str], usual: str) -> str:
@@ -291,35 +314,31 @@ def choose_joint_model(
     folds = np.unique(lab)
     q = rot @ reference_rotation.T
     hinge_axes = _hinge_axes(rot, lab, folds)
-    sq: dict[str, list[FloatArray]] = {HINGE: []}
-    eye = np.eye(3)[None]
-    for i, f in enumerate(folds):
-        out = lab == f
-        # Hinge: t - Rot_a t_ref = (I - Rot_a) c_a, c_a in the plane normal to a.
-        a = hinge_axes[i]
-        rot_a = axis_angle_matrix(a, twist_angle(q, a))
-        design = (eye - rot_a) @ orthonormal_basis(a)[:2].T
-        sq[HINGE].append(_held_out_sq(t - rot_a @ reference_offset, design, out))
+    outs = lab[None, :] == folds[:, None]  # (F, n): each fold's held-out frames
+    eye = np.eye(3)
+    # Hinge: t - Rot_a t_ref = (I - Rot_a) c_a, c_a in the plane normal to a.
+    rot_a = np.stack([axis_angle_matrix(a, twist_angle(q, a)) for a in hinge_axes])
+    err = _held_out_sq(t - rot_a @ reference_offset, (eye - rot_a) @ _bases(hinge_axes), outs)
+    sq: dict[str, list[FloatArray]] = {HINGE: [e[o] for e, o in zip(err, outs, strict=True)]}
     turn: dict[str, list[FloatArray]] = {}
     for order, fit in two_axis.items():
-        sq[order], turn[order] = [], []
-        per_fold = _two_axis_folds(q, lab, folds, fit, order, reference_rotation)
-        for f, (a, b, rot_a, rot_b) in zip(folds, per_fold, strict=True):
-            out = lab == f
-            ca, cb = orthonormal_basis(a)[:2].T, orthonormal_basis(b)[:2].T
-            if order == ABDUCTION_FIRST:
-                # t - Rot_b Rot_a t_ref = Rot_b (I - Rot_a) c_a + (I - Rot_b) c_b.
-                moved = rot_b @ rot_a
-                design = np.concatenate([rot_b @ (eye - rot_a) @ ca, (eye - rot_b) @ cb], axis=2)
-            else:
-                # t - Rot_a Rot_b t_ref = (I - Rot_a) c_a + Rot_a (I - Rot_b) c_b.
-                moved = rot_a @ rot_b
-                design = np.concatenate([(eye - rot_a) @ ca, rot_a @ (eye - rot_b) @ cb], axis=2)
-            sq[order].append(_held_out_sq(t - moved @ reference_offset, design, out))
-            # What the fold's angles leave of its orientations: the angle of
-            # moved^T Q, from the trace.
-            cos = 0.5 * (np.einsum("nij,nij->n", moved[out], q[out]) - 1.0)
-            turn[order].append(np.arccos(np.clip(cos, -1.0, 1.0)) ** 2)
+        fa, fb, rot_a, rot_b = _two_axis_folds(q, lab, folds, fit, order, reference_rotation)
+        ca, cb = _bases(fa), _bases(fb)
+        if order == ABDUCTION_FIRST:
+            # t - Rot_b Rot_a t_ref = Rot_b (I - Rot_a) c_a + (I - Rot_b) c_b.
+            moved = rot_b @ rot_a
+            design = np.concatenate([rot_b @ ((eye - rot_a) @ ca), (eye - rot_b) @ cb], axis=3)
+        else:
+            # t - Rot_a Rot_b t_ref = (I - Rot_a) c_a + Rot_a (I - Rot_b) c_b.
+            moved = rot_a @ rot_b
+            design = np.concatenate([(eye - rot_a) @ ca, rot_a @ ((eye - rot_b) @ cb)], axis=3)
+        err = _held_out_sq(t - moved @ reference_offset, design, outs)
+        # What the fold's angles leave of its orientations: the angle of moved^T Q, from
+        # the trace.
+        cos = 0.5 * (np.einsum("fnij,nij->fn", moved, q) - 1.0)
+        ang2 = np.arccos(np.clip(cos, -1.0, 1.0)) ** 2
+        sq[order] = [e[o] for e, o in zip(err, outs, strict=True)]
+        turn[order] = [x[o] for x, o in zip(ang2, outs, strict=True)]
     rms = {k: float(np.sqrt(np.mean(np.concatenate(v)))) for k, v in sq.items()}
     per_fold = {k: tuple(float(np.sqrt(np.mean(s))) for s in v) for k, v in sq.items()}
     off = {k: float(np.degrees(np.sqrt(np.mean(np.concatenate(v))))) for k, v in turn.items()}
