@@ -350,6 +350,7 @@ def fit_two_axis_directions(
         return (r * sw[:, None]).ravel(), (jac * sw[:, None, None]).reshape(-1, len(da))
 
     best = None
+    best_jac: FloatArray | None = None
     for b0 in starts:
         eb = orthonormal_basis(b0)
 
@@ -387,6 +388,7 @@ def fit_two_axis_directions(
         a, b = a1, b1
         for _ in range(2):
             r, jac, basis = direction_jacobian(q, a, b, sw)
+            jac_at = (a, b)
             cov, h_inv = _cluster_covariance(jac, r, groups)
             e = np.concatenate([[0.0, 0.0], unit(basis[2:] @ a)])  # tilt of b towards a
             var_tilt = max(float(e @ cov @ e), 0.0)
@@ -418,9 +420,12 @@ def fit_two_axis_directions(
         # Interior optima beat boundary ones; then the lower cost wins.
         if best is None or (interior, -cost) > (best[3], -best[2]):
             phi = np.concatenate([[0.0, 0.0], unit(basis[2:] @ cross3(a, b))])
+            # The last Jacobian, kept when it was taken at these axes (the usual case).
+            same = np.array_equal(jac_at[0], a) and np.array_equal(jac_at[1], b)
             best = (a, b, cost, interior, var_tilt, cov, share, float(phi @ cov @ phi))
+            best_jac = jac if same else None
     a, b, cost, interior, var_tilt, cov1, share, var_phi = best
-    _, jac, _ = direction_jacobian(q, a, b, sw)
+    jac = best_jac if best_jac is not None else direction_jacobian(q, a, b, sw)[1]
     sv = np.linalg.svd(jac, compute_uv=False)
     tilt_sd = float(np.degrees(np.sqrt(var_tilt))) if var_tilt > 0 else 0.0
     return TwoAxisDirections(
