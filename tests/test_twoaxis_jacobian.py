@@ -52,7 +52,7 @@ def test_skew_residual_jacobian_matches_finite_differences(
 
     want = _central(res, 5)
     r, got = skew_residual_jacobian(q, a, b, da, db)
-    np.testing.assert_allclose(r, _skew_residual(q, a, b), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(r, _skew_residual(q, a, b), rtol=0, atol=1e-14)
     assert got.shape == (300, 3, 5)
     scale = np.abs(want).max()
     assert scale > 0.1
@@ -69,7 +69,7 @@ def test_direction_jacobian_matches_finite_differences() -> None:
         aa, bb = unit(a + z[:2] @ ta), unit(b + z[2:] @ tb)
         return (_skew_residual(q, aa, bb) * sw[:, None]).ravel()
 
-    np.testing.assert_allclose(r, res(np.zeros(4)), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(r, res(np.zeros(4)), rtol=0, atol=1e-14)
     want = _central(res, 4)
     np.testing.assert_allclose(jac, want, rtol=0, atol=1e-6 * np.abs(want).max())
 

@@ -42,15 +42,21 @@ def _skew_residual(q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
 
 
 def _vee2(m: FloatArray) -> FloatArray:
-    """``vee(M - M^T)`` ``(n, 3)`` of ``m (n, 3, 3)``: ``tr(M K_v^T) = v . vee(M - M^T)``."""
-    return np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]], 1)
+    """``vee(M - M^T)`` ``(3, n)`` of matrices ``m (3, 3, n)`` (frames last):
+    ``tr(M K_v^T) = v . vee(M - M^T)``."""
+    return np.stack([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
 
 
 def _left(k: FloatArray, m: FloatArray) -> FloatArray:
-    """``k @ m[i]`` for every ``i``: ``(n, 3, 3)`` from ``k (3, 3)`` and ``m (n, 3, 3)``, one
-    matrix product."""
-    n = m.shape[0]
-    return (k @ np.swapaxes(m, 0, 1).reshape(3, 3 * n)).reshape(3, n, 3).swapaxes(0, 1)
+    """``k @ m[..., i]`` for every frame ``i``: ``(r // 3, 3, c, n)`` from ``k (r, 3)`` (``r //
+    3`` stacked ``3 x 3`` matrices) and ``m (3, c, n)``, frames last; one matrix product."""
+    return (k @ m.reshape(3, -1)).reshape(k.shape[0] // 3, 3, *m.shape[1:])
+
+
+def _times(m: FloatArray, v: FloatArray) -> FloatArray:
+    """``m[..., i] @ v[..., i]`` for every frame ``i``: ``(3, p, n)`` from matrices ``m (3, 3,
+    n)`` and vectors ``v (3, p, n)``, frames last."""
+    return m[:, 0, None] * v[0] + m[:, 1, None] * v[1] + m[:, 2, None] * v[2]
 
 
 def skew_residual_jacobian(
@@ -88,46 +94,58 @@ def skew_residual_jacobian(
     Omega / 2`` (``[w]x E + E^T [w]x = [(tr(E) I - E) w]x``). The angles' own
     derivatives follow from their formulas: ``beta = atan2(Qa . (b x a), Qa . a_perp)``
     (``a_perp = a - (a . b) b``) and ``theta = 2 atan2(a . vee(M - M^T), 1 + tr M)``.
+    Every per-frame array has the frames last (long inner loops, as in
+    :func:`_skew_residual`).
     """
-    beta, theta = two_axis_angles(q, a, b)
+    n, p = q.shape[0], da.shape[0]
     ka, kb = skew(a), skew(b)
     ab = a @ b
     ba, ap = kb @ a, a - ab * b
-    # beta = atan2(s1, c1): s1 = Qa . (b x a), c1 = Qa . a_perp; Q a and Q da at once.
-    n, k = q.shape[0], da.shape[0] + 1
-    qx = (q.reshape(3 * n, 3) @ np.vstack([a, da]).T).reshape(n, 3, k)
-    s1, c1 = ba @ qx, ap @ qx  # (n, 1 + p): the value, then Q da's part of the derivative
-    d_ba = db @ ka - da @ kb  # db x a + b x da
+    # beta = atan2(s1, c1): s1 = Qa . (b x a) = tr(Q a (b x a)^T), c1 = Qa . a_perp, and
+    # their derivatives, all linear functionals of Q: (2 + 2p, n). (The angles are those
+    # of two_axis_angles, from the same traces.)
+    d_ba = db @ ka - da @ kb  # d(b x a) = db x a + b x da, rows
     d_ap = da - np.outer(da @ b + db @ a, b) - ab * db
-    ds1 = s1[:, 1:] + qx[:, :, 0] @ d_ba.T
-    dc1 = c1[:, 1:] + qx[:, :, 0] @ d_ap.T
-    s1, c1 = s1[:, :1], c1[:, :1]
-    dbeta = (c1 * ds1 - s1 * dc1) / (s1 * s1 + c1 * c1)
+    w = np.concatenate(
+        [
+            [np.outer(ba, a), np.outer(ap, a)],
+            ba[None, :, None] * da[:, None, :] + d_ba[:, :, None] * a,
+            ap[None, :, None] * da[:, None, :] + d_ap[:, :, None] * a,
+        ]
+    )
+    f = w.reshape(-1, 9) @ q.reshape(n, 9).T
+    s1, c1, ds1, dc1 = f[0], f[1], f[2 : 2 + p], f[2 + p :]
+    beta = np.arctan2(s1, c1)
+    dbeta = (c1 * ds1 - s1 * dc1) / (s1 * s1 + c1 * c1)  # (p, n)
     # d Rot(b, beta) = [w_b]x Rot(b, beta); nu = Rot(b, -beta) w_b = b dbeta + sin(beta) db
-    # - (1 - cos(beta)) b x db (rows, (n, p, 3)); M = Rot(b, -beta) Q.
-    sb, cb = np.sin(beta)[:, None, None], (1.0 - np.cos(beta))[:, None, None]
-    nu = dbeta[:, :, None] * b + sb * db - cb * (db @ kb.T)
-    kbq = _left(kb, q)
-    m = q - sb * kbq + cb * _left(kb, kbq)
-    vm, trm = _vee2(m), m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    # - (1 - cos(beta)) b x db, (3, p, n); M = Rot(b, -beta) Q, (3, 3, n).
+    sb, cb = np.sin(beta), 1.0 - np.cos(beta)
+    nu = b[:, None, None] * dbeta + db.T[:, :, None] * sb - (db @ kb.T).T[:, :, None] * cb
+    qt = np.ascontiguousarray(q.transpose(1, 2, 0))
+    kq = _left(np.vstack([kb, kb @ kb]), qt)
+    m = qt - sb * kq[0] + cb * kq[1]
+    vm, trm = _vee2(m), m[0, 0] + m[1, 1] + m[2, 2]
     # theta = 2 atan2(S, C): S = a . vee(M - M^T), C = 1 + tr M; dM = -[nu]x M gives
     # dC = nu . vee(M - M^T) and dS = da . vee(M - M^T) + nu . (M^T a - tr(M) a).
-    big_s, big_c = (vm @ a)[:, None], (1.0 + trm)[:, None]
-    g = nu @ np.stack([vm, a @ m - trm[:, None] * a], axis=2)
-    dc, ds = g[:, :, 0], vm @ da.T + g[:, :, 1]
+    big_s, big_c = a @ vm, 1.0 + trm
+    theta = 2.0 * np.arctan2(big_s, big_c)
+    dc = np.einsum("ipn,in->pn", nu, vm)
+    ds = da @ vm + np.einsum("ipn,in->pn", nu, np.tensordot(a, m, axes=(0, 0)) - trm * a[:, None])
     dtheta = 2.0 * (big_c * ds - big_s * dc) / (big_s * big_s + big_c * big_c)
-    # E = Rot(a, -theta) M, dE = -[Omega]x E: Omega = Rot(a, -theta) (w_a + nu), and
-    # Rot(a, -theta) w_a = a dtheta + sin(theta) da - (1 - cos(theta)) a x da.
-    st, ct = np.sin(theta)[:, None, None], (1.0 - np.cos(theta))[:, None, None]
-    kam = _left(ka, m)
-    e = m - st * kam + ct * _left(ka, kam)
-    nu_k = (nu.reshape(-1, 3) @ np.hstack([ka.T, (ka @ ka).T])).reshape(n, k - 1, 6)
-    nu_a = nu - st * nu_k[:, :, :3] + ct * nu_k[:, :, 3:]  # Rot(a, -theta) nu, rows
-    omega = dtheta[:, :, None] * a + st * da - ct * (da @ ka.T) + nu_a
-    tre = e[:, 0, 0] + e[:, 1, 1] + e[:, 2, 2]
-    # dr = -(tr(E) I - E) Omega / 2, rows (n, p, 3) turned to (n, 3, p).
-    dr = omega @ np.swapaxes(e, 1, 2) - tre[:, None, None] * omega
-    return 0.5 * _vee2(e), 0.5 * np.swapaxes(dr, 1, 2)
+    # E = Rot(a, -theta) M, dE = -[Omega]x E with Omega = Rot(a, -theta) (w_a + nu) and
+    # Rot(a, -theta) w_a = a dtheta + sin(theta) da - (1 - cos(theta)) a x da:
+    # Omega = a dtheta + nu + sin(theta) (da - a x nu) + (1 - cos(theta)) (a x a x nu - a x da).
+    st, ct = np.sin(theta), 1.0 - np.cos(theta)
+    k2 = np.vstack([ka, ka @ ka])
+    km = _left(k2, m)
+    e = m - st * km[0] + ct * km[1]
+    knu = _left(k2, nu)
+    omega = nu + a[:, None, None] * dtheta
+    omega += (da.T[:, :, None] - knu[0]) * st
+    omega += (knu[1] - (da @ ka.T).T[:, :, None]) * ct
+    # dr = -(tr(E) I - E) Omega / 2, (3, p, n), returned as (n, 3, p).
+    dr = _times(e, omega) - (e[0, 0] + e[1, 1] + e[2, 2]) * omega
+    return 0.5 * _vee2(e).T, 0.5 * dr.transpose(2, 0, 1)
 
 
 def _hinge_residual(q: FloatArray, a: FloatArray) -> FloatArray:
