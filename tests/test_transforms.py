@@ -77,3 +77,23 @@ def test_rotation_angle_is_the_rotation_vectors_norm_from_0_to_pi_and_nan_safe()
     got = rotation_angle(m)
     assert np.isnan(got[[3, 150]]).all()
     assert np.isfinite(np.delete(got, [3, 150])).all()
+
+
+def test_cross3_and_stacked_orthonormal_bases_give_numpys_bits():
+    from fingerfit.transforms import cross3, orthonormal_basis
+
+    rng = np.random.default_rng(12)
+    u, v = rng.normal(size=(2, 200, 3)) * rng.uniform(1e-3, 1e3, (2, 200, 1))
+    for x, y in zip(u, v, strict=True):
+        np.testing.assert_array_equal(cross3(x, y), np.cross(x, y))
+    stacked = orthonormal_basis(u)
+    assert stacked.shape == (200, 3, 3)
+    np.testing.assert_array_equal(stacked, np.stack([orthonormal_basis(x) for x in u]))
+    # Right-handed and orthonormal, the last row the unit axis.
+    np.testing.assert_allclose(
+        stacked @ np.swapaxes(stacked, 1, 2), np.broadcast_to(np.eye(3), (200, 3, 3)), atol=1e-15
+    )
+    np.testing.assert_allclose(np.linalg.det(stacked), 1.0, atol=1e-14)
+    np.testing.assert_allclose(
+        stacked[:, 2], u / np.linalg.norm(u, axis=1, keepdims=True), atol=1e-16
+    )

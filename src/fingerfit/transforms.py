@@ -189,11 +189,15 @@ def cross3(u: FloatArray, v: FloatArray) -> FloatArray:
 
 def orthonormal_basis(axis: FloatArray) -> FloatArray:
     """Rows ``e1, e2, a`` ``(3, 3)``: a right-handed orthonormal basis whose last row is the
-    unit ``axis`` (``e2 = a x e1``); its transpose is a rotation taking z to ``axis``."""
+    unit ``axis`` (``e2 = a x e1``); its transpose is a rotation taking z to ``axis``.
+
+    ``axis`` may stack several axes, ``(m, 3)``: then ``(m, 3, 3)``, one basis each (the
+    same bits as one at a time)."""
     a = unit(axis)
-    helper = np.eye(3)[np.argmin(np.abs(a))]
-    e1 = unit(cross3(a, helper))
-    return np.stack([e1, cross3(a, e1), a])
+    helper = np.eye(3)[np.argmin(np.abs(a), axis=-1)]
+    cross = cross3 if a.ndim == 1 else np.cross
+    e1 = unit(cross(a, helper))
+    return np.stack([e1, cross(a, e1), a], axis=-2)
 
 
 def rotate_about_lines(

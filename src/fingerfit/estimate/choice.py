@@ -221,7 +221,7 @@ def _held_out_sq(y: FloatArray, design: FloatArray, out: np.ndarray) -> FloatArr
 def _bases(axes: FloatArray) -> FloatArray:
     """``(F, 1, 3, 2)``: per axis ``(F, 3)``, the two unit vectors perpendicular to it
     (:func:`orthonormal_basis`) as columns, to multiply every frame's ``(3, 3)``."""
-    return np.stack([orthonormal_basis(a)[:2].T for a in axes])[:, None]
+    return np.swapaxes(orthonormal_basis(axes)[:, :2], 1, 2)[:, None]
 
 
 def _two_axis_folds(
