@@ -58,7 +58,7 @@ from scipy.stats import binomtest
 from ..angles import twist_angle, two_axis_angles
 from ..digits import ABDUCTION_FIRST, FLEXION_FIRST
 from ..transforms import FloatArray, axis_angle_matrix, orthonormal_basis, unit
-from .twoaxis import MAX_FRAMES, TwoAxisFit, direction_jacobian
+from .twoaxis import MAX_FRAMES, TwoAxisDirections, TwoAxisFit, direction_jacobian
 
 HINGE = "hinge"
 TWO_AXIS = "two_axis"
@@ -168,7 +168,7 @@ def _hinge_axes(rotation: FloatArray, labels: np.ndarray, folds: np.ndarray) -> 
 
 
 def _two_axis_directions(
-    q: FloatArray, labels: np.ndarray, folds: np.ndarray, fit: TwoAxisFit
+    q: FloatArray, labels: np.ndarray, folds: np.ndarray, fit: TwoAxisFit | TwoAxisDirections
 ) -> tuple[FloatArray, FloatArray]:
     """Flexion and ab/adduction axes without each fold: one Gauss-Newton step from ``fit``.
 
@@ -228,7 +228,7 @@ def _two_axis_folds(
     q: FloatArray,
     labels: np.ndarray,
     folds: np.ndarray,
-    fit: TwoAxisFit,
+    fit: TwoAxisFit | TwoAxisDirections,
     order: str,
     reference_rotation: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -279,7 +279,7 @@ def choose_joint_model(
     reference_rotation: FloatArray,
     reference_offset: FloatArray,
     labels: np.ndarray,
-    two_axis: dict[str, TwoAxisFit],
+    two_axis: dict[str, TwoAxisFit | TwoAxisDirections],
     usual: str = ABDUCTION_FIRST,
 ) -> ModelChoice:
     """Choose hinge or two axes, and their order, by leave-one-cycle-out prediction
@@ -296,11 +296,12 @@ def choose_joint_model(
         Child-in-parent rotation and child origin (mm) at the reference posture.
     labels : ndarray of int, shape (n,)
         Cycle of each frame (the folds).
-    two_axis : dict[str, TwoAxisFit]
+    two_axis : dict[str, TwoAxisFit or TwoAxisDirections]
         Order -> the two-axis joint fitted to every cycle in the ab/adduction-first form
         ``Q = Rot(b, beta) Rot(a, theta)``: ``abduction_first`` in the parent frame,
         ``flexion_first`` seen from the child (``JointData.reversed``: child frame at the
-        reference posture). One or both.
+        reference posture). One or both. Only the directions are used (the axes,
+        ``interior`` and ``tilt_data_share``), so the direction search's result serves.
     usual : str
         The digit's usual order (:mod:`fingerfit.digits`), kept when the two orders
         predict equally well.

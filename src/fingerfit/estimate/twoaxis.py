@@ -441,6 +441,59 @@ def fit_two_axis_directions(
     )
 
 
+def _frame_inputs(
+    rotation: FloatArray,
+    reference_rotation: FloatArray,
+    weights: FloatArray | None,
+    groups: FloatArray | None,
+) -> tuple[FloatArray, FloatArray, np.ndarray, int]:
+    """``Q = R R_ref^T (n, 3, 3)``, the frame weights ``(n,)`` (mean 1), the grasp cycle of
+    each frame ``(n,)`` (default ten contiguous blocks) and the stride of the direction
+    search (at most :data:`MAX_FRAMES` frames)."""
+    q = rotation @ reference_rotation.T
+    w = np.ones(q.shape[0]) if weights is None else weights / np.mean(weights)
+    stride = max(1, -(-q.shape[0] // MAX_FRAMES))
+    if groups is None:
+        groups = np.arange(q.shape[0]) * 10 // max(q.shape[0], 1)
+    return q, w, np.asarray(groups), stride
+
+
+def two_axis_directions(
+    rotation: FloatArray,
+    reference_rotation: FloatArray,
+    flexion_guess: FloatArray,
+    weights: FloatArray | None = None,
+    finger_direction: FloatArray | None = None,
+    groups: FloatArray | None = None,
+) -> TwoAxisDirections:
+    """The directions :func:`fit_two_axis` fits, alone (its arguments of the same names).
+
+    Parameters
+    ----------
+    rotation : ndarray, shape (n, 3, 3)
+        Child-in-parent rotations (no NaN).
+    reference_rotation : ndarray, shape (3, 3)
+        Child-in-parent rotation at the reference posture.
+    flexion_guess : ndarray, shape (3,)
+        Pooled hinge axis (parent frame) to start from.
+    weights, groups : ndarray, shape (n,), optional
+        Frame weights and grasp cycle of each frame (default ten contiguous blocks).
+    finger_direction : ndarray, shape (3,), optional
+        Unit direction of the stretched finger in the parent frame.
+
+    Returns
+    -------
+    TwoAxisDirections
+        :func:`fit_two_axis_directions` on at most :data:`MAX_FRAMES` evenly strided frames
+        (parent frame at the reference posture); pass it to :func:`fit_two_axis` to
+        complete the joint without searching again.
+    """
+    q, w, groups, stride = _frame_inputs(rotation, reference_rotation, weights, groups)
+    return fit_two_axis_directions(
+        q[::stride], flexion_guess, w[::stride], finger_direction, groups[::stride]
+    )
+
+
 def fit_two_axis(
     rotation: FloatArray,
     translation: FloatArray,
@@ -450,6 +503,7 @@ def fit_two_axis(
     noise_mm: float = 0.5,
     finger_direction: FloatArray | None = None,
     groups: FloatArray | None = None,
+    directions: TwoAxisDirections | None = None,
 ) -> TwoAxisFit:
     """Fit a two-axis joint to the movement frames of one joint.
 
@@ -475,21 +529,21 @@ def fit_two_axis(
         Grasp cycle of each frame: the clusters of the robust variances that weigh the
         priors (``docs/methods.md``, "Numerical stability"); default ten contiguous
         blocks of frames.
+    directions : TwoAxisDirections, optional
+        :func:`two_axis_directions` of the same arguments, when already found: the
+        direction search is not run again.
 
     Returns
     -------
     TwoAxisFit
     """
-    q = rotation @ reference_rotation.T
-    w = np.ones(q.shape[0]) if weights is None else weights / np.mean(weights)
+    q, w, groups, stride = _frame_inputs(rotation, reference_rotation, weights, groups)
     hinge_rms = float(np.sqrt(np.average(_hinge_residual(q, unit(flexion_guess)) ** 2, weights=w)))
-    stride = max(1, -(-q.shape[0] // MAX_FRAMES))
-    if groups is None:
-        groups = np.arange(q.shape[0]) * 10 // max(q.shape[0], 1)
-    groups = np.asarray(groups)
-    dr = fit_two_axis_directions(
-        q[::stride], flexion_guess, w[::stride], finger_direction, groups[::stride]
-    )
+    dr = directions
+    if dr is None:
+        dr = fit_two_axis_directions(
+            q[::stride], flexion_guess, w[::stride], finger_direction, groups[::stride]
+        )
     a, b, rms, interior = dr.flexion_axis, dr.abduction_axis, dr.rms_rad, dr.interior
     beta, theta = two_axis_angles(q, a, b)
     lo, hi = np.percentile(beta, [5, 95])
@@ -541,8 +595,10 @@ def fit_two_axis(
 
 __all__ = [
     "RestAbductionTest",
+    "TwoAxisDirections",
     "TwoAxisFit",
     "fit_two_axis",
     "fit_two_axis_directions",
     "rest_abduction_test",
+    "two_axis_directions",
 ]
