@@ -54,7 +54,7 @@ def _left(k: FloatArray, m: FloatArray) -> FloatArray:
 
 
 def _times(m: FloatArray, v: FloatArray) -> FloatArray:
-    """``m[..., i] @ v[..., i]`` for every frame ``i``: ``(3, p, n)`` from matrices ``m (3, 3,
+    """``m[..., i] @ v[..., i]`` for every frame ``i``: ``(r, p, n)`` from matrices ``m (r, 3,
     n)`` and vectors ``v (3, p, n)``, frames last."""
     return m[:, 0, None] * v[0] + m[:, 1, None] * v[1] + m[:, 2, None] * v[2]
 
@@ -120,7 +120,8 @@ def skew_residual_jacobian(
     # d Rot(b, beta) = [w_b]x Rot(b, beta); nu = Rot(b, -beta) w_b = b dbeta + sin(beta) db
     # - (1 - cos(beta)) b x db, (3, p, n); M = Rot(b, -beta) Q, (3, 3, n).
     sb, cb = np.sin(beta), 1.0 - np.cos(beta)
-    nu = b[:, None, None] * dbeta + db.T[:, :, None] * sb - (db @ kb.T).T[:, :, None] * cb
+    nu = np.stack([db.T, -(db @ kb.T).T], axis=2).reshape(3 * p, 2) @ np.stack([sb, cb])
+    nu = nu.reshape(3, p, n) + b[:, None, None] * dbeta
     qt = np.ascontiguousarray(q.transpose(1, 2, 0))
     kq = _left(np.vstack([kb, kb @ kb]), qt)
     m = qt - sb * kq[0] + cb * kq[1]
@@ -129,8 +130,8 @@ def skew_residual_jacobian(
     # dC = nu . vee(M - M^T) and dS = da . vee(M - M^T) + nu . (M^T a - tr(M) a).
     big_s, big_c = a @ vm, 1.0 + trm
     theta = 2.0 * np.arctan2(big_s, big_c)
-    dc = np.einsum("ipn,in->pn", nu, vm)
-    ds = da @ vm + np.einsum("ipn,in->pn", nu, np.tensordot(a, m, axes=(0, 0)) - trm * a[:, None])
+    dc, ds = _times(np.stack([vm, np.tensordot(a, m, axes=(0, 0)) - trm * a[:, None]]), nu)
+    ds += da @ vm
     dtheta = 2.0 * (big_c * ds - big_s * dc) / (big_s * big_s + big_c * big_c)
     # E = Rot(a, -theta) M, dE = -[Omega]x E with Omega = Rot(a, -theta) (w_a + nu) and
     # Rot(a, -theta) w_a = a dtheta + sin(theta) da - (1 - cos(theta)) a x da:
