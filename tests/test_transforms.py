@@ -97,3 +97,18 @@ def test_cross3_and_stacked_orthonormal_bases_give_numpys_bits():
     np.testing.assert_allclose(
         stacked[:, 2], u / np.linalg.norm(u, axis=1, keepdims=True), atol=1e-16
     )
+
+
+def test_stacked_axis_angle_matrices_and_skews_give_one_at_a_times_bits():
+    from fingerfit.transforms import axis_angle_matrix, skew, unit
+
+    rng = np.random.default_rng(13)
+    axes = unit(rng.normal(size=(7, 3)))
+    angles = rng.uniform(-3.0, 3.0, (7, 50))
+    stacked = axis_angle_matrix(axes, angles)
+    assert stacked.shape == (7, 50, 3, 3)
+    want = np.stack([axis_angle_matrix(a, t) for a, t in zip(axes, angles, strict=True)])
+    np.testing.assert_array_equal(stacked, want)
+    np.testing.assert_array_equal(skew(axes), np.stack([skew(a) for a in axes]))
+    v = rng.normal(size=3)
+    np.testing.assert_allclose(skew(axes) @ v, np.cross(axes, v), atol=1e-15)

@@ -157,26 +157,34 @@ def axis_angle_matrix(axis: FloatArray, angle: FloatArray) -> FloatArray:
 
     Parameters
     ----------
-    axis : ndarray, shape (3,)
-        Unit rotation axis.
-    angle : ndarray, shape (n,)
+    axis : ndarray, shape (3,) or (m, 3)
+        Unit rotation axis; or ``m`` axes, one per row of ``angle``.
+    angle : ndarray, shape (n,) or (m, n)
         Angles in radians, right-hand rule about ``axis``.
 
     Returns
     -------
-    ndarray, shape (n, 3, 3)
+    ndarray, shape (n, 3, 3) or (m, n, 3, 3)
+        With ``m`` axes, row ``i`` is ``axis_angle_matrix(axis[i], angle[i])``.
     """
     a = np.asarray(axis, dtype=float)
     th = np.asarray(angle, dtype=float)
-    k = skew(a)
-    s = np.sin(th)[:, None, None]
-    c = (1.0 - np.cos(th))[:, None, None]
+    k = skew(a) if a.ndim == 1 else skew(a)[:, None]
+    s = np.sin(th)[..., None, None]
+    c = (1.0 - np.cos(th))[..., None, None]
     return np.eye(3) + s * k + c * (k @ k)
 
 
 def skew(a: FloatArray) -> FloatArray:
-    """Cross-product matrix ``(3, 3)`` of ``a (3,)``: ``skew(a) @ v == a x v``."""
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    """Cross-product matrix ``(3, 3)`` of ``a (3,)``: ``skew(a) @ v == a x v``; of a stack
+    ``(m, 3)``, ``(m, 3, 3)``."""
+    if np.ndim(a) == 1:
+        return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    a = np.asarray(a, dtype=float)
+    k = np.zeros((*a.shape[:-1], 3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = a[..., 2], -a[..., 1], a[..., 0]
+    return k
 
 
 def cross3(u: FloatArray, v: FloatArray) -> FloatArray:

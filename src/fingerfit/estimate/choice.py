@@ -247,13 +247,8 @@ def _two_axis_folds(
         fa, fb = _two_axis_directions(q_child, labels, folds, fit)
         angles = [two_axis_angles(q_child, a, b) for a, b in zip(fa, fb, strict=True)]
         fa, fb, sign = fa @ ref.T, fb @ ref.T, -1.0
-    rot_a = np.stack(
-        [axis_angle_matrix(a, sign * th) for a, (_, th) in zip(fa, angles, strict=True)]
-    )
-    rot_b = np.stack(
-        [axis_angle_matrix(b, sign * be) for b, (be, _) in zip(fb, angles, strict=True)]
-    )
-    return fa, fb, rot_a, rot_b
+    beta, theta = np.array(angles).transpose(1, 0, 2)  # (F, n) each
+    return fa, fb, axis_angle_matrix(fa, sign * theta), axis_angle_matrix(fb, sign * beta)
 
 
 def _order(turn: dict[str, list[FloatArray]], candidates: list[str], usual: str) -> str:
@@ -318,7 +313,7 @@ def choose_joint_model(
     outs = lab[None, :] == folds[:, None]  # (F, n): each fold's held-out frames
     eye = np.eye(3)
     # Hinge: t - Rot_a t_ref = (I - Rot_a) c_a, c_a in the plane normal to a.
-    rot_a = np.stack([axis_angle_matrix(a, twist_angle(q, a)) for a in hinge_axes])
+    rot_a = axis_angle_matrix(hinge_axes, np.array([twist_angle(q, a) for a in hinge_axes]))
     err = _held_out_sq(t - rot_a @ reference_offset, (eye - rot_a) @ _bases(hinge_axes), outs)
     sq: dict[str, list[FloatArray]] = {HINGE: [e[o] for e, o in zip(err, outs, strict=True)]}
     turn: dict[str, list[FloatArray]] = {}
