@@ -333,14 +333,16 @@ def fit_two_axis_directions(
     sw = np.sqrt(np.ones(n) if weights is None else weights / np.mean(weights))
     if groups is None:
         groups = np.arange(n) * 10 // max(n, 1)
-    # Starting ab/adduction axes: the main direction of the rotation left off the hinge
-    # (the swing of a), and the direction perpendicular to it and to a.
-    swing = np.cross(a0, q @ a0) * sw[:, None]
-    _, _, vt = np.linalg.svd(swing, full_matrices=False)
-    pca = unit(vt[0] - (vt[0] @ a0) * a0)
-    starts = [pca, cross3(a0, pca)]
+    # Starting ab/adduction axes: the dorsal direction; without it, the main direction of
+    # the rotation left off the hinge (the swing of a) and the direction perpendicular to
+    # it and to a.
     if finger_direction is not None and np.linalg.norm(cross3(finger_direction, a0)) > 0.1:
         starts = [unit(cross3(finger_direction, a0))]
+    else:
+        swing = np.cross(a0, q @ a0) * sw[:, None]
+        _, _, vt = np.linalg.svd(swing, full_matrices=False)
+        pca = unit(vt[0] - (vt[0] @ a0) * a0)
+        starts = [pca, cross3(a0, pca)]
     ea = orthonormal_basis(a0)
     lim = np.array([_BOUNDS[0], _BOUNDS[1], np.radians(MAX_ABDUCTION_TURN_DEG)])
 
