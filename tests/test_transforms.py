@@ -77,3 +77,38 @@ def test_rotation_angle_is_the_rotation_vectors_norm_from_0_to_pi_and_nan_safe()
     got = rotation_angle(m)
     assert np.isnan(got[[3, 150]]).all()
     assert np.isfinite(np.delete(got, [3, 150])).all()
+
+
+def test_cross3_and_stacked_orthonormal_bases_give_numpys_bits():
+    from fingerfit.transforms import cross3, orthonormal_basis
+
+    rng = np.random.default_rng(12)
+    u, v = rng.normal(size=(2, 200, 3)) * rng.uniform(1e-3, 1e3, (2, 200, 1))
+    for x, y in zip(u, v, strict=True):
+        np.testing.assert_array_equal(cross3(x, y), np.cross(x, y))
+    stacked = orthonormal_basis(u)
+    assert stacked.shape == (200, 3, 3)
+    np.testing.assert_array_equal(stacked, np.stack([orthonormal_basis(x) for x in u]))
+    # Right-handed and orthonormal, the last row the unit axis.
+    np.testing.assert_allclose(
+        stacked @ np.swapaxes(stacked, 1, 2), np.broadcast_to(np.eye(3), (200, 3, 3)), atol=1e-15
+    )
+    np.testing.assert_allclose(np.linalg.det(stacked), 1.0, atol=1e-14)
+    np.testing.assert_allclose(
+        stacked[:, 2], u / np.linalg.norm(u, axis=1, keepdims=True), atol=1e-16
+    )
+
+
+def test_stacked_axis_angle_matrices_and_skews_give_one_at_a_times_bits():
+    from fingerfit.transforms import axis_angle_matrix, skew, unit
+
+    rng = np.random.default_rng(13)
+    axes = unit(rng.normal(size=(7, 3)))
+    angles = rng.uniform(-3.0, 3.0, (7, 50))
+    stacked = axis_angle_matrix(axes, angles)
+    assert stacked.shape == (7, 50, 3, 3)
+    want = np.stack([axis_angle_matrix(a, t) for a, t in zip(axes, angles, strict=True)])
+    np.testing.assert_array_equal(stacked, want)
+    np.testing.assert_array_equal(skew(axes), np.stack([skew(a) for a in axes]))
+    v = rng.normal(size=3)
+    np.testing.assert_allclose(skew(axes) @ v, np.cross(axes, v), atol=1e-15)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .transforms import FloatArray, rotate_about_line, skew
+from .transforms import FloatArray, cross3, rotate_about_line, skew
 
 
 def projection_angle(
@@ -142,7 +142,7 @@ def two_axis_angles(
     # for X = I and K_a^T. All ten traces come from one product.
     kb = skew(b)
     xs, ys = (np.eye(3), skew(a).T), (np.eye(3), kb, kb @ kb)
-    mats = [np.outer(a, np.cross(b, ap)), np.outer(a, ap)] + [x @ y for x in xs for y in ys]
+    mats = [np.outer(a, cross3(b, ap)), np.outer(a, ap)] + [x @ y for x in xs for y in ys]
     t = _traces(rotation, np.stack(mats))
     beta = np.arctan2(t[:, 0], t[:, 1])
     t = t[:, 2:].reshape(n, 2, 3)

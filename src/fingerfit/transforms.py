@@ -157,35 +157,55 @@ def axis_angle_matrix(axis: FloatArray, angle: FloatArray) -> FloatArray:
 
     Parameters
     ----------
-    axis : ndarray, shape (3,)
-        Unit rotation axis.
-    angle : ndarray, shape (n,)
+    axis : ndarray, shape (3,) or (m, 3)
+        Unit rotation axis; or ``m`` axes, one per row of ``angle``.
+    angle : ndarray, shape (n,) or (m, n)
         Angles in radians, right-hand rule about ``axis``.
 
     Returns
     -------
-    ndarray, shape (n, 3, 3)
+    ndarray, shape (n, 3, 3) or (m, n, 3, 3)
+        With ``m`` axes, row ``i`` is ``axis_angle_matrix(axis[i], angle[i])``.
     """
     a = np.asarray(axis, dtype=float)
     th = np.asarray(angle, dtype=float)
-    k = skew(a)
-    s = np.sin(th)[:, None, None]
-    c = (1.0 - np.cos(th))[:, None, None]
+    k = skew(a) if a.ndim == 1 else skew(a)[:, None]
+    s = np.sin(th)[..., None, None]
+    c = (1.0 - np.cos(th))[..., None, None]
     return np.eye(3) + s * k + c * (k @ k)
 
 
 def skew(a: FloatArray) -> FloatArray:
-    """Cross-product matrix ``(3, 3)`` of ``a (3,)``: ``skew(a) @ v == a x v``."""
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    """Cross-product matrix ``(3, 3)`` of ``a (3,)``: ``skew(a) @ v == a x v``; of a stack
+    ``(m, 3)``, ``(m, 3, 3)``."""
+    if np.ndim(a) == 1:
+        return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    a = np.asarray(a, dtype=float)
+    k = np.zeros((*a.shape[:-1], 3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = a[..., 2], -a[..., 1], a[..., 0]
+    return k
+
+
+def cross3(u: FloatArray, v: FloatArray) -> FloatArray:
+    """``u x v`` ``(3,)`` of two vectors ``(3,)``: the bits of :func:`numpy.cross` without its
+    per-call cost (tens of microseconds; the joint fits take thousands of single products)."""
+    u0, u1, u2 = np.asarray(u, dtype=float).tolist()
+    v0, v1, v2 = np.asarray(v, dtype=float).tolist()
+    return np.array([u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0])
 
 
 def orthonormal_basis(axis: FloatArray) -> FloatArray:
     """Rows ``e1, e2, a`` ``(3, 3)``: a right-handed orthonormal basis whose last row is the
-    unit ``axis`` (``e2 = a x e1``); its transpose is a rotation taking z to ``axis``."""
+    unit ``axis`` (``e2 = a x e1``); its transpose is a rotation taking z to ``axis``.
+
+    ``axis`` may stack several axes, ``(m, 3)``: then ``(m, 3, 3)``, one basis each (the
+    same bits as one at a time)."""
     a = unit(axis)
-    helper = np.eye(3)[np.argmin(np.abs(a))]
-    e1 = unit(np.cross(a, helper))
-    return np.stack([e1, np.cross(a, e1), a])
+    helper = np.eye(3)[np.argmin(np.abs(a), axis=-1)]
+    cross = cross3 if a.ndim == 1 else np.cross
+    e1 = unit(cross(a, helper))
+    return np.stack([e1, cross(a, e1), a], axis=-2)
 
 
 def rotate_about_lines(

@@ -60,7 +60,7 @@ from ..digits import ABDUCTION_FIRST, FLEXION_FIRST
 from ..transforms import FloatArray, axis_angle_matrix, orthonormal_basis, unit
 from .bootstrap import Z95, jackknife_sd
 from .pooled import leave_one_out_axes
-from .twoaxis import MAX_FRAMES, TwoAxisFit, direction_jacobian
+from .twoaxis import MAX_FRAMES, TwoAxisDirections, TwoAxisFit, direction_jacobian
 
 HINGE = "hinge"
 TWO_AXIS = "two_axis"
@@ -157,8 +157,14 @@ class ModelChoice:
 _PROXIMAL = {ABDUCTION_FIRST: "ab/adduction", FLEXION_FIRST: "flexion"}
 
 
+def _one_hot(rows: np.ndarray, count: int) -> FloatArray:
+    """``(count, len(rows))``: 1 where column ``k`` belongs to fold ``rows[k]``; times a
+    matrix of per-row values it sums them by fold."""
+    return (rows[None, :] == np.arange(count)[:, None]).astype(float)
+
+
 def _two_axis_directions(
-    q: FloatArray, labels: np.ndarray, folds: np.ndarray, fit: TwoAxisFit
+    q: FloatArray, labels: np.ndarray, folds: np.ndarray, fit: TwoAxisFit | TwoAxisDirections
 ) -> tuple[FloatArray, FloatArray]:
     """Flexion and ab/adduction axes without each fold: one Gauss-Newton step from ``fit``.
 
@@ -171,11 +177,9 @@ def _two_axis_directions(
     if fit.tilt_data_share < 0.5:
         e = np.concatenate([[0.0, 0.0], unit(basis[2:] @ a)])
         h = h + _HELD * np.trace(h) * np.outer(e, e)
-    rows = np.repeat(np.searchsorted(folds, labels), 3)
-    hf = np.zeros((folds.size, 4, 4))
-    np.add.at(hf, rows, jac[:, :, None] * jac[:, None, :])
-    gf = np.zeros((folds.size, 4))
-    np.add.at(gf, rows, jac * r[:, None])
+    one_hot = _one_hot(np.repeat(np.searchsorted(folds, labels), 3), folds.size)
+    hf = (one_hot @ (jac[:, :, None] * jac[:, None, :]).reshape(-1, 16)).reshape(-1, 4, 4)
+    gf = one_hot @ (jac * r[:, None])
     dx = -np.linalg.solve(h[None] - hf, (g[None] - gf)[..., None])[..., 0]
     fa = a + dx[:, :2] @ basis[:2]
     fb = b + dx[:, 2:] @ basis[2:]
@@ -186,46 +190,61 @@ def _two_axis_directions(
 
 
 def _held_out_sq(y: FloatArray, design: FloatArray, out: np.ndarray) -> FloatArray:
-    """Squared prediction errors ``(n_out,)`` (mm^2) of the frames ``out`` (bool, ``(n,)``).
+    """Squared prediction errors ``(F, n)`` (mm^2) of every frame by each fold's axis points.
 
-    The axis points ``z`` are fitted to the other frames by least squares on
-    ``y(k) = design(k) z``: ``y (n, 3)`` mm, ``design (n, 3, p)``.
+    Fold ``f``'s points ``z_f`` are fitted to the frames not in ``out[f]`` by least squares
+    on ``y_f(k) = design_f(k) z_f``.
+
+    Parameters
+    ----------
+    y : ndarray, shape (F, n, 3)
+        Per fold and frame, what the points must explain (mm, parent frame).
+    design : ndarray, shape (F, n, 3, p)
+    out : ndarray of bool, shape (F, n)
+        The frames each fold holds out.
     """
-    k = design.shape[2]
-    z = np.linalg.lstsq(design[~out].reshape(-1, k), y[~out].ravel(), rcond=1e-9)[0]
-    err = y[out] - design[out] @ z
-    return np.einsum("ni,ni->n", err, err)
+    p = design.shape[3]
+    z = np.stack(
+        [
+            np.linalg.lstsq(d[~o].reshape(-1, p), v[~o].ravel(), rcond=1e-9)[0]
+            for d, v, o in zip(design, y, out, strict=True)
+        ]
+    )
+    err = y - (design @ z[:, None, :, None])[..., 0]
+    return np.einsum("fni,fni->fn", err, err)
+
+
+def _bases(axes: FloatArray) -> FloatArray:
+    """``(F, 1, 3, 2)``: per axis ``(F, 3)``, the two unit vectors perpendicular to it
+    (:func:`orthonormal_basis`) as columns, to multiply every frame's ``(3, 3)``."""
+    return np.swapaxes(orthonormal_basis(axes)[:, :2], 1, 2)[:, None]
 
 
 def _two_axis_folds(
     q: FloatArray,
     labels: np.ndarray,
     folds: np.ndarray,
-    fit: TwoAxisFit,
+    fit: TwoAxisFit | TwoAxisDirections,
     order: str,
     reference_rotation: FloatArray,
-) -> list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]]:
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Per fold, the refitted axes and every frame's rotations about them, parent frame:
-    ``(a (3,), b (3,), Rot_a (n, 3, 3), Rot_b (n, 3, 3))``; ``Q = Rot_b Rot_a``
-    (ab/adduction first) or ``Q = Rot_a Rot_b`` (flexion first)."""
+    ``a, b (F, 3)`` and ``Rot_a, Rot_b (F, n, 3, 3)``; ``Q = Rot_b Rot_a`` (ab/adduction
+    first) or ``Q = Rot_a Rot_b`` (flexion first)."""
     if order == ABDUCTION_FIRST:
         fa, fb = _two_axis_directions(q, labels, folds, fit)
-        out = []
-        for a, b in zip(fa, fb, strict=True):
-            beta, theta = two_axis_angles(q, a, b)
-            out.append((a, b, axis_angle_matrix(a, theta), axis_angle_matrix(b, beta)))
-        return out
-    # Seen from the child: Q' = R^T R_ref = R_ref^T Q^T R_ref = Rot(b', -beta) Rot(a', -theta)
-    # with a' = R_ref^T a, b' = R_ref^T b.
-    ref = reference_rotation
-    q_child = ref.T @ np.swapaxes(q, 1, 2) @ ref
-    fa, fb = _two_axis_directions(q_child, labels, folds, fit)
-    out = []
-    for a_c, b_c in zip(fa, fb, strict=True):
-        beta, theta = two_axis_angles(q_child, a_c, b_c)
-        a, b = ref @ a_c, ref @ b_c
-        out.append((a, b, axis_angle_matrix(a, -theta), axis_angle_matrix(b, -beta)))
-    return out
+        angles = [two_axis_angles(q, a, b) for a, b in zip(fa, fb, strict=True)]
+        sign = 1.0
+    else:
+        # Seen from the child: Q' = R^T R_ref = R_ref^T Q^T R_ref = Rot(b', -beta)
+        # Rot(a', -theta) with a' = R_ref^T a, b' = R_ref^T b.
+        ref = reference_rotation
+        q_child = ref.T @ np.swapaxes(q, 1, 2) @ ref
+        fa, fb = _two_axis_directions(q_child, labels, folds, fit)
+        angles = [two_axis_angles(q_child, a, b) for a, b in zip(fa, fb, strict=True)]
+        fa, fb, sign = fa @ ref.T, fb @ ref.T, -1.0
+    beta, theta = np.array(angles).transpose(1, 0, 2)  # (F, n) each
+    return fa, fb, axis_angle_matrix(fa, sign * theta), axis_angle_matrix(fb, sign * beta)
 
 
 def _order(turn: dict[str, list[FloatArray]], candidates: list[str], usual: str) -> str:
@@ -251,7 +270,7 @@ def choose_joint_model(
     reference_rotation: FloatArray,
     reference_offset: FloatArray,
     labels: np.ndarray,
-    two_axis: dict[str, TwoAxisFit],
+    two_axis: dict[str, TwoAxisFit | TwoAxisDirections],
     usual: str = ABDUCTION_FIRST,
 ) -> ModelChoice:
     """Choose hinge or two axes, and their order, by leave-one-cycle-out prediction
@@ -268,11 +287,12 @@ def choose_joint_model(
         Child-in-parent rotation and child origin (mm) at the reference posture.
     labels : ndarray of int, shape (n,)
         Cycle of each frame (the folds).
-    two_axis : dict[str, TwoAxisFit]
+    two_axis : dict[str, TwoAxisFit or TwoAxisDirections]
         Order -> the two-axis joint fitted to every cycle in the ab/adduction-first form
         ``Q = Rot(b, beta) Rot(a, theta)``: ``abduction_first`` in the parent frame,
         ``flexion_first`` seen from the child (``JointData.reversed``: child frame at the
-        reference posture). One or both.
+        reference posture). One or both. Only the directions are used (the axes,
+        ``interior`` and ``tilt_data_share``), so the direction search's result serves.
     usual : str
         The digit's usual order (:mod:`fingerfit.digits`), kept when the two orders
         predict equally well.
@@ -286,37 +306,33 @@ def choose_joint_model(
     folds = np.unique(lab)
     q = rot @ reference_rotation.T
     hinge_axes = leave_one_out_axes(rot, lab, folds)
-    sq: dict[str, list[FloatArray]] = {HINGE: []}
-    eye = np.eye(3)[None]
-    for i, f in enumerate(folds):
-        out = lab == f
-        # Hinge: t - Rot_a t_ref = (I - Rot_a) c_a, c_a in the plane normal to a.
-        a = hinge_axes[i]
-        rot_a = axis_angle_matrix(a, twist_angle(q, a))
-        design = (eye - rot_a) @ orthonormal_basis(a)[:2].T
-        sq[HINGE].append(_held_out_sq(t - rot_a @ reference_offset, design, out))
+    outs = lab[None, :] == folds[:, None]  # (F, n): each fold's held-out frames
+    eye = np.eye(3)
+    # Hinge: t - Rot_a t_ref = (I - Rot_a) c_a, c_a in the plane normal to a.
+    rot_a = axis_angle_matrix(hinge_axes, np.array([twist_angle(q, a) for a in hinge_axes]))
+    err = _held_out_sq(t - rot_a @ reference_offset, (eye - rot_a) @ _bases(hinge_axes), outs)
+    sq: dict[str, list[FloatArray]] = {HINGE: [e[o] for e, o in zip(err, outs, strict=True)]}
     turn: dict[str, list[FloatArray]] = {}
     fold_axes = {HINGE: hinge_axes}
     for order, fit in two_axis.items():
-        sq[order], turn[order] = [], []
-        per_fold = _two_axis_folds(q, lab, folds, fit, order, reference_rotation)
-        fold_axes[order] = np.array([a for a, *_ in per_fold])  # signed as the fit's axis
-        for f, (a, b, rot_a, rot_b) in zip(folds, per_fold, strict=True):
-            out = lab == f
-            ca, cb = orthonormal_basis(a)[:2].T, orthonormal_basis(b)[:2].T
-            if order == ABDUCTION_FIRST:
-                # t - Rot_b Rot_a t_ref = Rot_b (I - Rot_a) c_a + (I - Rot_b) c_b.
-                moved = rot_b @ rot_a
-                design = np.concatenate([rot_b @ (eye - rot_a) @ ca, (eye - rot_b) @ cb], axis=2)
-            else:
-                # t - Rot_a Rot_b t_ref = (I - Rot_a) c_a + Rot_a (I - Rot_b) c_b.
-                moved = rot_a @ rot_b
-                design = np.concatenate([(eye - rot_a) @ ca, rot_a @ (eye - rot_b) @ cb], axis=2)
-            sq[order].append(_held_out_sq(t - moved @ reference_offset, design, out))
-            # What the fold's angles leave of its orientations: the angle of
-            # moved^T Q, from the trace.
-            cos = 0.5 * (np.einsum("nij,nij->n", moved[out], q[out]) - 1.0)
-            turn[order].append(np.arccos(np.clip(cos, -1.0, 1.0)) ** 2)
+        fa, fb, rot_a, rot_b = _two_axis_folds(q, lab, folds, fit, order, reference_rotation)
+        fold_axes[order] = fa  # signed as the fit's axis
+        ca, cb = _bases(fa), _bases(fb)
+        if order == ABDUCTION_FIRST:
+            # t - Rot_b Rot_a t_ref = Rot_b (I - Rot_a) c_a + (I - Rot_b) c_b.
+            moved = rot_b @ rot_a
+            design = np.concatenate([rot_b @ ((eye - rot_a) @ ca), (eye - rot_b) @ cb], axis=3)
+        else:
+            # t - Rot_a Rot_b t_ref = (I - Rot_a) c_a + Rot_a (I - Rot_b) c_b.
+            moved = rot_a @ rot_b
+            design = np.concatenate([(eye - rot_a) @ ca, rot_a @ ((eye - rot_b) @ cb)], axis=3)
+        err = _held_out_sq(t - moved @ reference_offset, design, outs)
+        # What the fold's angles leave of its orientations: the angle of moved^T Q, from
+        # the trace.
+        cos = 0.5 * (np.einsum("fnij,nij->fn", moved, q) - 1.0)
+        ang2 = np.arccos(np.clip(cos, -1.0, 1.0)) ** 2
+        sq[order] = [e[o] for e, o in zip(err, outs, strict=True)]
+        turn[order] = [x[o] for x, o in zip(ang2, outs, strict=True)]
     rms = {k: float(np.sqrt(np.mean(np.concatenate(v)))) for k, v in sq.items()}
     per_fold = {k: tuple(float(np.sqrt(np.mean(s))) for s in v) for k, v in sq.items()}
     off = {k: float(np.degrees(np.sqrt(np.mean(np.concatenate(v))))) for k, v in turn.items()}

@@ -1,6 +1,7 @@
 """The hinge estimators as the joint API and the finger pipeline invoke them: one place
 that configures SARA/SCoRE, the outlier rules and the per-cycle line (:func:`estimate_hinge`),
-and the two-axis fit started from a hinge (:func:`estimate_two_axis`)."""
+and the two-axis fit started from a hinge (:func:`estimate_two_axis`; its directions alone:
+:func:`estimate_two_axis_directions`)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from .bootstrap import BOOTSTRAP_BLOCKS
 from .centre import CentreFit, centre_of_rotation
 from .pooled import PooledHinge, pooled_hinge, sara_axis
 from .robust import RobustHinge, robust_hinge
-from .twoaxis import TwoAxisFit, fit_two_axis
+from .twoaxis import TwoAxisDirections, TwoAxisFit, fit_two_axis, two_axis_directions
 
 HINGE_METHODS = ("sara", "robust", "tang2018")
 
@@ -148,12 +149,44 @@ def estimate_hinge(
     )
 
 
+def _hinge_frames(hinge: HingeEstimate) -> tuple[np.ndarray, np.ndarray]:
+    """The frames a hinge fit used ``(k,)`` and their groups ``(k,)``: its cycles, else
+    :data:`BOOTSTRAP_BLOCKS` contiguous time blocks."""
+    k = hinge.frames
+    groups = hinge.groups
+    if groups is None:
+        groups = np.arange(k.size) * BOOTSTRAP_BLOCKS // k.size
+    return k, groups
+
+
+def estimate_two_axis_directions(
+    rotation: FloatArray,
+    reference_rotation: FloatArray,
+    hinge: HingeEstimate,
+    finger_direction: FloatArray | None = None,
+) -> TwoAxisDirections:
+    """The directions :func:`estimate_two_axis` would fit, alone (its arguments of the same
+    names): :func:`.twoaxis.two_axis_directions` on the hinge's frames, weights and groups.
+
+    Returns
+    -------
+    TwoAxisDirections
+        Parent frame at the reference posture; pass it to :func:`estimate_two_axis` as
+        ``directions`` to complete the joint without searching again.
+    """
+    k, groups = _hinge_frames(hinge)
+    return two_axis_directions(
+        rotation[k], reference_rotation, hinge.axis, hinge.weights, finger_direction, groups
+    )
+
+
 def estimate_two_axis(
     rotation: FloatArray,
     translation: FloatArray,
     reference_rotation: FloatArray,
     hinge: HingeEstimate,
     finger_direction: FloatArray | None = None,
+    directions: TwoAxisDirections | None = None,
 ) -> TwoAxisFit:
     """Two-axis joint (flexion, then ab/adduction) started from a hinge fit.
 
@@ -170,6 +203,8 @@ def estimate_two_axis(
     finger_direction : ndarray, shape (3,), optional
         Unit direction of the stretched finger (parent frame), for the initial
         ab/adduction axis.
+    directions : TwoAxisDirections, optional
+        :func:`estimate_two_axis_directions` of the same arguments, when already found.
 
     Returns
     -------
@@ -177,11 +212,8 @@ def estimate_two_axis(
         :func:`.twoaxis.fit_two_axis`'s result; ``accepted`` says whether the data
         support the second axis.
     """
-    k = hinge.frames
-    groups = hinge.groups
-    if groups is None:
-        groups = np.arange(k.size) * BOOTSTRAP_BLOCKS // k.size
+    k, groups = _hinge_frames(hinge)
     return fit_two_axis(
         rotation[k], translation[k], reference_rotation, hinge.axis, hinge.weights,
-        hinge.noise_mm, finger_direction, groups,
+        hinge.noise_mm, finger_direction, groups, directions,
     )  # fmt: skip

@@ -31,7 +31,7 @@ from .axis import AxisFit, mean_null_axis
 from .centre import CentreFit, centre_of_rotation
 from .choice import TWO_AXIS, ModelChoice, choose_joint_model
 from .cycles import period_labels
-from .joint import estimate_hinge, estimate_two_axis
+from .joint_estimators import estimate_hinge, estimate_two_axis, estimate_two_axis_directions
 from .migration import fit_axis_points
 from .saddle import SaddleFit
 from .twoaxis import TwoAxisFit
@@ -287,18 +287,17 @@ def second_axis_choice(data: JointData) -> tuple[TwoAxisFit, ModelChoice]:
     ``estimate_two_axis`` fits ``Q = Rot(b, beta) Rot(a, theta)`` with the ab/adduction
     axis ``b`` proximal; the flexion-first joint is that form seen from the child
     (:meth:`JointData.reversed`): fitted there and brought back to the parent frame.
-    Returns the fit of the order :attr:`ModelChoice.order` names, parent frame.
+    Returns the fit of the order :attr:`ModelChoice.order` names, parent frame. The choice
+    needs only each order's directions; the joint is completed (angles, axis points) for
+    the chosen order alone.
     """
-    fits = {}
+    starts, directions = {}, {}
     for order in (ABDUCTION_FIRST, FLEXION_FIRST):
         d = data.reversed() if order == FLEXION_FIRST else data
         start = estimate_hinge(d.rotation, d.translation, "sara", d.periods)
-        fits[order] = estimate_two_axis(
-            d.rotation,
-            d.translation,
-            d.reference_rotation,
-            replace(start, groups=period_labels(d.periods)),
-            d.finger_direction,
+        starts[order] = (d, replace(start, groups=period_labels(d.periods)))
+        directions[order] = estimate_two_axis_directions(
+            d.rotation, d.reference_rotation, starts[order][1], d.finger_direction
         )
     frames = np.concatenate(data.periods)
     choice = choose_joint_model(
@@ -307,10 +306,18 @@ def second_axis_choice(data: JointData) -> tuple[TwoAxisFit, ModelChoice]:
         data.reference_rotation,
         data.reference_offset,
         period_labels(data.periods),
-        fits,
+        directions,
         data.second_axis or ABDUCTION_FIRST,
     )
-    tf = fits[choice.order]
+    d, start = starts[choice.order]
+    tf = estimate_two_axis(
+        d.rotation,
+        d.translation,
+        d.reference_rotation,
+        start,
+        d.finger_direction,
+        directions[choice.order],
+    )
     if choice.order == ABDUCTION_FIRST:
         return tf, choice
     ref, off = data.reference_rotation, data.reference_offset

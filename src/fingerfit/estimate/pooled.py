@@ -150,8 +150,8 @@ def leave_one_out_axes(rotation: FloatArray, labels: np.ndarray, folds: np.ndarr
         Unit axes, signed towards the SARA axis of every frame.
     """
     s_all = rotation.sum(axis=0)
-    s_fold = np.zeros((folds.size, 3, 3))
-    np.add.at(s_fold, np.searchsorted(folds, labels), rotation)
+    member = np.searchsorted(folds, labels)[None, :] == np.arange(folds.size)[:, None]
+    s_fold = (member.astype(float) @ rotation.reshape(-1, 9)).reshape(-1, 3, 3)
     u, _, _ = np.linalg.svd(s_all[None] - s_fold)
     axes = u[:, :, 0]
     ref = np.linalg.svd(s_all)[0][:, 0]

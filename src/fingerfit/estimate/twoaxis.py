@@ -12,9 +12,9 @@ with ``a`` and ``b`` in the parent (hand) sensor frame at the reference posture.
 in closed form from :func:`fingerfit.angles.two_axis_angles` (the same
 decomposition the angles use later), and the residual is the small rotation
 ``vee(E - E^T) / 2`` of ``E = Rot(a, theta)^T Rot(b, beta)^T Q`` (rad).
-``scipy.optimize.least_squares`` minimises it, first with ``b`` held perpendicular
-to ``a`` (three parameters), then with the tilt of ``b`` towards ``a`` freed only as far
-as the grasp cycles determine it (:mod:`.shrink`; the tilt is seen only at second order
+``scipy.optimize.least_squares`` minimises it (with its analytic Jacobian), first with
+``b`` held perpendicular to ``a`` (three parameters), then with the tilt of ``b`` towards
+``a`` freed only as far as the grasp cycles determine it (:mod:`.shrink`; the tilt is seen only at second order
 and otherwise wanders along a flat valley: ``docs/methods.md``, "Numerical
 stability"). Starts: the pooled hinge axis and, for ``b``, the dorsal direction
 (finger direction x hinge axis, from the landmarks) -- or, without landmarks, both the
@@ -63,13 +63,14 @@ from here too.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..angles import two_axis_angles
-from ..transforms import FloatArray, orthonormal_basis, unit
+from ..transforms import FloatArray, cross3, orthonormal_basis, skew, unit
 from .migration import fit_axis_points
 from .rest_abduction import REST_SPREAD_CONFIDENCE as REST_SPREAD_CONFIDENCE
 from .rest_abduction import REST_SPREAD_RATIO as REST_SPREAD_RATIO
@@ -78,10 +79,11 @@ from .shrink import MIN_DATA_SHARE, data_share
 from .twoaxis_residual import (
     _cluster_covariance,
     _hinge_residual,
-    _skew_residual,
     _tangent_coords,
     direction_jacobian,
+    skew_residual_jacobian,
 )
+from .twoaxis_residual import _skew_residual as _skew_residual
 
 MAX_RESIDUAL_RATIO = 0.5
 MIN_RANGE_DEG = 1.5
@@ -221,6 +223,69 @@ class TwoAxisDirections:
     data_condition: float
 
 
+def _turned(v0: FloatArray, e: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``unit(v0 + x[0] e[0] + x[1] e[1])`` ``(3,)`` and its derivative ``(2, 3)`` by ``x``."""
+    v = v0 + x[0] * e[0] + x[1] * e[1]
+    norm = np.linalg.norm(v)
+    u = v / norm
+    return u, (e[:2] - np.outer(e[:2] @ u, u)) / norm
+
+
+def _free_axes(
+    x: FloatArray, a0: FloatArray, ea: FloatArray, b0: FloatArray, eb: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Stage 2's axes: ``a`` turned from ``a0`` by ``x[:2]`` along ``ea[:2]``, ``b`` from
+    ``b0`` by ``x[2:]`` along ``eb[:2]`` (:func:`_turned`), and their derivatives ``(4, 3)``
+    each by the four parameters."""
+    a, da = _turned(a0, ea, x[:2])
+    b, db = _turned(b0, eb, x[2:])
+    zero = np.zeros((2, 3))
+    return a, b, np.concatenate([da, zero]), np.concatenate([zero, db])
+
+
+def _perpendicular_axes(
+    y: FloatArray, a0: FloatArray, ea: FloatArray, b0: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Stage 1's axes: ``a`` turned from ``a0`` by ``y[:2]`` (:func:`_turned`), ``b``
+    perpendicular to it, turned by ``y[2]`` (rad) about ``a`` from ``b0``'s part
+    perpendicular to ``a``; with their derivatives ``(3, 3)`` each by the three parameters."""
+    a, da = _turned(a0, ea, y[:2])
+    w = b0 - (b0 @ a) * a
+    norm = np.linalg.norm(w)
+    u = w / norm
+    dw = -np.outer(da @ b0, a) - (b0 @ a) * da
+    du = (dw - np.outer(dw @ u, u)) / norm
+    c, s = np.cos(y[2]), np.sin(y[2])
+    ka = skew(a)
+    axu = ka @ u
+    b = c * u + s * axu
+    # rows: d(a x u) = da x u + a x du
+    db = np.vstack([c * du + s * (da @ skew(u) + du @ ka.T), -s * u + c * axu])
+    return a, b, np.vstack([da, np.zeros(3)]), db
+
+
+class _Evaluations:
+    """``fun`` and ``jac`` for :func:`scipy.optimize.least_squares` from one function of the
+    parameters returning both (residual ``(m,)``, Jacobian ``(m, p)``): the Jacobian
+    computed with a residual is handed back when asked for at the same parameters (the
+    solver asks for it at each step it accepts, right after the residual)."""
+
+    def __init__(self, both: Callable[..., tuple[FloatArray, FloatArray]]) -> None:
+        self.both = both
+        self.x: FloatArray | None = None
+        self.j = np.zeros((0, 0))
+
+    def fun(self, x: FloatArray, **kwargs: float) -> FloatArray:
+        r, self.j = self.both(x, **kwargs)
+        self.x = x.copy()
+        return r
+
+    def jac(self, x: FloatArray, **kwargs: float) -> FloatArray:
+        if self.x is None or not np.array_equal(x, self.x):
+            self.fun(x, **kwargs)
+        return self.j
+
+
 def fit_two_axis_directions(
     q: FloatArray,
     flexion_guess: FloatArray,
@@ -268,49 +333,56 @@ def fit_two_axis_directions(
     sw = np.sqrt(np.ones(n) if weights is None else weights / np.mean(weights))
     if groups is None:
         groups = np.arange(n) * 10 // max(n, 1)
-    # Starting ab/adduction axes: the main direction of the rotation left off the hinge
-    # (the swing of a), and the direction perpendicular to it and to a.
-    swing = np.cross(a0, q @ a0) * sw[:, None]
-    _, _, vt = np.linalg.svd(swing, full_matrices=False)
-    pca = unit(vt[0] - (vt[0] @ a0) * a0)
-    starts = [pca, np.cross(a0, pca)]
-    if finger_direction is not None and np.linalg.norm(np.cross(finger_direction, a0)) > 0.1:
-        starts = [unit(np.cross(finger_direction, a0))]
+    # Starting ab/adduction axes: the dorsal direction; without it, the main direction of
+    # the rotation left off the hinge (the swing of a) and the direction perpendicular to
+    # it and to a.
+    if finger_direction is not None and np.linalg.norm(cross3(finger_direction, a0)) > 0.1:
+        starts = [unit(cross3(finger_direction, a0))]
+    else:
+        swing = np.cross(a0, q @ a0) * sw[:, None]
+        _, _, vt = np.linalg.svd(swing, full_matrices=False)
+        pca = unit(vt[0] - (vt[0] @ a0) * a0)
+        starts = [pca, cross3(a0, pca)]
     ea = orthonormal_basis(a0)
     lim = np.array([_BOUNDS[0], _BOUNDS[1], np.radians(MAX_ABDUCTION_TURN_DEG)])
+
+    def data(a: FloatArray, b: FloatArray, da: FloatArray, db: FloatArray) -> tuple:
+        # Weighted residual (3n,) and Jacobian (3n, p).
+        r, jac = skew_residual_jacobian(q, a, b, da, db)
+        return (r * sw[:, None]).ravel(), (jac * sw[:, None, None]).reshape(-1, len(da))
+
     best = None
+    best_jac: FloatArray | None = None
     for b0 in starts:
         eb = orthonormal_basis(b0)
 
         def dirs(x: FloatArray, b0: FloatArray = b0, eb: FloatArray = eb) -> tuple:
-            a = unit(a0 + x[0] * ea[0] + x[1] * ea[1])
-            b = unit(b0 + x[2] * eb[0] + x[3] * eb[1])
-            return a, b
+            return _free_axes(x, a0, ea, b0, eb)
 
         def perp(y: FloatArray, b0: FloatArray = b0) -> tuple:
-            # Stage 1: b perpendicular to a, turned by y[2] (rad) about a from b0.
-            a = unit(a0 + y[0] * ea[0] + y[1] * ea[1])
-            u = unit(b0 - (b0 @ a) * a)
-            return a, np.cos(y[2]) * u + np.sin(y[2]) * np.cross(a, u)
+            return _perpendicular_axes(y, a0, ea, b0)
 
-        def data_resid(a: FloatArray, b: FloatArray) -> FloatArray:
-            return (_skew_residual(q, a, b) * sw[:, None]).ravel()
-
+        stage1 = _Evaluations(lambda y, perp=perp: data(*perp(y)))
         s1 = least_squares(
-            lambda y, perp=perp: data_resid(*perp(y)),
+            stage1.fun,
             np.zeros(3),
+            jac=stage1.jac,
             bounds=(-lim, lim),
             x_scale=0.05,
             xtol=1e-10,
             ftol=1e-12,
         )
-        a1, b1 = perp(s1.x)
+        a1, b1, _, _ = perp(s1.x)
         x1 = np.concatenate([_tangent_coords(a1, a0, ea), _tangent_coords(b1, b0, eb)])
         x1 = np.clip(x1, -0.99 * _BOUNDS, 0.99 * _BOUNDS)
 
-        def resid(x: FloatArray, lam: float, dirs=dirs) -> FloatArray:
-            a, b = dirs(x)
-            return np.append(data_resid(a, b), lam * (a @ b))
+        def resid(x: FloatArray, lam: float, dirs=dirs) -> tuple:
+            # The data rows and the prior row on a . b.
+            a, b, da, db = dirs(x)
+            r, jac = data(a, b, da, db)
+            return np.append(r, lam * (a @ b)), np.vstack([jac, lam * (da @ b + db @ a)])
+
+        stage2 = _Evaluations(resid)
 
         # How well the data alone see the tilt of b towards a (cluster-robust, per
         # cycle), first at the perpendicular solution, then once more at the fit it
@@ -318,6 +390,7 @@ def fit_two_axis_directions(
         a, b = a1, b1
         for _ in range(2):
             r, jac, basis = direction_jacobian(q, a, b, sw)
+            jac_at = (a, b)
             cov, h_inv = _cluster_covariance(jac, r, groups)
             e = np.concatenate([[0.0, 0.0], unit(basis[2:] @ a)])  # tilt of b towards a
             var_tilt = max(float(e @ cov @ e), 0.0)
@@ -329,15 +402,16 @@ def fit_two_axis_directions(
             curv = 1.0 / max(float(e @ h_inv @ e), 1e-300)
             lam = np.sqrt(curv * (1.0 - share) / share)
             sol = least_squares(
-                resid,
+                stage2.fun,
                 x1,
+                jac=stage2.jac,
                 bounds=(-_BOUNDS, _BOUNDS),
                 x_scale=0.05,
                 xtol=1e-12,
                 ftol=1e-14,
                 kwargs={"lam": lam},
             )
-            a, b = dirs(sol.x)
+            a, b, _, _ = dirs(sol.x)
         if share < MIN_DATA_SHARE:
             # The data do not determine the tilt: b stays perpendicular to a.
             a, b, cost = a1, b1, s1.cost
@@ -347,10 +421,13 @@ def fit_two_axis_directions(
             interior = bool(np.all(np.abs(sol.x) < 0.98 * _BOUNDS))
         # Interior optima beat boundary ones; then the lower cost wins.
         if best is None or (interior, -cost) > (best[3], -best[2]):
-            phi = np.concatenate([[0.0, 0.0], unit(basis[2:] @ np.cross(a, b))])
+            phi = np.concatenate([[0.0, 0.0], unit(basis[2:] @ cross3(a, b))])
+            # The last Jacobian, kept when it was taken at these axes (the usual case).
+            same = np.array_equal(jac_at[0], a) and np.array_equal(jac_at[1], b)
             best = (a, b, cost, interior, var_tilt, cov, share, float(phi @ cov @ phi))
+            best_jac = jac if same else None
     a, b, cost, interior, var_tilt, cov1, share, var_phi = best
-    _, jac, _ = direction_jacobian(q, a, b, sw)
+    jac = best_jac if best_jac is not None else direction_jacobian(q, a, b, sw)[1]
     sv = np.linalg.svd(jac, compute_uv=False)
     tilt_sd = float(np.degrees(np.sqrt(var_tilt))) if var_tilt > 0 else 0.0
     return TwoAxisDirections(
@@ -366,6 +443,59 @@ def fit_two_axis_directions(
     )
 
 
+def _frame_inputs(
+    rotation: FloatArray,
+    reference_rotation: FloatArray,
+    weights: FloatArray | None,
+    groups: FloatArray | None,
+) -> tuple[FloatArray, FloatArray, np.ndarray, int]:
+    """``Q = R R_ref^T (n, 3, 3)``, the frame weights ``(n,)`` (mean 1), the grasp cycle of
+    each frame ``(n,)`` (default ten contiguous blocks) and the stride of the direction
+    search (at most :data:`MAX_FRAMES` frames)."""
+    q = rotation @ reference_rotation.T
+    w = np.ones(q.shape[0]) if weights is None else weights / np.mean(weights)
+    stride = max(1, -(-q.shape[0] // MAX_FRAMES))
+    if groups is None:
+        groups = np.arange(q.shape[0]) * 10 // max(q.shape[0], 1)
+    return q, w, np.asarray(groups), stride
+
+
+def two_axis_directions(
+    rotation: FloatArray,
+    reference_rotation: FloatArray,
+    flexion_guess: FloatArray,
+    weights: FloatArray | None = None,
+    finger_direction: FloatArray | None = None,
+    groups: FloatArray | None = None,
+) -> TwoAxisDirections:
+    """The directions :func:`fit_two_axis` fits, alone (its arguments of the same names).
+
+    Parameters
+    ----------
+    rotation : ndarray, shape (n, 3, 3)
+        Child-in-parent rotations (no NaN).
+    reference_rotation : ndarray, shape (3, 3)
+        Child-in-parent rotation at the reference posture.
+    flexion_guess : ndarray, shape (3,)
+        Pooled hinge axis (parent frame) to start from.
+    weights, groups : ndarray, shape (n,), optional
+        Frame weights and grasp cycle of each frame (default ten contiguous blocks).
+    finger_direction : ndarray, shape (3,), optional
+        Unit direction of the stretched finger in the parent frame.
+
+    Returns
+    -------
+    TwoAxisDirections
+        :func:`fit_two_axis_directions` on at most :data:`MAX_FRAMES` evenly strided frames
+        (parent frame at the reference posture); pass it to :func:`fit_two_axis` to
+        complete the joint without searching again.
+    """
+    q, w, groups, stride = _frame_inputs(rotation, reference_rotation, weights, groups)
+    return fit_two_axis_directions(
+        q[::stride], flexion_guess, w[::stride], finger_direction, groups[::stride]
+    )
+
+
 def fit_two_axis(
     rotation: FloatArray,
     translation: FloatArray,
@@ -375,6 +505,7 @@ def fit_two_axis(
     noise_mm: float = 0.5,
     finger_direction: FloatArray | None = None,
     groups: FloatArray | None = None,
+    directions: TwoAxisDirections | None = None,
 ) -> TwoAxisFit:
     """Fit a two-axis joint to the movement frames of one joint.
 
@@ -400,21 +531,21 @@ def fit_two_axis(
         Grasp cycle of each frame: the clusters of the robust variances that weigh the
         priors (``docs/methods.md``, "Numerical stability"); default ten contiguous
         blocks of frames.
+    directions : TwoAxisDirections, optional
+        :func:`two_axis_directions` of the same arguments, when already found: the
+        direction search is not run again.
 
     Returns
     -------
     TwoAxisFit
     """
-    q = rotation @ reference_rotation.T
-    w = np.ones(q.shape[0]) if weights is None else weights / np.mean(weights)
+    q, w, groups, stride = _frame_inputs(rotation, reference_rotation, weights, groups)
     hinge_rms = float(np.sqrt(np.average(_hinge_residual(q, unit(flexion_guess)) ** 2, weights=w)))
-    stride = max(1, -(-q.shape[0] // MAX_FRAMES))
-    if groups is None:
-        groups = np.arange(q.shape[0]) * 10 // max(q.shape[0], 1)
-    groups = np.asarray(groups)
-    dr = fit_two_axis_directions(
-        q[::stride], flexion_guess, w[::stride], finger_direction, groups[::stride]
-    )
+    dr = directions
+    if dr is None:
+        dr = fit_two_axis_directions(
+            q[::stride], flexion_guess, w[::stride], finger_direction, groups[::stride]
+        )
     a, b, rms, interior = dr.flexion_axis, dr.abduction_axis, dr.rms_rad, dr.interior
     beta, theta = two_axis_angles(q, a, b)
     lo, hi = np.percentile(beta, [5, 95])
@@ -466,8 +597,10 @@ def fit_two_axis(
 
 __all__ = [
     "RestAbductionTest",
+    "TwoAxisDirections",
     "TwoAxisFit",
     "fit_two_axis",
     "fit_two_axis_directions",
     "rest_abduction_test",
+    "two_axis_directions",
 ]
