@@ -36,10 +36,10 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
-from ..transforms import quat_wxyz_from_matrix, row_norms
+from ..transforms import row_norms
 from .fastcsv import NotPlain, put_quat_rows, put_rows, put_scaled_rows, read_header
 from .hygiene import check_recording, implausible_rows, missing_note
-from .posecsv import check_field_counts
+from .posecsv import check_field_counts, sensor_quats
 from .wideframes import QUAT_NORM_TOLERANCE as QUAT_NORM_TOLERANCE
 from .wideframes import RATE_TOLERANCE as RATE_TOLERANCE
 from .wideframes import _assemble, _frame_grid
@@ -488,22 +488,31 @@ def wide_table(
         Missing samples are NaN.
     """
     lay = layout or DEFAULT_LAYOUT
+    return pd.DataFrame(_wide_block(recording, 0, recording.n_frames, units, lay))
+
+
+def _wide_block(
+    recording: Recording, lo: int, hi: int, units: str, lay: WideLayout
+) -> dict[str, np.ndarray]:
+    """The columns of :func:`wide_table` for frames ``lo:hi``, each ``(hi - lo,)``
+    (positions in ``units``, orientations as ``lay`` states them; NaN where missing)."""
     data: dict[str, np.ndarray] = {}
     if lay.time is not None:
-        data[lay.time] = recording.time
+        data[lay.time] = recording.time[lo:hi]
     for s, name in enumerate(recording.sensors, start=1):
         pose = recording.poses[name]
         if lay.orientation == _QUAT:
-            ori = quat_wxyz_from_matrix(pose.rotation)
+            ori = sensor_quats(recording, name, lo, hi)
         else:
-            ori = np.full((recording.n_frames, 3), np.nan)
-            ok = pose.valid
-            ori[ok] = Rotation.from_matrix(pose.rotation[ok]).as_euler("ZYX", degrees=True)
+            ori = np.full((3, hi - lo), np.nan)
+            ok = pose.valid[lo:hi]
+            euler = Rotation.from_matrix(pose.rotation[lo:hi][ok]).as_euler("ZYX", degrees=True)
+            ori[:, ok] = euler.T
         for m, key in enumerate(lay.orientation):
-            data[_column(lay.columns[key], s)] = ori[:, m]
+            data[_column(lay.columns[key], s)] = ori[m]
         for m, key in enumerate(_POS):
-            data[_column(lay.columns[key], s)] = pose.position[:, m] / UNITS_TO_MM[units]
-    return pd.DataFrame(data)
+            data[_column(lay.columns[key], s)] = pose.position[lo:hi, m] / UNITS_TO_MM[units]
+    return data
 
 
 def write_wide_csv(
@@ -542,29 +551,16 @@ def write_wide_csv(
 
 def _write_parquet(path: Path, recording: Recording, units: str, lay: WideLayout) -> Path:
     """The columns of :func:`wide_table` (quaternion layouts) written a row group of
-    frames at a time: the same numbers, without the whole table in memory."""
+    frames at a time, each made while the one before it is written: the same numbers,
+    without the whole table in memory."""
     from .parquet import ROW_GROUP_ROWS, ParquetSink
-    from .posecsv import _whole_quat_error, quats_blocked
 
     n = recording.n_frames
-    with ParquetSink(path, _wide_meta(units, lay)) as sink:
-        for lo in range(0, max(n, 1), ROW_GROUP_ROWS):
-            hi = min(lo + ROW_GROUP_ROWS, n)
-            data: dict[str, np.ndarray] = {}
-            if lay.time is not None:
-                data[lay.time] = recording.time[lo:hi]
-            for s, name in enumerate(recording.sensors, start=1):
-                pose = recording.poses[name]
-                try:
-                    ori = quats_blocked(pose.rotation[lo:hi])
-                except ValueError:
-                    _whole_quat_error(recording)
-                    raise
-                for m, key in enumerate(lay.orientation):
-                    data[_column(lay.columns[key], s)] = np.ascontiguousarray(ori[:, m])
-                for m, key in enumerate(_POS):
-                    data[_column(lay.columns[key], s)] = (
-                        pose.position[lo:hi, m] / UNITS_TO_MM[units]
-                    )
-            sink.write(data)
+    with ParquetSink(
+        path, _wide_meta(units, lay), statistics=(lay.time,) if lay.time else ()
+    ) as sink:
+        sink.write_blocks(
+            _wide_block(recording, lo, min(lo + ROW_GROUP_ROWS, n), units, lay)
+            for lo in range(0, max(n, 1), ROW_GROUP_ROWS)
+        )
     return path
