@@ -326,7 +326,11 @@ def _read_parquet_fast(
             m = block[0].size
             ext = getattr(buffers, "ext", None)
             if ext is None or ext.shape[0] < m + 1:
-                ext = buffers.ext = np.empty((max(m, _PARQUET_BLOCK) + 1, n_st, k))
+                # (rows, stations, keys) with each field's rows contiguous: the columns
+                # are copied as they are, and the checks' reductions over stations and
+                # keys go across contiguous rows
+                rows = max(m, _PARQUET_BLOCK) + 1
+                ext = buffers.ext = np.empty((n_st, k, rows)).transpose(2, 0, 1)
             if before is not None:
                 ext[0] = before
             v = ext[1 : m + 1]
@@ -340,8 +344,12 @@ def _read_parquet_fast(
                 rep, same = rep[1:], same[1:]
             if rep.any():
                 raise _Irregular
-            held = int(np.count_nonzero(same.any(axis=1) & ~same.all(axis=1)))
-            del rep, same
+            some, every = same[:, 0].copy(), same[:, 0].copy()
+            for j in range(1, n_st):
+                some |= same[:, j]
+                every &= same[:, j]
+            held = int(np.count_nonzero(some & ~every))
+            del rep, same, some, every
             finite = np.isfinite(v)
             complete = finite.all(axis=2)
             empty = int(np.count_nonzero(~complete & finite.any(axis=2)))
