@@ -335,6 +335,17 @@ def child(src: Path, kind: str, path: Path, extra: str) -> dict:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+def best_of(jobs: dict[str, tuple], repeat: int) -> dict[str, dict]:
+    """Each job's fastest of ``repeat`` fresh processes (:func:`child` of its arguments),
+    the jobs taking turns, so that a load coming and going on the shared cores falls on
+    the current and the older code alike."""
+    runs: dict[str, list[dict]] = {label: [] for label in jobs}
+    for _ in range(repeat):
+        for label, args in jobs.items():
+            runs[label].append(child(*args))
+    return {label: min(r, key=lambda x: x["seconds"]) for label, r in runs.items()}
+
+
 def run(
     rows: int, before: Path | None = None, repeat: int = 2, tables: tuple[str, ...] | None = None
 ) -> dict:
@@ -354,16 +365,12 @@ def run(
             big, small, count = files[kind]
             entry = {"rows": count, "file_bytes": big.stat().st_size}
             new = kind == "angles"  # no older reader to compare
-            for label, src in codes.items():
-                if new and label != "now":
-                    continue
-                best = min(
-                    (
-                        child(src, kind, big, str(small))
-                        for _ in range(repeat if label == "now" else 1)
-                    ),
-                    key=lambda r: r["seconds"],
-                )
+            jobs = {
+                label: (src, kind, big, str(small))
+                for label, src in codes.items()
+                if not new or label == "now"
+            }
+            for label, best in best_of(jobs, repeat).items():
                 entry[label] = best | {"rows_per_s": count / best["seconds"]}
             floor_kind = {
                 "pose": "floor-csv",
@@ -380,14 +387,8 @@ def run(
         big_pose = files["pose"][0]
         for kind in filter(wanted, WRITERS + PARQUET_WRITERS):
             entry = {}
-            for label, src in codes.items():
-                best = min(
-                    (
-                        child(src, kind, big_pose, label)
-                        for _ in range(repeat if label == "now" else 1)
-                    ),
-                    key=lambda r: r["seconds"],
-                )
+            jobs = {label: (src, kind, big_pose, label) for label, src in codes.items()}
+            for label, best in best_of(jobs, repeat).items():
                 entry[label] = best | {"rows_per_s": best["rows"] / best["seconds"]}
             results["write"][kind.removeprefix("write-")] = entry
     results["load_after"] = os.getloadavg()[0]
