@@ -13,7 +13,10 @@ Beside rows per second the table gives MB/s of file and numbers per second (a wi
 holds 15 numbers, a pose-CSV row 8), and the speed of the library alone on the same file
 as the floor: Arrow's CSV reader with the column types declared (all threads) for the
 CSV files, ``np.fromfile`` and the float64 conversion of the values for Liberty binary,
-and ``pyarrow.csv.write_csv`` of the written table (read back) for the writers.
+and ``pyarrow.csv.write_csv`` of the written table (read back) for the writers; for
+the Parquet writers ``pyarrow.parquet.write_table`` of the written table with pyarrow's
+defaults (zstd) and with fingerfit's own options
+(:func:`fingerfit.io.parquet.writer_options`, same row groups).
 
 Every file is read without the hygiene check (``check=False``; the pose CSV reader has
 none), so the formats compare like for like; the check itself
@@ -153,13 +156,23 @@ if kind.startswith("write"):
         with open(target) as fh:
             n_cols = len(fh.readline().split(","))
     numbers = rows * (n_cols - (1 if kind.startswith("write-pose") else 0))  # sensor: text
-    floor = None
-    if PARQUET:  # pyarrow writing the same table (read back): the library alone
+    floor = floor_options = None
+    if PARQUET:  # pyarrow writing the same table (read back): the library alone, with its
+        # defaults (zstd) and with the options of the code under test (when it has them)
         import pyarrow.parquet as pq
         table = pq.read_table(target)
         t = time.perf_counter()
         pq.write_table(table, target + ".floor", compression="zstd")
         floor = time.perf_counter() - t
+        try:
+            from fingerfit.io.parquet import ROW_GROUP_ROWS, writer_options
+        except ImportError:  # older code
+            pass
+        else:
+            t = time.perf_counter()
+            pq.write_table(table, target + ".floor", row_group_size=ROW_GROUP_ROWS,
+                           **writer_options(table.schema))
+            floor_options = time.perf_counter() - t
         os.unlink(target + ".floor")
     elif out == "now":  # Arrow writing the same table (read back typed): the formatting floor
         import pyarrow.csv as pacsv
@@ -171,7 +184,8 @@ if kind.startswith("write"):
         os.unlink(target + ".floor")
     os.unlink(target)
     print(json.dumps({"seconds": seconds, "rows": rows, "bytes": size, "numbers": numbers,
-                      "peak_above": peak, "floor_seconds": floor}))
+                      "peak_above": peak, "floor_seconds": floor,
+                      "floor_options_seconds": floor_options}))
     raise SystemExit(0)
 
 if kind.startswith("floor"):
@@ -321,6 +335,17 @@ def child(src: Path, kind: str, path: Path, extra: str) -> dict:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+def best_of(jobs: dict[str, tuple], repeat: int) -> dict[str, dict]:
+    """Each job's fastest of ``repeat`` fresh processes (:func:`child` of its arguments),
+    the jobs taking turns, so that a load coming and going on the shared cores falls on
+    the current and the older code alike."""
+    runs: dict[str, list[dict]] = {label: [] for label in jobs}
+    for _ in range(repeat):
+        for label, args in jobs.items():
+            runs[label].append(child(*args))
+    return {label: min(r, key=lambda x: x["seconds"]) for label, r in runs.items()}
+
+
 def run(
     rows: int, before: Path | None = None, repeat: int = 2, tables: tuple[str, ...] | None = None
 ) -> dict:
@@ -340,16 +365,12 @@ def run(
             big, small, count = files[kind]
             entry = {"rows": count, "file_bytes": big.stat().st_size}
             new = kind == "angles"  # no older reader to compare
-            for label, src in codes.items():
-                if new and label != "now":
-                    continue
-                best = min(
-                    (
-                        child(src, kind, big, str(small))
-                        for _ in range(repeat if label == "now" else 1)
-                    ),
-                    key=lambda r: r["seconds"],
-                )
+            jobs = {
+                label: (src, kind, big, str(small))
+                for label, src in codes.items()
+                if not new or label == "now"
+            }
+            for label, best in best_of(jobs, repeat).items():
                 entry[label] = best | {"rows_per_s": count / best["seconds"]}
             floor_kind = {
                 "pose": "floor-csv",
@@ -366,14 +387,8 @@ def run(
         big_pose = files["pose"][0]
         for kind in filter(wanted, WRITERS + PARQUET_WRITERS):
             entry = {}
-            for label, src in codes.items():
-                best = min(
-                    (
-                        child(src, kind, big_pose, label)
-                        for _ in range(repeat if label == "now" else 1)
-                    ),
-                    key=lambda r: r["seconds"],
-                )
+            jobs = {label: (src, kind, big_pose, label) for label, src in codes.items()}
+            for label, best in best_of(jobs, repeat).items():
                 entry[label] = best | {"rows_per_s": best["rows"] / best["seconds"]}
             results["write"][kind.removeprefix("write-")] = entry
     results["load_after"] = os.getloadavg()[0]
@@ -456,6 +471,7 @@ def parquet_table(res: dict) -> str:
     head = (
         "| table | operation | rows | CSV | Parquet | Parquet / CSV | file CSV / Parquet |"
         " Parquet peak above start / arrays kept | pyarrow alone |"
+        " pyarrow alone, fingerfit's writer options |"
     )
     has_before = any(
         "before" in e for op in ("read", "write") for k, e in res[op].items() if "parquet" in k
@@ -481,12 +497,14 @@ def parquet_table(res: dict) -> str:
             else:
                 mem = f"{pn['peak_above'] / 1e6:.0f} MB (a writer)"
             floor = p.get("floor_seconds", pn.get("floor_seconds"))
+            same = pn.get("floor_options_seconds")
             lines.append(
                 f"| {name} | {op} | {rows:,} | {cn['rows_per_s'] / 1e6:.2f} M rows/s "
                 f"({cn['seconds']:.2f} s) | {pn['rows_per_s'] / 1e6:.2f} M rows/s "
                 f"({pn['seconds']:.2f} s) | {pn['rows_per_s'] / cn['rows_per_s']:.1f}x | "
                 f"{csv_bytes / 1e6:.0f} MB / {pq_bytes / 1e6:.0f} MB | {mem} | "
                 + (f"{rows / floor / 1e6:.2f} M rows/s |" if floor else "n/a |")
+                + (f" {rows / same / 1e6:.2f} M rows/s |" if same else " n/a |")
             )
             if "before" in p:
                 b = p["before"]

@@ -17,6 +17,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from fingerfit import transforms
 from fingerfit.errors import FingerfitError
 from fingerfit.io import parquet as fpq
 from fingerfit.io import read_pose_csv, write_pose_csv
@@ -37,7 +38,10 @@ def recording():
     return subject("exact", 1).session.grasp[0]
 
 
-def test_table_round_trip_is_bit_exact(tmp_path: Path) -> None:
+def test_table_round_trip_is_bit_exact(tmp_path: Path, monkeypatch) -> None:
+    from fingerfit.io import parquet_read
+
+    monkeypatch.setattr(parquet_read, "_READ_COLUMNS", 3)  # columns read 3, then 1
     rng = np.random.default_rng(0)
     n = 10_000
     cols = {
@@ -393,7 +397,7 @@ def test_blocked_writers_write_the_whole_table(tmp_path: Path, recording, monkey
     from fingerfit.io import posecsv, widecsv
 
     monkeypatch.setattr(fpq, "ROW_GROUP_ROWS", 1000)
-    monkeypatch.setattr(posecsv, "QUAT_BLOCK", 77)
+    monkeypatch.setattr(transforms, "_QUAT_BLOCK", 77)
     rec = posecsv.read_pose_csv(_pose_file(tmp_path, recording), units="mm")
     for units in ("mm", "cm"):
         got = pq.read_table(write_pose_csv(tmp_path / "p.parquet", rec, units=units))
@@ -464,3 +468,75 @@ def test_blocks_decoded_ahead_stop_and_fail_like_the_plain_ones() -> None:
     assert [next(gen) for _ in range(3)] == [0, 1, 2]
     gen.close()  # the consumer stops early: the thread ends
     assert not [t for t in threading.enumerate() if t.name == "fingerfit-parquet-ahead"]
+
+
+def test_files_are_standard_with_the_documented_encodings(tmp_path: Path, recording) -> None:
+    """Float columns BYTE_STREAM_SPLIT (no dictionary), text dictionary-encoded, every
+    column chunk zstd, min/max statistics for the time column alone; pandas and Dask read
+    the files and give the numbers bit for bit."""
+    import dask.dataframe as dd
+
+    pose = write_pose_csv(tmp_path / "g.parquet", recording, units="cm")
+    wide = write_wide_csv(tmp_path / "w.parquet", recording, units="cm")
+    n = 1000
+    table = {"time": np.arange(n) / 240.0, "a": np.resize(ODD, n)}
+    angles = fpq.write_parquet(tmp_path / "a.parquet", table, fpq.angles_meta("mm"))
+    for path, time in ((pose, "time"), (wide, "Time"), (angles, "time")):
+        meta = pq.ParquetFile(path).metadata
+        for g in range(meta.num_row_groups):
+            for j in range(meta.num_columns):
+                col = meta.row_group(g).column(j)
+                assert col.compression == "ZSTD", col
+                if col.path_in_schema == "sensor":
+                    assert "RLE_DICTIONARY" in col.encodings, col
+                    continue
+                assert "BYTE_STREAM_SPLIT" in col.encodings, col
+                assert not {"PLAIN_DICTIONARY", "RLE_DICTIONARY"} & set(col.encodings), col
+                assert col.is_stats_set == (col.path_in_schema == time), col
+        lo = meta.row_group(0).column(0).statistics
+        assert lo.min == pq.read_table(path).column(time).to_numpy()[0]
+    want = pq.read_table(pose)
+    for got in (pd.read_parquet(pose), dd.read_parquet(pose).compute()):
+        assert got["sensor"].astype(str).tolist() == want.column("sensor").to_pylist()
+        for c in ("time", "x", "y", "z", "qw", "qx", "qy", "qz"):
+            assert np.array_equal(bits(got[c].to_numpy()), bits(want.column(c).to_numpy()))
+    got = pd.read_parquet(angles)
+    assert np.array_equal(bits(got["a"].to_numpy()), bits(table["a"]))
+    assert np.signbit(got["a"].to_numpy()[1])
+
+
+def test_files_written_with_pyarrows_defaults_read_the_same(tmp_path: Path, recording) -> None:
+    """A file of the earlier layout (floats dictionary-encoded, statistics for every
+    column, one row group) or of another writer (snappy) gives the same recording."""
+    for write, read in (
+        (write_pose_csv, lambda p: read_pose_csv(p, units="cm", rate_hz=240)),
+        (write_wide_csv, lambda p: read_wide_csv(p, units="cm", rate_hz=240, check=False)),
+    ):
+        ours = write(tmp_path / "ours.parquet", recording, units="cm")
+        for options in ({"compression": "zstd"}, {"compression": "snappy"}):
+            other = tmp_path / "other.parquet"
+            pq.write_table(pq.read_table(ours), other, **options)
+            col = pq.ParquetFile(other).metadata.row_group(0).column(2)
+            assert "BYTE_STREAM_SPLIT" not in col.encodings
+            a, b = read(ours), read(other)
+            _same_recording(a, type(b)(a.name, b.time, b.poses, b.notes))
+
+
+def test_blocked_writers_raise_the_whole_recordings_error(
+    tmp_path: Path, recording, monkeypatch
+) -> None:
+    """A matrix that is not a rotation, met while the blocks are made ahead of the
+    writer, is the error of the whole recording's conversion (the first sensor in order,
+    the matrix by its frame), and no file is left."""
+    monkeypatch.setattr(fpq, "ROW_GROUP_ROWS", 100)
+    poses = dict(recording.poses)
+    names = list(poses)
+    for k, frame in ((1, 250), (2, 10)):  # a later sensor has one in an earlier block
+        rot = poses[names[k]].rotation.copy()
+        rot[frame] = np.diag([1.0, 1.0, -1.0])
+        poses[names[k]] = type(poses[names[k]])(poses[names[k]].position, rot)
+    bad = type(recording)(recording.name, recording.time, poses)
+    for write in (write_pose_csv, write_wide_csv):
+        with pytest.raises(ValueError, match=r"rotation matrix 250$"):
+            write(tmp_path / "bad.parquet", bad)
+        assert not list(tmp_path.iterdir())

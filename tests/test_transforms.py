@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from fingerfit import transforms
 from fingerfit.transforms import (
     matrix_from_quat_wxyz,
+    quat_wxyz_columns,
     quat_wxyz_from_matrix,
     rotation_angle,
     rotation_vector,
@@ -55,6 +57,63 @@ def test_quat_from_matrix_nan_rows_single_and_reflections():
     assert np.array_equal(quat_wxyz_from_matrix(np.eye(3)), [1.0, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match=r"non-positive determinant .* rotation matrix 1"):
         quat_wxyz_from_matrix(np.stack([np.eye(3), np.diag([1.0, 1.0, -1.0])]))
+
+
+def _markley_plain(m: np.ndarray) -> np.ndarray:
+    """Markley's method written plainly on ``(n, 3, 3)`` (np.argmax, np.choose,
+    np.linalg.norm): the numbers :func:`quat_wxyz_from_matrix` must give bit for bit."""
+    r = [[m[:, a, b] for b in range(3)] for a in range(3)]
+    trace = r[0][0] + r[1][1] + r[2][2]
+    choice = np.argmax(np.stack([r[0][0], r[1][1], r[2][2], trace]), axis=0)
+    big = [1 - trace + 2 * r[k][k] for k in range(3)]
+    wx, wy, wz = r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]
+    xy, xz, yz = r[1][0] + r[0][1], r[2][0] + r[0][2], r[2][1] + r[1][2]
+    out = np.stack(
+        [
+            np.choose(choice, [wx, wy, wz, 1 + trace]),
+            np.choose(choice, [big[0], xy, xz, wx]),
+            np.choose(choice, [xy, big[1], yz, wy]),
+            np.choose(choice, [xz, yz, big[2], wz]),
+        ],
+        axis=1,
+    )
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    out *= np.where(out[:, :1] < 0, -1.0, 1.0)
+    out[~np.isfinite(m).all(axis=(1, 2))] = np.nan
+    return out
+
+
+def test_quat_from_matrix_is_the_plain_method_bit_for_bit(monkeypatch) -> None:
+    """The blocked, gathered conversion gives the plain formula's bits on every branch,
+    ties (the first largest diagonal entry wins, as np.argmax), signed zeros, NaN rows and
+    matrices only near a rotation; :func:`quat_wxyz_columns` is its transpose, and an
+    error names the matrix by its index in the whole array across blocks."""
+    monkeypatch.setattr(transforms, "_QUAT_BLOCK", 37)
+    rng = np.random.default_rng(3)
+    m = Rotation.random(1000, random_state=4).as_matrix()
+    m[::3] += rng.normal(0, 1e-7, m[::3].shape)  # not quite orthonormal
+    m[::5] *= rng.uniform(0.5, 2.0, (m[::5].shape[0], 1, 1))
+    m[1] = np.eye(3)
+    m[2] = np.diag([1.0, -1.0, -1.0])
+    m[3] = np.diag([-1.0, 1.0, -1.0])
+    m[4] = np.diag([-1.0, -1.0, 1.0])
+    m[5] = np.diag([0.5, 0.5, 0.5])  # ties between the diagonal entries
+    m[6] = np.diag([0.2, 0.7, 0.7])
+    m[7] = np.where(np.eye(3) > 0, 1.0, -0.0)  # signed zeros
+    m[8, 1, 2] = np.nan
+    m[9, 0, 0] = -np.inf
+    m[10] = np.nan
+    with np.errstate(invalid="ignore"):
+        want = _markley_plain(m)
+    got = quat_wxyz_from_matrix(m)
+    assert got.flags.c_contiguous
+    assert np.array_equal(got.view(np.int64), want.view(np.int64))
+    assert np.array_equal(quat_wxyz_columns(m).view(np.int64), want.T.view(np.int64))
+    assert np.array_equal(quat_wxyz_from_matrix(m[6]).view(np.int64), want[6].view(np.int64))
+    assert quat_wxyz_from_matrix(m[:0]).shape == (0, 4)
+    m[200] = np.diag([1.0, 1.0, -1.0])
+    with pytest.raises(ValueError, match=r"rotation matrix 200$"):
+        quat_wxyz_from_matrix(m)
 
 
 def test_rotation_angle_is_the_rotation_vectors_norm_from_0_to_pi_and_nan_safe():

@@ -84,7 +84,8 @@ def matrix_from_quat_wxyz(quat: FloatArray, out: FloatArray | None = None) -> Fl
     return out[0] if single else out
 
 
-#: Rows per block of :func:`matrix_from_quat_wxyz` (its ten temporaries stay in cache).
+#: Rows per block of :func:`matrix_from_quat_wxyz` and :func:`quat_wxyz_columns` (their
+#: temporaries stay in cache).
 _QUAT_BLOCK = 4096
 
 
@@ -112,44 +113,108 @@ def quat_wxyz_from_matrix(matrix: FloatArray) -> FloatArray:
     Returns
     -------
     ndarray, shape (n, 4) or (4,)
-        Quaternions ``(w, x, y, z)`` with ``w >= 0``.
+        Quaternions ``(w, x, y, z)`` with ``w >= 0`` (C-contiguous).
 
     Raises
     ------
     ValueError
-        A matrix with a non-positive determinant (a reflection or a null frame).
+        A matrix with a non-positive determinant (a reflection or a null frame), named by
+        its index.
     """
     m = np.asarray(matrix, dtype=float)
-    single = m.ndim == 2
-    m = m.reshape(-1, 3, 3)
-    ok = np.isfinite(m).all(axis=(1, 2))
+    q = quat_wxyz_columns(m)
+    return np.ascontiguousarray(q[:, 0] if m.ndim == 2 else q.T)
+
+
+def quat_wxyz_columns(matrix: FloatArray) -> FloatArray:
+    """:func:`quat_wxyz_from_matrix` with the four components as rows: ``w``, ``x``, ``y``
+    and ``z`` each a contiguous array (the columns of a table), the same bits.
+
+    Parameters
+    ----------
+    matrix : ndarray, shape (n, 3, 3) or (3, 3)
+        Rotation matrices (sensor -> parent), any strides.
+
+    Returns
+    -------
+    ndarray, shape (4, n)
+        ``w, x, y, z`` of each matrix, ``w >= 0``; NaN for a matrix with NaN or inf.
+
+    Raises
+    ------
+    ValueError
+        As :func:`quat_wxyz_from_matrix`.
+    """
+    m = np.asarray(matrix, dtype=float).reshape(-1, 3, 3)
+    n = m.shape[0]
+    out = np.empty((4, n))
+    # A block of matrices at a time, every temporary in cache.
+    for lo in range(0, n, _QUAT_BLOCK):
+        hi = min(lo + _QUAT_BLOCK, n)
+        _markley(m[lo:hi], out[:, lo:hi], lo)
+    return out
+
+
+#: The component (row of the candidates of :func:`_markley`) of ``w, x, y, z`` (rows) for
+#: each largest diagonal entry (columns: ``R_xx``, ``R_yy``, ``R_zz``, the trace).
+_PICK = np.array([[0, 1, 2, 3], [4, 7, 8, 0], [7, 5, 9, 1], [8, 9, 6, 2]], dtype=np.intp)
+
+
+def _markley(m: FloatArray, out: FloatArray, first: int) -> None:
+    """Quaternions ``out (4, k)`` of the rotation matrices ``m (k, 3, 3)`` (the ``first``-th
+    on of an array, for the error); see :func:`quat_wxyz_from_matrix`."""
+    k = m.shape[0]
+    r = np.empty((9, k))
+    r[...] = m.reshape(k, 9).T  # r[3 a + b] = R_ab, each contiguous
+    ok = np.isfinite(r).all(axis=0)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = r
     with np.errstate(invalid="ignore", over="ignore"):
-        r = [[m[:, a, b] for b in range(3)] for a in range(3)]
         det = (
-            r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
-            - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
-            + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0])
+            r00 * (r11 * r22 - r12 * r21)
+            - r01 * (r10 * r22 - r12 * r20)
+            + r02 * (r10 * r21 - r11 * r20)
         )
         bad = np.flatnonzero(ok & ~(det > 0))
         if bad.size:
             raise ValueError(
                 f"non-positive determinant {det[bad[0]]:.6g} (a reflection or a null frame) "
-                f"in rotation matrix {bad[0]}"
+                f"in rotation matrix {first + bad[0]}"
             )
-        trace = r[0][0] + r[1][1] + r[2][2]
-        choice = np.argmax(np.stack([r[0][0], r[1][1], r[2][2], trace]), axis=0)
-        big = [1 - trace + 2 * r[k][k] for k in range(3)]  # 4 x^2, 4 y^2, 4 z^2
-        wx, wy, wz = r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]
-        xy, xz, yz = r[1][0] + r[0][1], r[2][0] + r[0][2], r[2][1] + r[1][2]
-        out = np.empty((m.shape[0], 4))
-        np.choose(choice, [wx, wy, wz, 1 + trace], out=out[:, 0])
-        np.choose(choice, [big[0], xy, xz, wx], out=out[:, 1])
-        np.choose(choice, [xy, big[1], yz, wy], out=out[:, 2])
-        np.choose(choice, [xz, yz, big[2], wz], out=out[:, 3])
-        out /= np.linalg.norm(out, axis=1, keepdims=True)
-    out *= np.where(out[:, :1] < 0, -1.0, 1.0)
-    out[~ok] = np.nan
-    return out[0] if single else out
+        trace = r00 + r11 + r22
+        # the candidates: 4 w x, 4 w y, 4 w z, 4 w^2, 4 x^2, 4 y^2, 4 z^2, 4 x y, 4 x z, 4 y z
+        c = np.empty((10, k))
+        np.subtract(r21, r12, out=c[0])
+        np.subtract(r02, r20, out=c[1])
+        np.subtract(r10, r01, out=c[2])
+        np.add(1, trace, out=c[3])
+        for j, rjj in enumerate((r00, r11, r22)):
+            c[4 + j] = 1 - trace + 2 * rjj
+        np.add(r10, r01, out=c[7])
+        np.add(r20, r02, out=c[8])
+        np.add(r21, r12, out=c[9])
+        # the first largest of R_xx, R_yy, R_zz, trace (as np.argmax picks it; a NaN only
+        # in a matrix with NaN or inf, whose quaternion is NaN whatever is picked)
+        top = np.maximum(r00, r11)
+        later = (r22 > top).view(np.int8)
+        later <<= 1
+        choice = np.maximum((r11 > r00).view(np.int8), later)
+        np.maximum(top, r22, out=top)
+        later = (trace > top).view(np.int8)
+        later *= 3
+        np.maximum(choice, later, out=choice)
+        at = _PICK[:, choice]
+        at *= k
+        at += np.arange(k)
+        c.ravel().take(at, out=out)
+        # divided by the norm, summed ((w^2 + x^2) + y^2) + z^2 as np.linalg.norm sums a row
+        sq = out * out
+        norm = sq[0] + sq[1]
+        norm += sq[2]
+        norm += sq[3]
+        np.sqrt(norm, out=norm)
+        out /= norm
+    out *= np.where(out[0] < 0, -1.0, 1.0)
+    out[:, ~ok] = np.nan
 
 
 def axis_angle_matrix(axis: FloatArray, angle: FloatArray) -> FloatArray:

@@ -57,9 +57,9 @@ from .parquet_meta import angles_meta as angles_meta
 from .parquet_meta import joints_meta as joints_meta
 from .parquet_meta import pose_meta as pose_meta
 from .parquet_read import ParquetTable as ParquetTable
+from .parquet_read import _ahead, _reason
 from .parquet_read import _corrupt as _corrupt
 from .parquet_read import _metadata as _metadata
-from .parquet_read import _reason
 from .parquet_read import _text_codes as _text_codes
 from .parquet_read import check_meta as check_meta
 from .parquet_read import float_blocks as float_blocks
@@ -67,10 +67,58 @@ from .parquet_read import open_checked as open_checked
 from .parquet_read import parquet_schema as parquet_schema
 from .parquet_read import read_parquet as read_parquet
 
-#: Compression of every Parquet file fingerfit writes.
+#: Compression of every Parquet file fingerfit writes, and its level (zstd's fastest
+#: ordinary level: most of what zstd gains on float columns split into their bytes).
 COMPRESSION = "zstd"
-#: Rows per row group of :func:`write_parquet` (a few tens of MB of float64 columns).
-ROW_GROUP_ROWS = 1 << 20
+COMPRESSION_LEVEL = 1
+#: Rows per row group of :func:`write_parquet` and the recording writers (a few MB to
+#: tens of MB of float64 columns; small enough for a file of a few row groups to be
+#: made and written at once, block by block).
+ROW_GROUP_ROWS = 1 << 18
+#: Columns given min/max statistics where a table has them (row groups can be skipped
+#: by time in DuckDB, Dask, ``pyarrow.dataset``); no other column has any.
+STATISTICS = ("time",)
+
+
+def writer_options(schema, statistics: Sequence[str] = STATISTICS) -> dict[str, object]:
+    """The options of pyarrow's Parquet writer for every file fingerfit writes.
+
+    zstd at :data:`COMPRESSION_LEVEL`; float columns ``BYTE_STREAM_SPLIT``-encoded (each
+    number's 8 bytes stored as 8 streams, which zstd compresses better and faster than
+    the plain bytes; readers give back the same bits), text columns dictionary-encoded
+    and no other (a dictionary of floats that are nearly all different is built and
+    thrown away page after page); min/max statistics only for the columns of
+    ``statistics`` the schema has. All standard Parquet: pyarrow, pandas, Dask, DuckDB
+    and Polars read the files.
+
+    Parameters
+    ----------
+    schema : pyarrow.Schema
+        The file's columns.
+    statistics : sequence of str
+        Columns to give statistics, where present.
+
+    Returns
+    -------
+    dict
+        Keyword arguments of ``pyarrow.parquet.ParquetWriter`` and ``write_table``.
+    """
+    pa, _ = _pa()
+    text = [
+        f.name
+        for f in schema
+        if pa.types.is_dictionary(f.type)
+        or pa.types.is_string(f.type)
+        or pa.types.is_large_string(f.type)
+    ]
+    floats = [f.name for f in schema if pa.types.is_floating(f.type)]
+    return {
+        "compression": COMPRESSION,
+        "compression_level": COMPRESSION_LEVEL,
+        "use_dictionary": text,
+        "column_encoding": dict.fromkeys(floats, "BYTE_STREAM_SPLIT") or None,
+        "write_statistics": [c for c in statistics if c in schema.names] or False,
+    }
 
 
 #: A column as handed to the writers: ``(n,)`` float/int/bool/text array, or a pair
@@ -126,7 +174,7 @@ class ParquetSink:
     """A Parquet file written a block of rows at a time that appears complete or not at all.
 
     Rows go to a temporary file beside ``path`` through a ``pyarrow.parquet.ParquetWriter``
-    (zstd), each :meth:`write` one or more row groups; :meth:`close` finishes the file
+    (:func:`writer_options`), each :meth:`write` one or more row groups; :meth:`close` finishes the file
     (footer, metadata) and renames it over ``path``, or with ``ok=False`` removes it. Also
     a context manager (closed with ``ok`` = no exception).
 
@@ -141,6 +189,8 @@ class ParquetSink:
         float64, integers int64, text strings). Later blocks are cast to it.
     row_group_rows : int
         Largest row group written.
+    statistics : sequence of str
+        Columns given min/max statistics where present (:func:`writer_options`).
     """
 
     def __init__(
@@ -150,6 +200,7 @@ class ParquetSink:
         *,
         schema=None,
         row_group_rows: int = ROW_GROUP_ROWS,
+        statistics: Sequence[str] = STATISTICS,
     ) -> None:
         from .atomic import atomic_path
 
@@ -157,39 +208,54 @@ class ParquetSink:
         self.meta = meta
         self.rows = 0
         self._schema = schema
+        self._statistics = tuple(statistics)
         self._writer = None
         self._group = row_group_rows
         self._ctx = atomic_path(self.path)
         self._tmp = self._ctx.__enter__()
         self._open = True
 
-    def _start(self, pa, pq, schema) -> None:
-        schema = schema.with_metadata(self.meta.items())
-        self._schema = schema
+    def _batches(self, table: object):
+        """The rows of ``table`` as Arrow record batches of at most ``row_group_rows``
+        rows (one, without rows, for a table without rows), cast to the file's schema
+        (that of the first batch when none was given)."""
+        pa, _ = _pa()
+        columns = _items(table)
+        n = _n_rows(columns)
+        for lo in range(0, max(n, 1), self._group):
+            batch = _batch(pa, columns, lo, min(lo + self._group, n), self._schema)
+            if self._schema is None:
+                self._schema = batch.schema
+            yield batch
+
+    def _write(self, batch) -> None:
+        """Write a record batch as a row group (the first one opens the file)."""
+        pa, pq = _pa()
         try:
-            self._writer = pq.ParquetWriter(
-                str(self._tmp), schema, compression=COMPRESSION, write_statistics=False
-            )
+            if self._writer is None:
+                schema = self._schema.with_metadata(self.meta.items())
+                self._writer = pq.ParquetWriter(
+                    str(self._tmp), schema, **writer_options(schema, self._statistics)
+                )
+            if batch.num_rows:
+                self._writer.write_batch(batch, row_group_size=self._group)
         except (OSError, pa.ArrowException) as exc:
             raise FingerfitError(f"cannot write ({_reason(exc)})", path=self.path) from None
+        self.rows += batch.num_rows
 
     def write(self, table: object) -> None:
         """Append rows: a DataFrame or a mapping name -> column (``(m,)`` arrays, or
         ``(codes, names)`` pairs for text), the same columns in the same order each time."""
-        pa, pq = _pa()
-        columns = _items(table)
-        n = _n_rows(columns)
-        for lo in range(0, max(n, 1), self._group):
-            hi = min(lo + self._group, n)
-            batch = _batch(pa, columns, lo, hi, self._schema)
-            if self._writer is None:
-                self._start(pa, pq, batch.schema)
-            if hi > lo:
-                try:
-                    self._writer.write_batch(batch, row_group_size=self._group)
-                except (OSError, pa.ArrowException) as exc:
-                    raise FingerfitError(f"cannot write ({_reason(exc)})", path=self.path) from None
-        self.rows += n
+        for batch in self._batches(table):
+            self._write(batch)
+
+    def write_blocks(self, blocks: Iterable[object]) -> None:
+        """Append each table of ``blocks`` (as :meth:`write` takes them), the next one
+        made and turned into Arrow arrays in a thread of its own while this one is
+        encoded, compressed and written (NumPy and Arrow both work without the GIL, so
+        the two share the cores). An exception of ``blocks`` is raised here."""
+        for batch in _ahead(b for table in blocks for b in self._batches(table)):
+            self._write(batch)
 
     def close(self, ok: bool = True) -> None:
         """Finish the file and rename it into place (``ok``), or remove it."""
@@ -280,8 +346,8 @@ def parquet_bytes(table: object, meta: TableMeta) -> bytes:
     pq.write_table(
         pa.Table.from_batches([batch]).replace_schema_metadata(meta.items()),
         sink,
-        compression=COMPRESSION,
-        write_statistics=False,
+        row_group_size=ROW_GROUP_ROWS,
+        **writer_options(batch.schema),
     )
     return sink.getvalue().to_pybytes()
 

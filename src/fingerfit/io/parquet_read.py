@@ -234,21 +234,29 @@ def read_parquet(
     with fh:
         try:
             n_rows = pf.metadata.num_rows
-            # float columns straight into their final arrays, a row group at a time (no
-            # whole Arrow table beside them)
-            # (one row group: its decoded columns are the arrays, no copy at all)
-            single = pf.num_row_groups == 1
-            out: dict[str, object] = {} if single else {c: np.empty(n_rows) for c in floats}
-            filled = 0
-            for lo, block in float_blocks(pf, floats, n_rows):
-                for c, v in zip(floats, block, strict=True):
-                    if single:
-                        out[c] = v
-                    else:
-                        out[c][lo : lo + v.size] = v
-                filled = lo + (block[0].size if block else 0)
-            if floats and filled != n_rows:
-                raise ValueError(f"{filled} rows read of {n_rows}")
+            # float columns straight into their final arrays, no whole Arrow table beside
+            # them. One row group: its decoded columns are the arrays, no copy at all.
+            # Several: a few columns of a row group at a time (Arrow decodes the whole
+            # row group of the columns asked for, so the memory beside the arrays is a
+            # few column chunks, not a row group of every column).
+            out: dict[str, object] = {}
+            if pf.num_row_groups == 1:
+                for _, block in float_blocks(pf, floats, n_rows):
+                    out.update(zip(floats, block, strict=True))
+                if floats and out[floats[0]].size != n_rows:
+                    raise ValueError(f"{out[floats[0]].size} rows read of {n_rows}")
+            else:
+                for i in range(0, len(floats), _READ_COLUMNS):
+                    few = floats[i : i + _READ_COLUMNS]
+                    for c in few:
+                        out[c] = np.empty(n_rows)
+                    filled = 0
+                    for lo, block in float_blocks(pf, few, n_rows):
+                        for c, v in zip(few, block, strict=True):
+                            out[c][lo : lo + v.size] = v
+                        filled = lo + block[0].size
+                    if filled != n_rows:
+                        raise ValueError(f"{filled} rows read of {n_rows}")
             texts = pf.read(columns=[c for c in names if c in text], use_threads=True)
         except Exception as exc:  # a damaged data page
             raise _corrupt(path, exc) from None
@@ -265,13 +273,17 @@ def read_parquet(
     return ParquetTable({c: out[c] for c in names}, _metadata(schema), n_rows, names)
 
 
+#: Float columns of a file of several row groups decoded at a time by :func:`read_parquet`.
+_READ_COLUMNS = 4
+
+
 def float_blocks(
     pf, columns: Sequence[str], n_rows: int, batch_rows: int | None = None, ahead: bool = False
 ):
     """The float64 columns ``columns`` of an open Parquet file, a block of rows at a time.
 
     Yields ``(first row, [one (m,) float64 array per column])``: a row group at a time, or
-    batches of ``batch_rows`` rows (a null read as NaN). The arrays are the decoded
+    batches of at most ``batch_rows`` rows, none across row groups (a null read as NaN). The arrays are the decoded
     buffers where Arrow allows (no copy). ``ahead``: the next block is decoded in a
     thread of its own while the caller works on this one (Arrow decodes without the
     GIL, so decoding and NumPy's work share the cores).
@@ -334,7 +346,16 @@ def _float_blocks(pf, columns: Sequence[str], n_rows: int, batch_rows: int | Non
     if batch_rows is None:
         parts = (pf.read_row_group(g, columns=list(columns)) for g in range(pf.num_row_groups))
     else:
-        parts = pf.iter_batches(batch_size=batch_rows, columns=list(columns), use_threads=True)
+        # a reader per row group: one reader over the whole file holds on to memory
+        # growing with the bytes read (about the file's size for BYTE_STREAM_SPLIT or
+        # plain columns) until it is done
+        parts = (
+            batch
+            for g in range(pf.num_row_groups)
+            for batch in pf.iter_batches(
+                batch_size=batch_rows, row_groups=[g], columns=list(columns), use_threads=True
+            )
+        )
     for part in parts:
         m = part.num_rows
         if lo + m > n_rows:

@@ -21,7 +21,7 @@ import pandas as pd
 
 from ..errors import FingerfitError, shown
 from ..session import PoseSeries, Recording, is_sensor_name
-from ..transforms import quat_wxyz_from_matrix
+from ..transforms import quat_wxyz_columns
 from .fastcsv import put_quat_rows, put_rows, put_scaled_rows, rows_where
 from .hygiene import (
     frames_missing_note,
@@ -672,26 +672,63 @@ def _assemble(
 
 def _pose_columns(recording: Recording, mm_per_unit: float) -> dict[str, object]:
     """Columns of the long table; ``sensor`` as ``(codes, names)``."""
+    return _pose_block(recording, 0, recording.n_frames, mm_per_unit)
+
+
+def _pose_block(recording: Recording, lo: int, hi: int, mm_per_unit: float) -> dict[str, object]:
+    """The rows of frames ``lo:hi`` of the long table, one per present sample (a sample
+    with a NaN or an infinity anywhere is left out), ordered by frame then sensor.
+
+    Parameters
+    ----------
+    recording : Recording
+        Positions in mm (tracker frame), rotations sensor -> tracker.
+    lo, hi : int
+        The frames.
+    mm_per_unit : float
+        Positions are divided by this (10 to write cm).
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``time`` (s), ``sensor`` as ``(codes (m,) int32, names)``, ``x, y, z`` (file
+        units) and ``qw, qx, qy, qz``, each ``(m,)``.
+    """
     names = recording.sensors
-    n = recording.n_frames
-    pos = np.empty((n, len(names), 3))
-    quat = np.empty((n, len(names), 4))
+    n_s = len(names)
+    # x, y, z, qw, qx, qy, qz of each frame and sensor: each column's rows contiguous
+    vals = np.empty((7, hi - lo, n_s))
     for j, s in enumerate(names):
-        pos[:, j] = recording.poses[s].position / mm_per_unit
-        quat[:, j] = quat_wxyz_from_matrix(recording.poses[s].rotation)
-    ok = np.isfinite(pos).all(axis=2) & np.isfinite(quat).all(axis=2)
-    frame, sensor = np.nonzero(ok)
-    cols: dict[str, object] = {
-        "time": recording.time[frame],
-        "sensor": (sensor.astype(np.int32), list(names)),
-    }
-    sel = pos[frame, sensor]
-    for j, c in enumerate(("x", "y", "z")):
-        cols[c] = sel[:, j]
-    sel = quat[frame, sensor]
-    for j, c in enumerate(("qw", "qx", "qy", "qz")):
-        cols[c] = sel[:, j]
+        np.divide(recording.poses[s].position[lo:hi].T, mm_per_unit, out=vals[:3, :, j])
+        vals[3:, :, j] = sensor_quats(recording, s, lo, hi)
+    ok = np.isfinite(vals).all(axis=0)
+    time = recording.time[lo:hi]
+    if ok.all():
+        flat = vals.reshape(7, -1)
+        cols: dict[str, object] = {
+            "time": np.repeat(time, n_s),
+            "sensor": (np.tile(np.arange(n_s, dtype=np.int32), hi - lo), list(names)),
+        }
+    else:
+        frame, sensor = np.nonzero(ok)
+        flat = vals.reshape(7, -1)[:, ok.ravel()]
+        cols = {"time": time[frame], "sensor": (sensor.astype(np.int32), list(names))}
+    for j, c in enumerate(("x", "y", "z", "qw", "qx", "qy", "qz")):
+        cols[c] = flat[j]
     return cols
+
+
+def sensor_quats(recording: Recording, sensor: str, lo: int, hi: int) -> np.ndarray:
+    """The quaternions of a sensor's rotations in frames ``lo:hi`` as rows ``(4, hi - lo)``
+    (:func:`~fingerfit.transforms.quat_wxyz_columns`: ``w, x, y, z``). A matrix that is not
+    a rotation raises the error of the whole recording's conversion: the first sensor, in
+    order, with such a matrix, that matrix named by its frame."""
+    try:
+        return quat_wxyz_columns(recording.poses[sensor].rotation[lo:hi])
+    except ValueError:
+        for s in recording.sensors:
+            quat_wxyz_columns(recording.poses[s].rotation)
+        raise
 
 
 def pose_table(recording: Recording, *, mm_per_unit: float = 1.0) -> pd.DataFrame:
@@ -745,67 +782,19 @@ def write_pose_csv(path: str | Path, recording: Recording, *, units: str = "mm")
     )
 
 
-#: Rotation matrices turned into quaternions at a time by the writers (their temporaries
-#: stay in cache).
-QUAT_BLOCK = 8192
-
-
-def quats_blocked(rotation: np.ndarray) -> np.ndarray:
-    """:func:`~fingerfit.transforms.quat_wxyz_from_matrix` of ``(n, 3, 3)``, a block of
-    :data:`QUAT_BLOCK` at a time (the same bits; an error is the one of the whole array)."""
-    out = np.empty((rotation.shape[0], 4))
-    try:
-        for lo in range(0, rotation.shape[0], QUAT_BLOCK):
-            out[lo : lo + QUAT_BLOCK] = quat_wxyz_from_matrix(rotation[lo : lo + QUAT_BLOCK])
-    except ValueError:
-        quat_wxyz_from_matrix(rotation)  # raises, naming the matrix by its index in all
-        raise
-    return out
-
-
-def _whole_quat_error(recording: Recording) -> None:
-    """Raise the error the whole recording's conversion raises (the first sensor, in
-    order, with a matrix that is not a rotation, that matrix by its frame)."""
-    for s in recording.sensors:
-        quat_wxyz_from_matrix(recording.poses[s].rotation)
-
-
 def _write_parquet(path: Path, recording: Recording, mm_per_unit: float, meta) -> Path:
     """The long table of :func:`_pose_columns` written a row group of frames at a time
-    (about :data:`fingerfit.io.parquet.ROW_GROUP_ROWS` rows): the same rows and numbers,
-    without the whole table in memory."""
+    (about :data:`fingerfit.io.parquet.ROW_GROUP_ROWS` rows), each made while the one
+    before it is written: the same rows and numbers, without the whole table in memory."""
     from .parquet import ROW_GROUP_ROWS, ParquetSink
 
-    names = recording.sensors
     n = recording.n_frames
-    step = max(1, ROW_GROUP_ROWS // max(len(names), 1))
+    step = max(1, ROW_GROUP_ROWS // max(len(recording.sensors), 1))
     with ParquetSink(path, meta) as sink:
-        for lo in range(0, max(n, 1), step):
-            hi = min(lo + step, n)
-            pos = np.empty((hi - lo, len(names), 3))
-            quat = np.empty((hi - lo, len(names), 4))
-            for j, s in enumerate(names):
-                pose = recording.poses[s]
-                pos[:, j] = pose.position[lo:hi] / mm_per_unit
-                try:
-                    quat[:, j] = quats_blocked(pose.rotation[lo:hi])
-                except ValueError:
-                    _whole_quat_error(recording)
-                    raise
-            ok = np.isfinite(pos).all(axis=2) & np.isfinite(quat).all(axis=2)
-            frame, sensor = np.nonzero(ok)
-            cols: dict[str, object] = {
-                "time": recording.time[lo:hi][frame],
-                "sensor": (sensor.astype(np.int32), list(names)),
-            }
-            sel = pos[frame, sensor]
-            for j, c in enumerate(("x", "y", "z")):
-                cols[c] = np.ascontiguousarray(sel[:, j])
-            sel = quat[frame, sensor]
-            for j, c in enumerate(("qw", "qx", "qy", "qz")):
-                cols[c] = np.ascontiguousarray(sel[:, j])
-            del pos, quat, sel
-            sink.write(cols)
+        sink.write_blocks(
+            _pose_block(recording, lo, min(lo + step, n), mm_per_unit)
+            for lo in range(0, max(n, 1), step)
+        )
     return path
 
 

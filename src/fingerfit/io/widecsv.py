@@ -36,10 +36,10 @@ from scipy.spatial.transform import Rotation
 
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
-from ..transforms import quat_wxyz_from_matrix, row_norms
+from ..transforms import row_norms
 from .fastcsv import NotPlain, put_quat_rows, put_rows, put_scaled_rows, read_header
 from .hygiene import check_recording, implausible_rows, missing_note
-from .posecsv import check_field_counts
+from .posecsv import check_field_counts, sensor_quats
 from .wideframes import QUAT_NORM_TOLERANCE as QUAT_NORM_TOLERANCE
 from .wideframes import RATE_TOLERANCE as RATE_TOLERANCE
 from .wideframes import _assemble, _frame_grid
@@ -326,7 +326,11 @@ def _read_parquet_fast(
             m = block[0].size
             ext = getattr(buffers, "ext", None)
             if ext is None or ext.shape[0] < m + 1:
-                ext = buffers.ext = np.empty((max(m, _PARQUET_BLOCK) + 1, n_st, k))
+                # (rows, stations, keys) with each field's rows contiguous: the columns
+                # are copied as they are, and the checks' reductions over stations and
+                # keys go across contiguous rows
+                rows = max(m, _PARQUET_BLOCK) + 1
+                ext = buffers.ext = np.empty((n_st, k, rows)).transpose(2, 0, 1)
             if before is not None:
                 ext[0] = before
             v = ext[1 : m + 1]
@@ -340,8 +344,12 @@ def _read_parquet_fast(
                 rep, same = rep[1:], same[1:]
             if rep.any():
                 raise _Irregular
-            held = int(np.count_nonzero(same.any(axis=1) & ~same.all(axis=1)))
-            del rep, same
+            some, every = same[:, 0].copy(), same[:, 0].copy()
+            for j in range(1, n_st):
+                some |= same[:, j]
+                every &= same[:, j]
+            held = int(np.count_nonzero(some & ~every))
+            del rep, same, some, every
             finite = np.isfinite(v)
             complete = finite.all(axis=2)
             empty = int(np.count_nonzero(~complete & finite.any(axis=2)))
@@ -488,22 +496,31 @@ def wide_table(
         Missing samples are NaN.
     """
     lay = layout or DEFAULT_LAYOUT
+    return pd.DataFrame(_wide_block(recording, 0, recording.n_frames, units, lay))
+
+
+def _wide_block(
+    recording: Recording, lo: int, hi: int, units: str, lay: WideLayout
+) -> dict[str, np.ndarray]:
+    """The columns of :func:`wide_table` for frames ``lo:hi``, each ``(hi - lo,)``
+    (positions in ``units``, orientations as ``lay`` states them; NaN where missing)."""
     data: dict[str, np.ndarray] = {}
     if lay.time is not None:
-        data[lay.time] = recording.time
+        data[lay.time] = recording.time[lo:hi]
     for s, name in enumerate(recording.sensors, start=1):
         pose = recording.poses[name]
         if lay.orientation == _QUAT:
-            ori = quat_wxyz_from_matrix(pose.rotation)
+            ori = sensor_quats(recording, name, lo, hi)
         else:
-            ori = np.full((recording.n_frames, 3), np.nan)
-            ok = pose.valid
-            ori[ok] = Rotation.from_matrix(pose.rotation[ok]).as_euler("ZYX", degrees=True)
+            ori = np.full((3, hi - lo), np.nan)
+            ok = pose.valid[lo:hi]
+            euler = Rotation.from_matrix(pose.rotation[lo:hi][ok]).as_euler("ZYX", degrees=True)
+            ori[:, ok] = euler.T
         for m, key in enumerate(lay.orientation):
-            data[_column(lay.columns[key], s)] = ori[:, m]
+            data[_column(lay.columns[key], s)] = ori[m]
         for m, key in enumerate(_POS):
-            data[_column(lay.columns[key], s)] = pose.position[:, m] / UNITS_TO_MM[units]
-    return pd.DataFrame(data)
+            data[_column(lay.columns[key], s)] = pose.position[lo:hi, m] / UNITS_TO_MM[units]
+    return data
 
 
 def write_wide_csv(
@@ -542,29 +559,16 @@ def write_wide_csv(
 
 def _write_parquet(path: Path, recording: Recording, units: str, lay: WideLayout) -> Path:
     """The columns of :func:`wide_table` (quaternion layouts) written a row group of
-    frames at a time: the same numbers, without the whole table in memory."""
+    frames at a time, each made while the one before it is written: the same numbers,
+    without the whole table in memory."""
     from .parquet import ROW_GROUP_ROWS, ParquetSink
-    from .posecsv import _whole_quat_error, quats_blocked
 
     n = recording.n_frames
-    with ParquetSink(path, _wide_meta(units, lay)) as sink:
-        for lo in range(0, max(n, 1), ROW_GROUP_ROWS):
-            hi = min(lo + ROW_GROUP_ROWS, n)
-            data: dict[str, np.ndarray] = {}
-            if lay.time is not None:
-                data[lay.time] = recording.time[lo:hi]
-            for s, name in enumerate(recording.sensors, start=1):
-                pose = recording.poses[name]
-                try:
-                    ori = quats_blocked(pose.rotation[lo:hi])
-                except ValueError:
-                    _whole_quat_error(recording)
-                    raise
-                for m, key in enumerate(lay.orientation):
-                    data[_column(lay.columns[key], s)] = np.ascontiguousarray(ori[:, m])
-                for m, key in enumerate(_POS):
-                    data[_column(lay.columns[key], s)] = (
-                        pose.position[lo:hi, m] / UNITS_TO_MM[units]
-                    )
-            sink.write(data)
+    with ParquetSink(
+        path, _wide_meta(units, lay), statistics=(lay.time,) if lay.time else ()
+    ) as sink:
+        sink.write_blocks(
+            _wide_block(recording, lo, min(lo + ROW_GROUP_ROWS, n), units, lay)
+            for lo in range(0, max(n, 1), ROW_GROUP_ROWS)
+        )
     return path
