@@ -56,13 +56,16 @@ keep the figures). Two parts, in one run:
    added latency (fingerfit minus bare, of the p50 and of the p99). With ``--realtime``
    both publishers ask for the real-time class (their ``realtime:`` lines are kept);
    ``--background-load N`` runs N busy processes (a Python spin loop, normal priority)
-   during the measurement (:func:`background_load`).
+   during the measurement (:func:`background_load`). With ``--realtime`` the consumers
+   run at a real-time priority too, below the publishers' (:func:`realtime_consumers`),
+   unless ``--consumers-normal``.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import json
 import os
 import platform
@@ -222,7 +225,7 @@ def end_to_end(
         command = [sys.executable, __file__, "--bare-run", f"{name}-{outlet}", topic, *bare]
     proc = subprocess.Popen(
         command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
+        env=dict(os.environ, ROS_DOMAIN_ID=str(domain)), preexec_fn=_normal_class,
     )  # fmt: skip
     lsl_lat: list[float] = []
     dds_lat: list[float] = []
@@ -498,6 +501,50 @@ def background_load(n: int) -> Iterator[list[int]]:
                 p.wait()
 
 
+#: SCHED_FIFO priority of the bench's consumers with ``--realtime``: below the robot
+#: lane's (:data:`fingerfit.live.realtime.REALTIME_PRIORITY`).
+CONSUMER_PRIORITY = 40
+
+
+def _normal_class() -> None:
+    """In a child before ``exec``: the normal scheduling class (a publisher does not
+    inherit the real-time class of :func:`realtime_consumers`)."""
+    if hasattr(os, "sched_setscheduler"):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+@contextlib.contextmanager
+def realtime_consumers(on: bool) -> Iterator[str | None]:
+    """SCHED_FIFO (:data:`CONSUMER_PRIORITY`) for this thread while the block runs, and
+    so for the threads started meanwhile: the consumers and liblsl's and cyclonedds'
+    receive threads (a robot's controller runs at a real-time priority too; at normal
+    priority, beside busy processes, the consumers measure their own waits).
+
+    Parameters
+    ----------
+    on : bool
+        Ask for it (False: nothing changes).
+
+    Yields
+    ------
+    str or None
+        What was granted, or why not (None when not asked).
+    """
+    if not on:
+        yield None
+        return
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(CONSUMER_PRIORITY))
+    except OSError as exc:
+        yield f"consumers: SCHED_FIFO not permitted ({errno.errorcode.get(exc.errno or 0)})"
+        return
+    try:
+        yield f"consumers: SCHED_FIFO {CONSUMER_PRIORITY} granted"
+    finally:
+        os.sched_setscheduler(0, before[0], os.sched_param(before[1]))
+
+
 def bare_frames(model, rec: Recording, robot: str | None, path: Path) -> Path:
     """The values ``fingerfit stream`` sends for ``rec``, computed once, for
     :func:`bare_publish`.
@@ -650,10 +697,17 @@ def _pooled(runs: list[dict], key: str) -> dict[str, float]:
 
 
 def against_bare(
-    models: list[str], seconds: float, rounds: int, load: int, realtime: bool, max_age_ms: float
+    models: list[str],
+    seconds: float,
+    rounds: int,
+    load: int,
+    realtime: bool,
+    max_age_ms: float,
+    consumers_realtime: bool = True,
 ) -> dict:
     """Part 6: ``fingerfit stream`` and a bare publisher of the same frames, alternately,
-    to the same consumers; fingerfit's added latency per model and consumer."""
+    to the same consumers; fingerfit's added latency per model and consumer
+    (``consumers_realtime``: with ``realtime``, the consumers' real-time class too)."""
     out: dict = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
         "seconds": seconds,
@@ -678,8 +732,11 @@ def against_bare(
             robot = "shadow" if key.endswith("-shadow") else None
             frames = bare_frames(model, long, robot, Path(tmp) / f"{key}.npz")
             cases.append((key, model_path, csv, long.n_frames, robot, frames))
-        with background_load(load) as pids:
-            out["background_pids"] = pids
+        with (
+            background_load(load) as pids,
+            realtime_consumers(realtime and consumers_realtime) as consumers,
+        ):
+            out["background_pids"], out["consumers"] = pids, consumers
             out["load_average_measuring"] = os.getloadavg()
             for key, model_path, csv, n, robot, frames in cases:
                 runs: dict[str, list] = {"bare": [], "fingerfit": []}
@@ -747,6 +804,8 @@ def print_against_bare(out: dict) -> None:
                 f"| {b['age_at_send_max_ms']:.2f} ms ({b['stale']}) |",
                 flush=True,
             )
+    if out.get("consumers"):
+        print(out["consumers"])
     for key, row in out["models"].items():
         for label in ("fingerfit", "bare"):
             for line in row[label]["realtime"]:
@@ -797,6 +856,11 @@ def main() -> None:
     ap.add_argument(
         "--realtime", action="store_true", help="part 6: --realtime for both publishers"
     )
+    ap.add_argument(
+        "--consumers-normal",
+        action="store_true",
+        help="part 6 with --realtime: the consumers at normal priority",
+    )
     ap.add_argument("--max-age", type=float, default=20.0, help="part 6: --max-age (ms)")
     ap.add_argument("--lane-run", nargs=2, type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--bare-run", nargs="+", help=argparse.SUPPRESS)
@@ -820,7 +884,7 @@ def main() -> None:
         )
         results = against_bare(
             models.split(","), args.seconds, args.bare_rounds, args.background_load,
-            args.realtime, args.max_age,
+            args.realtime, args.max_age, not args.consumers_normal,
         )  # fmt: skip
         if args.json:
             args.json.write_text(json.dumps(results, indent=1) + "\n")
