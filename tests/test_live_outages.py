@@ -38,16 +38,26 @@ def _stations(model) -> dict[int, str]:
 
 
 def _one_silence(lsl: FakeLsl, frames: np.ndarray, before: int) -> int:
-    """Index (in what the robot lane pushed) of the one ``valid`` 0 sample between
-    frames, which must be stamped between the arrivals of frames ``before - 1`` and
-    ``before``; the stream ended with an error, so the last sample has ``valid`` 0 too."""
+    """Index (in what the robot lane pushed) of the one ``valid`` 0 sample the source's
+    pause caused, which must be stamped between the arrivals of frames ``before - 1`` and
+    ``before``; the stream ended with an error, so the last sample has ``valid`` 0 too.
+
+    A machine too busy to read the device in time may show the watchdog more silences
+    (the emulator runs in this process): each of those must follow a real gap of more
+    than :data:`SILENCE` after the frame before it, and two never come without a frame
+    between them. Returns the pause's index; ``valid`` 0 samples are counted by the
+    caller against the stream's silences."""
     valid = np.concatenate(lsl.valid)
     arrival = np.concatenate(lsl.arrival)
-    k, end = np.flatnonzero(valid == 0)
-    assert end == len(valid) - 1  # the error end's: the data stopped
-    assert frames[before - 1] < arrival[k] < frames[before]
+    zeros = np.flatnonzero(valid == 0)
+    end = len(valid) - 1
+    assert zeros[-1] == end  # the error end's (or a silence's): the data stopped
     assert np.all(np.diff(arrival) > 0)
-    assert k < end - 1 and np.all(valid[k + 1 : end] == 1)  # frames came back
+    (k,) = [j for j in zeros if frames[before - 1] < arrival[j] < frames[before]]
+    assert k < end - 1 and valid[k + 1] == 1  # frames came back
+    assert np.all(np.diff(zeros) > 1)  # one per silence: a frame between any two
+    for j in zeros[:-1]:  # every other one after a real gap
+        assert arrival[j] - frames[np.searchsorted(frames, arrival[j]) - 1] > SILENCE
     angles = np.vstack(lsl.angles)
     np.testing.assert_array_equal(angles[k], angles[k - 1])  # held
     np.testing.assert_array_equal(angles[end], angles[end - 1])
@@ -73,9 +83,13 @@ def test_liberty_silence_marks_invalid_once_and_frames_resume() -> None:
         emu.close()
     s = streamer.summary
     assert s.received == 120 == s.sent + s.skipped + s.stale and s.lost == 0
-    assert s.silences == 1
-    assert warnings == ["no frame for 100 ms: valid = 0 on the live outputs, robot: hold"]
     _one_silence(lsl, np.concatenate(source.blocks_seen), 60)
+    # The pause's silence, and any a busy machine caused (the end's sample may be one).
+    zeros = int(np.count_nonzero(np.concatenate(lsl.valid) == 0))
+    assert s.silences in (zeros - 1, zeros) and s.silences >= 1
+    assert warnings == ["no frame for 100 ms: valid = 0 on the live outputs, robot: hold"] * (
+        s.silences
+    )
 
 
 @pytest.mark.parametrize("restart_count", [False, True], ids=["count-goes-on", "power-cycle"])
@@ -97,9 +111,11 @@ def test_liberty_reconnects_after_an_unplug(tmp_path, restart_count: bool) -> No
     finally:
         emu.close()
     line = refused(res, emu.port, "not back within 2 s", f"(after {n} frames, 1 reconnect; kept")
-    # One warning per outage (the replugged one and the last), and the watchdog's.
+    # One warning per outage (the replugged one and the last), and the watchdog's in
+    # each (more when a busy machine kept the in-process emulator from a frame for 50 ms:
+    # the watchdog measures time; once per silence is asserted with the replay source).
     assert res.output.count("reopening the port (up to 2 s)") == 2
-    assert res.output.count("warning: no frame for 50 ms") == 2
+    assert res.output.count("warning: no frame for 50 ms") >= 2
     assert "Traceback" not in res.output and line
     # The device was set up again on the new port, as on the first.
     setup = [b"P", b"O*,2,7,9", b"U1", b"F1", b"C"]
