@@ -604,6 +604,20 @@ def bare_publish(
     frame's arrival. Of the frames due at a wake-up only the newest is sent, and none
     older than ``max_age_ms``, as the robot lane does.
 
+    Parameters
+    ----------
+    frames : Path
+        :func:`bare_frames`' file.
+    name : str
+        The LSL outlet's name (``PREFIX-angles`` or ``PREFIX-robot``, as fingerfit's).
+    topic : str
+        ROS 2 topic (DDS ``rt/<topic>``).
+    max_age_ms : float
+        ``--max-age``.
+    realtime : bool
+        Ask for the real-time class (:class:`~fingerfit.live.realtime.Realtime`) once the
+        consumers are there, as ``fingerfit stream --realtime`` does.
+
     Returns
     -------
     line : str
@@ -706,8 +720,33 @@ def against_bare(
     consumers_realtime: bool = True,
 ) -> dict:
     """Part 6: ``fingerfit stream`` and a bare publisher of the same frames, alternately,
-    to the same consumers; fingerfit's added latency per model and consumer
-    (``consumers_realtime``: with ``realtime``, the consumers' real-time class too)."""
+    to the same consumers; fingerfit's added latency per model and consumer.
+
+    Parameters
+    ----------
+    models : list of str
+        ``index``, ``hand5``, ``hand5-shadow`` (the whole hand with ``--retarget shadow``).
+    seconds : float
+        Length of each run's replay (240 Hz).
+    rounds : int
+        Runs of each publisher per model (the order swapped each round).
+    load : int
+        Busy processes beside the measurement (:func:`background_load`).
+    realtime : bool
+        ``--realtime`` for both publishers.
+    max_age_ms : float
+        ``--max-age`` for both publishers.
+    consumers_realtime : bool
+        With ``realtime``, the consumers at SCHED_FIFO too (:func:`realtime_consumers`).
+
+    Returns
+    -------
+    dict
+        Per model: ``bare`` and ``fingerfit`` (per consumer the p50 / p99 over the rounds'
+        frames, the age at send, stale, skipped, lost, the ``realtime:`` lines), their
+        runs, and ``added`` (fingerfit minus bare, of the p50 and of the p99); the load
+        averages and times.
+    """
     out: dict = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
         "seconds": seconds,
