@@ -44,12 +44,30 @@ keep the figures). Two parts, in one run:
    alternately (``--view-rounds`` rounds, the order swapped each round); per run the
    consumers' latency (LSL, DDS) and the stream's own arrival -> sent, and the ratios
    with / without of the medians over the rounds.
+6. **Against a bare publisher** (``--against-bare``, alone): per model (``--models``,
+   default one finger, the whole hand, the whole hand with ``--retarget shadow``), part
+   2's end to end run of ``fingerfit stream`` and, alternately in the same run
+   (``--bare-rounds`` rounds, the order swapped each round), of a bare publisher: a
+   process that publishes the values fingerfit streams for the same recording, computed
+   once up front (:func:`bare_frames`), on the replay's schedule to one LSL outlet of the
+   same channel count and format as the consumed one and a DDS ``JointState`` writer of
+   the same QoS and topic naming, each frame stamped with its due time as the replay
+   stamps its arrival, latest-wins and never older than ``--max-age`` as the robot lane
+   (:func:`bare_publish`). The same consumers measure both; per model and consumer the
+   p50 / p99 of arrival -> receipt over the rounds' frames, for both, and fingerfit's
+   added latency (fingerfit minus bare, of the p50 and of the p99). With ``--realtime``
+   both publishers ask for the real-time class (their ``realtime:`` lines are kept);
+   ``--background-load N`` runs N busy processes (a Python spin loop, normal priority)
+   during the measurement (:func:`background_load`). With ``--realtime`` the consumers
+   run at a real-time priority too, below the publishers' (:func:`realtime_consumers`),
+   unless ``--consumers-normal``.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import json
 import os
 import platform
@@ -59,6 +77,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -189,10 +208,18 @@ def end_to_end(
     speed: float = 1.0,
     record: Path | None = None,
     extra: tuple[str, ...] = (),
+    bare: tuple[str, ...] | None = None,
+    raw: bool = False,
 ) -> dict:
     """Stream ``csv`` (``speed`` times real time) to LSL and DDS; measure latency, losses
     and CPU (``retarget``: ``--retarget ROBOT``, the robot's outlet and JointState;
-    ``record``: ``--record`` too, whose rows are counted)."""
+    ``record``: ``--record`` too, whose rows are counted; ``extra``: more options of
+    ``fingerfit stream``).
+
+    ``bare``: the publisher is not ``fingerfit stream`` but :func:`bare_publish`, with
+    these arguments after its outlet name and topic (the frames file first). ``raw``: the
+    consumers' latencies (ms) too, as arrays ``lsl_ms`` and ``dds_ms``. ``realtime`` is
+    the publisher's ``realtime:`` line, if any."""
     import pylsl
     from cyclonedds.core import Policy, Qos
     from cyclonedds.domain import DomainParticipant
@@ -208,13 +235,19 @@ def end_to_end(
     qos = Qos(Policy.Reliability.Reliable(0), Policy.History.KeepAll)
     reader = DataReader(participant, Topic(participant, "rt" + topic, JointState, qos=qos), qos=qos)
     name = f"bench{tag}{os.getpid()}"
+    outlet = "robot" if retarget else "angles"
+    if bare is None:
+        command = [
+            FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@{speed:g}",
+            "--lsl", "--lsl-name", name, "--ros2", topic, "--wait", "--wait-timeout", "60",
+            "-q", *(["--retarget", retarget] if retarget else []),
+            *(["--record", str(record)] if record else []), *extra,
+        ]  # fmt: skip
+    else:
+        command = [sys.executable, __file__, "--bare-run", f"{name}-{outlet}", topic, *bare]
     proc = subprocess.Popen(
-        [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@{speed:g}", "--lsl",
-         "--lsl-name", name, "--ros2", topic, "--wait", "--wait-timeout", "60", "-q",
-         *(["--retarget", retarget] if retarget else []),
-         *(["--record", str(record)] if record else []), *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=dict(os.environ, ROS_DOMAIN_ID=str(domain)), preexec_fn=_normal_class,
     )  # fmt: skip
     lsl_lat: list[float] = []
     dds_lat: list[float] = []
@@ -224,7 +257,6 @@ def end_to_end(
     deadline = time.monotonic() + seconds + 90
 
     def lsl_consumer() -> None:
-        outlet = "robot" if retarget else "angles"
         found = pylsl.resolve_byprop("name", f"{name}-{outlet}", timeout=30)
         inlet = pylsl.StreamInlet(found[0], max_buflen=60, processing_flags=0)
         inlet.open_stream(timeout=10)
@@ -287,7 +319,10 @@ def end_to_end(
         "cpu_share_of_one_core": cpu,
         "children_cpu_share_of_one_core": kids_cpu,
         "stream_summary": summary[0] if summary else (out + err)[-500:],
+        "realtime": next((ln for ln in err.splitlines() if ln.startswith("realtime:")), None),
     }
+    if raw:
+        result["lsl_ms"], result["dds_ms"] = lsl_ms, dds_ms
     if record is not None:
         with record.open() as fh:
             result["record_rows"] = sum(1 for _ in fh) - 1
@@ -446,6 +481,407 @@ def view_compare(seconds: float, rounds: int) -> dict:
     return out
 
 
+#: A busy process of ``--background-load``: a pure-Python spin loop.
+SPIN = "while True: pass"
+#: ``prctl`` option (Linux ``<sys/prctl.h>``): the signal a child gets when its parent dies.
+PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """In a child before ``exec``: SIGKILL when the bench dies, however it ends."""
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
+@contextlib.contextmanager
+def background_load(n: int) -> Iterator[list[int]]:
+    """``n`` busy processes (:data:`SPIN`, normal priority) while the block runs.
+
+    Parameters
+    ----------
+    n : int
+        How many (0: none).
+
+    Yields
+    ------
+    list of int
+        Their process ids.
+
+    Notes
+    -----
+    They are stopped when the block ends, however it ends (an error, Ctrl-C), and are
+    killed by the kernel if this process dies first (``PR_SET_PDEATHSIG``).
+    """
+    procs: list[subprocess.Popen] = []
+    try:
+        for _ in range(n):
+            procs.append(
+                subprocess.Popen([sys.executable, "-c", SPIN], preexec_fn=_die_with_parent)
+            )
+        yield [p.pid for p in procs]
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+#: SCHED_FIFO priority of the bench's consumers with ``--realtime``: below the robot
+#: lane's (:data:`fingerfit.live.realtime.REALTIME_PRIORITY`).
+CONSUMER_PRIORITY = 40
+
+
+def _normal_class() -> None:
+    """In a child before ``exec``: the normal scheduling class (a publisher does not
+    inherit the real-time class of :func:`realtime_consumers`)."""
+    if hasattr(os, "sched_setscheduler"):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+@contextlib.contextmanager
+def realtime_consumers(on: bool) -> Iterator[str | None]:
+    """SCHED_FIFO (:data:`CONSUMER_PRIORITY`) for this thread while the block runs, and
+    so for the threads started meanwhile: the consumers and liblsl's and cyclonedds'
+    receive threads (a robot's controller runs at a real-time priority too; at normal
+    priority, beside busy processes, the consumers measure their own waits).
+
+    Parameters
+    ----------
+    on : bool
+        Ask for it (False: nothing changes).
+
+    Yields
+    ------
+    str or None
+        What was granted, or why not (None when not asked).
+    """
+    if not on:
+        yield None
+        return
+    before = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(CONSUMER_PRIORITY))
+    except OSError as exc:
+        yield f"consumers: SCHED_FIFO not permitted ({errno.errorcode.get(exc.errno or 0)})"
+        return
+    try:
+        yield f"consumers: SCHED_FIFO {CONSUMER_PRIORITY} granted"
+    finally:
+        os.sched_setscheduler(0, before[0], os.sched_param(before[1]))
+
+
+def bare_frames(model, rec: Recording, robot: str | None, path: Path) -> Path:
+    """The values ``fingerfit stream`` sends for ``rec``, computed once, for
+    :func:`bare_publish`.
+
+    Parameters
+    ----------
+    model : HandModel
+    rec : Recording
+        The replayed recording.
+    robot : str, optional
+        ``--retarget ROBOT``: the robot's joints (the offline ``fingerfit retarget``
+        joints, ``tip`` method) instead of the person's.
+    path : Path
+        The ``.npz`` to write.
+
+    Returns
+    -------
+    Path
+        ``path``, holding ``time (n,)`` s; ``lsl (n, k + 1)``: the consumed outlet's
+        channels, ``valid`` last (``PREFIX-angles``, deg; ``PREFIX-robot``, rad);
+        ``dds (n, j)`` rad and ``names (j,)``: the ``JointState``'s.
+    """
+    sensors = model_sensors(model)
+    kin = compute_kinematics(model, rec, ("user_axis",))
+    values = block_values(kin, channels_of(model, kin), rec, sensors, "tracker")
+    if robot is None:
+        from fingerfit.export.geometry import joint_names
+
+        lsl, dds, names = values.angles, values.joints, joint_names(model)
+    else:
+        from fingerfit.retarget import Retargeter, resolve
+
+        hand, rmap = resolve(robot, None, model.hand)
+        lsl = dds = Retargeter(model, hand, rmap, "tip").step(rec, kin)[0]
+        names = list(hand.joint_names)
+    np.savez(
+        path,
+        time=rec.time,
+        lsl=np.column_stack([lsl, values.valid]),
+        dds=dds,
+        names=np.array(names),
+    )
+    return path
+
+
+def bare_publish(
+    frames: Path, name: str, topic: str, max_age_ms: float, realtime: bool
+) -> tuple[str, str | None]:
+    """A bare publisher of :func:`bare_frames`' values, in real time.
+
+    One LSL outlet ``name`` (double64, the frames' channel count, as
+    :class:`~fingerfit.live.outputs.LslOutput`'s: unchunked, 10 s buffered) and a DDS
+    ``JointState`` writer on ``rt/<topic>`` (:func:`~fingerfit.live.outputs.ros2_qos`,
+    domain ``ROS_DOMAIN_ID``). Once both have a consumer, frame *i* falls due at start +
+    its recording time, as the replay source hands it over; it is stamped with its due
+    time (LSL clock; ``header.stamp`` on the system clock), as fingerfit stamps a
+    frame's arrival. Of the frames due at a wake-up only the newest is sent, and none
+    older than ``max_age_ms``, as the robot lane does.
+
+    Parameters
+    ----------
+    frames : Path
+        :func:`bare_frames`' file.
+    name : str
+        The LSL outlet's name (``PREFIX-angles`` or ``PREFIX-robot``, as fingerfit's).
+    topic : str
+        ROS 2 topic (DDS ``rt/<topic>``).
+    max_age_ms : float
+        ``--max-age``.
+    realtime : bool
+        Ask for the real-time class (:class:`~fingerfit.live.realtime.Realtime`) once the
+        consumers are there, as ``fingerfit stream --realtime`` does.
+
+    Returns
+    -------
+    line : str
+        ``fingerfit stream``'s last line for what it did (its counts, arrival -> sent,
+        age at send).
+    realtime : str or None
+        The ``--realtime`` line (``realtime``: asked for as the robot lane asks).
+    """
+    import pylsl
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
+
+    from fingerfit.cli.stream import summary_line
+    from fingerfit.live.outputs import LslOutput, dds_topic, ros2_qos, ros_domain_id, stamp
+    from fingerfit.live.realtime import Realtime
+    from fingerfit.live.ros2types import Header, JointState, Time
+    from fingerfit.live.stream import Summary
+
+    data = np.load(frames)
+    t = data["time"] - data["time"][0]
+    lsl_rows, dds_rows = data["lsl"].tolist(), data["dds"].tolist()
+    names = [str(x) for x in data["names"]]
+    n, rate = len(t), (len(t) - 1) / t[-1]
+    info = pylsl.StreamInfo(name, "JointAngles", len(lsl_rows[0]), rate, pylsl.cf_double64, name)
+    outlet = pylsl.StreamOutlet(info, chunk_size=0, max_buffered=10)
+    participant = DomainParticipant(ros_domain_id())
+    qos = ros2_qos()
+    writer = DataWriter(
+        participant, Topic(participant, dds_topic(topic), JointState, qos=qos), qos=qos
+    )
+    give_up = time.monotonic() + 60
+    while not (outlet.have_consumers() and writer.get_matched_subscriptions()):
+        if time.monotonic() > give_up:
+            raise SystemExit("bare publisher: no consumer within 60 s")
+        time.sleep(0.01)
+    max_age = max_age_ms / 1e3
+    s = Summary()
+    line = None
+    with contextlib.ExitStack() as rt:
+        if realtime:
+            line = rt.enter_context(Realtime(lane="bare publisher")).line()
+        lsl_offset = pylsl.local_clock() - time.monotonic()
+        wall_offset = time.time() - time.monotonic()
+        due = time.monotonic() + t
+        i = 0
+        while i < n:
+            now = time.monotonic()
+            if due[i] > now:
+                time.sleep(due[i] - now)
+                continue
+            j = int(np.searchsorted(due, now, side="right"))
+            k = j - 1  # the newest frame due; the older ones skipped, or stale
+            old = int(np.count_nonzero(now - due[i:k] > max_age))
+            s.stale, s.skipped, s.received = (
+                s.stale + old,
+                s.skipped + k - i - old,
+                s.received + j - i,
+            )
+            i = j
+            age = time.monotonic() - due[k]
+            if age > max_age:
+                s.stale += 1
+                continue
+            outlet.push_sample(lsl_rows[k], due[k] + lsl_offset)
+            sec, nsec = stamp(due[k] + wall_offset)
+            writer.write(JointState(Header(Time(sec, nsec), "hand"), names, dds_rows[k], [], []))
+            s.sent += 1
+            s.add(time.monotonic() - due[k], 0.0, 0, age)
+        s.seconds = time.monotonic() - due[0]
+    time.sleep(LslOutput.LINGER_S)  # as fingerfit's outputs close: the last frames out
+    with contextlib.suppress(Exception):
+        writer.wait_for_acks(duration(seconds=1))
+    return summary_line(s, True, False, max_age_ms), line
+
+
+def _pooled(runs: list[dict], key: str) -> dict[str, float]:
+    """p50 / p99 (ms) of one consumer's latencies over every run, and the medians of the
+    runs' own."""
+    x = np.concatenate([r[key] for r in runs])
+    out = {"frames": int(x.size)}
+    if x.size:
+        out |= {"p50_ms": float(np.percentile(x, 50)), "p99_ms": float(np.percentile(x, 99))}
+        out["max_ms"] = float(x.max())
+    for q in ("p50_ms", "p99_ms"):
+        out[f"median_run_{q}"] = float(
+            np.median([r[key.split("_")[0]].get(q, np.nan) for r in runs])
+        )
+    return out
+
+
+def against_bare(
+    models: list[str],
+    seconds: float,
+    rounds: int,
+    load: int,
+    realtime: bool,
+    max_age_ms: float,
+    consumers_realtime: bool = True,
+) -> dict:
+    """Part 6: ``fingerfit stream`` and a bare publisher of the same frames, alternately,
+    to the same consumers; fingerfit's added latency per model and consumer.
+
+    Parameters
+    ----------
+    models : list of str
+        ``index``, ``hand5``, ``hand5-shadow`` (the whole hand with ``--retarget shadow``).
+    seconds : float
+        Length of each run's replay (240 Hz).
+    rounds : int
+        Runs of each publisher per model (the order swapped each round).
+    load : int
+        Busy processes beside the measurement (:func:`background_load`).
+    realtime : bool
+        ``--realtime`` for both publishers.
+    max_age_ms : float
+        ``--max-age`` for both publishers.
+    consumers_realtime : bool
+        With ``realtime``, the consumers at SCHED_FIFO too (:func:`realtime_consumers`).
+
+    Returns
+    -------
+    dict
+        Per model: ``bare`` and ``fingerfit`` (per consumer the p50 / p99 over the rounds'
+        frames, the age at send, stale, skipped, lost, the ``realtime:`` lines), their
+        runs, and ``added`` (fingerfit minus bare, of the p50 and of the p99); the load
+        averages and times.
+    """
+    out: dict = {
+        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
+        "seconds": seconds,
+        "rounds": rounds,
+        "background_load": load,
+        "realtime": realtime,
+        "max_age_ms": max_age_ms,
+        "started_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
+        "load_average_at_start": os.getloadavg(),
+        "models": {},
+    }
+    wanted = {"index": ("index",), "hand5": HAND, "hand5-shadow": HAND}
+    flags = ("--max-age", f"{max_age_ms:g}") + (("--realtime",) if realtime else ())
+    with tempfile.TemporaryDirectory() as tmp:
+        cases = []
+        for key in models:
+            sim = subject_for(wanted[key])
+            model = fit_session(sim.session)
+            model_path = save_model(model, Path(tmp) / f"{key}.json")
+            long = long_recording(sim.session.test[0], seconds)
+            csv = write_pose_csv(Path(tmp) / f"{key}.csv", long)
+            robot = "shadow" if key.endswith("-shadow") else None
+            frames = bare_frames(model, long, robot, Path(tmp) / f"{key}.npz")
+            cases.append((key, model_path, csv, long.n_frames, robot, frames))
+        with (
+            background_load(load) as pids,
+            realtime_consumers(realtime and consumers_realtime) as consumers,
+        ):
+            out["background_pids"], out["consumers"] = pids, consumers
+            out["load_average_measuring"] = os.getloadavg()
+            for key, model_path, csv, n, robot, frames in cases:
+                runs: dict[str, list] = {"bare": [], "fingerfit": []}
+                for r in range(rounds):
+                    for label in ("bare", "fingerfit") if r % 2 == 0 else ("fingerfit", "bare"):
+                        tag = f"{key.replace('-', '')}{r}{label[0]}"
+                        if label == "bare":
+                            bare = (
+                                str(frames),
+                                f"{max_age_ms:g}",
+                                *(("--realtime",) if realtime else ()),
+                            )
+                            e2e = end_to_end(model_path, csv, n, tag, robot, bare=bare, raw=True)
+                        else:
+                            e2e = end_to_end(model_path, csv, n, tag, robot, extra=flags, raw=True)
+                        runs[label].append(e2e)
+                        brief = {k: v for k, v in e2e.items() if k not in ("lsl_ms", "dds_ms")}
+                        print(f"{key} {label} (round {r + 1}): {json.dumps(brief)}", flush=True)
+                row: dict = {}
+                for label, xs in runs.items():
+                    row[label] = {c: _pooled(xs, f"{c}_ms") for c in ("lsl", "dds")}
+                    row[label]["age_at_send_max_ms"] = max(
+                        x["counts"].get("age_at_send_max_ms", np.nan) for x in xs
+                    )
+                    row[label]["stale"] = sum(int(x["counts"].get("stale", 0)) for x in xs)
+                    row[label]["skipped"] = sum(int(x["counts"].get("skipped", 0)) for x in xs)
+                    row[label]["lost"] = {c: sum(x[c]["lost"] for x in xs) for c in ("lsl", "dds")}
+                    row[label]["realtime"] = sorted({x["realtime"] for x in xs if x["realtime"]})
+                    row[label + "_runs"] = [
+                        {k: v for k, v in x.items() if k not in ("lsl_ms", "dds_ms")} for x in xs
+                    ]
+                row["added"] = {
+                    c: {q: row["fingerfit"][c][q] - row["bare"][c][q] for q in ("p50_ms", "p99_ms")}
+                    for c in ("lsl", "dds")
+                }
+                out["models"][key] = row
+            out["load_average_before_stop"] = os.getloadavg()
+    out["load_average_at_end"] = os.getloadavg()
+    out["ended_utc"] = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime())
+    print_against_bare(out)
+    return out
+
+
+def print_against_bare(out: dict) -> None:
+    """The Markdown table of part 6: per model and consumer, bare and fingerfit p50 / p99
+    and fingerfit's added latency, the age at send and the stale frames."""
+    names = {
+        "index": "one finger",
+        "hand5": "whole hand",
+        "hand5-shadow": "whole hand, `--retarget shadow`",
+    }
+    print(
+        "| model | consumer | bare p50 / p99 | fingerfit p50 / p99 | added p50 / p99 "
+        "| fingerfit age at send max (stale) | bare age at send max (stale) |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for key, row in out["models"].items():
+        b, f, a = row["bare"], row["fingerfit"], row["added"]
+        for c in ("lsl", "dds"):
+            print(
+                f"| {names.get(key, key)} | {c.upper()} | {b[c]['p50_ms']:.2f} / {b[c]['p99_ms']:.2f} ms "
+                f"| {f[c]['p50_ms']:.2f} / {f[c]['p99_ms']:.2f} ms "
+                f"| {a[c]['p50_ms']:+.2f} / {a[c]['p99_ms']:+.2f} ms "
+                f"| {f['age_at_send_max_ms']:.2f} ms ({f['stale']}) "
+                f"| {b['age_at_send_max_ms']:.2f} ms ({b['stale']}) |",
+                flush=True,
+            )
+    if out.get("consumers"):
+        print(out["consumers"])
+    for key, row in out["models"].items():
+        for label in ("fingerfit", "bare"):
+            for line in row[label]["realtime"]:
+                print(f"{key}, {label}: {line}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="replay length (s)")
@@ -473,13 +909,55 @@ def main() -> None:
         help="only part 5: the robot lane's latency without and with --view-save",
     )
     ap.add_argument("--view-rounds", type=int, default=2, help="rounds of part 5")
+    ap.add_argument(
+        "--against-bare",
+        action="store_true",
+        help="only part 6: fingerfit stream against a bare publisher of the same frames "
+        "(--models default index,hand5,hand5-shadow)",
+    )
+    ap.add_argument("--bare-rounds", type=int, default=3, help="rounds of part 6")
+    ap.add_argument(
+        "--background-load",
+        type=int,
+        default=0,
+        metavar="N",
+        help="part 6: N busy processes (a Python spin loop) while measuring",
+    )
+    ap.add_argument(
+        "--realtime", action="store_true", help="part 6: --realtime for both publishers"
+    )
+    ap.add_argument(
+        "--consumers-normal",
+        action="store_true",
+        help="part 6 with --realtime: the consumers at normal priority",
+    )
+    ap.add_argument("--max-age", type=float, default=20.0, help="part 6: --max-age (ms)")
     ap.add_argument("--lane-run", nargs=2, type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--bare-run", nargs="+", help=argparse.SUPPRESS)
     args = ap.parse_args()
     from fingerfit.live import quiet_lsl
 
     quiet_lsl()  # this process's consumers: no liblsl log lines in the report
     if args.lane_run:  # a child of --lane-before
         print(json.dumps(lane_per_frame(*args.lane_run)), flush=True)
+        return
+    if args.bare_run:  # a child of --against-bare: NAME TOPIC FRAMES MAX_AGE [--realtime]
+        name, topic, frames, max_age = args.bare_run[:4]
+        line, rt = bare_publish(Path(frames), name, topic, float(max_age), args.realtime)
+        if rt is not None:
+            print(f"realtime: {rt}", file=sys.stderr, flush=True)
+        print(line, flush=True)
+        return
+    if args.against_bare:
+        models = (
+            args.models if args.models != ap.get_default("models") else "index,hand5,hand5-shadow"
+        )
+        results = against_bare(
+            models.split(","), args.seconds, args.bare_rounds, args.background_load,
+            args.realtime, args.max_age, not args.consumers_normal,
+        )  # fmt: skip
+        if args.json:
+            args.json.write_text(json.dumps(results, indent=1) + "\n")
         return
     if args.view_compare:
         results = view_compare(args.seconds, args.view_rounds)

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import functools
 import re
+import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -47,14 +49,45 @@ def write_recording(path: Path, n: int = 240, holes: tuple[tuple[int, str], ...]
     return path
 
 
-def resolve_prefix(prefix: str, n: int, timeout: float = 20.0) -> dict:
-    """The LSL streams named ``<prefix>-*`` by name, once at least ``n`` are seen (or the
-    timeout). Find every stream before opening any: ``fingerfit stream --wait`` starts 1 s
-    after its first consumer, and a second search can take longer on a loaded machine."""
+def resolve_prefix(prefix: str, n: int, proc: subprocess.Popen | None = None) -> dict:
+    """The LSL streams named ``<prefix>-*`` by name, once at least ``n`` are seen, or
+    ``proc`` (the process that makes them) has ended (or after :data:`HANG_S`). Find every
+    stream before opening any: ``fingerfit stream --wait`` starts 1 s after its first
+    consumer, and a second search can take longer on a loaded machine."""
     import pylsl
 
-    found = pylsl.resolve_bypred(f"starts-with(name,'{prefix}-')", minimum=n, timeout=timeout)
-    return {i.name(): i for i in found}
+    found: dict = {}
+
+    def look() -> bool:
+        got = pylsl.resolve_bypred(f"starts-with(name,'{prefix}-')", minimum=n, timeout=1.0)
+        found.update({i.name(): i for i in got})
+        return len(found) >= n or (proc is not None and proc.poll() is not None)
+
+    until(look, step=0.0)
+    return found
+
+
+#: Seconds a live test waits for anything (a stream to appear, a consumer, a frame, a
+#: process to end) before it calls it a hang: a guard, never what a test waits for, so a
+#: machine busy with other processes makes the tests slower, not failed.
+HANG_S = 120.0
+
+
+def until(cond: Callable[[], bool], timeout: float = HANG_S, step: float = 0.005) -> bool:
+    """Call ``cond`` until it returns True (every ``step`` s). ``timeout`` only guards
+    against a hang: a test waits on what it needs, not for a duration.
+
+    Returns
+    -------
+    bool
+        Whether ``cond`` came true (False: ``timeout`` s passed).
+    """
+    t_end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > t_end:
+            return False
+        time.sleep(step)
+    return True
 
 
 _COUNT = re.compile(r"(\d+) (frames received|sent|skipped|stale|recorded)\b")

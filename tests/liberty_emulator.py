@@ -273,11 +273,20 @@ class LibertyEmulator:
                 return
             self.sent_frames = i + 1
 
-    def _wait_drained(self, timeout: float = 5.0) -> None:
+    def _wait_drained(self, timeout: float = 60.0) -> None:
         """Wait until the port has read every byte sent (closing the master would drop
-        them, which makes the number of frames delivered depend on timing)."""
+        them, which makes the number of frames delivered depend on timing).
+
+        Bytes written to the master reach the port's input queue through the kernel's
+        flip buffer, moved by a worker thread later: right after a write ``FIONREAD`` may
+        be 0 with the bytes still on their way (two thirds of the trials with two busy
+        processes running). A zero-timeout poll of the port first moves them (the line
+        discipline's poll flushes the pending buffer) without reading any. ``timeout``
+        only guards against a hang.
+        """
         t_end = time.monotonic() + timeout
         while time.monotonic() < t_end and not self._stop.is_set():
+            select.select([self._slave], [], [], 0)  # the flip buffer into the queue
             waiting = fcntl.ioctl(self._slave, termios.FIONREAD, b"\0\0\0\0")
             if struct.unpack("i", waiting)[0] == 0:
                 return

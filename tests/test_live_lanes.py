@@ -7,6 +7,7 @@ counts, order and values -- never a duration, which belongs in ``bench/stream.py
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -182,3 +183,46 @@ def test_robot_lane_frame_values_equal_block_values(tips_frame: str) -> None:
             )
         np.testing.assert_array_equal(got["robot"], robot)
         assert got["robot"] is not robot  # a copy: the retargeter's array is its own
+
+
+class _SlowOnce:
+    """A retargeter stand-in whose step for one frame (by its recording time) takes
+    ``delay`` s: that frame goes stale in its compute."""
+
+    variant = "user_axis"
+
+    def __init__(self, slow_time: float, delay: float) -> None:
+        self.slow_time, self.delay = slow_time, delay
+
+    def step(self, rec, kin):
+        if rec.time[0] == self.slow_time:
+            time.sleep(self.delay)
+        return (np.zeros((1, 2)),)
+
+
+def test_a_frame_that_goes_stale_in_its_compute_is_not_held() -> None:
+    """The hold is the last frame sent: a frame computed but too old to send (its compute
+    outlasted --max-age) does not become the value a later frame's missing sensor keeps."""
+    model = load_model(fitted()[1])
+    # Frame 30 computes for 30 ms (--max-age 10 ms); every frame after it that can be sent
+    # next lacks the distal sensor, so its angles that need it are held.
+    rec = short_recording(60, tuple((i, "index.distal") for i in range(31, 60)))
+    lsl = FakeLsl()
+    slow = _SlowOnce(float(rec.time[30]), 0.03)
+    streamer = Streamer(model, lsl=lsl, retargeter=slow, max_age=0.010)
+    source = Logged(ReplaySource(rec, 1.0))
+    s = run(source, streamer, status=False)
+    assert s.received == 60 == s.sent + s.skipped + s.stale and s.stale >= 1
+    arrivals = np.concatenate(source.blocks_seen)
+    sent = np.searchsorted(arrivals, np.concatenate(lsl.arrival))
+    assert 30 not in sent  # stale: not sent
+    angles = np.vstack(lsl.angles)
+    after = int(np.flatnonzero(sent > 30)[0])  # the first frame sent after it
+    kin = compute_kinematics(model, rec, ("user_axis",))
+    ch = channels_of(model, kin)
+    table = kinematics_table(kin)[ch.angle_labels].to_numpy()
+    held = ~np.isfinite(table[sent[after]])
+    assert held.any() and np.isfinite(table[30, held]).all()
+    # Held from the frame sent before it, not from frame 30 (which differs there).
+    np.testing.assert_array_equal(angles[after, held], angles[after - 1, held])
+    assert not np.allclose(angles[after, held], table[30, held])

@@ -17,7 +17,7 @@ from fingerfit.kinematics import compute_kinematics, kinematics_table
 from fingerfit.live.stream import model_sensors
 from fingerfit.model import load_model
 
-from ._live import fitted, short_recording
+from ._live import HANG_S, fitted, short_recording
 
 pylsl = pytest.importorskip("pylsl")
 FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
@@ -55,13 +55,13 @@ def test_lsl_source_equals_angles(tmp_path: Path) -> None:
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
-        assert outlet.wait_for_consumers(20), "the stream did not connect"
+        assert outlet.wait_for_consumers(HANG_S), "the stream did not connect"
         time.sleep(0.3)
         t0 = pylsl.local_clock()
         for i in range(0, N, 10):  # 10 samples every 10 ms
             outlet.push_chunk(data[i : i + 10], (t0 + rec.time[i : i + 10]).tolist())
             time.sleep(0.01)
-        out, err = proc.communicate(timeout=60)
+        out, err = proc.communicate(timeout=HANG_S)
     finally:
         if proc.poll() is None:
             proc.kill()

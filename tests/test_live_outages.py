@@ -23,7 +23,7 @@ from fingerfit.live.sources import LibertySource, LslSource
 from fingerfit.live.stream import Streamer, model_sensors, run
 from fingerfit.model import load_model
 
-from ._live import FakeLsl, Logged, fitted, short_recording
+from ._live import HANG_S, FakeLsl, Logged, fitted, short_recording, until
 from .bad_inputs._cli import refused
 from .bad_inputs._cli import run as cli
 from .liberty_emulator import Faults, LibertyEmulator
@@ -38,16 +38,26 @@ def _stations(model) -> dict[int, str]:
 
 
 def _one_silence(lsl: FakeLsl, frames: np.ndarray, before: int) -> int:
-    """Index (in what the robot lane pushed) of the one ``valid`` 0 sample between
-    frames, which must be stamped between the arrivals of frames ``before - 1`` and
-    ``before``; the stream ended with an error, so the last sample has ``valid`` 0 too."""
+    """Index (in what the robot lane pushed) of the one ``valid`` 0 sample the source's
+    pause caused, which must be stamped between the arrivals of frames ``before - 1`` and
+    ``before``; the stream ended with an error, so the last sample has ``valid`` 0 too.
+
+    A machine too busy to read the device in time may show the watchdog more silences
+    (the emulator runs in this process): each of those must follow a real gap of more
+    than :data:`SILENCE` after the frame before it, and two never come without a frame
+    between them. Returns the pause's index; ``valid`` 0 samples are counted by the
+    caller against the stream's silences."""
     valid = np.concatenate(lsl.valid)
     arrival = np.concatenate(lsl.arrival)
-    k, end = np.flatnonzero(valid == 0)
-    assert end == len(valid) - 1  # the error end's: the data stopped
-    assert frames[before - 1] < arrival[k] < frames[before]
+    zeros = np.flatnonzero(valid == 0)
+    end = len(valid) - 1
+    assert zeros[-1] == end  # the error end's (or a silence's): the data stopped
     assert np.all(np.diff(arrival) > 0)
-    assert k < end - 1 and np.all(valid[k + 1 : end] == 1)  # frames came back
+    (k,) = [j for j in zeros if frames[before - 1] < arrival[j] < frames[before]]
+    assert k < end - 1 and valid[k + 1] == 1  # frames came back
+    assert np.all(np.diff(zeros) > 1)  # one per silence: a frame between any two
+    for j in zeros[:-1]:  # every other one after a real gap
+        assert arrival[j] - frames[np.searchsorted(frames, arrival[j]) - 1] > SILENCE
     angles = np.vstack(lsl.angles)
     np.testing.assert_array_equal(angles[k], angles[k - 1])  # held
     np.testing.assert_array_equal(angles[end], angles[end - 1])
@@ -73,9 +83,13 @@ def test_liberty_silence_marks_invalid_once_and_frames_resume() -> None:
         emu.close()
     s = streamer.summary
     assert s.received == 120 == s.sent + s.skipped + s.stale and s.lost == 0
-    assert s.silences == 1
-    assert warnings == ["no frame for 100 ms: valid = 0 on the live outputs, robot: hold"]
     _one_silence(lsl, np.concatenate(source.blocks_seen), 60)
+    # The pause's silence, and any a busy machine caused (the end's sample may be one).
+    zeros = int(np.count_nonzero(np.concatenate(lsl.valid) == 0))
+    assert s.silences in (zeros - 1, zeros) and s.silences >= 1
+    assert warnings == ["no frame for 100 ms: valid = 0 on the live outputs, robot: hold"] * (
+        s.silences
+    )
 
 
 @pytest.mark.parametrize("restart_count", [False, True], ids=["count-goes-on", "power-cycle"])
@@ -97,9 +111,11 @@ def test_liberty_reconnects_after_an_unplug(tmp_path, restart_count: bool) -> No
     finally:
         emu.close()
     line = refused(res, emu.port, "not back within 2 s", f"(after {n} frames, 1 reconnect; kept")
-    # One warning per outage (the replugged one and the last), and the watchdog's.
+    # One warning per outage (the replugged one and the last), and the watchdog's in
+    # each (more when a busy machine kept the in-process emulator from a frame for 50 ms:
+    # the watchdog measures time; once per silence is asserted with the replay source).
     assert res.output.count("reopening the port (up to 2 s)") == 2
-    assert res.output.count("warning: no frame for 50 ms") == 2
+    assert res.output.count("warning: no frame for 50 ms") >= 2
     assert "Traceback" not in res.output and line
     # The device was set up again on the new port, as on the first.
     setup = [b"P", b"O*,2,7,9", b"U1", b"F1", b"C"]
@@ -146,13 +162,6 @@ def _samples(rec, sensors: list[str]) -> np.ndarray:
     return np.hstack(cols)
 
 
-def _until(cond, timeout: float = 20.0) -> None:
-    t_end = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < t_end, "timed out"
-        time.sleep(0.005)
-
-
 class _Background:
     """``run`` on a thread (the test drives the LSL outlets meanwhile)."""
 
@@ -169,7 +178,7 @@ class _Background:
         self.thread.start()
 
     def join(self) -> BaseException | None:
-        self.thread.join(timeout=60)
+        self.thread.join(timeout=HANG_S)
         assert not self.thread.is_alive()
         return self.error
 
@@ -188,11 +197,11 @@ def test_lsl_stream_lost_is_marked_and_found_again() -> None:
     s = streamer.summary
     for part in (slice(0, 60), slice(60, 120)):
         outlet = outlets.pop()
-        assert outlet.wait_for_consumers(20)
+        assert outlet.wait_for_consumers(HANG_S)
         outlet.push_chunk(data[part])
-        _until(lambda p=part: s.received == p.stop)
+        assert until(lambda p=part: s.received == p.stop), "timed out"
         del outlet  # the sender goes away: the inlet's next pull raises LostError
-        _until(lambda p=part: source.stats.outages == (2 if p.start else 1))
+        assert until(lambda p=part: source.stats.outages == (2 if p.start else 1)), "timed out"
         if not part.start:  # the stream comes back (same name), after a while
             time.sleep(PAUSE)
             outlets.append(pylsl.StreamOutlet(_mocap(name, sensors)))
@@ -224,11 +233,11 @@ def test_lsl_stream_that_comes_back_malformed_ends_in_one_line() -> None:
     lsl, warnings = FakeLsl(), []
     streamer = Streamer(model, lsl=lsl)
     bg = _Background(source, streamer, warnings)
-    assert outlet.wait_for_consumers(20)
+    assert outlet.wait_for_consumers(HANG_S)
     outlet.push_chunk(_samples(short_recording(30), sensors))
-    _until(lambda: streamer.summary.received == 30)
+    assert until(lambda: streamer.summary.received == 30), "timed out"
     del outlet
-    _until(lambda: source.stats.outages == 1)
+    assert until(lambda: source.stats.outages == 1), "timed out"
     outlet = pylsl.StreamOutlet(_mocap(name, sensors[:1]))  # the hand's channels only
     error = bg.join()
     assert isinstance(error, FingerfitError)
@@ -327,25 +336,27 @@ def test_cli_lsl_source_lost_is_one_line_and_the_robot_gets_valid_0(tmp_path) ->
     )  # fmt: skip
     got: list = []
     try:
-        assert outlet.wait_for_consumers(30), "the stream did not connect"
-        info = resolve_prefix(prefix, 2)[f"{prefix}-angles"]
+        assert outlet.wait_for_consumers(HANG_S), "the stream did not connect"
+        info = resolve_prefix(prefix, 2, proc)[f"{prefix}-angles"]
         inlet = pylsl.StreamInlet(info)
-        inlet.open_stream(timeout=20)
+        inlet.open_stream(timeout=HANG_S)
         labels = [c for c in _labels(inlet) if c != "valid"]  # the outlet's order
         last = want[labels].iloc[-1].to_numpy(float)
         outlet.push_chunk(_samples(rec, sensors))
-        t_end = time.monotonic() + 30
+        t_end = time.monotonic() + HANG_S
         while not got or not np.allclose(got[-1][: len(labels)], last, atol=1e-6):
             assert time.monotonic() < t_end, "the newest frame did not come through"
             chunk, _ = inlet.pull_chunk(timeout=0.2)
             got += chunk
         del outlet  # the source goes away for good
-        _, err = proc.communicate(timeout=60)
-        while True:  # what the stream sent since (its outlets linger 0.25 s)
-            chunk, _ = inlet.pull_chunk(timeout=1.0)
-            if not chunk:
-                break
-            got += chunk
+        _, err = proc.communicate(timeout=HANG_S)
+
+        def pull() -> bool:  # what the stream sent since: up to its sample with valid 0
+            got.extend(inlet.pull_chunk(timeout=0.2)[0])
+            return any(row[-1] == 0 for row in got)
+
+        until(pull)
+        got += inlet.pull_chunk(timeout=0.0)[0]  # anything after it
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -364,7 +375,7 @@ def test_cli_lsl_source_lost_is_one_line_and_the_robot_gets_valid_0(tmp_path) ->
 
 
 def _labels(inlet) -> list[str]:
-    ch = inlet.info(timeout=20).desc().child("channels").child("channel")
+    ch = inlet.info(timeout=HANG_S).desc().child("channels").child("channel")
     out = []
     while not ch.empty():
         out.append(ch.child_value("label"))

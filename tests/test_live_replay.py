@@ -27,11 +27,13 @@ from fingerfit.live.stream import block_values, channels_of, hold, model_sensors
 from fingerfit.model import load_model
 
 from ._live import (
+    HANG_S,
     fitted,
     resolve_prefix,
     sent_frames,
     short_recording,
     stream_counts,
+    until,
     write_recording,
 )
 from .bad_inputs._cli import run
@@ -43,7 +45,7 @@ pytest.importorskip("rosbags")
 FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
 N = 240
 HOLES = ((50, "index.middle"), (51, "index.middle"), (120, "hand"))
-DEADLINE = 60.0
+DEADLINE = HANG_S
 
 
 def _angles(tmp_path: Path, csv: Path, model: Path) -> pd.DataFrame:
@@ -89,16 +91,17 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     qos = Qos(Policy.Reliability.Reliable(0), Policy.History.KeepAll)
     reader = DataReader(participant, Topic(participant, "rt" + topic, JointState, qos=qos), qos=qos)
     record, bag = tmp_path / "live.csv", tmp_path / "bag"
+    lsl_start, wall_start = pylsl.local_clock(), time.time()  # before any frame's arrival
     proc = subprocess.Popen(
         [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@2", "--lsl",
          "--lsl-name", prefix, "--ros2", topic, "--ros2-bag", str(bag), "--record",
-         str(record), "--wait", "--wait-timeout", "30", "-q"],
+         str(record), "--wait", "--wait-timeout", str(HANG_S), "-q"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(domain),
     )  # fmt: skip
     inlets, data, stamps, received = {}, {}, {}, {}
     messages = []
     try:
-        found = resolve_prefix(prefix, 2)  # both found before either is opened
+        found = resolve_prefix(prefix, 2, proc)  # both found before either is opened
         for kind in ("angles", "tips"):
             assert f"{prefix}-{kind}" in found, f"no LSL stream {prefix}-{kind}"
             inlets[kind] = pylsl.StreamInlet(
@@ -106,14 +109,15 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
             )
             data[kind], stamps[kind], received[kind] = [], [], []
         for inlet in inlets.values():
-            inlet.open_stream(timeout=10)
+            inlet.open_stream(timeout=HANG_S)
         # A consumer that goes away mid-stream does not stop the stream.
-        leaver = pylsl.StreamInlet(pylsl.resolve_byprop("name", f"{prefix}-tips", timeout=20)[0])
-        leaver.open_stream(timeout=10)
-        t_end = time.monotonic() + DEADLINE
-        quiet_since = None  # the stream has ended: drain until nothing comes for 1 s
-        while time.monotonic() < t_end:
-            got_any = False
+        leaver = pylsl.StreamInlet(
+            pylsl.resolve_byprop("name", f"{prefix}-tips", timeout=HANG_S)[0]
+        )
+        leaver.open_stream(timeout=HANG_S)
+
+        def pull() -> None:
+            nonlocal leaver
             for kind, inlet in inlets.items():
                 x, ts = inlet.pull_chunk(timeout=0.0)
                 if ts:
@@ -121,19 +125,12 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
                     data[kind] += x
                     stamps[kind] += ts
                     received[kind] += [now] * len(ts)
-                    got_any = True
-            new = [m for m in reader.take(N=1000) if isinstance(m, JointState)]
-            messages += new
+            messages.extend(m for m in reader.take(N=1000) if isinstance(m, JointState))
             if leaver is not None and len(data["tips"]) > 20:
                 leaver.close_stream()
                 leaver = None
-            if proc.poll() is not None:
-                if got_any or new or quiet_since is None:
-                    quiet_since = time.monotonic()
-                elif time.monotonic() - quiet_since > 1.0:
-                    break
-            time.sleep(0.003)
-        infos = {k: inlet.info(timeout=5) for k, inlet in inlets.items()}
+
+        until(lambda: pull() or proc.poll() is not None, DEADLINE, 0.003)
     finally:
         code, output = _finish(proc)
     assert code == 0, output
@@ -141,6 +138,9 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     assert counts["received"] == N == counts["recorded"]
     assert counts["sent"] + counts["skipped"] + counts["stale"] == N
     sent = counts["sent"]
+    # What is still on its way: until every consumer has every frame sent.
+    until(lambda: pull() or min(len(data["angles"]), len(data["tips"]), len(messages)) >= sent)
+    infos = {k: inlet.info(timeout=HANG_S) for k, inlet in inlets.items()}
 
     # --- LSL: channels, metadata, values, validity, timestamps -----------------------
     ch = channels_of(model, compute_kinematics(model, short_recording(2), ("user_axis",)))
@@ -171,7 +171,7 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
         np.testing.assert_allclose(x[:, :-1], held, rtol=0, atol=1e-9)
         np.testing.assert_array_equal(x[:, -1], valid[idx])
         assert np.all(np.diff(ts) > 0)
-        assert np.all(rx - ts > 0) and np.all(rx - ts < 5.0)  # arrival on the LSL clock
+        assert np.all(ts > lsl_start) and np.all(rx > ts)  # arrival on the LSL clock
     assert ch.angle_labels == [c for c in want.columns if c.count(".") == 1 and c != "time"]
 
     # --- ROS 2 over DDS: names, radians, stamps (the frames LSL got) --------------------
@@ -182,7 +182,7 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     rad = np.radians(want[[n.replace("_", ".", 1) for n in names]])
     np.testing.assert_allclose(pos, rad.iloc[idx].ffill().to_numpy(), rtol=0, atol=1e-9)
     stamp = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in messages])
-    assert np.all(np.diff(stamp) > 0) and abs(stamp[-1] - time.time()) < 30
+    assert np.all(np.diff(stamp) > 0) and wall_start < stamp[0] and stamp[-1] < time.time()
     np.testing.assert_allclose(np.diff(stamp), np.diff(stamps["angles"]), atol=1e-6)
     assert {m.header.frame_id for m in messages} == {"hand"}
 
@@ -219,9 +219,12 @@ def test_ctrl_c_ends_with_exit_0_and_complete_files(tmp_path: Path) -> None:
         preexec_fn=_default_sigint,
     )  # fmt: skip
     try:
-        found = pylsl.resolve_byprop("name", f"ffint{os.getpid()}-angles", timeout=20)
+        found = pylsl.resolve_byprop("name", f"ffint{os.getpid()}-angles", timeout=HANG_S)
         assert found
-        time.sleep(0.5)
+        # Ctrl-C once the stream runs: a frame has come through (however loaded the
+        # machine is; the timeout only guards against a hang).
+        inlet = pylsl.StreamInlet(found[0])
+        assert inlet.pull_sample(timeout=DEADLINE)[1] is not None, "no frame came"
         proc.send_signal(signal.SIGINT)
     finally:
         code, output = _finish(proc)
@@ -306,7 +309,7 @@ from fingerfit.live.outputs import LslOutput
 angles = [f"index.a{k}" for k in range(16)]  # a finger's widths of the real streams
 tips = [f"index.tip{k}.{c}" for k in range(4) for c in "xyz"]
 out = LslOutput(sys.argv[1], angles, tips, rate_hz=480.0)
-t_end = time.monotonic() + 20
+t_end = time.monotonic() + 120
 while not out.has_consumers() and time.monotonic() < t_end:
     time.sleep(0.01)
 n = int(sys.argv[2])
@@ -326,19 +329,19 @@ def test_lsl_consumer_receives_the_frames_pushed_just_before_close() -> None:
     prefix, n = f"ffclose{os.getpid()}", 400
     proc = subprocess.Popen([sys.executable, "-c", _BURST_THEN_CLOSE, prefix, str(n)])
     try:
-        found = resolve_prefix(prefix, 2)
+        found = resolve_prefix(prefix, 2, proc)
         assert len(found) == 2, f"LSL streams {prefix}-*: {sorted(found)}"
         inlets = {k: pylsl.StreamInlet(i, processing_flags=0) for k, i in found.items()}
         for inlet in inlets.values():
-            inlet.open_stream(timeout=10)
+            inlet.open_stream(timeout=HANG_S)
         got: dict[str, list] = {k: [] for k in inlets}
-        t_end = time.monotonic() + 20
+        t_end = time.monotonic() + HANG_S
         while min(map(len, got.values())) < n and time.monotonic() < t_end:
             for k, inlet in inlets.items():
                 got[k] += inlet.pull_chunk(timeout=0.0)[0]
             time.sleep(0.01)
     finally:
-        proc.wait(timeout=30)
+        proc.wait(timeout=HANG_S)
     assert proc.returncode == 0
     # Both outlets (without the linger the one destroyed first lost the burst).
     for k, rows in got.items():

@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -24,7 +23,7 @@ import pytest
 from fingerfit.io import write_pose_csv
 from fingerfit.session import PoseSeries, Recording
 
-from ._live import max_age_ms, resolve_prefix, sent_frames, stream_counts
+from ._live import HANG_S, max_age_ms, resolve_prefix, sent_frames, stream_counts, until
 from .bad_inputs._cli import run
 from .conftest import subject
 
@@ -38,7 +37,7 @@ HAND = ("thumb", "index", "middle", "ring", "little")
 N = 240
 #: (frame, sensor) missing in the replayed recording (absent rows of the pose CSV).
 HOLES = ((60, "index.middle"), (61, "index.middle"), (150, "hand"), (151, "thumb.distal"))
-DEADLINE = 90.0
+DEADLINE = HANG_S
 
 
 @pytest.fixture(scope="module")
@@ -133,12 +132,12 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
     proc = subprocess.Popen(
         [FINGERFIT, "stream", str(model_path), "--source", f"replay:{csv}@2", "--retarget",
          "shadow", "--lsl", "--lsl-name", prefix, "--ros2", topic, "--ros2-bag", str(bag),
-         "--record", str(record), "--wait", "--wait-timeout", "30", "-q"],
+         "--record", str(record), "--wait", "--wait-timeout", str(HANG_S), "-q"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
     inlets, data, stamps, messages = {}, {}, {}, []
     try:
-        found = resolve_prefix(prefix, 3)  # angles, tips, robot: found before any is opened
+        found = resolve_prefix(prefix, 3, proc)  # angles, tips, robot: found before any is opened
         for kind in ("robot", "angles"):
             assert f"{prefix}-{kind}" in found, f"no LSL stream {prefix}-{kind}"
             inlets[kind] = pylsl.StreamInlet(
@@ -146,25 +145,16 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
             )
             data[kind], stamps[kind] = [], []
         for inlet in inlets.values():
-            inlet.open_stream(timeout=10)
-        t_end = time.monotonic() + DEADLINE
-        quiet_since = None  # the stream has ended: drain until nothing comes for 1 s
-        while time.monotonic() < t_end:
-            got_any = False
+            inlet.open_stream(timeout=HANG_S)
+
+        def pull() -> None:
             for kind, inlet in inlets.items():
                 x, ts = inlet.pull_chunk(timeout=0.0)
                 data[kind] += x
                 stamps[kind] += ts
-                got_any = got_any or bool(ts)
-            new = [m for m in reader.take(N=1000) if isinstance(m, JointState)]
-            messages += new
-            if proc.poll() is not None:
-                if got_any or new or quiet_since is None:
-                    quiet_since = time.monotonic()
-                elif time.monotonic() - quiet_since > 1.0:
-                    break
-            time.sleep(0.005)
-        info = inlets["robot"].info(timeout=5)
+            messages.extend(m for m in reader.take(N=1000) if isinstance(m, JointState))
+
+        until(lambda: pull() or proc.poll() is not None, DEADLINE)
     finally:
         try:
             out, err = proc.communicate(timeout=DEADLINE)
@@ -177,11 +167,14 @@ def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path:
     assert counts["received"] == N == counts["recorded"]
     assert counts["sent"] + counts["skipped"] + counts["stale"] == N
     sent = counts["sent"]
+    # What is still on its way: until every consumer has every frame sent.
+    until(lambda: pull() or min(len(data["robot"]), len(data["angles"]), len(messages)) >= sent)
+    info = inlets["robot"].info(timeout=HANG_S)
     assert "compute per frame (retargeting included) p50" in out
 
     # --- which frames the robot lane sent (the person's angles identify them) ------------
     live = pd.read_csv(record)
-    labels = [c.findtext("label") for c in ET.fromstring(inlets["angles"].info(5).as_xml())
+    labels = [c.findtext("label") for c in ET.fromstring(inlets["angles"].info(HANG_S).as_xml())
               .find("desc/channels").findall("channel")]  # fmt: skip
     assert labels[:-1] == [c for c in live.columns if c.count(".") == 1 and c != "time"]
     a = np.asarray(data["angles"])

@@ -243,11 +243,12 @@ class Streamer:
         compute = time.perf_counter() - t
         held = self._frame.values(kin, rec, robot)
         for key, row in held.items():
-            self._hold(key, row)
+            self._fill(key, row)
         sent_age = time.monotonic() - arrived
-        if sent_age > self.max_age:  # the compute made it too old
+        if sent_age > self.max_age:  # the compute made it too old: not sent, so not held
             s.stale += 1
             return
+        self._keep(held)
         self._valid[0] = 1.0 if valid else 0.0
         self._arrival[0] = arrived
         self._push(held, self._valid, self._arrival, robot is not None)
@@ -257,17 +258,24 @@ class Streamer:
         if self._view_sent is not None:  # the view's robot: this frame's sent joints
             self._view_sent.append((s.received + n - 1, held["robot"][0].copy()))
 
-    def _hold(self, key: str, row: FloatArray) -> None:
-        """In place: NaN in ``row`` (shape (1, k)) -> the column's last value sent; the
-        last values are then ``row``'s (kept in arrays of their own)."""
+    def _fill(self, key: str, row: FloatArray) -> None:
+        """In place: NaN in ``row`` (shape (1, k)) -> the column's last value sent (NaN
+        until a value was sent)."""
         last = self._last.get(key)
-        if last is None:
-            self._last[key] = row[0].copy()
-            return
         r = row[0]
-        if not np.isfinite(r).all():
+        if last is not None and not np.isfinite(r).all():
             np.copyto(r, last, where=~np.isfinite(r))
-        np.copyto(last, r)
+
+    def _keep(self, held: dict) -> None:
+        """The frame about to be sent: its (filled) values become the last values sent,
+        kept in arrays of their own. A frame that went stale in its compute is not kept:
+        the hold is the last frame a consumer got."""
+        for key, row in held.items():
+            last = self._last.get(key)
+            if last is None:
+                self._last[key] = row[0].copy()
+            else:
+                np.copyto(last, row[0])
 
     def _push(self, held: dict, valid: FloatArray, arrival: FloatArray, robot: bool) -> None:
         if self.lsl is not None:
