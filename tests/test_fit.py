@@ -210,7 +210,7 @@ def test_cli_fit_and_angles_in_session_units(tmp_path) -> None:
     assert err.mean() < 6.0
 
 
-def test_axis_confidence_bound_is_the_figure_capture_shows(realistic_subject) -> None:
+def test_axis_confidence_bound_is_the_figure_capture_shows(realistic_subject, tmp_path) -> None:
     """Above ``max_axis_ci_deg`` by ``axis_ci_deg`` (the half-angle ``fingerfit capture``
     reports) the fit warns and notes it, and still fits the joint: the same model."""
     from fingerfit.capture import evidence
@@ -232,6 +232,14 @@ def test_axis_confidence_bound_is_the_figure_capture_shows(realistic_subject) ->
     np.testing.assert_array_equal(
         model.fingers["index"].joints["mp"].axis, plain.fingers["index"].joints["mp"].axis
     )
+    # The model keeps every joint's figure (the fit table's "axis ±°"), the one capture shows.
+    shown = {(r.digit, r.joint): r.axis_ci_deg for r in evidence(s, ["index"])}
+    stored = {
+        ("index", j): jm.quality.axis_ci_deg for j, jm in plain.fingers["index"].joints.items()
+    }
+    assert stored == pytest.approx(shown, rel=1e-9)
+    back = load_model(save_model(plain, tmp_path / "model.json"))
+    assert back.fingers["index"].joints["mp"].quality.axis_ci_deg == stored[("index", "mp")]
 
 
 def test_leave_one_cycle_out_axes_are_sara_refits(realistic_subject) -> None:

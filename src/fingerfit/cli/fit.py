@@ -26,6 +26,8 @@ TABLE_LEGEND = {
     "s5/s6": "median over cycles of the centre system's two smallest singular values' ratio: "
     "rotation about the axis over rotation off it (large = one clear hinge axis)",
     "vs cycles°": "angle between the fitted axis and the cycles' own rotation axis (SVD null vectors)",
+    "axis ±°": "95 % confidence half-angle of the flexion axis from its spread over the cycles "
+    "(delete-one-cycle jackknife; `fingerfit capture` asks for <= 9)",
     "bone mm": "segment length from this joint's centre to the next joint's centre (dip: to the tip)",
     "two axes": "the joint's second (ab/adduction) axis, when fitted: its angle to the flexion "
     "axis and its line's distance from the flexion axis's line (a two-axis joint's rows of "
@@ -73,6 +75,7 @@ def quality_table(model: HandModel) -> Table:
                 f"{np.mean(q.centre_distance_mm):.2f}" if q.centre_distance_mm else "–",
                 f"{np.median(q.conditioning):.0f}" if q.conditioning else "–",
                 f"{q.null_agreement_deg:.1f}",
+                "–" if q.axis_ci_deg is None else f"{q.axis_ci_deg:.1f}",
                 f"{length:.1f}",
                 two_axes,
             )

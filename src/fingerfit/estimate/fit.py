@@ -237,8 +237,8 @@ def _conditioning_problem(est: AxisEstimate, options: FitOptions) -> list[str]:
     ]
 
 
-def _quality(data: JointData, est: AxisEstimate, notes: list[str]) -> JointQuality:
-    """Quality figures of one joint."""
+def _quality(data: JointData, est: AxisEstimate, notes: list[str], ci: float) -> JointQuality:
+    """Quality figures of one joint (``ci``: :func:`axis_ci_deg`, NaN when not known)."""
     extra = ["exact data: axis from the cycles' null vectors"] if est.axis.degenerate else []
     pc = est.pooled_conditioning
     return JointQuality(
@@ -254,6 +254,7 @@ def _quality(data: JointData, est: AxisEstimate, notes: list[str]) -> JointQuali
         rejected_frames=est.rejected_frames,
         rejected_cycles=list(est.rejected_cycles),
         model_choice=None if est.choice is None else est.choice.summary(),
+        axis_ci_deg=float(ci) if np.isfinite(ci) else None,
     )
 
 
@@ -301,8 +302,10 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
     """
     digit = DIGITS[finger]
     estimator = METHODS[options.method]
-    fitted: dict[str, tuple[str, str, FloatArray, FloatArray, AxisEstimate, JointData, list[str]]]
-    fitted = {}
+    # joint -> parent, child, axis point, axis (tracker), estimate, data, notes, axis CI deg
+    fitted: dict[
+        str, tuple[str, str, FloatArray, FloatArray, AxisEstimate, JointData, list[str], float]
+    ] = {}
     landmarks = np.array([session.landmark(f"{finger}.{k}") for k in digit.landmarks])
     along = digit_direction(session, finger)
     joints_data = digit_data(session, finger, reference, along)
@@ -352,23 +355,23 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             moving = np.concatenate(data.periods)
             rv = rotation_vector(data.rotation[moving] @ data.reference_rotation.T)
             a_parent = orient_flexion(est.axis.direction, rv)
-        fitted[j] = (parent, child, pr @ est.axis.point + pp, pr @ a_parent, est, data, notes)
+        fitted[j] = (parent, child, pr @ est.axis.point + pp, pr @ a_parent, est, data, notes, ci)
     fitted = {j: fitted[j] for j in digit.joints}  # proximal to distal again
 
     plane = sagittal_plane(landmarks, np.array([f[3] for f in fitted.values()]), finger)
     tip = session.landmark(f"{finger}.tip")
     joints = {}
     migration = {}
-    for j, (parent, child, point, a, est, data, notes) in fitted.items():
+    for j, (parent, child, point, a, est, data, notes, ci) in fitted.items():
         centre = intersect(plane, point, a, f"{finger} {j}")
-        joints[j] = (parent, child, centre, a, _quality(data, est, notes))
+        joints[j] = (parent, child, centre, a, _quality(data, est, notes, ci))
         if est.migration is not None:
             # The migration is per radian of the angle about the estimator's axis sense.
             sense = np.sign(a @ (reference[parent][1] @ est.axis.direction))
             migration[j] = sense * (reference[parent][1] @ est.migration)
     second_axes = {}
     axis_order = {}
-    for j, (parent, child, _, a, est, _, _) in fitted.items():
+    for j, (parent, child, _, a, est, *_) in fitted.items():
         if est.abduction is None:
             continue
         if est.choice is not None and est.choice.order != digit.order[j]:

@@ -224,7 +224,7 @@ def _quality(r: _Reader, q: Any, where: str) -> JointQuality:
             if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
                 raise r.err(w, "must be a list of strings")
             out[key] = list(v)
-        elif key in ("pooled_conditioning", "model_choice") and v is None:
+        elif key in ("pooled_conditioning", "model_choice", "axis_ci_deg") and v is None:
             out[key] = None
         elif key == "model_choice":
             out[key] = _model_choice(r, v, w)

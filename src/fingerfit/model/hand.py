@@ -60,6 +60,10 @@ class JointQuality:
         (:meth:`fingerfit.estimate.choice.ModelChoice.summary`: ``chosen``,
         ``held_out_hinge_mm``, ``held_out_two_axis_mm``, ``folds``,
         ``two_axis_candidate``).
+    axis_ci_deg : float or None
+        95 % confidence half-angle of the flexion axis from its spread over the cycles
+        (deg; :func:`fingerfit.estimate.fit.axis_ci_deg`, the figure ``fingerfit capture``
+        shows). None: not known (fewer than two cycles, or a file written before it).
     """
 
     cycles: int
@@ -74,6 +78,7 @@ class JointQuality:
     rejected_frames: int = 0
     rejected_cycles: list[int] = field(default_factory=list)
     model_choice: dict | None = None
+    axis_ci_deg: float | None = None
 
 
 @dataclass(frozen=True)
