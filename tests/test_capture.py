@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -79,6 +80,22 @@ def _two_cycles(sub) -> int:
     return int((periods[1].max() + periods[2].min()) // 2)
 
 
+def _fits_and_assembles(
+    new: Path, tmp_path: Path, hand: str, digits: list[str], grasp: list[str]
+) -> None:
+    """The folder capture wrote passes ``fingerfit fit``, and ``fingerfit session``
+    assembles its files (reference, the ``grasp`` recordings, landmarks) into a session."""
+    res = CliRunner().invoke(app, ["fit", str(new), "-q"])
+    assert res.exit_code == 0, res.output
+    args = ["session", str(tmp_path / "assembled"), "--subject", "S01", "--hand", hand]
+    args += ["--fingers", ",".join(digits), "--reference", str(new / "reference.csv")]
+    for name in grasp:
+        args += ["--grasp", str(new / name)]
+    args += ["--landmarks", str(new / "landmarks.csv")]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+
+
 def test_thresholds_are_the_fits():
     o = FitOptions()
     assert thresholds() == (max(o.min_cycles, 2), o.min_rom_deg, o.max_axis_ci_deg)
@@ -106,28 +123,7 @@ def test_full_grasp_is_enough_and_the_folder_fits(simulated, tmp_path):
     np.testing.assert_array_equal(got.time, want.time)
     for s in got.poses:
         np.testing.assert_array_equal(got.poses[s].position, want.poses[s].position)
-    res = CliRunner().invoke(app, ["fit", str(new), "-q"])
-    assert res.exit_code == 0, res.output
-    res = CliRunner().invoke(
-        app,
-        [
-            "session",
-            str(tmp_path / "assembled"),
-            "--subject",
-            "S01",
-            "--hand",
-            sub.session.hand,
-            "--fingers",
-            ",".join(DIGITS),
-            "--reference",
-            str(new / "reference.csv"),
-            "--grasp",
-            str(new / "grasp.csv"),
-            "--landmarks",
-            str(new / "landmarks.csv"),
-        ],
-    )
-    assert res.exit_code == 0, res.output
+    _fits_and_assembles(new, tmp_path, sub.session.hand, list(DIGITS), ["grasp.csv"])
 
 
 def test_two_cycles_are_not_enough_as_the_fit_says(simulated, tmp_path):
@@ -200,30 +196,9 @@ def test_thumb_protocol_after_the_grasp_is_enough_and_the_folder_fits(with_thumb
     assert [r.joint for r in rows if r.enough] == ["cmc", "mcp", "ip"]
     cmc = rows[0]
     assert cmc.second is True and cmc.axis_ci_deg < FitOptions().max_axis_ci_deg
-    res = CliRunner().invoke(app, ["fit", str(new), "-q"])
-    assert res.exit_code == 0, res.output
-    res = CliRunner().invoke(
-        app,
-        [
-            "session",
-            str(tmp_path / "assembled"),
-            "--subject",
-            "S01",
-            "--hand",
-            sub.session.hand,
-            "--fingers",
-            ",".join(digits),
-            "--reference",
-            str(new / "reference.csv"),
-            "--grasp",
-            str(new / "grasp.csv"),
-            "--grasp",
-            str(new / "thumb_circumduction.csv"),
-            "--landmarks",
-            str(new / "landmarks.csv"),
-        ],
+    _fits_and_assembles(
+        new, tmp_path, sub.session.hand, digits, ["grasp.csv", "thumb_circumduction.csv"]
     )
-    assert res.exit_code == 0, res.output
 
 
 def test_thumb_protocol_needs_a_thumb(simulated, tmp_path):

@@ -127,7 +127,9 @@ def capture(
 
     if protocol not in PROTOCOLS:
         raise FingerfitError(f"must be one of {', '.join(PROTOCOLS)}", field="--protocol")
-    _check_view(view, view_save)
+    from .stream import check_view
+
+    check_view(view, view_save, None)
     meta = _meta(session_dir, subject, hand, units, rate, fingers)
     listed = meta["recordings"].get(RECORDING_LIST, [])
     listed = [listed] if isinstance(listed, str) else list(listed)
@@ -305,26 +307,6 @@ def capture(
         say("view -> [bold]{}[/]", view_save)
     if not (session_dir / "landmarks.csv").is_file():
         notice("note", f"{session_dir / 'landmarks.csv'} is missing: the fit needs it")
-
-
-def _check_view(view: bool, view_save: Path | None) -> None:
-    """``--view`` needs a display, ``--view-save`` a new .rrd file (not both); either
-    needs Rerun (one line naming the extra), checked before anything is recorded."""
-    if view_save is not None:
-        from .stream import check_view_save
-
-        check_view_save(view_save, view, None)
-    if view:
-        from ..view import has_display
-
-        if not has_display():
-            raise FingerfitError(
-                "no display to open the viewer on: give --view-save OUT.rrd", field="--view"
-            )
-    if view or view_save is not None:
-        from ..view import require_rerun
-
-        require_rerun()
 
 
 def _shortfall(r: JointEvidence, need: tuple[int, float, float]) -> str:

@@ -258,19 +258,7 @@ def stream(
     refuse_writing_inputs(files, inputs)
     if record is not None:
         check_target(record)
-    if view_save is not None:
-        check_view_save(view_save, view, record)
-    if view:
-        from ..view import has_display
-
-        if not has_display():
-            raise FingerfitError(
-                "no display to open the viewer on: give --view-save OUT.rrd", field="--view"
-            )
-    if view or view_save is not None:
-        from ..view import require_rerun
-
-        require_rerun()  # before the source opens: one line naming the extra
+    check_view(view, view_save, record)
     if (
         ros2_bag is not None
         and ros2_bag.exists()
@@ -438,6 +426,27 @@ def stream(
     for p, what in ((record, "angles CSV"), (ros2_bag, "rosbag2"), (view_save, "view")):
         if p is not None:
             say("{} -> [bold]{}[/]", what, p)
+
+
+def check_view(view: bool, view_save: Path | None, record: Path | None) -> None:
+    """``--view`` needs a display, ``--view-save`` a new .rrd file (:func:`check_view_save`;
+    not both); either needs Rerun (one line naming the extra). Checked before the source
+    opens (``stream``, ``capture``)."""
+    from ..errors import FingerfitError
+
+    if view_save is not None:
+        check_view_save(view_save, view, record)
+    if view:
+        from ..view import has_display
+
+        if not has_display():
+            raise FingerfitError(
+                "no display to open the viewer on: give --view-save OUT.rrd", field="--view"
+            )
+    if view or view_save is not None:
+        from ..view import require_rerun
+
+        require_rerun()
 
 
 def check_view_save(path: Path, view: bool, record: Path | None) -> None:
