@@ -63,6 +63,32 @@ def test_table_round_trip_is_bit_exact(tmp_path: Path, monkeypatch) -> None:
     assert pd.read_parquet(path).shape == (n, 4)
 
 
+@pytest.mark.parametrize("row_group_rows", [999, 1 << 20])
+@pytest.mark.parametrize("bad", [-np.inf, np.inf])
+def test_an_infinity_is_named_by_its_row_in_any_row_group(
+    tmp_path: Path, monkeypatch, row_group_rows: int, bad: float
+) -> None:
+    from fingerfit.io import parquet_read
+
+    monkeypatch.setattr(parquet_read, "_READ_COLUMNS", 1)
+    n = 5_000
+    c = np.ones(n)
+    c[[10, 3_210]] = np.nan  # NaN is a missing value, before and after the infinity
+    c[3_000] = bad
+    cols = {"time": np.arange(n) / 240.0, "a": np.zeros(n), "c": c}
+    path = fpq.write_parquet(
+        tmp_path / "t.parquet", cols, fpq.TableMeta(fpq.ANGLES), row_group_rows=row_group_rows
+    )
+    with pytest.raises(FingerfitError) as err:
+        fpq.read_parquet(path, fpq.ANGLES, columns=list(cols))
+    assert str(err.value) == f"{path}:3001: field 'c': not a finite number: {bad!r}"
+    c[3_000] = 1e308  # finite values whose sum overflows are not infinities
+    c[3_001] = 1e308
+    path = fpq.write_parquet(tmp_path / "big.parquet", cols, fpq.TableMeta(fpq.ANGLES))
+    got = fpq.read_parquet(path, fpq.ANGLES, columns=list(cols))
+    assert np.array_equal(got.columns["c"], c, equal_nan=True)
+
+
 def test_pose_round_trip_equals_the_csv(tmp_path: Path, recording) -> None:
     for units in ("mm", "cm"):
         write_pose_csv(tmp_path / "g.csv", recording, units=units)

@@ -239,35 +239,39 @@ def read_parquet(
             # Several: a few columns of a row group at a time (Arrow decodes the whole
             # row group of the columns asked for, so the memory beside the arrays is a
             # few column chunks, not a row group of every column).
+            # Each block is checked for infinities as it is placed (in cache), while
+            # the next one is decoded in a thread of its own.
             out: dict[str, object] = {}
             if pf.num_row_groups == 1:
                 for _, block in float_blocks(pf, floats, n_rows):
                     out.update(zip(floats, block, strict=True))
+                    for c, v in zip(floats, block, strict=True):
+                        refuse_infinite(v, c, path)
                 if floats and out[floats[0]].size != n_rows:
                     raise ValueError(f"{out[floats[0]].size} rows read of {n_rows}")
             else:
-                for i in range(0, len(floats), _READ_COLUMNS):
-                    few = floats[i : i + _READ_COLUMNS]
-                    for c in few:
-                        out[c] = np.empty(n_rows)
-                    filled = 0
-                    for lo, block in float_blocks(pf, few, n_rows):
-                        for c, v in zip(few, block, strict=True):
-                            out[c][lo : lo + v.size] = v
-                        filled = lo + block[0].size
-                    if filled != n_rows:
-                        raise ValueError(f"{filled} rows read of {n_rows}")
+                groups = [
+                    floats[i : i + _READ_COLUMNS] for i in range(0, len(floats), _READ_COLUMNS)
+                ]
+                for c in floats:
+                    out[c] = np.empty(n_rows)
+                filled = dict.fromkeys(range(len(groups)), 0)
+                for (gi, few), (lo, block) in _column_groups(pf, groups, n_rows):
+                    for c, v in zip(few, block, strict=True):
+                        refuse_infinite(v, c, path, first=lo)
+                        out[c][lo : lo + v.size] = v
+                    filled[gi] = lo + block[0].size
+                if any(f != n_rows for f in filled.values()):
+                    raise ValueError(f"{min(filled.values())} rows read of {n_rows}")
             texts = pf.read(columns=[c for c in names if c in text], use_threads=True)
+        except FingerfitError:
+            raise
         except Exception as exc:  # a damaged data page
             raise _corrupt(path, exc) from None
     try:
         for name in names:
             if name in text:
                 out[name] = _text_codes(pa, texts.column(name))
-                continue
-            refuse_infinite(out[name], name, path)
-    except FingerfitError:
-        raise
     except Exception as exc:  # inconsistent pages of a damaged file
         raise _corrupt(path, exc) from None
     return ParquetTable({c: out[c] for c in names}, _metadata(schema), n_rows, names)
@@ -275,6 +279,18 @@ def read_parquet(
 
 #: Float columns of a file of several row groups decoded at a time by :func:`read_parquet`.
 _READ_COLUMNS = 4
+
+
+def _column_groups(pf, groups: list[list[str]], n_rows: int):
+    """:func:`float_blocks` of each group of columns in turn, decoded one block ahead:
+    yields ``((group index, columns), (first row, arrays))``."""
+
+    def blocks():
+        for gi, few in enumerate(groups):
+            for item in _float_blocks(pf, few, n_rows, None):
+                yield (gi, few), item
+
+    return _ahead(blocks())
 
 
 def float_blocks(
@@ -392,14 +408,21 @@ def _text_codes(pa, col) -> tuple[np.ndarray, list[str]]:
     return codes.to_numpy(zero_copy_only=False).astype(np.int32, copy=False), names
 
 
-def refuse_infinite(values: np.ndarray, column: str, path: Path) -> None:
+def refuse_infinite(values: np.ndarray, column: str, path: Path, first: int = 0) -> None:
     """Refuse a float column ``(n,)`` with an infinity: one line naming the file, the
-    column and the 1-based row (NaN is a missing value, not an error)."""
+    column and the 1-based row (NaN is a missing value, not an error). ``first``: the
+    0-based row of ``values[0]`` in the file (a block of the column)."""
+    # A finite sum has no infinity (nor NaN) in it: one reduction for the common case.
+    # An infinity makes it infinite or NaN (inf - inf), and so may NaN or an overflow:
+    # then the values are looked at one by one.
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = values.sum()
+    if np.isfinite(total) or not np.isinf(values).any():
+        return
     bad = np.flatnonzero(np.isinf(values))
-    if bad.size:
-        raise FingerfitError(
-            f"not a finite number: {float(values[bad[0]])!r}",
-            path=path,
-            line=int(bad[0]) + 1,
-            field=shown(column),
-        )
+    raise FingerfitError(
+        f"not a finite number: {float(values[bad[0]])!r}",
+        path=path,
+        line=int(bad[0]) + first + 1,
+        field=shown(column),
+    )
