@@ -399,6 +399,37 @@ def test_streamed_pose_read_is_the_reference_bit_for_bit(
             assert np.array_equal(bits(ref.poses[s].rotation), bits(fast.poses[s].rotation))
 
 
+@pytest.mark.parametrize(
+    ("qw_scale", "x", "fragment"),
+    [
+        (1.0009, 10.0, None),  # a norm within the tolerance but near it: read as the reference
+        (1.0011, 10.0, "has norm 1.0011, not 1"),
+        (1.0, 2e9, "field 'x': coordinate 2e+09 mm is implausible"),
+    ],
+)
+def test_pose_checks_near_their_limits_are_the_reference(
+    tmp_path: Path, recording, monkeypatch, qw_scale: float, x: float, fragment: str | None
+) -> None:
+    """The streaming reader's checks of whole blocks give what the reference path says,
+    at the edge of the quaternion norm's tolerance and of plausible coordinates."""
+    from fingerfit.io import posecsv
+
+    cols = posecsv._pose_columns(recording, 1.0)
+    for c in ("qw", "qx", "qy", "qz"):
+        cols[c] = cols[c].copy()
+        cols[c][7] *= qw_scale
+    cols["x"] = cols["x"].copy()
+    cols["x"][9] = x
+    path = fpq.write_parquet(tmp_path / "edge.parquet", cols, fpq.pose_meta("mm"))
+    if fragment is not None:
+        _refused(path, fragment, ":10:" if x > 1e9 else ":8:")
+        return
+    got = posecsv.read_pose_csv(path, units="mm", rate_hz=240)
+    with monkeypatch.context() as m:
+        m.setattr(posecsv, "_read_parquet_fast", _no_assembly)  # the reference only
+        _same_recording(got, posecsv.read_pose_csv(path, units="mm", rate_hz=240))
+
+
 def test_pose_duplicates_go_to_the_reference_path(tmp_path: Path, recording) -> None:
     from fingerfit.io import posecsv
 

@@ -24,6 +24,7 @@ from ..session import PoseSeries, Recording, is_sensor_name
 from ..transforms import quat_wxyz_columns
 from .fastcsv import put_quat_rows, put_rows, put_scaled_rows, rows_where
 from .hygiene import (
+    MAX_COORDINATE_MM,
     frames_missing_note,
     implausible_message,
     implausible_rows,
@@ -450,33 +451,50 @@ def _read_parquet_fast(
             """Check and place rows ``lo:lo + m``; their samples with empty fields."""
             m = cols[0].size
             hi = lo + m
+            # the rows as (m, 7) with each column contiguous (a (7, m) buffer seen
+            # transposed): copied column by column, checked column by column
             block = getattr(buffers, "block", None)
-            if block is None or block.shape[0] < m:
-                block = buffers.block = np.empty((max(m, _PARQUET_BLOCK), 7))
-            p = block[:m]
+            if block is None or block.shape[1] < m:
+                block = buffers.block = np.empty((7, max(m, _PARQUET_BLOCK)))
+                buffers.sums = np.empty(block.shape[1])
             for j, v in enumerate(cols):
-                p[:, j] = v
+                block[j, :m] = v
             del cols
+            p, total = block[:, :m].T, buffers.sums[:m]
             partial = 0
-            finite = np.isfinite(p)
-            ok = finite.all(axis=1)
-            if not ok.all():
+            with np.errstate(over="ignore", invalid="ignore"):
+                np.add.reduce(block[:, :m], axis=0, out=total)
+            if np.isfinite(total).all():  # every field of every row a finite number
+                ok = True
+                xyz = block[:3, :m]
+                if max(-xyz.min(), xyz.max()) * abs(scale) > MAX_COORDINATE_MM:
+                    raise _Irregular
+                np.multiply(block[3, :m], block[3, :m], out=total)
+                for j in (4, 5, 6):
+                    total += block[j, :m] * block[j, :m]
+                # |q|^2 - 1 within the tolerance bounds |q| - 1 by half of it: a norm
+                # nearer the tolerance goes to the reference path, which decides it
+                if max(total.max() - 1.0, 1.0 - total.min()) > QUAT_NORM_TOLERANCE:
+                    raise _Irregular
+            else:
+                finite = np.isfinite(p)
+                ok = finite.all(axis=1)
                 if np.isinf(p).any():
                     raise _Irregular
                 partial = int(np.count_nonzero(~ok & finite.any(axis=1)))
-            if implausible_rows(p[:, :3], scale).size:
-                raise _Irregular
-            q = p[:, 3:]
-            with np.errstate(over="ignore", invalid="ignore"):
-                norm = np.sqrt(np.einsum("ij,ij->i", q, q))
-            if (ok & (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)).any():
-                raise _Irregular
+                if implausible_rows(p[:, :3], scale).size:
+                    raise _Irregular
+                q = p[:, 3:]
+                with np.errstate(over="ignore", invalid="ignore"):
+                    norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+                if (ok & (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE)).any():
+                    raise _Irregular
             f = np.cumsum(new[lo:hi], dtype=np.int64)  # the rows' frames
             f += int(np.searchsorted(row_of_frame, lo)) - 1  # frames begun before
             if grid is not None:
                 f = grid[f]
             c = code[lo:hi]
-            if not ok.all():
+            if ok is not True and not ok.all():
                 c, f, p = c[ok], f[ok], p[ok]
             for k in np.flatnonzero(np.bincount(c, minlength=n_codes)):
                 r = rows_where(c, k)
