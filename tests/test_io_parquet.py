@@ -486,19 +486,33 @@ def test_streamed_wide_read_is_the_reference_bit_for_bit(
     messy = plain[rng.random(len(plain)) > 0.03].reset_index(drop=True)
     messy.loc[rng.random(len(messy)) < 0.05, "x2"] = np.nan
     repeated = pd.concat([plain.iloc[:40], plain.iloc[39:]]).reset_index(drop=True)
+    # the first row of a block repeating the last of the block before
+    edge = pd.concat([plain.iloc[:50], plain.iloc[49:]]).reset_index(drop=True)
+    # station 2 holding its values into the next row, within a block and across blocks
+    held = plain.copy()
+    st2 = [c for c in plain.columns if c.endswith("2")]
+    for row in (7, 50, 100):
+        held.loc[row, st2] = held.loc[row - 1, st2].to_numpy()
+    # a quaternion norm within the tolerance, near it
+    near = plain.copy()
+    near.loc[10, ["w1", "x1", "y1", "z1"]] *= 1.0009
     meta = widecsv._wide_meta("mm", widecsv.DEFAULT_LAYOUT)
-    for name, table in (("plain", plain), ("messy", messy), ("repeated", repeated)):
+    tables = {"plain": plain, "messy": messy, "repeated": repeated, "edge": edge}
+    for name, table in (tables | {"held": held, "near": near}).items():
         path = fpq.write_parquet(tmp_path / f"{name}.parquet", table, meta, row_group_rows=333)
         for rate in (240, None):
             with monkeypatch.context() as m:
                 m.setattr(widecsv, "_read_parquet_fast", _no_assembly)  # the reference only
                 ref = read_wide_csv(path, units="mm", rate_hz=rate, check=False)
-            if name == "repeated":
+            if name in ("repeated", "edge"):
                 with monkeypatch.context() as m:
                     m.setattr(widecsv, "_assemble", _no_assembly)
                     with pytest.raises(AssertionError, match="not this path"):
                         read_wide_csv(path, units="mm", rate_hz=rate, check=False)
                 assert any("exactly repeated rows dropped" in n for n in ref.notes)
+                _same_recording(ref, read_wide_csv(path, units="mm", rate_hz=rate, check=False))
+                continue
+            if name == "near":  # decided by the reference path, which reads it
                 _same_recording(ref, read_wide_csv(path, units="mm", rate_hz=rate, check=False))
                 continue
             with monkeypatch.context() as m:

@@ -336,6 +336,8 @@ _BLOCK = 1 << 16
 #: Threads placing the blocks of a pose Parquet file, and the rows of a block.
 _THREADS = 2
 _PARQUET_BLOCK = 1 << 15
+#: Elements added to each row of a block buffer (see ``_read_parquet_fast``).
+_PAD = 24
 
 
 def _first(rows: slice | np.ndarray) -> int:
@@ -455,7 +457,10 @@ def _read_parquet_fast(
             # transposed): copied column by column, checked column by column
             block = getattr(buffers, "block", None)
             if block is None or block.shape[1] < m:
-                block = buffers.block = np.empty((7, max(m, _PARQUET_BLOCK)))
+                # rows a few cache lines longer than the block: columns a power of two
+                # apart share cache sets, which makes strided work on rows several
+                # times slower
+                block = buffers.block = np.empty((7, max(m, _PARQUET_BLOCK) + _PAD))
                 buffers.sums = np.empty(block.shape[1])
             for j, v in enumerate(cols):
                 block[j, :m] = v

@@ -38,7 +38,7 @@ from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import row_norms
 from .fastcsv import NotPlain, put_quat_rows, put_rows, put_scaled_rows, read_header
-from .hygiene import check_recording, implausible_rows, missing_note
+from .hygiene import MAX_COORDINATE_MM, check_recording, implausible_rows, missing_note
 from .posecsv import check_field_counts, sensor_quats
 from .wideframes import QUAT_NORM_TOLERANCE as QUAT_NORM_TOLERANCE
 from .wideframes import RATE_TOLERANCE as RATE_TOLERANCE
@@ -330,41 +330,36 @@ def _read_parquet_fast(
                 # are copied as they are, and the checks' reductions over stations and
                 # keys go across contiguous rows
                 rows = max(m, _PARQUET_BLOCK) + 1
-                ext = buffers.ext = np.empty((n_st, k, rows)).transpose(2, 0, 1)
+                buffers.fields = np.empty((n_st, k, rows))
+                buffers.ext = ext = buffers.fields.transpose(2, 0, 1)
+                buffers.sums = np.empty(rows)
+            fields = buffers.fields[:, :, : m + 1]  # (stations, keys, 1 + m), rows contiguous
             if before is not None:
                 ext[0] = before
             v = ext[1 : m + 1]
             for c, col in enumerate(block):
                 v[:, c // k, c % k] = col
             del block
-            if np.isinf(v).any() or implausible_rows(v[:, :, :3], scale).size:
-                raise _Irregular
-            rep, same = _repeats(ext[: m + 1] if before is not None else v)
-            if before is not None:
-                rep, same = rep[1:], same[1:]
-            if rep.any():
-                raise _Irregular
-            some, every = same[:, 0].copy(), same[:, 0].copy()
-            for j in range(1, n_st):
-                some |= same[:, j]
-                every &= same[:, j]
-            held = int(np.count_nonzero(some & ~every))
-            del rep, same, some, every
-            finite = np.isfinite(v)
-            complete = finite.all(axis=2)
-            empty = int(np.count_nonzero(~complete & finite.any(axis=2)))
-            del finite
+            total = buffers.sums[:m]
+            with np.errstate(over="ignore", invalid="ignore"):
+                np.add.reduce(fields[:, :, 1:].reshape(n_st * k, m), axis=0, out=total)
+            if np.isfinite(total).all():
+                held, complete = _finite_block(fields, before is not None, scale)
+                empty = 0
+            else:
+                held, complete, empty = _block_with_gaps(ext, m, before is not None, scale)
             at_all = grid_idx[lo : lo + m]
             for j in range(n_st):
-                ok_j = complete[:, j]
-                rows = slice(0, m) if ok_j.all() else np.flatnonzero(ok_j)
+                ok_j = complete if complete is True else complete[:, j]
+                rows = slice(0, m) if ok_j is True or ok_j.all() else np.flatnonzero(ok_j)
                 fv = v[rows, j]
                 at = at_all[rows]
                 put_scaled_rows(pos[j], at, fv[:, :3], scale)
-                with np.errstate(over="ignore"):
-                    norm = row_norms(fv[:, 3:])
-                if (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE).any():
-                    raise _Irregular
+                if complete is not True:
+                    with np.errstate(over="ignore"):
+                        norm = row_norms(fv[:, 3:])
+                    if (np.abs(norm - 1.0) > QUAT_NORM_TOLERANCE).any():
+                        raise _Irregular
                 put_quat_rows(rot[j], at, fv[:, 3:])
                 put_rows(filled[j], at, True)
             return held, empty
@@ -412,6 +407,62 @@ def _read_parquet_fast(
     if check:
         check_recording(rec, path)
     return rec
+
+
+def _finite_block(fields: np.ndarray, with_before: bool, scale: float) -> tuple[int, bool]:
+    """The checks of a block of rows whose fields all hold finite numbers, by whole-block
+    reductions: coordinates plausible, quaternion norms within the tolerance (by the
+    squared norm, which bounds it by half the tolerance: a norm nearer the limit goes to
+    the reference path), no repeated row.
+
+    ``fields (stations, keys, 1 + rows)``: the row before the block (when
+    ``with_before``; else not looked at), then the block's rows. Returns the rows with
+    held values and ``True`` (every sample complete); raises :class:`_Irregular` for
+    anything the reference path must decide.
+    """
+    xyz = fields[:, :3, 1:]
+    if max(-xyz.min(), xyz.max()) * abs(scale) > MAX_COORDINATE_MM:
+        raise _Irregular
+    q = fields[:, 3:, 1:]
+    sq = np.einsum("skm,skm->sm", q, q)
+    if max(sq.max() - 1.0, 1.0 - sq.min()) > QUAT_NORM_TOLERANCE:
+        raise _Irregular
+    del sq
+    # same[j, i]: station j's fields of row i equal those of the row before it
+    same = fields[:, 0, 1:] == fields[:, 0, :-1]
+    for key in range(1, fields.shape[1]):
+        same &= fields[:, key, 1:] == fields[:, key, :-1]
+    if not with_before:  # the file's first row: no row before it
+        same[:, 0] = False
+    if same.all(axis=0).any():  # a repeated row
+        raise _Irregular
+    return int(np.count_nonzero(same.any(axis=0))), True
+
+
+def _block_with_gaps(
+    ext: np.ndarray, m: int, with_before: bool, scale: float
+) -> tuple[int, np.ndarray, int]:
+    """The checks of a block of rows with empty fields (NaN), row by row: ``ext (1 + m,
+    stations, keys)`` the row before and the block. Returns the rows with held values,
+    complete samples ``(m, stations)`` and samples with empty fields."""
+    v = ext[1 : m + 1]
+    if np.isinf(v).any() or implausible_rows(v[:, :, :3], scale).size:
+        raise _Irregular
+    rep, same = _repeats(ext[: m + 1] if with_before else v)
+    if with_before:
+        rep, same = rep[1:], same[1:]
+    if rep.any():
+        raise _Irregular
+    some, every = same[:, 0].copy(), same[:, 0].copy()
+    for j in range(1, same.shape[1]):
+        some |= same[:, j]
+        every &= same[:, j]
+    held = int(np.count_nonzero(some & ~every))
+    del rep, same, some, every
+    finite = np.isfinite(v)
+    complete = finite.all(axis=2)
+    empty = int(np.count_nonzero(~complete & finite.any(axis=2)))
+    return held, complete, empty
 
 
 def _decode_parquet(
