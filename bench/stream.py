@@ -647,7 +647,8 @@ def bare_publish(
         ``--max-age``.
     realtime : bool
         Ask for the real-time class (:class:`~fingerfit.live.realtime.Realtime`) once the
-        consumers are there, as ``fingerfit stream --realtime`` does.
+        consumers are there, for the outlet's and the writer's threads too, as
+        ``fingerfit stream --realtime`` does.
 
     Returns
     -------
@@ -665,7 +666,7 @@ def bare_publish(
 
     from fingerfit.cli.stream import summary_line
     from fingerfit.live.outputs import LslOutput, dds_topic, ros2_qos, ros_domain_id, stamp
-    from fingerfit.live.realtime import Realtime
+    from fingerfit.live.realtime import Realtime, task_ids, threads_started
     from fingerfit.live.ros2types import Header, JointState, Time
     from fingerfit.live.stream import Summary
 
@@ -674,6 +675,7 @@ def bare_publish(
     lsl_rows, dds_rows = data["lsl"].tolist(), data["dds"].tolist()
     names = [str(x) for x in data["names"]]
     n, rate = len(t), (len(t) - 1) / t[-1]
+    threads_before = task_ids()  # the outlet's and the writer's threads: started from here on
     info = pylsl.StreamInfo(name, "JointAngles", len(lsl_rows[0]), rate, pylsl.cf_double64, name)
     outlet = pylsl.StreamOutlet(info, chunk_size=0, max_buffered=10)
     participant = DomainParticipant(ros_domain_id())
@@ -691,7 +693,8 @@ def bare_publish(
     line = None
     with contextlib.ExitStack() as rt:
         if realtime:
-            line = rt.enter_context(Realtime(lane="bare publisher")).line()
+            native = threads_started(threads_before)  # as fingerfit stream's outputs'
+            line = rt.enter_context(Realtime(lane="bare publisher", threads=native)).line()
         lsl_offset = pylsl.local_clock() - time.monotonic()
         wall_offset = time.time() - time.monotonic()
         due = time.monotonic() + t

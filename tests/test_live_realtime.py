@@ -33,7 +33,8 @@ pytestmark = pytest.mark.skipif(
 )
 
 LINE = re.compile(
-    r"^realtime: SCHED_FIFO (50 granted|not permitted \(E[A-Z]+\)), "
+    r"^realtime: SCHED_FIFO (50 granted( \(and to the outputs' \d+ threads?\))?"
+    r"|not permitted \(E[A-Z]+\)), "
     r"memory (locked|lock not permitted \(E[A-Z]+\)), robot lane on CPU \d+"
 )
 
@@ -112,6 +113,8 @@ def test_realtime_line_wording() -> None:
     assert (
         r.line() == "SCHED_FIFO 50 granted, memory locked, robot lane on CPU 1 (data lane on CPU 0)"
     )
+    r.raised = [101, 102]
+    assert r.line().startswith("SCHED_FIFO 50 granted (and to the outputs' 2 threads), memory")
     r.fifo, r.locked, r.cpu, r.other_cpus, r.cpu_note = (
         "EPERM",
         "EPERM",
@@ -140,3 +143,30 @@ def test_realtime_restores_a_thread_it_pinned() -> None:
     stop.set()
     assert (os.sched_getaffinity(t.native_id), _state()) == before
     t.join()
+
+
+def test_the_outputs_threads_get_the_class_and_get_it_back() -> None:
+    """The native threads a library started (Cyclone DDS's, here) are found, Python's are
+    not; they get SCHED_FIFO with the robot lane's thread when it is granted, and their
+    own class back at the end."""
+    from cyclonedds.domain import DomainParticipant
+
+    before = rt_mod.task_ids()
+    stop = threading.Event()
+    ours = threading.Thread(target=stop.wait, daemon=True)
+    ours.start()
+    participant = DomainParticipant(77)
+    native = rt_mod.threads_started(before)
+    assert native and ours.native_id not in native
+    was = {t: os.sched_getscheduler(t) for t in native}
+    with Realtime(threads=[*native, 2**22 + 12345]) as r:  # and one that does not exist
+        if r.fifo is None:
+            assert r.raised == native
+            assert all(os.sched_getscheduler(t) == os.SCHED_FIFO for t in native)
+            assert f"(and to the outputs' {len(native)} threads)" in r.line()
+        else:
+            assert r.raised == []
+    assert {t: os.sched_getscheduler(t) for t in native} == was
+    stop.set()
+    ours.join()
+    del participant

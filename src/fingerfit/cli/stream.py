@@ -322,6 +322,9 @@ def stream(
 
     names = list(robot.joint_names) if retargeter is not None else joint_names(model)
     streamer = None
+    from ..live.realtime import task_ids
+
+    threads_before = task_ids()  # the live outputs' threads: those started from here on
     try:
         lsl_out = ros_out = bag_out = rec_out = live_view = None
         ch = channels_of(model, compute_kinematics(model, empty_recording(sensors), ("user_axis",)))
@@ -385,6 +388,7 @@ def stream(
             warn=lambda text: notice("warning", text),
             realtime=realtime,
             note=lambda text: notice("realtime", text),
+            threads_before=threads_before,
         )
     except FingerfitError as exc:
         if streamer.summary.frames:

@@ -5,7 +5,10 @@ Three requests, each independent and none fatal:
 * **SCHED_FIFO** at :data:`REALTIME_PRIORITY` for the thread that runs the robot lane
   (:func:`os.sched_setscheduler` on the calling thread; Linux applies it per thread, so
   the data lane's thread, started before, keeps the normal class; threads started later
-  by the robot lane's thread inherit it);
+  by the robot lane's thread inherit it), and for the native threads the live outputs
+  started (``threads``: liblsl's and Cyclone DDS's own threads, which send what the
+  robot lane hands them; :func:`threads_started` finds them), so that a frame does not
+  wait behind other processes between the robot lane and the network either;
 * **memory locked** (``mlockall(MCL_CURRENT | MCL_FUTURE)`` through ctypes): no page of
   the process is swapped out or faulted in from disk mid-frame;
 * **CPU affinity** (:func:`os.sched_setaffinity`): the robot lane's thread on the last
@@ -36,6 +39,23 @@ MCL_CURRENT, MCL_FUTURE = 1, 2
 def _reason(exc: OSError) -> str:
     """``EPERM``, ``ENOMEM`` ... (or the message when there is no errno)."""
     return errno.errorcode.get(exc.errno or 0, str(exc) or type(exc).__name__)
+
+
+def task_ids() -> set[int]:
+    """The kernel ids of this process's threads (Linux ``/proc/self/task``; empty where
+    there is no such list)."""
+    try:
+        return {int(t) for t in os.listdir("/proc/self/task")}
+    except (OSError, ValueError):
+        return set()
+
+
+def threads_started(before: set[int]) -> list[int]:
+    """The native threads started since ``before`` (:func:`task_ids`) that are not Python
+    threads (``threading``): those a library started, e.g. liblsl's and Cyclone DDS's
+    for the live outputs. Sorted kernel thread ids."""
+    python = {t.native_id for t in threading.enumerate()}
+    return sorted(task_ids() - before - python)
 
 
 def _libc():
@@ -85,6 +105,10 @@ class Realtime:
         started.
     lane : str
         What the calling thread runs, for the line (``robot lane``).
+    threads : sequence of int
+        Kernel ids of native threads to raise to the same class (the live outputs'
+        threads, :func:`threads_started`); their affinity is left as it is. One that
+        ended meanwhile is skipped.
 
     Attributes
     ----------
@@ -96,6 +120,8 @@ class Realtime:
         The robot lane's CPU, None when its affinity was not set.
     other_cpus : list of int
         The CPUs of ``others`` (empty when they were left alone).
+    raised : list of int
+        The ``threads`` given SCHED_FIFO.
     """
 
     def __init__(
@@ -103,10 +129,14 @@ class Realtime:
         priority: int = REALTIME_PRIORITY,
         others: list[threading.Thread] | None = None,
         lane: str = "robot lane",
+        threads: list[int] | tuple[int, ...] = (),
     ) -> None:
         self.priority = priority
         self.others = [t for t in (others or []) if t.native_id is not None]
         self.lane = lane
+        self.threads = list(threads)
+        self.raised: list[int] = []
+        self._thread_sched: dict[int, tuple[int, int]] = {}
         self.fifo: str | None = "not requested"
         self.locked: str | None = "not requested"
         self.cpu: int | None = None
@@ -133,6 +163,14 @@ class Realtime:
             self.fifo = _reason(exc)
             return
         self._sched, self.fifo = before, None
+        for tid in self.threads:
+            try:
+                was = (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(self.priority))
+            except OSError:  # the thread ended meanwhile: nothing to raise
+                continue
+            self._thread_sched[tid] = was
+            self.raised.append(tid)
 
     def _pin(self) -> None:
         if not hasattr(os, "sched_setaffinity"):
@@ -167,7 +205,9 @@ class Realtime:
         robot lane on CPU 1; running at normal priority``."""
         parts = []
         if self.fifo is None:
-            parts.append(f"SCHED_FIFO {self.priority} granted")
+            n = len(self.raised)
+            also = f" (and to the outputs' {n} thread{'s' * (n != 1)})" if n else ""
+            parts.append(f"SCHED_FIFO {self.priority} granted{also}")
         elif self.fifo.startswith("not "):
             parts.append(f"SCHED_FIFO {self.fifo}")
         else:
@@ -205,6 +245,11 @@ class Realtime:
             try:
                 os.sched_setscheduler(0, policy, os.sched_param(prio))
             except OSError:
+                pass
+        for tid, (policy, prio) in self._thread_sched.items():
+            try:
+                os.sched_setscheduler(tid, policy, os.sched_param(prio))
+            except OSError:  # ended since
                 pass
         for tid, cpus in self._affinity.items():
             try:

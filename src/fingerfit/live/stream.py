@@ -407,6 +407,7 @@ def run(
     warn: Callable[[str], None] | None = None,
     realtime: bool = False,
     note: Callable[[str], None] | None = None,
+    threads_before: set[int] | None = None,
 ) -> Summary:
     """Stream until the source ends, ``duration`` passes, or Ctrl-C.
 
@@ -437,6 +438,11 @@ def run(
         granted goes to ``note`` in one line; nothing refused stops the stream.
     note : callable, optional
         Called with the ``--realtime`` line (default: ``realtime: ...`` on stderr).
+    threads_before : set of int, optional
+        With ``realtime``: the process's thread ids before the live outputs were made
+        (:func:`~fingerfit.live.realtime.task_ids`); the native threads started since
+        (liblsl's, Cyclone DDS's: they send the robot lane's frames) get the real-time
+        class too.
 
     Returns
     -------
@@ -459,7 +465,18 @@ def run(
     # backlog lets it finish (the files complete).
     tell = note or (lambda text: print(f"realtime: {text}", file=sys.stderr, flush=True))
     with _ctrl_c_sets(stop):
-        _run(source, streamer, line, stop, wait, duration, silence, say, tell if realtime else None)
+        _run(
+            source,
+            streamer,
+            line,
+            stop,
+            wait,
+            duration,
+            silence,
+            say,
+            tell if realtime else None,
+            threads_before,
+        )
     return streamer.summary
 
 
@@ -473,9 +490,11 @@ def _run(
     silence: float | None,
     say: Callable[[str], None],
     realtime: Callable[[str], None] | None = None,
+    threads_before: set[int] | None = None,
 ) -> None:
     """:func:`run`'s loop, with Ctrl-C setting ``stop``; ``realtime``: ask for a real-time
-    class and tell it what was granted."""
+    class (for the outputs' threads started since ``threads_before`` too) and tell it
+    what was granted."""
     s = streamer.summary
     ok = True
     t0 = last = None
@@ -498,11 +517,14 @@ def _run(
                     )
                 time.sleep(0.01)
         if realtime is not None:
-            from .realtime import Realtime
+            from .realtime import Realtime, threads_started
 
             others = [streamer.data.thread] if streamer.data is not None else []
             lane = "robot lane" if streamer.live else "stream loop"
-            realtime(rt.enter_context(Realtime(others=others, lane=lane)).line())
+            # the outputs' own threads, started by now (liblsl starts some when a
+            # consumer connects)
+            native = threads_started(threads_before) if threads_before is not None else []
+            realtime(rt.enter_context(Realtime(others=others, lane=lane, threads=native)).line())
         for block in source.blocks():
             if block is not None and block.recording.n_frames:
                 if t0 is None:
