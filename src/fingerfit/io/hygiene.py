@@ -57,6 +57,10 @@ WORKSPACE_MM = 10_000.0
 #: below float trouble. Larger values (``1e308``, an overflowing unit conversion) are
 #: garbled data and an error, never a sample.
 MAX_COORDINATE_MM = 1e9
+#: Largest departure of a quaternion's norm from 1 accepted from any file or device (a
+#: sample of another layout or order, or garbled, is far off; a tracker's rounding is
+#: far below).
+QUAT_NORM_TOLERANCE = 1e-3
 #: Largest sampling rate accepted from any file (Hz): far above any tracker, far below
 #: float trouble.
 MAX_RATE_HZ = 1e6

@@ -26,6 +26,7 @@ from ..transforms import quat_wxyz_columns
 from .fastcsv import put_quat_rows, put_rows, put_scaled_rows, rows_where
 from .hygiene import (
     MAX_COORDINATE_MM,
+    QUAT_NORM_TOLERANCE,
     frames_missing_note,
     implausible_message,
     implausible_rows,
@@ -35,7 +36,6 @@ from .hygiene import (
 
 HEADER = ("time", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz")
 _NUMERIC = ("time", "x", "y", "z", "qw", "qx", "qy", "qz")
-QUAT_NORM_TOLERANCE = 1e-3
 
 
 def check_field_counts(raw: bytes, path: Path, n_fields: int) -> int:

@@ -16,6 +16,7 @@ from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import row_norms
 from .fastcsv import gap_rows, put_quat_rows, put_rows, put_scaled_rows, row_blocks
 from .hygiene import (
+    QUAT_NORM_TOLERANCE,
     check_increasing,
     check_recording,
     frames_missing_note,
@@ -26,7 +27,6 @@ from .hygiene import (
 )
 from .widelayout import _POS, _QUAT, WideLayout, _column
 
-QUAT_NORM_TOLERANCE = 1e-3
 #: Largest relative disagreement between ``--rate`` and the rate implied by the time
 #: column when frames are timed by counting.
 RATE_TOLERANCE = 0.05

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..io.hygiene import QUAT_NORM_TOLERANCE
 from ..io.liberty import _binary_dtype
 
 #: Output list (``O`` command) fingerfit asks for: position, quaternion, frame count.
@@ -43,7 +44,6 @@ MAX_FRAME_COUNT = 2**28
 MAX_FRAME_JUMP = 2400
 #: Largest position magnitude accepted (cm): the Liberty's range is a few metres.
 MAX_POSITION_CM = 1000.0
-QUAT_NORM_TOLERANCE = 1e-3
 
 RECORD = _binary_dtype(ITEMS)
 

@@ -29,6 +29,7 @@ from ..fastcsv import (
     rows_where,
 )
 from ..hygiene import (
+    QUAT_NORM_TOLERANCE,
     check_grid_size,
     check_recording,
     frames_missing_note,
@@ -44,7 +45,6 @@ from .records import MAX_STATION, LibertyRecords
 
 #: Largest Euler angle magnitude accepted (deg); the device reports within +-180.
 MAX_EULER_DEG = 360.0
-QUAT_NORM_TOLERANCE = 1e-3
 #: Records converted to rotation matrices at a time (bounds the temporary memory).
 _BLOCK = 1 << 16
 
