@@ -210,3 +210,23 @@ def test_cli_reports_bad_file_in_one_line(session_dir, tmp_path) -> None:
     assert "grasp.csv:3: expected 9 comma-separated fields" in res.output
     assert "Traceback" not in res.output
     assert not (d / "model.json").exists()
+
+
+def test_fit_reads_no_test_recording(session_dir, tmp_path) -> None:
+    """``fit`` does not use the free-motion test recordings: they are checked to be there,
+    not read (a long test recording costs the fit nothing); a missing one is still an
+    error."""
+    d = _copy(session_dir, tmp_path)
+    full = load_session(d)
+    assert full.test
+    (d / full.test[0].name).write_text("not a pose table\n")
+    with pytest.raises(FingerfitError):
+        load_session(d)
+    s = load_session(d, test=False)
+    assert s.test == [] and [r.name for r in s.grasp] == [r.name for r in full.grasp]
+    assert d / full.test[0].name in s.files
+    res = CliRunner().invoke(app, ["fit", str(d), "-o", str(tmp_path / "m.json"), "-q"])
+    assert res.exit_code == 0, res.output
+    (d / full.test[0].name).unlink()
+    with pytest.raises(FingerfitError, match=full.test[0].name):
+        load_session(d, test=False)

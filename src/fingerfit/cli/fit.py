@@ -146,7 +146,7 @@ def fit(
     names = parse_list(fingers, FINGERS, "--fingers")
     with progress(quiet) as bar:
         task = bar.add_task(f"reading {session}", total=2)
-        s = load_session(session)
+        s = load_session(session, test=False)  # the fit does not use the test recordings
         target = output or session / "model.json"
         refuse_writing_inputs([target], s.files)
         check_target(target)

@@ -287,7 +287,9 @@ def read_events(path: str | Path) -> list[TargetEvent]:
     return events
 
 
-def load_session(directory: str | Path, *, parsed: Session | None = None) -> Session:
+def load_session(
+    directory: str | Path, *, parsed: Session | None = None, test: bool = True
+) -> Session:
     """Load and validate a session directory.
 
     Parameters
@@ -301,6 +303,10 @@ def load_session(directory: str | Path, *, parsed: Session | None = None) -> Ses
         ``fingerfit session`` does before it writes the folder): its recordings (by file
         name), landmarks and events are used instead of parsing those files again; the
         folder's ``session.toml`` and the whole-session checks still run.
+    test : bool
+        Read the free-motion test recordings. False (``fingerfit fit``, which does not
+        use them): their files are checked to be inside the folder and present, not
+        read, and the session's ``test`` is empty (``files`` still lists them).
 
     Returns
     -------
@@ -407,7 +413,7 @@ def load_session(directory: str | Path, *, parsed: Session | None = None) -> Ses
     reference = load(ref_file)
     grasp = [load(f) for f in grasp_files]
     targets = [load(f) for f in target_files]
-    test = [load(f) for f in test_files]
+    test = [load(f) for f in test_files] if test else []
     if parsed is not None:
         landmarks, events = parsed.landmarks, parsed.events
     else:
