@@ -296,10 +296,10 @@ def kinematics_table(kin: Kinematics, units: str = "mm") -> pd.DataFrame:
 # axis of each two-axis joint) are one call, all proximal angles of two-axis joints
 # another. The chain needs cos and sin of each angle, which come from the same two numbers
 # the angle's atan2 takes, so no cos/sin call is made. The point chains of all digits and
-# variants run together, step by step: a digit with fewer axes than the longest chain (a
-# finger beside the thumb) is padded at its proximal end with steps that hold (carry the
-# identity, turn by angle 0), which leave its numbers unchanged. Every operation on a
-# frame's numbers is the one the per-joint code did, so the results are the same bits.
+# variants run together, step by step, the digits with the longest chain first: the rows
+# of a step's digits are a leading slice (a finger's four axes end where the thumb's fifth
+# begins). Every operation on a frame's numbers is the one the per-joint code did, so the
+# results are the same bits.
 # The arrays of a block are J (or V * D) times those of one joint, hence blocks of 1024
 # frames (16,384 for one joint at a time was no faster per frame than this).
 
@@ -385,11 +385,12 @@ class KinematicsPlan:
     ``D`` digits and ``m`` frames of a block:
 
     * angle slots ``(4, A, V, m)`` (angle rad, its cosine, its sine, minus its sine): the
-      proximal axes of the two-axis joints, their distal axes, the hinges, then one slot of
-      angle 0 (the steps that hold);
-    * the chain: batch ``V * D`` (variant major), ``L`` steps (the longest digit's axes,
-      distal first), ``k`` points per digit (tip, and pad when any digit has one; a digit
-      without a pad carries its tip twice).
+      proximal axes of the two-axis joints, their distal axes, then the hinges;
+    * the chain: ``V * D`` rows, one per digit and variant (the digits with the longest
+      chain first, then variant by variant), ``L`` steps (the longest chain's axes, distal
+      first; the rows of the digits that have a step are a leading slice), ``k`` points per
+      row (tip, and pad when any digit has one; a digit without a pad carries its tip
+      twice).
     """
 
     def __init__(
@@ -439,7 +440,7 @@ class KinematicsPlan:
                 slot[f, axes[0].name], slot[f, axes[1].name] = i, n2 + i
             else:
                 slot[f, axes[0].name] = n2 + i
-        self._n2, self._n1, self._slots = n2, n1, 2 * n2 + n1 + 1
+        self._n2, self._n1, self._slots = n2, n1, 2 * n2 + n1
         self._w2 = np.array(weights[:n2]).reshape(n2, 8 * nv, 9)
         self._w1 = np.array(weights[n2:]).reshape(n1, 2 * nv, 9)
         # Outputs: angle name -> slot, per digit.
@@ -451,74 +452,67 @@ class KinematicsPlan:
         self.p0 = p0
 
     def _build_chain(self, p0: FloatArray, r0: FloatArray) -> None:
-        """The chain's constants, stacked over ``V * D`` (see the class notes): per step its
-        bases, carries, offsets (``None`` where a centre migrates), centres and migrations,
-        the angle slot it turns by and the one that moves its centre."""
+        """The chain's constants, stacked over the batch (see the class notes): per step the
+        rows that have it, their bases, carries, offsets (``None`` where a centre migrates),
+        centres and migrations and the angle slot each turns by; per row its points and the
+        turn to the hand sensor's frame."""
         model, nv = self.model, len(self.variants)
-        digits = [model.fingers[f] for f in self.fingers]
-        chains = [fm.chain()[::-1] for fm in digits]  # distal first
-        n_steps = max(len(c) for c in chains)
+        chains = [model.fingers[f].chain()[::-1] for f in self.fingers]  # distal first
+        order = sorted(range(len(chains)), key=lambda d: -len(chains[d]))  # longest first
+        self._row = {self.fingers[d]: i * nv for i, d in enumerate(order)}  # + variant index
+        n_steps = len(chains[order[0]])
+        self._rows = [nv * sum(len(c) > i for c in chains) for i in range(n_steps)]
         self._k = 2 if any(self._pads) else 1
-        idle = self._slots - 1  # the slot of angle 0
         slot_of = {
             (f, name): s for f, names in self._angle_slots.items() for name, s in names.items()
         }
-        nvd = nv * len(digits)
-        basis = np.empty((n_steps, nvd, 3, 3))
-        centre = np.empty((n_steps, nvd, 3, 1))
+        nvd = nv * len(chains)
+        basis = np.zeros((n_steps, nvd, 3, 3))
+        centre = np.zeros((n_steps, nvd, 3, 1))
         migration = np.zeros((n_steps, nvd, 3, 1))
         moves = np.zeros((n_steps, nvd), dtype=bool)
-        turn = np.full((n_steps, nvd), idle, dtype=np.intp)
-        shift = np.full((n_steps, nvd), idle, dtype=np.intp)
-        carry = np.empty((n_steps, nvd, 3, 3))
+        turn = np.zeros((n_steps, nvd), dtype=np.intp)
+        carry = np.zeros((n_steps, nvd, 3, 3))
         offset = np.zeros((n_steps, nvd, 3, 1))
-        variant = np.repeat(np.arange(nv), len(digits))[None, :].repeat(n_steps, 0)
+        variant = np.zeros((n_steps, nvd), dtype=np.intp)
         points = np.empty((nvd, 3, self._k))
         start = np.empty((nvd, 3, self._k, 1))  # the first step's x where its centre is fixed
         to_hand = np.empty((nvd, 3, 3))
-        for iv, v in enumerate(self.variants):
-            for d, (f, fm, chain) in enumerate(zip(self.fingers, digits, chains, strict=True)):
-                b = iv * len(digits) + d
+        hand_offset = np.empty((nvd, 3, 1))
+        for f, chain in zip(self.fingers, chains, strict=True):
+            fm = model.fingers[f]
+            for iv, v in enumerate(self.variants):
+                b = self._row[f] + iv
                 pts = [fm.tip] + ([fm.pad if fm.pad is not None else fm.tip] * (self._k - 1))
                 points[b] = np.array(pts).T
-                for s in range(n_steps):
-                    if s < len(chain):
-                        jm = chain[s]
-                        basis[s, b] = orthonormal_basis(jm.axis_for(v))
-                        centre[s, b] = jm.center[:, None]
-                        if jm.migration is not None:
-                            migration[s, b, :, 0], moves[s, b] = jm.migration, True
-                        turn[s, b] = shift[s, b] = slot_of[f, jm.name]
-                    else:  # hold: the previous step's basis and (moving) centre, angle 0
-                        basis[s, b], centre[s, b] = basis[s - 1, b], centre[s - 1, b]
-                        migration[s, b], moves[s, b] = migration[s - 1, b], moves[s - 1, b]
-                        shift[s, b] = shift[s - 1, b]
-                    if s == 0:
-                        continue
-                    if s < len(chain):
-                        carry[s, b] = basis[s, b] @ basis[s - 1, b].T
-                        if not (moves[s, b] or moves[s - 1, b]):
-                            offset[s, b] = basis[s, b] @ (centre[s - 1, b] - centre[s, b])
-                    else:
-                        carry[s, b] = np.eye(3)
+                variant[:, b] = iv
+                for i, jm in enumerate(chain):
+                    basis[i, b] = orthonormal_basis(jm.axis_for(v))
+                    centre[i, b] = jm.center[:, None]
+                    if jm.migration is not None:
+                        migration[i, b, :, 0], moves[i, b] = jm.migration, True
+                    turn[i, b] = slot_of[f, jm.name]
+                    if i > 0:
+                        carry[i, b] = basis[i, b] @ basis[i - 1, b].T
+                        offset[i, b] = basis[i, b] @ (centre[i - 1, b] - centre[i, b])
                 d0 = points[b][:, :, None] - centre[0, b][:, None, :]  # (3, k, 1)
                 start[b] = (basis[0, b] @ d0.reshape(3, -1)).reshape(d0.shape)
                 # The point at the reference posture, then in the hand sensor's frame.
-                to_hand[b] = r0.T @ basis[-1, b].T
-        self._basis, self._carry, self._points, self._start = basis, carry, points, start
-        self._turn, self._shift, self._variant = turn, shift, variant
-        self._to_hand = to_hand
-        # Which steps have a moving centre, and the offsets where neither centre moves.
-        self._moves = [bool(x) for x in moves.any(axis=1)]
-        self._centre = centre
-        self._migration = [migration[s] if self._moves[s] else None for s in range(n_steps)]
+                last = len(chain) - 1
+                to_hand[b] = r0.T @ basis[last, b].T
+                hand_offset[b] = r0.T @ (centre[last, b] - p0[:, None])
+        self._basis, self._carry, self._centre = basis, carry, centre
+        self._points, self._start, self._to_hand = points, start, to_hand
+        self._turn, self._variant = turn, variant
+        # Per step: whether a centre of its rows moves; the offsets where none of them (nor
+        # of the step before) does; the migrations where one does.
+        self._moves = [bool(moves[i, :r].any()) for i, r in enumerate(self._rows)]
+        self._migration = [migration[i] if x else None for i, x in enumerate(self._moves)]
         self._offset = [
-            None if s == 0 or self._moves[s] or self._moves[s - 1] else offset[s][:, :, :, None]
-            for s in range(n_steps)
+            None if i == 0 or self._moves[i] or self._moves[i - 1] else offset[i][:, :, :, None]
+            for i in range(n_steps)
         ]
-        self._hand_offset = (
-            None if self._moves[-1] else (r0.T @ (centre[-1] - p0[:, None]))[:, :, None, :]
-        )
+        self._hand_offset = None if any(self._moves) else hand_offset[:, :, None, :]
         self._r0t = r0.T
 
     def run(self, recording: Recording) -> Kinematics:
@@ -527,18 +521,19 @@ class KinematicsPlan:
         n = recording.n_frames
         parents = [recording.pose(s) for s in self._parent_sensors]  # a clear error if absent
         children = [recording.pose(s) for s in self._child_sensors]
-        nv, nd = len(self.variants), len(self.fingers)
-        angles = np.empty((self._slots - 1, nv, n))
-        world = np.empty((nv * nd, self._k, n, 3))
+        nv = len(self.variants)
+        angles = np.empty((self._slots, nv, n))
+        world = np.empty((nv * len(self.fingers), self._k, n, 3))
         for s in range(0, n, BLOCK_FRAMES):
             e = min(n, s + BLOCK_FRAMES)
             a, w = self._block(parents, children, s, e)
             angles[:, :, s:e] = a
-            world[:, :, s:e] = np.swapaxes(w, -1, -2)
+            for i in range(3):  # coordinate by coordinate: faster than one transposing copy
+                world[:, :, s:e, i] = w[:, :, i]
         motions: dict[str, dict[str, FingerMotion]] = {v: {} for v in self.variants}
         for iv, v in enumerate(self.variants):
             for d, f in enumerate(self.fingers):
-                b = iv * nd + d
+                b = self._row[f] + iv
                 motions[v][f] = FingerMotion(
                     {name: angles[i, iv] for name, i in self._angle_slots[f].items()},
                     world[b, 0],
@@ -550,7 +545,7 @@ class KinematicsPlan:
         self, parents: list[PoseSeries], children: list[PoseSeries], s: int, e: int
     ) -> tuple[FloatArray, FloatArray]:
         """Frames ``s:e`` of the joints' parent sensors (then the hand sensor) and child
-        sensors: angles ``(A - 1, V, m)`` rad (the slots of the class notes but the last) and
+        sensors: angles ``(A, V, m)`` rad (the slots of the class notes) and
         points ``(V * D, k, 3, m)`` mm in tracker coordinates."""
         m, nv, n2, n1 = e - s, len(self.variants), self._n2, self._n1
         # Rows of each joint's parent (and of the hand) and child: (J + 1, 9, m), (J, 9, m),
@@ -562,7 +557,6 @@ class KinematicsPlan:
         t2 = np.matmul(self._w2, g[:n2]).reshape(n2, nv, 8, m)
         t1 = np.matmul(self._w1, g[n2:]).reshape(n1, nv, 2, m)
         out = np.empty((4, self._slots, nv, m))
-        out[:3, -1] = _IDLE
         # Two-axis joints: beta turns a to Q a about b; theta is the twist of Rot(b, -beta) Q.
         _full_angle(t2[:, :, 0], t2[:, :, 1], out[:3, :n2])
         cb, sb = out[1, :n2], out[2, :n2]
@@ -580,52 +574,52 @@ class KinematicsPlan:
         y[n2:] = t1[:, :, 1]
         _half_angle(y, x, out[:3, n2 : 2 * n2 + n1])
         np.negative(out[2], out=out[3])
-        return out[0, :-1], self._chain(out, p[-1], parents[-1].position[s:e].T)
+        return out[0], self._chain(out, p[-1], parents[-1].position[s:e].T)
 
     def _chain(self, out: FloatArray, hand: FloatArray, position: FloatArray) -> FloatArray:
-        """Points ``(V * D, k, 3, m)`` (mm, tracker coordinates) of the angles ``out`` (the
-        slots of the class notes), the hand sensor's rotation rows ``hand (9, m)`` and position
-        ``(3, m)`` (mm):
+        """Points ``(V * D, k, 3, m)`` (mm, tracker coordinates; the rows of the class notes)
+        of the angles ``out`` (the slots of the class notes), the hand sensor's rotation rows
+        ``hand (9, m)`` and position ``(3, m)`` (mm):
         :func:`~fingerfit.transforms.rotate_about_lines` (which see) with the model's
         constants taken from the plan, then carried by the hand."""
         m = out.shape[-1]
-        # Per step and digit: cos, sin, -sin of the angle it turns by, (L, V D, 3, 1, m).
-        turns = np.moveaxis(out[1:, self._turn, self._variant], 0, 2)[:, :, :, None, :]
+        # Per step and row: cos, sin, -sin of the angle it turns by, (L, V D, 3, 1, m).
+        turns = out[1:, self._turn, self._variant].transpose(1, 2, 0, 3)[:, :, :, None, :]
         moving = any(self._moves)
-        theta = out[0, self._shift, self._variant] if moving else None  # (L, V D, m)
-        y = centre = None
+        theta = out[0, self._turn, self._variant] if moving else None  # (L, V D, m)
         nvd, k = self._points.shape[0], self._k
-        for i, fixed in enumerate(self._offset):
-            c = self._centre[i]
+        y = np.empty((nvd, 3, k, m))
+        last = np.empty((nvd, 3, m)) if moving else None  # each row's last centre
+        centre = None
+        for i, (r, fixed) in enumerate(zip(self._rows, self._offset, strict=True)):
+            c = self._centre[i, :r]
             if self._migration[i] is not None:
-                c = c + self._migration[i] * theta[i][:, None, :]  # (V D, 3, m)
-            if y is None:
+                c = c + self._migration[i][:r] * theta[i, :r, None, :]  # (r, 3, m)
+            if i == 0:
                 if self._migration[i] is None:
                     x = self._start  # (V D, 3, k, 1)
                 else:
                     dd = self._points[:, :, :, None] - c[:, :, None, :]
-                    x = np.matmul(self._basis[i], dd.reshape(nvd, 3, -1)).reshape(dd.shape)
+                    x = np.matmul(self._basis[i], dd.reshape(r, 3, -1)).reshape(dd.shape)
             else:
-                x = np.matmul(self._carry[i], y.reshape(nvd, 3, -1)).reshape(y.shape)
+                x = np.matmul(self._carry[i, :r], y[:r].reshape(r, 3, -1)).reshape(r, 3, k, m)
                 if fixed is None:  # a centre moves: basis (c_prev - c) per frame
-                    x += np.matmul(self._basis[i], centre - c)[:, :, None, :]
+                    x += np.matmul(self._basis[i, :r], centre[:r] - c)[:, :, None, :]
                 else:
-                    x += fixed
+                    x += fixed[:r]
             # (y0, y1) = x0 (cos, sin) + x1 (-sin, cos): the same bits as x0 cos - x1 sin.
-            y = np.empty((nvd, 3, k, m))
-            np.multiply(x[:, 0:1], turns[i, :, 0:2], out=y[:, :2])
-            y[:, :2] += x[:, 1:2] * turns[i, :, 2::-2]
-            y[:, 2] = x[:, 2]
+            np.multiply(x[:, 0:1], turns[i, :r, 0:2], out=y[:r, :2])
+            y[:r, :2] += x[:, 1:2] * turns[i, :r, 2::-2]
+            y[:r, 2] = x[:, 2]
+            if moving:  # the rows whose chain ends here
+                done = self._rows[i + 1] if i + 1 < len(self._rows) else 0
+                last[done:r] = c[done:]
             centre = c
         local = np.matmul(self._to_hand, y.reshape(nvd, 3, -1)).reshape(y.shape)
         if self._hand_offset is None:
-            local += np.matmul(self._r0t, centre - self.p0[:, None])[:, :, None, :]
+            local += np.matmul(self._r0t, last - self.p0[:, None])[:, :, None, :]
         else:
             local += self._hand_offset
         world = np.einsum("ijm,bjkm->bkim", hand.reshape(3, 3, m), local)
         world += position
         return world
-
-
-#: An angle of 0: its value, cosine and sine (the slot of the steps that hold).
-_IDLE = np.array([0.0, 1.0, 0.0])[:, None, None]
