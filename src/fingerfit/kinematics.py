@@ -415,9 +415,17 @@ class KinematicsPlan:
         joints = [x for x in joints if len(x[3]) == 2] + [x for x in joints if len(x[3]) == 1]
         n2 = sum(len(x[3]) == 2 for x in joints)
         n1 = len(joints) - n2
-        # Sensors read per block: each joint's parent, then the hand sensor; each joint's child.
-        self._parent_sensors = [jm.parent for _, _, jm, _ in joints] + [HAND_SENSOR]
-        self._child_sensors = [jm.child for _, _, jm, _ in joints]
+        # Sensors: the joints' children in joint order (so the children's rows are a
+        # slice), then the others (the hand sensor); the joints' parents by index.
+        children = [jm.child for _, _, jm, _ in joints]
+        parents = [jm.parent for _, _, jm, _ in joints]
+        self.sensors = list(dict.fromkeys(children))
+        self.sensors += sorted({HAND_SENSOR, *parents} - set(children))
+        self._parents = np.array([self.sensors.index(x) for x in parents], dtype=np.intp)
+        self._children: slice | np.ndarray = slice(0, len(joints))
+        if len(self.sensors) < len(joints) or self.sensors[: len(joints)] != children:
+            self._children = np.array([self.sensors.index(x) for x in children], dtype=np.intp)
+        self._hand = self.sensors.index(HAND_SENSOR)
         # Trace weights: (n2, 8 V, 9) and (n1, 2 V, 9), variant major in each joint's rows.
         weights = []
         slot: dict[tuple[str, str], int] = {}  # (digit, axis name) -> angle slot
@@ -519,14 +527,13 @@ class KinematicsPlan:
         """Angles and tips (and pads) of every frame of ``recording`` (see
         :func:`compute_kinematics`)."""
         n = recording.n_frames
-        parents = [recording.pose(s) for s in self._parent_sensors]  # a clear error if absent
-        children = [recording.pose(s) for s in self._child_sensors]
+        poses = [recording.pose(s) for s in self.sensors]  # a clear error if one is absent
         nv = len(self.variants)
         angles = np.empty((self._slots, nv, n))
         world = np.empty((nv * len(self.fingers), self._k, n, 3))
         for s in range(0, n, BLOCK_FRAMES):
             e = min(n, s + BLOCK_FRAMES)
-            a, w = self._block(parents, children, s, e)
+            a, w = self._block(poses, s, e)
             angles[:, :, s:e] = a
             for i in range(3):  # coordinate by coordinate: faster than one transposing copy
                 world[:, :, s:e, i] = w[:, :, i]
@@ -541,19 +548,15 @@ class KinematicsPlan:
                 )
         return Kinematics(recording.time, motions)
 
-    def _block(
-        self, parents: list[PoseSeries], children: list[PoseSeries], s: int, e: int
-    ) -> tuple[FloatArray, FloatArray]:
-        """Frames ``s:e`` of the joints' parent sensors (then the hand sensor) and child
-        sensors: angles ``(A, V, m)`` rad (the slots of the class notes) and
-        points ``(V * D, k, 3, m)`` mm in tracker coordinates."""
+    def _block(self, poses: list[PoseSeries], s: int, e: int) -> tuple[FloatArray, FloatArray]:
+        """Frames ``s:e`` of the poses of :attr:`sensors`: angles ``(A, V, m)`` rad (the
+        slots of the class notes) and points ``(V * D, k, 3, m)`` mm in tracker coordinates."""
         m, nv, n2, n1 = e - s, len(self.variants), self._n2, self._n1
-        # Rows of each joint's parent (and of the hand) and child: (J + 1, 9, m), (J, 9, m),
-        # each written in one pass (``out`` sets the layout: frames last, contiguous).
-        p, c = np.empty((len(parents), 9, m)), np.empty((len(children), 9, m))
-        np.concatenate([x.rotation[s:e].transpose(1, 2, 0) for x in parents], out=_as3(p))
-        np.concatenate([x.rotation[s:e].transpose(1, 2, 0) for x in children], out=_as3(c))
-        g = _product_rows(p[:-1], c)  # (J, 9, m)
+        # Rows of every sensor, (S, 9, m), written in one pass (``out`` sets the layout:
+        # frames last, contiguous); the children's are the first J (a view).
+        rows = np.empty((len(poses), 9, m))
+        np.concatenate([x.rotation[s:e].transpose(1, 2, 0) for x in poses], out=_as3(rows))
+        g = _product_rows(rows[self._parents], rows[self._children])  # (J, 9, m)
         t2 = np.matmul(self._w2, g[:n2]).reshape(n2, nv, 8, m)
         t1 = np.matmul(self._w1, g[n2:]).reshape(n1, nv, 2, m)
         out = np.empty((4, self._slots, nv, m))
@@ -574,7 +577,8 @@ class KinematicsPlan:
         y[n2:] = t1[:, :, 1]
         _half_angle(y, x, out[:3, n2 : 2 * n2 + n1])
         np.negative(out[2], out=out[3])
-        return out[0], self._chain(out, p[-1], parents[-1].position[s:e].T)
+        hand = poses[self._hand].position[s:e].T
+        return out[0], self._chain(out, rows[self._hand], hand)
 
     def _chain(self, out: FloatArray, hand: FloatArray, position: FloatArray) -> FloatArray:
         """Points ``(V * D, k, 3, m)`` (mm, tracker coordinates; the rows of the class notes)
