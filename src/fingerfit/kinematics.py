@@ -300,8 +300,9 @@ def kinematics_table(kin: Kinematics, units: str = "mm") -> pd.DataFrame:
 # of a step's digits are a leading slice (a finger's four axes end where the thumb's fifth
 # begins). Every operation on a frame's numbers is the one the per-joint code did, so the
 # results are the same bits.
-# The arrays of a block are J (or V * D) times those of one joint, hence blocks of 1024
-# frames (16,384 for one joint at a time was no faster per frame than this).
+# A block's arrays are J (or V * D) times as large as one joint's, hence blocks of 1024
+# frames, not the 16,384 of a joint at a time (on a 100,000-frame whole hand, 2048 was
+# slower with both variants, 512 slower with either).
 
 BLOCK_FRAMES = 1024
 
@@ -455,7 +456,6 @@ class KinematicsPlan:
         self._angle_slots = {
             f: {k: slot[f, k] for k in model.fingers[f].angle_names()} for f in self.fingers
         }
-        self._pads = [model.fingers[f].pad is not None for f in self.fingers]
         self._build_chain(p0, r0)
         self.p0 = p0
 
@@ -470,7 +470,7 @@ class KinematicsPlan:
         self._row = {self.fingers[d]: i * nv for i, d in enumerate(order)}  # + variant index
         n_steps = len(chains[order[0]])
         self._rows = [nv * sum(len(c) > i for c in chains) for i in range(n_steps)]
-        self._k = 2 if any(self._pads) else 1
+        self._k = 2 if any(model.fingers[f].pad is not None for f in self.fingers) else 1
         slot_of = {
             (f, name): s for f, names in self._angle_slots.items() for name, s in names.items()
         }
@@ -486,6 +486,7 @@ class KinematicsPlan:
         points = np.empty((nvd, 3, self._k))
         start = np.empty((nvd, 3, self._k, 1))  # the first step's x where its centre is fixed
         to_hand = np.empty((nvd, 3, 3))
+        self._has_pad = np.zeros(nvd, dtype=bool)
         hand_offset = np.empty((nvd, 3, 1))
         for f, chain in zip(self.fingers, chains, strict=True):
             fm = model.fingers[f]
@@ -493,6 +494,7 @@ class KinematicsPlan:
                 b = self._row[f] + iv
                 pts = [fm.tip] + ([fm.pad if fm.pad is not None else fm.tip] * (self._k - 1))
                 points[b] = np.array(pts).T
+                self._has_pad[b] = fm.pad is not None
                 variant[:, b] = iv
                 for i, jm in enumerate(chain):
                     basis[i, b] = orthonormal_basis(jm.axis_for(v))
@@ -528,23 +530,39 @@ class KinematicsPlan:
         :func:`compute_kinematics`)."""
         n = recording.n_frames
         poses = [recording.pose(s) for s in self.sensors]  # a clear error if one is absent
-        nv = len(self.variants)
-        angles = np.empty((self._slots, nv, n))
-        world = np.empty((nv * len(self.fingers), self._k, n, 3))
-        for s in range(0, n, BLOCK_FRAMES):
-            e = min(n, s + BLOCK_FRAMES)
-            a, w = self._block(poses, s, e)
-            angles[:, :, s:e] = a
-            for i in range(3):  # coordinate by coordinate: faster than one transposing copy
-                world[:, :, s:e, i] = w[:, :, i]
+        nv, nvd, k = len(self.variants), len(self.variants) * len(self.fingers), self._k
+        angles: FloatArray | list[list[FloatArray]]
+        points: FloatArray | list[list[FloatArray | None]]
+        if n <= BLOCK_FRAMES:  # one block (a live stream's): its arrays are the outputs
+            angles, w = self._block(poses, 0, n)
+            points = np.ascontiguousarray(np.swapaxes(w, -1, -2))  # (V D, k, n, 3)
+        else:
+            # One array per output, as a digit's own computation would give: in a few
+            # large arrays, NumPy asks the kernel for huge pages (from 4 MB on), whose first
+            # touch cost up to 0.1 s of system time per 100,000 whole-hand frames here.
+            angles = [[np.empty(n) for _ in range(nv)] for _ in range(self._slots)]
+            points = [
+                [np.empty((n, 3)) if kk == 0 or self._has_pad[b] else None for kk in range(k)]
+                for b in range(nvd)
+            ]
+            for s in range(0, n, BLOCK_FRAMES):
+                e = min(n, s + BLOCK_FRAMES)
+                a, w = self._block(poses, s, e)
+                for i, row in enumerate(angles):
+                    for iv, out in enumerate(row):
+                        out[s:e] = a[i, iv]
+                for b, row in enumerate(points):
+                    for kk, out in enumerate(row):
+                        if out is not None:
+                            out[s:e] = w[b, kk].T
         motions: dict[str, dict[str, FingerMotion]] = {v: {} for v in self.variants}
         for iv, v in enumerate(self.variants):
-            for d, f in enumerate(self.fingers):
+            for f in self.fingers:
                 b = self._row[f] + iv
                 motions[v][f] = FingerMotion(
-                    {name: angles[i, iv] for name, i in self._angle_slots[f].items()},
-                    world[b, 0],
-                    world[b, 1] if self._pads[d] else None,
+                    {name: angles[i][iv] for name, i in self._angle_slots[f].items()},
+                    points[b][0],
+                    points[b][1] if self._has_pad[b] else None,
                 )
         return Kinematics(recording.time, motions)
 
