@@ -424,7 +424,7 @@ class KinematicsPlan:
         self.sensors += sorted({HAND_SENSOR, *parents} - set(children))
         self._parents = np.array([self.sensors.index(x) for x in parents], dtype=np.intp)
         self._children: slice | np.ndarray = slice(0, len(joints))
-        if len(self.sensors) < len(joints) or self.sensors[: len(joints)] != children:
+        if self.sensors[: len(joints)] != children:  # a sensor the child of two joints
             self._children = np.array([self.sensors.index(x) for x in children], dtype=np.intp)
         self._hand = self.sensors.index(HAND_SENSOR)
         # Trace weights: (n2, 8 V, 9) and (n1, 2 V, 9), variant major in each joint's rows.
