@@ -180,3 +180,14 @@ def test_one_frame_whole_hand(migration: bool) -> None:
 def model_sensors(model: HandModel, digit: str) -> set[str]:
     """The sensors of a digit's joints (the hand sensor included)."""
     return {s for jm in model.fingers[digit].joints.values() for s in (jm.parent, jm.child)}
+
+
+def test_plan_on_no_frames(models: dict[str, HandModel]) -> None:
+    """A recording without frames (a stream's empty block): empty angles and points."""
+    model = models["two_axis"]
+    empty = random_recording(model, 5, seed=2).slice(slice(0, 0))
+    got = kin.KinematicsPlan(model, VARIANTS).run(empty)
+    for v in VARIANTS:
+        for motion in got.motions[v].values():
+            assert motion.tip.shape == (0, 3)
+            assert all(a.shape == (0,) for a in motion.angles.values())

@@ -533,7 +533,7 @@ class KinematicsPlan:
         nv, nvd, k = len(self.variants), len(self.variants) * len(self.fingers), self._k
         angles: FloatArray | list[list[FloatArray]]
         points: FloatArray | list[list[FloatArray | None]]
-        if n <= BLOCK_FRAMES:  # one block (a live stream's): its arrays are the outputs
+        if 0 < n <= BLOCK_FRAMES:  # one block (a live stream's): its arrays are the outputs
             angles, w = self._block(poses, 0, n)
             points = np.ascontiguousarray(np.swapaxes(w, -1, -2))  # (V D, k, n, 3)
         else:
