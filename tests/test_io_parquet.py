@@ -521,21 +521,19 @@ def test_streamed_wide_read_is_the_reference_bit_for_bit(
             _same_recording(ref, fast)
 
 
-def test_blocks_made_in_threads_are_written_in_order_and_fail_whole(tmp_path: Path) -> None:
+def test_blocks_made_ahead_are_written_in_order_and_fail_whole(tmp_path: Path) -> None:
     made: list[int] = []
 
-    def block(k: int, fail: bool = False):
-        def make():
+    def blocks(n: int, fail_at: int | None = None):
+        for k in range(n):
             made.append(k)
-            if fail:
+            if k == fail_at:
                 raise OSError("the source failed")
-            return {"time": np.arange(5.0) + 5 * k, "a": np.full(5, float(k))}
-
-        return make
+            yield {"time": np.arange(5.0) + 5 * k, "a": np.full(5, float(k))}
 
     target = tmp_path / "t.parquet"
     with fpq.ParquetSink(target, fpq.TableMeta(fpq.ANGLES), row_group_rows=3) as sink:
-        sink.write_blocks(block(k) for k in range(9))
+        sink.write_blocks(blocks(9))
     got = fpq.read_parquet(target, fpq.ANGLES, columns=["time", "a"])
     assert np.array_equal(got.columns["time"], np.arange(45.0))
     assert np.array_equal(got.columns["a"], np.repeat(np.arange(9.0), 5))
@@ -544,9 +542,9 @@ def test_blocks_made_in_threads_are_written_in_order_and_fail_whole(tmp_path: Pa
         pytest.raises(OSError, match="the source failed"),
         fpq.ParquetSink(tmp_path / "u.parquet", fpq.TableMeta(fpq.ANGLES)) as sink,
     ):
-        sink.write_blocks(block(k, fail=k == 3) for k in range(50))
+        sink.write_blocks(blocks(50, fail_at=3))
     assert not (tmp_path / "u.parquet").exists()
-    assert max(made) <= 3 + 2 + 1  # the blocks in flight at most, not the other 44
+    assert max(made) == 3  # the blocks after the failure are not made
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.parquet"]
 
 

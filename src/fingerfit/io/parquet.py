@@ -30,7 +30,6 @@ reading in :mod:`.parquet_read`; their names are importable from here too.
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
@@ -58,9 +57,9 @@ from .parquet_meta import angles_meta as angles_meta
 from .parquet_meta import joints_meta as joints_meta
 from .parquet_meta import pose_meta as pose_meta
 from .parquet_read import ParquetTable as ParquetTable
+from .parquet_read import _ahead, _reason
 from .parquet_read import _corrupt as _corrupt
 from .parquet_read import _metadata as _metadata
-from .parquet_read import _reason
 from .parquet_read import _text_codes as _text_codes
 from .parquet_read import check_meta as check_meta
 from .parquet_read import float_blocks as float_blocks
@@ -250,40 +249,13 @@ class ParquetSink:
         for batch in self._batches(table):
             self._write(batch)
 
-    def write_blocks(self, blocks: Iterable[Callable[[], object]], workers: int = 2) -> None:
-        """Append the table each callable of ``blocks`` makes (as :meth:`write` takes
-        them), in order. The next ``workers`` tables are made and turned into Arrow
-        arrays in threads of their own while this one is encoded, compressed and written
-        (NumPy and Arrow work without the GIL, so they share the cores); at most
-        ``workers + 1`` tables are held at once. An exception of a callable is raised
-        here, and the tables not yet made are not made."""
-        from concurrent.futures import Future, ThreadPoolExecutor
-
-        def make(block: Callable[[], object]) -> list:
-            return list(self._batches(block()))
-
-        blocks = iter(blocks)
-        pending: deque[Future] = deque()
-        if self._schema is None:  # the first table sets the file's columns: made here
-            first = next(blocks, None)
-            if first is None:
-                return
-            made: Future = Future()
-            made.set_result(make(first))
-            pending.append(made)
-        with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="fingerfit-block") as pool:
-            try:
-                for block in blocks:
-                    pending.append(pool.submit(make, block))
-                    if len(pending) > workers:
-                        for batch in pending.popleft().result():
-                            self._write(batch)
-                while pending:
-                    for batch in pending.popleft().result():
-                        self._write(batch)
-            finally:
-                for fut in pending:
-                    fut.cancel()
+    def write_blocks(self, blocks: Iterable[object]) -> None:
+        """Append each table of ``blocks`` (as :meth:`write` takes them), the next one
+        made and turned into Arrow arrays in a thread of its own while this one is
+        encoded, compressed and written (NumPy and Arrow both work without the GIL, so
+        the two share the cores). An exception of ``blocks`` is raised here."""
+        for batch in _ahead(b for table in blocks for b in self._batches(table)):
+            self._write(batch)
 
     def close(self, ok: bool = True) -> None:
         """Finish the file and rename it into place (``ok``), or remove it."""

@@ -9,7 +9,6 @@ may be absent rows or rows with empty/NaN fields. See ``docs/formats.md``.
 from __future__ import annotations
 
 import csv
-import functools
 import io
 import threading
 from collections import deque
@@ -808,15 +807,15 @@ def write_pose_csv(path: str | Path, recording: Recording, *, units: str = "mm")
 
 def _write_parquet(path: Path, recording: Recording, mm_per_unit: float, meta) -> Path:
     """The long table of :func:`_pose_columns` written a row group of frames at a time
-    (about :data:`fingerfit.io.parquet.ROW_GROUP_ROWS` rows), the next ones made while
-    one is written: the same rows and numbers, without the whole table in memory."""
+    (about :data:`fingerfit.io.parquet.ROW_GROUP_ROWS` rows), each made while the one
+    before it is written: the same rows and numbers, without the whole table in memory."""
     from .parquet import ROW_GROUP_ROWS, ParquetSink
 
     n = recording.n_frames
     step = max(1, ROW_GROUP_ROWS // max(len(recording.sensors), 1))
     with ParquetSink(path, meta) as sink:
         sink.write_blocks(
-            functools.partial(_pose_block, recording, lo, min(lo + step, n), mm_per_unit)
+            _pose_block(recording, lo, min(lo + step, n), mm_per_unit)
             for lo in range(0, max(n, 1), step)
         )
     return path

@@ -23,7 +23,6 @@ recording in :mod:`.wideframes`; their names are importable from here too.
 from __future__ import annotations
 
 import csv
-import functools
 import io
 import threading
 from collections import deque
@@ -611,7 +610,7 @@ def write_wide_csv(
 
 def _write_parquet(path: Path, recording: Recording, units: str, lay: WideLayout) -> Path:
     """The columns of :func:`wide_table` (quaternion layouts) written a row group of
-    frames at a time, the next ones made while one is written: the same numbers,
+    frames at a time, each made while the one before it is written: the same numbers,
     without the whole table in memory."""
     from .parquet import ROW_GROUP_ROWS, ParquetSink
 
@@ -620,7 +619,7 @@ def _write_parquet(path: Path, recording: Recording, units: str, lay: WideLayout
         path, _wide_meta(units, lay), statistics=(lay.time,) if lay.time else ()
     ) as sink:
         sink.write_blocks(
-            functools.partial(_wide_block, recording, lo, min(lo + ROW_GROUP_ROWS, n), units, lay)
+            _wide_block(recording, lo, min(lo + ROW_GROUP_ROWS, n), units, lay)
             for lo in range(0, max(n, 1), ROW_GROUP_ROWS)
         )
     return path
