@@ -70,6 +70,32 @@ MAX_GRID_RATIO = 10
 GRID_SLACK = 1000
 
 
+def plain_block(xyz: np.ndarray, squared_norms: np.ndarray, scale_to_mm: float) -> bool:
+    """Whether a block of samples with every field a finite number passes the
+    coordinate and quaternion checks, by whole-block reductions (a fast reader's common
+    case; False: let the reference path decide, row by row).
+
+    Parameters
+    ----------
+    xyz : ndarray
+        The block's coordinates in file units, any shape and strides, no NaN.
+    squared_norms : ndarray
+        Each sample's squared quaternion norm ``w^2 + x^2 + y^2 + z^2``, any shape.
+    scale_to_mm : float
+        Millimetres per file unit.
+
+    Returns
+    -------
+    bool
+        No coordinate beyond :data:`MAX_COORDINATE_MM` and every ``|q|^2 - 1`` within
+        :data:`QUAT_NORM_TOLERANCE`, which bounds ``|q| - 1`` by about half of it: a norm
+        nearer the tolerance goes to the reference path, which decides it.
+    """
+    if max(-xyz.min(), xyz.max()) * abs(scale_to_mm) > MAX_COORDINATE_MM:
+        return False
+    return max(squared_norms.max() - 1.0, 1.0 - squared_norms.min()) <= QUAT_NORM_TOLERANCE
+
+
 def implausible_rows(values: np.ndarray, scale_to_mm: float = 1.0) -> np.ndarray:
     """Rows holding a coordinate beyond :data:`MAX_COORDINATE_MM` (or infinite) in mm.
 

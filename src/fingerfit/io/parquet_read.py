@@ -244,9 +244,9 @@ def read_parquet(
             out: dict[str, object] = {}
             if pf.num_row_groups == 1:
                 for _, block in float_blocks(pf, floats, n_rows):
-                    out.update(zip(floats, block, strict=True))
                     for c, v in zip(floats, block, strict=True):
                         refuse_infinite(v, c, path)
+                        out[c] = v
                 if floats and out[floats[0]].size != n_rows:
                     raise ValueError(f"{out[floats[0]].size} rows read of {n_rows}")
             else:

@@ -24,13 +24,13 @@ from ..session import PoseSeries, Recording, is_sensor_name
 from ..transforms import quat_wxyz_columns
 from .fastcsv import put_quat_rows, put_rows, put_scaled_rows, rows_where
 from .hygiene import (
-    MAX_COORDINATE_MM,
     QUAT_NORM_TOLERANCE,
     frames_missing_note,
     implausible_message,
     implausible_rows,
     missing_note,
     place_on_grid,
+    plain_block,
 )
 
 HEADER = ("time", "sensor", "x", "y", "z", "qw", "qx", "qy", "qz")
@@ -471,15 +471,10 @@ def _read_parquet_fast(
                 np.add.reduce(block[:, :m], axis=0, out=total)
             if np.isfinite(total).all():  # every field of every row a finite number
                 ok = True
-                xyz = block[:3, :m]
-                if max(-xyz.min(), xyz.max()) * abs(scale) > MAX_COORDINATE_MM:
-                    raise _Irregular
-                np.multiply(block[3, :m], block[3, :m], out=total)
+                np.multiply(block[3, :m], block[3, :m], out=total)  # squared norms
                 for j in (4, 5, 6):
                     total += block[j, :m] * block[j, :m]
-                # |q|^2 - 1 within the tolerance bounds |q| - 1 by half of it: a norm
-                # nearer the tolerance goes to the reference path, which decides it
-                if max(total.max() - 1.0, 1.0 - total.min()) > QUAT_NORM_TOLERANCE:
+                if not plain_block(block[:3, :m], total, scale):
                     raise _Irregular
             else:
                 finite = np.isfinite(p)

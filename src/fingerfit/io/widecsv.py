@@ -38,7 +38,7 @@ from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import row_norms
 from .fastcsv import NotPlain, put_quat_rows, put_rows, put_scaled_rows, read_header
-from .hygiene import MAX_COORDINATE_MM, check_recording, implausible_rows, missing_note
+from .hygiene import check_recording, implausible_rows, missing_note, plain_block
 from .posecsv import check_field_counts, sensor_quats
 from .wideframes import QUAT_NORM_TOLERANCE as QUAT_NORM_TOLERANCE
 from .wideframes import RATE_TOLERANCE as RATE_TOLERANCE
@@ -411,23 +411,17 @@ def _read_parquet_fast(
 
 def _finite_block(fields: np.ndarray, with_before: bool, scale: float) -> tuple[int, bool]:
     """The checks of a block of rows whose fields all hold finite numbers, by whole-block
-    reductions: coordinates plausible, quaternion norms within the tolerance (by the
-    squared norm, which bounds it by half the tolerance: a norm nearer the limit goes to
-    the reference path), no repeated row.
+    reductions: coordinates plausible and quaternion norms within the tolerance
+    (:func:`~fingerfit.io.hygiene.plain_block`), no repeated row.
 
     ``fields (stations, keys, 1 + rows)``: the row before the block (when
     ``with_before``; else not looked at), then the block's rows. Returns the rows with
     held values and ``True`` (every sample complete); raises :class:`_Irregular` for
     anything the reference path must decide.
     """
-    xyz = fields[:, :3, 1:]
-    if max(-xyz.min(), xyz.max()) * abs(scale) > MAX_COORDINATE_MM:
-        raise _Irregular
     q = fields[:, 3:, 1:]
-    sq = np.einsum("skm,skm->sm", q, q)
-    if max(sq.max() - 1.0, 1.0 - sq.min()) > QUAT_NORM_TOLERANCE:
+    if not plain_block(fields[:, :3, 1:], np.einsum("skm,skm->sm", q, q), scale):
         raise _Irregular
-    del sq
     # same[j, i]: station j's fields of row i equal those of the row before it
     same = fields[:, 0, 1:] == fields[:, 0, :-1]
     for key in range(1, fields.shape[1]):
