@@ -49,12 +49,12 @@ IO_FUNCTIONS = (
 
 class IoClock:
     """Wall time inside the I/O functions, each function patched wherever a module holds
-    it by name; a call inside another timed call is not counted again."""
+    it by name (for the rest of the process); a call inside another timed call is not
+    counted again."""
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = defaultdict(float)
         self.depth = 0
-        self._undo: list[tuple[object, str, object]] = []
 
     def _wrap(self, name: str, func):
         @functools.wraps(func)
@@ -88,12 +88,10 @@ class IoClock:
                 continue
             for attr, value in list(vars(mod).items()):
                 if id(value) in wrapped and callable(value):
-                    self._undo.append((mod, attr, value))
                     setattr(mod, attr, wrapped[id(value)])
         sink = pq_mod.ParquetSink
         for method in ("write", "write_blocks", "close"):
             func = getattr(sink, method)
-            self._undo.append((sink, method, func))
             setattr(sink, method, self._wrap("ParquetSink", func))
 
     def reset(self) -> None:
@@ -178,7 +176,7 @@ def commands(files: dict[str, Path], test: Path, work: Path) -> list[tuple[str, 
     ]
 
 
-def run_commands(clock: IoClock, cmds, quiet_output: bool = True) -> list[dict]:
+def run_commands(clock: IoClock, cmds) -> list[dict]:
     from typer.testing import CliRunner
 
     from fingerfit.cli import app
