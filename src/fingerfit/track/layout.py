@@ -58,7 +58,12 @@ def digit_layout(model: HandModel, digit: str, sensors: set[str]) -> DigitLayout
 
 
 def check_layout(
-    model: HandModel, sensors: set[str], digits: list[str], where: str | None = None
+    model: HandModel,
+    sensors: set[str],
+    digits: list[str],
+    where: str | None = None,
+    field: str | None = None,
+    skip: str | None = None,
 ) -> dict[str, DigitLayout]:
     """Each digit's layout, or the one-line refusal of a layout that determines too little.
 
@@ -71,6 +76,11 @@ def check_layout(
         The digits to compute.
     where : str, optional
         The recording's file, for the message.
+    field : str, optional
+        The option that chose the sensors (``--sensors``, ``--stations``), for the message.
+    skip : str, optional
+        The option that leaves a digit out (``angles``' ``--fingers``), named in the
+        message of a digit without any sensor.
 
     Returns
     -------
@@ -85,16 +95,19 @@ def check_layout(
     """
     if HAND_SENSOR not in sensors:
         raise FingerfitError(
-            f"no '{HAND_SENSOR}' sensor: every joint angle is taken relative to it", path=where
+            f"no '{HAND_SENSOR}' sensor: every joint angle is taken relative to it",
+            path=where,
+            field=field,
         )
     out = {}
     for d in digits:
         lay = digit_layout(model, d, sensors)
         if not any(lay.present):
             raise FingerfitError(
-                f"{d}: no sensor on the digit ({lay.sensors[-1]} would determine every joint; "
-                "--fingers leaves the digit out)",
+                f"{d}: no sensor on the digit ({lay.sensors[-1]} would determine every joint"
+                + (f"; {skip} leaves the digit out)" if skip else ")"),
                 path=where,
+                field=field,
             )
         if not lay.present[-1]:
             last = max(i for i, p in enumerate(lay.present) if p)
@@ -103,6 +116,7 @@ def check_layout(
             raise FingerfitError(
                 f"{d} {joint}: not determined by {have} ({lay.sensors[-1]} would determine it)",
                 path=where,
+                field=field,
             )
         out[d] = lay
     return out

@@ -63,6 +63,7 @@ class LiveTracker:
         self._mid = 0.5 * (self.weights.low + self.weights.high)  # (D, L)
         self._last: FloatArray | None = None  # (D, L) rad: the previous frame's angles
         self._info: FloatArray | None = None  # (D, P): their information (1/rad^2)
+        self._pending: tuple[Kinematics, float] | None = None
         # A chain computed directly: its angles as precise as the calibration's spread makes
         # them, taken as the sensors' orientation spread (1/rad^2) on every angle.
         spread = np.min(self.weights.orientation, axis=1)  # (D,)
@@ -74,7 +75,7 @@ class LiveTracker:
 
     def reset(self) -> None:
         """Forget the previous frame (after a silence: no prior across the gap)."""
-        self._last = None
+        self._last = self._pending = None
 
     def observe(self, rec: Recording) -> Observed:
         """The one frame of ``rec`` relative to the hand sensor (:func:`~.solver.observe`,
@@ -117,13 +118,11 @@ class LiveTracker:
         """
         chains = self.chains
         t = float(rec.time[0])
-        direct = np.empty((chains.size, chains.L))
-        for i, (v, d) in enumerate(chains.keys):
-            angles = kin.motions[v][d].angles
-            row = direct[i]
-            for k, name in enumerate(chains.names[i]):
-                row[k] = angles[name][0]
-            row[chains.levels[i] :] = 0.0
+        if self._pending is not None:  # the last frame computed directly, not yet read
+            kin0, t0 = self._pending
+            self._pending = None
+            self._remember(self._direct(kin0), t0, True)
+        direct = self._direct(kin)
         hand_ok = bool(np.isfinite(rec.poses[HAND_SENSOR].position[0]).all()) and bool(
             np.isfinite(rec.poses[HAND_SENSOR].rotation[0]).all()
         )
@@ -175,6 +174,23 @@ class LiveTracker:
         best = np.where(complete[:, None], direct, np.where(solve[:, None], q, last))
         self._remember(best, t, True, info[..., 0], complete | ~solve)
         return status
+
+    def remember(self, kin: Kinematics, t: float) -> None:
+        """A frame computed directly from every sensor (``kin``, one frame at ``t`` s): the
+        next frame's prior (read only when a frame needs it)."""
+        self._pending = (kin, t)
+
+    def _direct(self, kin: Kinematics) -> FloatArray:
+        """The one frame of ``kin`` as the chains' angles ``(D, L)`` rad (padding 0; NaN
+        where a sensor was missing)."""
+        chains = self.chains
+        direct = np.zeros((chains.size, chains.L))
+        for i, (v, d) in enumerate(chains.keys):
+            angles = kin.motions[v][d].angles
+            row = direct[i]
+            for k, name in enumerate(chains.names[i]):
+                row[k] = angles[name][0]
+        return direct
 
     def _last_or(self, default: FloatArray) -> FloatArray:
         return default if self._last is None else self._last

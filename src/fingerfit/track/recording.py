@@ -178,7 +178,7 @@ def track_recording(
     options = options or TrackOptions()
     fingers = list(fingers or model.fingers)
     rec = select_sensors(recording, sensors)
-    layouts = check_layout(model, set(rec.poses), fingers, recording.name)
+    layouts = check_layout(model, set(rec.poses), fingers, recording.name, skip="--fingers")
     needed = [HAND_SENSOR, *(s for d in fingers for s in layouts[d].sensors)]
     full = with_every_sensor(rec, needed)
     kin = compute_kinematics(model, full, variants, fingers)
@@ -315,6 +315,24 @@ def start(
     return np.where(np.isfinite(direct), direct, out)
 
 
+def last_frame(kin: Kinematics) -> Kinematics:
+    """The last frame of ``kin`` (the ``anchor`` of the next batch, :func:`track_recording`)."""
+    return Kinematics(
+        kin.time[-1:],
+        {
+            v: {
+                d: FingerMotion(
+                    {k: a[-1:] for k, a in m.angles.items()},
+                    m.tip[-1:],
+                    None if m.pad is None else m.pad[-1:],
+                )
+                for d, m in ms.items()
+            }
+            for v, ms in kin.motions.items()
+        },
+    )
+
+
 def _dilate(mask: np.ndarray, margin: int) -> np.ndarray:
     """``mask`` widened by ``margin`` frames on each side."""
     if margin <= 0 or not mask.any():
@@ -341,6 +359,7 @@ __all__ = [
     "Observed",
     "TrackOptions",
     "Tracked",
+    "last_frame",
     "select_sensors",
     "track_recording",
     "with_every_sensor",
