@@ -15,9 +15,9 @@ import numpy as np
 
 from ..errors import FingerfitError, shown
 from ..kinematics import Kinematics
-from ..track import track_recording
 from ..model import HandModel
 from ..session import Recording
+from ..track import track_recording
 from ..transforms import FloatArray
 from .joint import AngleCopy
 from .limits import Limits, limits_of
