@@ -350,12 +350,15 @@ class Solution:
     hessian : ndarray, shape (D, P, m)
         The sensors' normal matrix at ``q`` (upper triangle), for :func:`uncertainty`.
     iterations : int
+    cost : ndarray, shape (D, m), optional
+        Each frame's cost at ``q`` (:func:`solve_frames`: sensors, bounds and prior).
     """
 
     q: FloatArray
     rms_mm: FloatArray
     hessian: FloatArray
     iterations: int
+    cost: FloatArray | None = None
 
 
 def _diagonal(L: int) -> np.ndarray:
@@ -510,7 +513,7 @@ def solve_frames(
         cols = cols[~done]
         if cols.size == 0:
             break
-    return Solution(q, rms, data_h, it)
+    return Solution(q, rms, data_h, it, cost)
 
 
 def smooth(
