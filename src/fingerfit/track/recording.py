@@ -307,7 +307,7 @@ def start(
     seed = direct[..., cols]
     sub = obs.take(cols)
     coarse = solve_frames(chains, weights, sub, np.where(np.isfinite(seed), seed, mid))
-    q, cost = repair(chains, weights, sub, coarse.q, coarse.cost, seed, run_of(linked)[cols])
+    q = repair(chains, weights, sub, coarse.q, coarse.cost, seed, run_of(linked)[cols])[0]
     # Interpolation within a run only: each run shifted far from the others in time.
     run = run_of(linked)
     span = float(time[-1] - time[0]) + 1.0 if m else 1.0
@@ -405,7 +405,8 @@ def repair(
         better = False
         sub = obs.take(cols)
         same = np.isfinite(direct[..., cols])
-        for start, ok in zip(starts, [run[prev] == run[cols], run[nxt] == run[cols]] + [None] * 3):
+        oks = [run[prev] == run[cols], run[nxt] == run[cols]] + [None] * (len(starts) - 2)
+        for start, ok in zip(starts, oks, strict=True):
             q0 = np.where(same, direct[..., cols], start)
             sol = solve_frames(chains, weights, sub, q0)
             gain = sol.cost < cost[..., cols] * (1.0 - 1e-9)
