@@ -17,7 +17,7 @@ from fingerfit.cli import app
 from fingerfit.estimate import FitOptions
 from fingerfit.estimate.cycles import extract_cycles
 from fingerfit.io import load_session, read_pose_csv
-from fingerfit.io.posecsv import write_pose_csv
+from fingerfit.io.posewrite import write_pose_csv
 from fingerfit.session import joint_sensors
 from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.transforms import relative_pose

@@ -120,7 +120,7 @@ def capture(
     from ..capture import RECORDING_LIST, Accumulator, EvidenceProcess, evidence, thresholds
     from ..io import read_pose_csv
     from ..io.atomic import check_target
-    from ..io.posecsv import write_pose_csv
+    from ..io.posewrite import write_pose_csv
     from ..io.sessiondir import read_landmarks
     from ..live import sources as src
     from ..session import Session, digit_sensors

@@ -212,7 +212,7 @@ def convert(
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.hygiene import check_recording
     from ..io.hygiene import fill_gaps as fill
-    from ..io.posecsv import write_pose_csv
+    from ..io.posewrite import write_pose_csv
     from ..io.trackerfile import check_format_options, read_tracker_file
     from ..session import UNITS_TO_MM, is_sensor_name
 

@@ -38,7 +38,8 @@ from ..session import (
 from ..transforms import FloatArray
 from .atomic import atomic_write
 from .hygiene import MAX_RATE_HZ, implausible_message, implausible_rows
-from .posecsv import check_field_counts, read_pose_csv, write_pose_csv
+from .posecsv import check_field_counts, read_pose_csv
+from .posewrite import write_pose_csv
 
 SESSION_FILE = "session.toml"
 LANDMARKS_FILE = "landmarks.csv"

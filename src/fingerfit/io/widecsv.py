@@ -39,7 +39,8 @@ from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import row_norms
 from .fastcsv import NotPlain, put_quat_rows, put_rows, put_scaled_rows, read_header
 from .hygiene import check_recording, implausible_rows, missing_note, plain_block
-from .posecsv import check_field_counts, sensor_quats
+from .posecsv import check_field_counts
+from .posewrite import sensor_quats
 from .wideframes import QUAT_NORM_TOLERANCE as QUAT_NORM_TOLERANCE
 from .wideframes import RATE_TOLERANCE as RATE_TOLERANCE
 from .wideframes import _assemble, _frame_grid
