@@ -123,7 +123,7 @@ def joint(
     method: Annotated[str, typer.Option(help="Hinge estimator: sara, robust or tang2018.")] = "sara",
     fmt: Annotated[
         JointSource | None,
-        typer.Option("--from", help="Input format (default: c3d for .c3d, else pose-csv).", case_sensitive=False),
+        typer.Option("--from", help="Input format (default: from the file, as for convert).", case_sensitive=False),
     ] = None,
     units: Annotated[
         str | None,
@@ -151,7 +151,10 @@ def joint(
         refuse_writing_inputs([output], [source])
         if output.is_dir():
             raise FingerfitError("is a directory; give a file name", path=output)
-    fmt = fmt or (JointSource.c3d if source.suffix.lower() == ".c3d" else JointSource.pose_csv)
+    if fmt is None:
+        from ..io.trackerfile import infer_format
+
+        fmt = JointSource(infer_format(source))
     rec, declared = read_any(
         source, fmt, units=units, rate=rate, items=items, columns=columns, clusters=clusters
     )

@@ -24,6 +24,9 @@ from ..errors import FingerfitError, shown
 from ..session import Recording
 from .poserows import HEADER, NUMERIC, PoseRows, assemble_rows
 
+#: The first bytes of a Parquet file.
+PARQUET_MAGIC = b"PAR1"
+
 
 def check_field_counts(raw: bytes, path: Path, n_fields: int) -> int:
     """Check that every line of a CSV file has ``n_fields`` comma-separated fields.
@@ -81,7 +84,8 @@ def check_text(b: np.ndarray, path: Path) -> None:
     """Raise, naming the line, if the bytes ``b`` (``uint8``) are not UTF-8 text.
 
     Control bytes other than tab, CR and LF (a binary file, a corrupted transfer) and
-    invalid UTF-8 sequences are refused.
+    invalid UTF-8 sequences are refused; a Parquet file (its first bytes ``PAR1``) is
+    named as one.
     """
     ctrl = np.flatnonzero((b < 32) & (b != 9) & (b != 10) & (b != 13) | (b == 127))
     at = int(ctrl[0]) if ctrl.size else None
@@ -92,11 +96,42 @@ def check_text(b: np.ndarray, path: Path) -> None:
             at = exc.start
     if at is not None:
         line = int(np.count_nonzero(b[:at] == ord("\n"))) + 1
+        if b[:4].tobytes() == PARQUET_MAGIC:
+            raise FingerfitError(
+                f"not text: a Parquet file (name it {Path(path).stem}.parquet to read it as one)",
+                path=path,
+                line=line,
+            )
         raise FingerfitError(
             f"not text: byte 0x{int(b[at]):02x} at offset {at} (binary or corrupted file)",
             path=path,
             line=line,
         )
+
+
+def read_magic(path: Path) -> bytes:
+    """The first four bytes of a file (:data:`PARQUET_MAGIC` for a Parquet file)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(4)
+    except OSError as exc:
+        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+
+
+def header_line(path: Path) -> str:
+    """The first line of a CSV file as text (a byte-order mark and the line end removed).
+
+    Raises
+    ------
+    FingerfitError
+        The file cannot be read, or its first line is not text (:func:`check_text`: a
+        binary file, a Parquet file named ``.csv``).
+    """
+    from .fastcsv import read_header
+
+    head = read_header(path).split(b"\n", 1)[0]
+    check_text(np.frombuffer(head, dtype=np.uint8), path)
+    return head.decode("utf-8").strip().lstrip("\ufeff")
 
 
 def _to_float(
@@ -228,7 +263,6 @@ def read_pose_csv(
         On any malformed content, naming the file and line.
     """
     from ..session import UNITS_TO_MM
-    from .fastcsv import NotPlain, read_header
     from .parquet import is_parquet
 
     path = Path(path)
@@ -236,25 +270,52 @@ def read_pose_csv(
         from .poseparquet import read_pose_parquet
 
         return read_pose_parquet(path, units, rate_hz, scale_to_mm)
-    first = read_header(path).split(b"\n", 1)[0].decode("utf-8", "replace").strip()
-    first = first.lstrip("\ufeff")
-    if tuple(h.strip() for h in first.split(",")) != HEADER:
+    rows = read_pose_rows(path)
+    if scale_to_mm is None:
+        if units not in UNITS_TO_MM:
+            raise FingerfitError(f"unknown units '{units}'", path=path, field="units")
+        scale_to_mm = UNITS_TO_MM[units]
+    return assemble_rows(rows, path, scale_to_mm, rate_hz)
+
+
+def is_pose_header(line: str) -> bool:
+    """Whether a CSV file's first line (:func:`header_line`) is the pose CSV's header."""
+    return tuple(h.strip() for h in line.split(",")) == HEADER
+
+
+def read_pose_rows(path: Path) -> PoseRows:
+    """The data rows of a pose CSV as decoded, in file order and file units, unchecked
+    beyond the header and the text (:func:`read_pose_csv` checks and places them).
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    PoseRows
+        ``time`` ``(n,)`` s, ``sensor`` ``(n,)`` codes into ``names``, ``pose`` ``(n, 7)``
+        ``x, y, z`` (file units) and ``qw, qx, qy, qz``; NaN where a field is empty.
+
+    Raises
+    ------
+    FingerfitError
+        The header is not the pose CSV's, or a line is not text or not numbers.
+    """
+    from .fastcsv import NotPlain
+
+    first = header_line(path)
+    if not is_pose_header(first):
         raise FingerfitError(
             f"header must be exactly '{','.join(HEADER)}', found '{shown(first, 80)}'",
             path=path,
             line=1,
         )
     try:
-        rows = _decode_fast(path)
+        return _decode_fast(path)
     except NotPlain:
         try:
             raw = path.read_bytes()
         except OSError as exc:
             raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
-        rows = _decode_exact(raw, path)
-        del raw
-    if scale_to_mm is None:
-        if units not in UNITS_TO_MM:
-            raise FingerfitError(f"unknown units '{units}'", path=path, field="units")
-        scale_to_mm = UNITS_TO_MM[units]
-    return assemble_rows(rows, path, scale_to_mm, rate_hz)
+        return _decode_exact(raw, path)

@@ -33,7 +33,6 @@ def read_pose_parquet(
     its metadata stating the units (which must be ``units`` unless ``scale_to_mm`` is
     given), then every check of the CSV reader, rows named by their 1-based index."""
     from ..session import UNITS_TO_MM
-    from .parquet import POSE, QUAT_ORDER, TRACKER_FRAME, read_parquet
 
     if scale_to_mm is None and units not in UNITS_TO_MM:
         raise FingerfitError(f"unknown units '{units}'", path=path, field="units")
@@ -41,6 +40,43 @@ def read_pose_parquet(
         return _read_parquet_fast(path, units, rate_hz, scale_to_mm)
     except Exception:  # _Irregular, a FingerfitError, a damaged page Arrow reports
         pass  # the reference path below says what is wrong, or reads what is unusual
+    rows, stated = read_pose_parquet_rows(path)
+    if scale_to_mm is None and stated != units:
+        raise FingerfitError(
+            f"the file's positions are in {stated}, not {units} as stated for it "
+            "(session.toml units or --units)",
+            path=path,
+            field="fingerfit.units",
+        )
+    scale = UNITS_TO_MM[stated] if scale_to_mm is None else scale_to_mm
+    return assemble_rows(rows, path, scale, rate_hz, first_line=1)
+
+
+def read_pose_parquet_rows(path: Path) -> tuple[PoseRows, str]:
+    """The rows of a pose Parquet file as stored, in file order and file units, with the
+    units its metadata states; unchecked beyond the file, its metadata and its columns
+    (:func:`read_pose_parquet` checks and places them).
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    rows : PoseRows
+        ``time`` ``(n,)`` s, ``sensor`` ``(n,)`` codes into ``names``, ``pose`` ``(n, 7)``
+        ``x, y, z`` (file units) and ``qw, qx, qy, qz`` (a null read as NaN).
+    units : str
+        ``fingerfit.units``: ``mm``, ``cm``, ``m`` or ``in``.
+
+    Raises
+    ------
+    FingerfitError
+        Not a readable pose Parquet file, or units other than those.
+    """
+    from ..session import UNITS_TO_MM
+    from .parquet import POSE, QUAT_ORDER, TRACKER_FRAME, read_parquet
+
     table = read_parquet(
         path,
         POSE,
@@ -55,22 +91,12 @@ def read_pose_parquet(
             path=path,
             field="fingerfit.units",
         )
-    if scale_to_mm is None and stated != units:
-        raise FingerfitError(
-            f"the file's positions are in {stated}, not {units} as stated for it "
-            "(session.toml units or --units)",
-            path=path,
-            field="fingerfit.units",
-        )
     cols = table.columns
     codes, names = cols["sensor"]
     pose = np.empty((table.n_rows, 7))
     for j, c in enumerate(NUMERIC[1:]):
         pose[:, j] = cols.pop(c)
-    rows = PoseRows(cols["time"], codes, list(names), pose)
-    del table, cols
-    scale = UNITS_TO_MM[stated] if scale_to_mm is None else scale_to_mm
-    return assemble_rows(rows, path, scale, rate_hz, first_line=1)
+    return PoseRows(cols["time"], codes, list(names), pose), stated
 
 
 #: Threads placing the blocks of a pose Parquet file, and the rows of a block.

@@ -1,16 +1,19 @@
 """Recordings written as the canonical pose table: a CSV, or its Parquet form for a
-``.parquet`` path (one row per present sample, ordered by frame then sensor)."""
+``.parquet`` path (one row per present sample, ordered by frame then sensor); and a pose
+table copied row for row from one form to the other (``fingerfit convert``)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from ..errors import FingerfitError
 from ..session import Recording
 from ..transforms import quat_wxyz_columns
-from .poserows import HEADER
+from .poserows import HEADER, PoseRows
 
 
 def pose_columns(recording: Recording, mm_per_unit: float) -> dict[str, object]:
@@ -139,3 +142,100 @@ def _write_parquet(path: Path, recording: Recording, mm_per_unit: float, meta) -
             for lo in range(0, max(n, 1), step)
         )
     return path
+
+
+@dataclass
+class PoseTable:
+    """A pose table read for conversion (:func:`read_pose_table`).
+
+    Attributes
+    ----------
+    rows : PoseRows
+        The rows as stored, in file order and file units.
+    recording : Recording
+        The same rows checked and placed per sensor (mm, tracker frame), as
+        :func:`fingerfit.io.read_pose_csv` reads them.
+    units : str
+        The units of the rows' positions.
+    """
+
+    rows: PoseRows
+    recording: Recording
+    units: str
+
+
+def read_pose_table(
+    path: Path, *, units: str | None = None, rate_hz: float | None = None
+) -> PoseTable:
+    """Read a pose table (CSV, or Parquet by the extension) row for row, with every check
+    of :func:`fingerfit.io.read_pose_csv`.
+
+    Parameters
+    ----------
+    path : Path
+    units : str, optional
+        Units of the positions: a CSV's (default mm); a Parquet file states its own, which
+        ``units`` must then agree with.
+    rate_hz : float, optional
+        Sampling rate (Hz) the frames must lie on (checked, as the reader does).
+
+    Returns
+    -------
+    PoseTable
+
+    Raises
+    ------
+    FingerfitError
+        Anything the reader refuses, naming the file and the line (a Parquet file's row).
+    """
+    from ..session import UNITS_TO_MM
+    from .parquet import is_parquet
+    from .posecsv import read_pose_rows
+    from .poseparquet import read_pose_parquet_rows
+    from .poserows import assemble_rows
+
+    if units is not None and units not in UNITS_TO_MM:
+        raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
+    if is_parquet(path):
+        rows, stated = read_pose_parquet_rows(path)
+        if units is not None and units != stated:
+            raise FingerfitError(
+                f"the file's positions are in {stated}, not {units} as stated for it (--units)",
+                path=path,
+                field="fingerfit.units",
+            )
+        units, first_line = stated, 1
+    else:
+        rows, units, first_line = read_pose_rows(path), units or "mm", 2
+    recording = assemble_rows(rows, path, UNITS_TO_MM[units], rate_hz, first_line=first_line)
+    return PoseTable(rows, recording, units)
+
+
+def write_pose_rows(path: Path, table: PoseTable, units: str) -> Path:
+    """Write the rows of a pose table as they are, as CSV or Parquet by the extension of
+    ``path``, atomically: the same rows in the same order, the numbers bit for bit
+    (positions converted when ``units`` differ from the table's, as the reader and the
+    writer of a recording convert them: to mm, then to ``units``).
+
+    Parameters
+    ----------
+    path : Path
+    table : PoseTable
+    units : str
+        Units of the written positions (Parquet: stated in its metadata).
+
+    Returns
+    -------
+    Path
+    """
+    from ..session import UNITS_TO_MM
+    from .parquet import pose_meta, write_table_file
+
+    rows = table.rows
+    cols: dict[str, object] = {"time": rows.time, "sensor": (rows.sensor, list(rows.names))}
+    for j, c in enumerate(HEADER[2:]):
+        v = rows.pose[:, j]
+        if j < 3 and units != table.units:
+            v = np.divide(v * UNITS_TO_MM[table.units], UNITS_TO_MM[units])
+        cols[c] = np.ascontiguousarray(v)
+    return write_table_file(path, cols, pose_meta(units))
