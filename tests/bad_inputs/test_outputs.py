@@ -180,3 +180,25 @@ def test_convert_never_writes_onto_its_source(tmp_path: Path) -> None:
               "--rate", "240", "--map", "1=hand,2=index.proximal,3=index.middle,4=index.distal")  # fmt: skip
     refused(res, "would overwrite the input", str(alias))
     assert listing(tmp_path) == before and d.is_dir()
+
+
+def test_a_failed_write_leaves_no_folder_it_made(tmp_path: Path) -> None:
+    """A file or a folder written all-or-nothing into folders that did not exist: on
+    failure the new folders go too; a folder that existed, or holds something else, stays."""
+    from fingerfit.io.atomic import atomic_write, staged_directory, write_files
+
+    (tmp_path / "old").mkdir()
+    with pytest.raises(RuntimeError), atomic_write(tmp_path / "a/b/f.txt") as fh:
+        fh.write("half")
+        raise RuntimeError("fails part-way")
+    with pytest.raises(KeyboardInterrupt), staged_directory(tmp_path / "old/c/d/out") as tmp:
+        (tmp / "x.txt").write_text("half")
+        raise KeyboardInterrupt
+    with pytest.raises(TypeError):  # the second file's content cannot be written
+        write_files({tmp_path / "e/f/g.txt": "x", tmp_path / "e/i/h.txt": None})  # type: ignore[dict-item]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old"]
+    assert not any((tmp_path / "old").iterdir())
+    with pytest.raises(RuntimeError), staged_directory(tmp_path / "new/out"):
+        (tmp_path / "new" / "other.txt").write_text("someone else's")
+        raise RuntimeError
+    assert (tmp_path / "new" / "other.txt").exists()  # not removed: not empty
