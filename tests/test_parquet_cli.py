@@ -53,6 +53,33 @@ def test_session_of_parquet_recordings_fits_like_the_csv_session(tmp_path: Path)
     assert models["csv"] == models["parquet"]
 
 
+def test_parquet_session_takes_events_naming_the_csv_recordings(tmp_path: Path) -> None:
+    """events.csv written for targets.csv names the recording of a session converted to
+    targets.parquet by its stem; a name no recording has is refused with its line and
+    the session's recordings."""
+    from fingerfit.io import load_session
+
+    src = write_subject(subject("realistic", 2), tmp_path / "src")
+    args = ["session", tmp_path / "pq", "--subject", "S", "--rate", "240", "--fingers", "index"]
+    for opt, name in (("--reference", "reference"), ("--grasp", "grasp"), ("--targets", "targets")):
+        rec = read_pose_csv(src / f"{name}.csv", units="mm", rate_hz=240)
+        args += [opt, write_pose_csv(tmp_path / f"{name}.parquet", rec, units="mm")]
+    args += ["--landmarks", src / "landmarks.csv", "-q"]
+    assert "targets.csv," in (src / "events.csv").read_text()
+    r = run(*args, "--events", src / "events.csv")
+    assert r.exit_code == 0, r.output
+    session = load_session(tmp_path / "pq")
+    assert session.events and {e.recording for e in session.events} == {"targets.parquet"}
+    assert (tmp_path / "pq" / "events.csv").read_bytes() == (src / "events.csv").read_bytes()
+    bad = tmp_path / "events.csv"
+    lines = (src / "events.csv").read_text().splitlines()
+    lines[2] = lines[2].replace("targets.csv", "target.csv")
+    bad.write_text("\n".join(lines) + "\n")
+    line = refused(run(*args[:1], tmp_path / "pq2", *args[2:], "--events", bad), "events.csv:3:")
+    assert "unknown recording 'target.csv' (the session's recordings: reference.parquet, " in line
+    assert not (tmp_path / "pq2").exists()
+
+
 def test_angles_and_urdf_names_to_parquet(tmp_path: Path) -> None:
     d, model = fitted()
     rec = read_pose_csv(d / "test.csv", units="mm")
