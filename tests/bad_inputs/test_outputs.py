@@ -202,3 +202,23 @@ def test_a_failed_write_leaves_no_folder_it_made(tmp_path: Path) -> None:
         (tmp_path / "new" / "other.txt").write_text("someone else's")
         raise RuntimeError
     assert (tmp_path / "new" / "other.txt").exists()  # not removed: not empty
+
+
+def test_quiet_prints_no_table(fitted: Path, tmp_path: Path) -> None:
+    """``-q`` on ``fit`` and ``joint`` leaves out the table (only the line naming the file
+    written); ``export -q`` prints nothing; without it each prints its table or line."""
+    for quiet in ([], ["-q"]):
+        res = run("fit", fitted, "-o", tmp_path / f"m{len(quiet)}.json", *quiet)
+        assert res.exit_code == 0, res.output
+        assert ("s5/s6" in res.output) is not bool(quiet), res.output
+        assert f"model written to {tmp_path / f'm{len(quiet)}.json'}" in res.output
+        j = tmp_path / f"j{len(quiet)}.json"
+        res = run("joint", fitted / "grasp.csv", "--parent", "index.proximal", "--child",
+                  "index.middle", "--kind", "hinge", "-o", j, *quiet)  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert ("pivot residual" in res.output) is not bool(quiet), res.output
+        assert f"joint written to {j}" in res.output and j.exists()
+        res = run("export", fitted / "model.json", "--urdf", tmp_path / f"h{len(quiet)}.urdf",
+                  *quiet)  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert (res.output.strip() == "") is bool(quiet), res.output

@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import FingerfitError
-from .app import app, notice, out, say, user_errors
+from .app import QuietTable, app, notice, out, say, user_errors
 
 
 class JointSource(StrEnum):
@@ -138,6 +138,7 @@ def joint(
         bool,
         typer.Option("--convention-check/--no-convention-check", help="Refuse a wrong quaternion order or handedness."),
     ] = True,
+    quiet: QuietTable = False,
 ) -> None:  # fmt: skip
     """Find the joint (hinge, two-axis or ball) between two segments of one recording."""
     from ..estimate.joint import fit_joint
@@ -198,7 +199,8 @@ def joint(
         notice("note", f"{fit.quality.dropped_frames} frame(s) without both poses dropped")
     for note in fit.quality.notes:
         notice("note", note)
-    out.print(_table(fit))
+    if not quiet:
+        out.print(_table(fit))
     if output is not None:
         doc = {"file": str(source), "parent": parent, "child": child, **fit.summary()}
         with atomic_write(output) as fh:
