@@ -426,3 +426,67 @@ def test_web_view_renders_in_headless_chromium_and_asks_nothing_beyond_this_mach
     assert pixels.shape == (800, 1400, 3)
     assert pixels.std() > 0.05  # not a blank page
     assert coloured_share(pixels, SCENE_BOX) > 0.005  # the hand, drawn in the 3D view
+
+
+def _chunks(path) -> dict[str, int]:
+    """Entity -> the temporal chunks of a .rrd."""
+    from rerun.chunk import RrdReader
+
+    out: dict[str, int] = defaultdict(int)
+    for chunk in RrdReader(path).stream().to_chunks():
+        if not chunk.is_static:
+            out[chunk.entity_path] += 1
+    return out
+
+
+def test_live_view_save_joins_blocks_into_few_chunks(simulated, tmp_path):
+    """``--view-save`` gets a stream's frames in small blocks; the file holds them in
+    chunks of FILE_BATCH_FRAMES (each chunk carries about 1.2 kB of Rerun's own), so it is
+    no larger than the file of the same frames logged at once."""
+    pytest.importorskip("rerun")
+    from fingerfit.view import FILE_BATCH_FRAMES, LiveView, hand_scene, save_rrd
+
+    model, sub, _, _ = simulated
+    rec = sub.session.grasp[0].slice(slice(0, 600))
+    view = LiveView(model, tmp_path / "live.rrd")
+    for i in range(0, rec.n_frames, 3):  # 3 frames a block, as a real-time stream
+        view.push(rec.slice(slice(i, i + 3)))
+    view.close()
+    assert view.logged == rec.n_frames
+    chunks = _chunks(tmp_path / "live.rrd")
+    assert chunks and max(chunks.values()) <= -(-rec.n_frames // FILE_BATCH_FRAMES), chunks
+    whole = save_rrd(hand_scene(model, rec, compute_kinematics(model, rec)), tmp_path / "w.rrd")
+    assert (tmp_path / "live.rrd").stat().st_size < 1.05 * whole.stat().st_size
+    rows, _ = _read(tmp_path / "live.rrd")
+    assert sorted(rows["/person/tips"]["frame"]) == list(range(rec.n_frames))
+
+
+def test_a_script_makes_a_live_view_without_a_main_guard(simulated, tmp_path):
+    """The view's process runs nothing of the script that made it: no
+    ``if __name__ == "__main__":`` is needed, and the script's top level runs once."""
+    pytest.importorskip("rerun")
+    import subprocess
+
+    _, sub, folder, model_path = simulated
+    script = tmp_path / "live_script.py"
+    script.write_text(
+        "from pathlib import Path\n"
+        "from fingerfit.io import read_pose_csv\n"
+        "from fingerfit.model import load_model\n"
+        "from fingerfit.view import LiveView\n"
+        f"model = load_model({str(model_path)!r})\n"
+        f"rec = read_pose_csv({str(folder / sub.session.grasp[0].name)!r}).slice(slice(0, 40))\n"
+        "with open('ran.txt', 'a') as fh:\n"
+        "    fh.write('top level\\n')\n"
+        "view = LiveView(model, Path('live.rrd'))\n"
+        "view.push(rec)\n"
+        "view.close()\n"
+        "print('logged', view.logged)\n"
+    )
+    res = subprocess.run(
+        [sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=120
+    )
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "logged 40", res.stdout + res.stderr
+    assert (tmp_path / "ran.txt").read_text() == "top level\n"
+    assert (tmp_path / "live.rrd").is_file()
