@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import FingerfitError
 from ..kinematics import compute_kinematics
 from ..model import HandModel
-from ..processes import child_ignores_interrupt, context, start_child
+from ..processes import child_ignores_interrupt, context, end_child, start_child
 from ..session import Recording, concat_recordings
 from ..transforms import FloatArray
 from .rerunlog import (
@@ -254,10 +254,7 @@ class LiveView:
     def _end(self) -> None:
         """Join the view's process (ended after its answer) and release the queue."""
         proc, self._proc = self._proc, None
-        proc.join(timeout=30 * _POLL_S)
-        if proc.exitcode is None:  # only after an error of this side
-            proc.terminate()
-            proc.join()
+        end_child(proc, 30 * _POLL_S)  # terminated only after an error of this side
         self._queue.cancel_join_thread()  # the process has read up to "end", or is gone
         self._queue.close()
         self._reply.close()
