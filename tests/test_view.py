@@ -383,6 +383,23 @@ def test_web_view_serves_the_viewer_and_the_data(web_view):
             assert _listening_on(port) == {"0100007F"}, (port, _listening_on(port))
 
 
+def test_web_view_listens_on_this_machine_only(web_view):
+    """The socket table of ``fingerfit view --web`` and of every process it started:
+    every listening socket is on 127.0.0.1 or ::1 (the two printed ports among them)."""
+    from urllib.parse import parse_qs, urlsplit
+
+    psutil = pytest.importorskip("psutil")
+    parts = urlsplit(web_view)
+    grpc_port = urlsplit(parse_qs(parts.query)["url"][0]).port
+    listening = set()
+    for proc in psutil.Process().children(recursive=True):
+        for conn in proc.net_connections(kind="inet"):
+            if conn.status == psutil.CONN_LISTEN:
+                listening.add((conn.laddr.ip, conn.laddr.port))
+    assert {("127.0.0.1", parts.port), ("127.0.0.1", grpc_port)} <= listening, listening
+    assert {ip for ip, _ in listening} <= {"127.0.0.1", "::1"}, listening
+
+
 def test_web_view_renders_in_headless_chromium_and_asks_nothing_beyond_this_machine(
     web_view, tmp_path
 ):
