@@ -287,7 +287,7 @@ class _Logger:
         if not self._started:
             log_static(scene, self.stream)
             if self.placement is not None:
-                log_robot_static(self.placement.digits, self.stream)
+                log_robot_static(self.placement.digits, self.stream, self.placement.geometry)
             self._started = True
         log_frames(scene, self.stream, first)
         if self.placement is not None and q is not None:
