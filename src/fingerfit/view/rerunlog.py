@@ -295,9 +295,12 @@ def log_robot_frames(robot: RobotScene, stream, frames: np.ndarray, time: FloatA
     if robot.drawn:
         assert robot.geometry is not None and robot.placement_rotation is not None
         scaled = 1000.0 * robot.placement_rotation  # m -> mm
-        offset = robot.placement_translation.copy()
-        lost = ~(np.isfinite(scaled).all(axis=(1, 2)) & np.isfinite(offset).all(axis=1))
-        scaled[lost], offset[lost] = 0.0, 0.0  # no hand sample: drawn as nothing
+        offset = robot.placement_translation
+        ok = np.isfinite(scaled).all(axis=(1, 2)) & np.isfinite(offset).all(axis=1)
+        if ok.any() and not ok.all():  # no hand sample: the placement of the nearest before
+            near = np.maximum.accumulate(np.where(ok, np.arange(n), -1))
+            near[near < 0] = np.flatnonzero(ok)[0]  # (before the first: the first)
+            scaled, offset = scaled[near], offset[near]
         _transforms(rr, stream, "robot/geometry", idx, offset, scaled)
         for k in range(len(robot.geometry.links)):
             entity = _link_entity(rr, robot.geometry, k)

@@ -88,7 +88,8 @@ class RobotScene:
     placement_rotation : ndarray, shape (n, 3, 3), optional
         ... and its axes (robot world -> tracker): a point ``x`` (m) of the robot world is
         at ``placement_translation + 1000 * placement_rotation @ x`` mm, as ``points``
-        are placed. NaN at frames without the hand sensor's sample.
+        are placed. NaN at frames without the hand sensor's sample (logged as the frame
+        before: :func:`fingerfit.view.log_robot_frames`).
     """
 
     name: str
