@@ -45,13 +45,17 @@ def export(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace existing output files.")
     ] = False,
+    quiet: Annotated[
+        bool,
+        typer.Option("--quiet", "-q", help="Print nothing but warnings (the files are named)."),
+    ] = False,
 ) -> None:
     """Export the finger chains for robot software: root link `hand` (hand sensor frame),
     joints <finger>_mp|pip|dip, fingertip frame <finger>_tip.
 
     Both files are written or neither; an existing file is replaced only with --overwrite.
     """
-    _export(model_path, urdf, mjcf, variant, margin_deg, fix_centres, overwrite)
+    _export(model_path, urdf, mjcf, variant, margin_deg, fix_centres, overwrite, quiet)
 
 
 def _export(
@@ -62,6 +66,7 @@ def _export(
     margin_deg: float,
     fix_centres: bool = False,
     overwrite: bool = False,
+    quiet: bool = False,
 ) -> None:
     """Check the options, build every document, then write them all or none."""
     from ..export import mjcf_string, robot_hand, urdf_string
@@ -96,6 +101,8 @@ def _export(
     if mjcf is not None:
         files[mjcf] = mjcf_string(model, variant, margin_deg)
     _write_text(files, overwrite=overwrite)  # all files or none
+    if quiet:
+        return
     hand = robot_hand(model, variant, margin_deg)
     out.print(
         f"{len(hand.fingers)} digit(s), {len(hand.joints)} joints ({variant} axes, limits = "
