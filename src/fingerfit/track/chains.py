@@ -32,21 +32,20 @@ SEGMENTS = 3
 _EYE = np.eye(3)[..., None]  # (3, 3, 1): the identity of every frame
 
 
-def _frames_first(a: FloatArray) -> FloatArray:
-    """A view of ``(..., 3, k, m)`` rows as ``(..., m, 3, k)`` matrices."""
-    return np.moveaxis(a, -1, -3)
-
-
-def matmul_rows(a: FloatArray, b: FloatArray) -> FloatArray:
+def matmul_rows(a: FloatArray, b: FloatArray, out: FloatArray | None = None) -> FloatArray:
     """Per-frame products of matrices, frames last: ``a (..., i, j, m)`` times
     ``b (..., j, k, m)`` (either may be ``(..., j, k, 1)``, broadcast) -> ``(..., i, k, m)``,
-    stored frames last: one ``matmul`` (over views when there are several frames)."""
-    if a.shape[-1] == 1 and b.shape[-1] == 1:
-        return np.matmul(a[..., 0], b[..., 0])[..., None]
-    shape = np.broadcast_shapes(a.shape[:-3], b.shape[:-3])
-    m = max(a.shape[-1], b.shape[-1])
-    out = np.empty((*shape, a.shape[-3], b.shape[-2], m))
-    np.matmul(_frames_first(a), _frames_first(b), out=_frames_first(out))
+    stored frames last (into ``out`` when given): ``j`` products over whole rows of frames
+    (faster than ``matmul`` over strided 3 x 3 matrices)."""
+    if out is None:
+        shape = np.broadcast_shapes(a.shape[:-3], b.shape[:-3])
+        out = np.empty((*shape, a.shape[-3], b.shape[-2], max(a.shape[-1], b.shape[-1])))
+    if a.shape[-1] == 1 and b.shape[-1] == 1:  # one frame (live): one small matmul
+        np.matmul(a[..., 0], b[..., 0], out=out[..., 0])
+        return out
+    np.multiply(a[..., :, 0, None, :], b[..., None, 0, :, :], out=out)
+    for j in range(1, a.shape[-2]):
+        out += a[..., :, j, None, :] * b[..., None, j, :, :]
     return out
 
 
@@ -218,11 +217,8 @@ class Chains:
         v *= -1.0
         acc = np.empty((n_chain, L + 1, 3, 3, m))
         acc[:, 0] = _EYE
-        view, rots = (
-            (acc[..., 0], rot[..., 0]) if m == 1 else (_frames_first(acc), _frames_first(rot))
-        )
         for k in range(L):
-            np.matmul(view[:, k], rots[:, k], out=view[:, k + 1])
+            matmul_rows(acc[:, k], rot[:, k], out=acc[:, k + 1])
         prox = acc[:, :L]
         trans = np.zeros((n_chain, L + 1, 3, m))
         step = matvec_rows(prox, v)
