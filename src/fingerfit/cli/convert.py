@@ -1,4 +1,5 @@
-"""``fingerfit convert``: real tracker files -> the canonical pose CSV of the session format."""
+"""``fingerfit convert``: real tracker files -> the canonical pose CSV of the session format
+(or its Parquet form), and any of them -> OpenSim's orientation table or markers."""
 
 from __future__ import annotations
 
@@ -16,8 +17,9 @@ from .app import Quiet, app, notice, out, progress, user_errors
 
 
 class SourceFormat(StrEnum):
-    """Input formats of ``fingerfit convert``."""
+    """Input formats of ``fingerfit convert`` and ``fingerfit joint``."""
 
+    pose_csv = "pose-csv"
     liberty = "liberty"
     liberty_binary = "liberty-binary"
     wide_csv = "wide-csv"
@@ -115,19 +117,27 @@ def convert(
         typer.Option(
             "-o",
             "--output",
-            help="Pose CSV to write (OUT.parquet: its Parquet form).",
+            help="Pose CSV to write (OUT.parquet: its Parquet form; OUT.sto: OpenSim "
+            "orientations; OUT.trc: the sensor origins as OpenSim markers, m).",
             show_default=False,
         ),
     ],
     fmt: Annotated[
-        SourceFormat,
-        typer.Option("--from", help="Input format.", case_sensitive=False, show_default=False),
-    ],
+        SourceFormat | None,
+        typer.Option(
+            "--from",
+            help="Input format (default: c3d for .c3d, else pose-csv: the session format "
+            "or its .parquet form).",
+            case_sensitive=False,
+            show_default=False,
+        ),
+    ] = None,
     units: Annotated[
         str | None,
         typer.Option(
-            help="Position units in the input (mm, cm, m, in). Default: in for liberty "
-            "formats (the device default), POINT:UNITS for c3d; required for wide-csv."
+            help="Position units in the input (mm, cm, m, in). Default: mm for pose-csv, "
+            "in for liberty formats (the device default), POINT:UNITS for c3d; required "
+            "for wide-csv."
         ),
     ] = None,
     rate: Annotated[
@@ -206,16 +216,21 @@ def convert(
     out_units: Annotated[str, typer.Option(help="Units of x,y,z in the written pose CSV.")] = "mm",
     quiet: Quiet = False,
 ) -> None:
-    """Convert Liberty/Patriot ASCII or binary, wide CSV or C3D to the pose CSV."""
+    """Convert Liberty/Patriot ASCII or binary, wide CSV or C3D to the pose CSV (or a pose
+    CSV to Parquet, OpenSim orientations .sto or markers .trc)."""
     import numpy as np
 
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.hygiene import check_recording
     from ..io.hygiene import fill_gaps as fill
+    from ..io.opensim import write_markers, write_orientations
     from ..io.posecsv import write_pose_csv
     from ..io.trackerfile import check_format_options, read_tracker_file
     from ..session import UNITS_TO_MM, is_sensor_name
 
+    fmt = fmt or (SourceFormat.c3d if source.suffix.lower() == ".c3d" else SourceFormat.pose_csv)
+    if fmt is SourceFormat.pose_csv and map_ is not None:
+        raise FingerfitError("does not apply to --from pose-csv", field="--map")
     check_format_options(
         fmt.value,
         units,
@@ -268,7 +283,11 @@ def convert(
             rec, source, units=unit_check, max_speed_mm_s=max_speed, max_turn_deg_s=max_turn
         )
         bar.update(task, advance=1, description=f"writing {output.name}")
-        write_pose_csv(output, rec, units=out_units)
+        writer = {".sto": write_orientations, ".trc": write_markers}.get(output.suffix.lower())
+        if writer is None:
+            write_pose_csv(output, rec, units=out_units)
+        else:
+            writer(output, rec)
         if residuals is not None:
             _write_residuals(residuals, rec, fits)
         bar.advance(task)

@@ -1,4 +1,4 @@
-"""``fingerfit export``: the individual finger model as URDF and/or MuJoCo MJCF."""
+"""``fingerfit export``: the individual hand model as URDF, MuJoCo MJCF and/or OpenSim."""
 
 from __future__ import annotations
 
@@ -24,6 +24,10 @@ def export(
     mjcf: Annotated[
         Path | None, typer.Option("--mjcf", help="MuJoCo MJCF file to write (metres, radians).")
     ] = None,
+    osim: Annotated[
+        Path | None,
+        typer.Option("--osim", help="OpenSim model to write (.osim; metres, radians)."),
+    ] = None,
     variant: Annotated[
         str,
         typer.Option(help=f"Flexion axes: {' or '.join(VARIANTS)} (perpendicular to the bones)."),
@@ -46,36 +50,48 @@ def export(
         bool, typer.Option("--overwrite", help="Replace existing output files.")
     ] = False,
 ) -> None:
-    """Export the finger chains for robot software: root link `hand` (hand sensor frame),
-    joints <finger>_mp|pip|dip, fingertip frame <finger>_tip.
+    """Export the digit chains for robot and biomechanics software: root `hand` (hand sensor
+    frame), joints <digit>_<joint>, tips <digit>_tip.
 
-    Both files are written or neither; an existing file is replaced only with --overwrite.
+    Every file is written or none; an existing file is replaced only with --overwrite.
     """
-    _export(model_path, urdf, mjcf, variant, margin_deg, fix_centres, overwrite)
+    _export(
+        model_path,
+        {"--urdf": urdf, "--mjcf": mjcf, "--osim": osim},
+        variant,
+        margin_deg,
+        fix_centres,
+        overwrite,
+    )
 
 
 def _export(
     model_path: Path,
-    urdf: Path | None,
-    mjcf: Path | None,
+    targets: dict[str, Path | None],
     variant: str,
     margin_deg: float,
     fix_centres: bool = False,
     overwrite: bool = False,
 ) -> None:
-    """Check the options, build every document, then write them all or none."""
-    from ..export import mjcf_string, robot_hand, urdf_string
+    """Check the options, build every document, then write them all or none.
+
+    ``targets``: option (``--urdf``, ``--mjcf``, ``--osim``) -> the file it names, or None.
+    """
+    from ..export import mjcf_string, osim_string, robot_hand, urdf_string
     from ..export import write_text as _write_text
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..model import VARIANTS, load_model, with_fixed_centres
 
-    if urdf is None and mjcf is None:
-        raise FingerfitError("nothing to write: give --urdf and/or --mjcf")
-    if urdf is not None and mjcf is not None and urdf.resolve() == mjcf.resolve():
-        raise FingerfitError("--urdf and --mjcf name the same file", path=urdf)
-    targets = [p for p in (urdf, mjcf) if p is not None]
-    refuse_writing_inputs(targets, [model_path])
-    for p in targets:
+    given = {flag: p for flag, p in targets.items() if p is not None}
+    if not given:
+        raise FingerfitError("nothing to write: give --urdf, --mjcf and/or --osim")
+    seen: dict[Path, str] = {}
+    for flag, p in given.items():
+        if p.resolve() in seen:
+            raise FingerfitError(f"{seen[p.resolve()]} and {flag} name the same file", path=p)
+        seen[p.resolve()] = flag
+    refuse_writing_inputs(list(given.values()), [model_path])
+    for p in given.values():
         check_target(p, overwrite=overwrite)
     if variant not in VARIANTS:
         raise FingerfitError(f"must be one of {', '.join(VARIANTS)}", field="--variant")
@@ -90,11 +106,8 @@ def _export(
                 f"{joint}: migrating centre fixed at mid-range; it differs from the fitted "
                 f"one by up to {mm:.2f} mm over the observed range of motion",
             )
-    files: dict[Path, str] = {}
-    if urdf is not None:
-        files[urdf] = urdf_string(model, variant, margin_deg)
-    if mjcf is not None:
-        files[mjcf] = mjcf_string(model, variant, margin_deg)
+    build = {"--urdf": urdf_string, "--mjcf": mjcf_string, "--osim": osim_string}
+    files = {p: build[flag](model, variant, margin_deg) for flag, p in given.items()}
     _write_text(files, overwrite=overwrite)  # all files or none
     hand = robot_hand(model, variant, margin_deg)
     out.print(

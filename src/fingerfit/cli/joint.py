@@ -15,16 +15,7 @@ from rich.table import Table
 
 from ..errors import FingerfitError
 from .app import app, notice, out, say, user_errors
-
-
-class JointSource(StrEnum):
-    """Input formats of ``fingerfit joint``."""
-
-    pose_csv = "pose-csv"
-    liberty = "liberty"
-    liberty_binary = "liberty-binary"
-    wide_csv = "wide-csv"
-    c3d = "c3d"
+from .convert import SourceFormat
 
 
 class JointKind(StrEnum):
@@ -38,7 +29,7 @@ class JointKind(StrEnum):
 
 def read_any(
     source: Path,
-    fmt: JointSource,
+    fmt: SourceFormat,
     *,
     units: str | None,
     rate: float | None,
@@ -122,7 +113,7 @@ def joint(
     kind: Annotated[JointKind, typer.Option(help="Joint model; auto chooses.", case_sensitive=False)] = JointKind.auto,
     method: Annotated[str, typer.Option(help="Hinge estimator: sara, robust or tang2018.")] = "sara",
     fmt: Annotated[
-        JointSource | None,
+        SourceFormat | None,
         typer.Option("--from", help="Input format (default: c3d for .c3d, else pose-csv).", case_sensitive=False),
     ] = None,
     units: Annotated[
@@ -151,7 +142,7 @@ def joint(
         refuse_writing_inputs([output], [source])
         if output.is_dir():
             raise FingerfitError("is a directory; give a file name", path=output)
-    fmt = fmt or (JointSource.c3d if source.suffix.lower() == ".c3d" else JointSource.pose_csv)
+    fmt = fmt or (SourceFormat.c3d if source.suffix.lower() == ".c3d" else SourceFormat.pose_csv)
     rec, declared = read_any(
         source, fmt, units=units, rate=rate, items=items, columns=columns, clusters=clusters
     )
