@@ -36,6 +36,7 @@ import argparse
 import datetime
 import json
 import platform
+import sys
 import tempfile
 import time
 import warnings
@@ -43,10 +44,13 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from tests.test_export_osim import ik_differences, run_imu_ik
+
 from fingerfit import __version__
 from fingerfit.estimate import fit_session
 from fingerfit.export import osim_string, write_coordinates
-from fingerfit.export.osim import HAND_COORDINATES
 from fingerfit.io.opensim import write_orientations
 from fingerfit.kinematics import compute_kinematics
 from fingerfit.simulate import SimConfig, simulate_cohort
@@ -56,42 +60,7 @@ SEED = 2037
 WORLDS = {"default": {}, "myohand": {"world": "myohand", "hand": "right"}}
 
 
-def imu_ik(osim, model_path: Path, sto: Path, out: Path, seconds: float) -> Path:
-    """OpenSim's IMU IK tool on the orientation table (tracker frame = ground)."""
-    tool = osim.IMUInverseKinematicsTool()
-    tool.set_model_file(str(model_path))
-    tool.set_orientations_file(str(sto))
-    tool.set_sensor_to_opensim_rotations(osim.Vec3(0, 0, 0))
-    tool.set_time_range(0, 0.0)
-    tool.set_time_range(1, seconds)
-    tool.set_results_directory(str(out.parent))
-    tool.set_output_motion_file(str(out))
-    tool.run(False)
-    return out
-
-
-def rms_by_coordinate(osim, ik_path: Path, ref_path: Path) -> dict[str, float]:
-    """RMS difference (deg) per rotational coordinate, frames matched by time; frames
-    where fingerfit has no angle (a sensor missing) left out."""
-    ik, ref = osim.TimeSeriesTable(str(ik_path)), osim.TimeSeriesTable(str(ref_path))
-    t_ik, t_ref = np.array(ik.getIndependentColumn()), np.array(ref.getIndependentColumn())
-    rows = np.abs(t_ref[None, :] - t_ik[:, None]).argmin(axis=1)
-    a, b = ik.getMatrix().to_numpy(), ref.getMatrix().to_numpy()[rows]
-    labels = list(ref.getColumnLabels())
-    out = {}
-    for k, name in enumerate(ik.getColumnLabels()):
-        if name in HAND_COORDINATES[3:]:
-            continue
-        d = a[:, k] - b[:, labels.index(name)]
-        out[name] = float(np.sqrt(np.nanmean(d**2)))
-    return out
-
-
 def run(subjects: int, seconds: float, work: Path) -> dict:
-    import opensim as osim
-
-    osim.Logger.removeFileSink()
-    osim.Logger.setLevelString("warn")
     results: dict = {}
     for world, kw in WORLDS.items():
         for condition in ("exact", "realistic"):
@@ -115,8 +84,8 @@ def run(subjects: int, seconds: float, work: Path) -> dict:
                         d / "fingerfit.mot", compute_kinematics(model, rec), model, rec
                     )
                     write_orientations(d / "rec.sto", rec)
-                    ik = imu_ik(osim, d / "hand.osim", d / "rec.sto", d / "ik.mot", seconds)
-                    rows.append(rms_by_coordinate(osim, ik, d / "fingerfit.mot"))
+                    ik = run_imu_ik(d / "hand.osim", d / "rec.sto", d / "ik.mot", seconds)
+                    rows.append(ik_differences(ik, d / "fingerfit.mot"))
                 names = list(rows[0])
                 results[key] = {
                     n: {
