@@ -25,7 +25,7 @@ from fingerfit.export.osim import HAND_COORDINATES, hand_coordinates
 from fingerfit.io import read_pose_csv
 from fingerfit.io.opensim import frame_name, write_motion, write_orientations
 from fingerfit.kinematics import carry_by_hand, chain_points, compute_kinematics
-from fingerfit.model import HandModel, load_model
+from fingerfit.model import HandModel, load_model, save_model
 from fingerfit.session import Recording
 from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.simulate.truthmodel import truth_model
@@ -259,11 +259,12 @@ def test_massless_links_simulate(folder: Path) -> None:
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory) -> Path:
-    """A noise-free thumb + index session with two-axis joints, fitted and exported by the
-    CLI, and its test recording cut to its first seconds with a gap: the hand sensor is
-    missing in 5 frames, the index's middle sensor in 5 others."""
-    d = write_subject(exact(("thumb", "index"), abduction=True), tmp_path_factory.mktemp("s") / "S")
-    assert runner.invoke(app, ["fit", str(d), "-q"]).exit_code == 0
+    """A noise-free thumb + index session with two-axis joints, its fitted model (the
+    case's, as `fit` writes it) exported by the CLI, and its test recording cut to its
+    first seconds with two gaps: the hand sensor missing in 5 frames, the index's middle
+    sensor in 5 others."""
+    d = write_subject(case_subject("thumb_index_two_axis"), tmp_path_factory.mktemp("s") / "S")
+    save_model(case_model("thumb_index_two_axis"), d / "model.json")
     rows = pd.read_csv(d / "test.csv")
     rows = rows[rows["time"] < SECONDS]
     frames = np.sort(rows["time"].unique())
