@@ -24,6 +24,7 @@ from fingerfit.export import joint_names, osim_string, robot_hand, write_coordin
 from fingerfit.export.osim import HAND_COORDINATES, hand_coordinates
 from fingerfit.io import read_pose_csv
 from fingerfit.io.opensim import frame_name, write_motion, write_orientations
+from fingerfit.io.sessiondir import read_landmarks
 from fingerfit.kinematics import carry_by_hand, chain_points, compute_kinematics
 from fingerfit.model import HandModel, load_model, save_model
 from fingerfit.session import Recording
@@ -483,3 +484,56 @@ def test_osim_errors_leave_nothing(session: Path, tmp_path: Path) -> None:
     res = _cli("export", model, "--osim", existing, "--overwrite")
     assert res.exit_code == 0, res.output
     assert existing.read_text().startswith("<?xml")
+
+
+def test_landmarks_become_markers_on_their_segments(session: Path, tmp_path: Path) -> None:
+    """``--landmarks``: each dorsal joint landmark is a marker on the joint's parent segment
+    (it moves with the bone whose head it lies over), each target a marker on ground; at
+    the reference posture each is at its landmark, and in any posture where fingerfit's
+    model carries it."""
+    out = tmp_path / "lm.osim"
+    res = _cli(
+        "export", session / "model.json", "--osim", out, "--landmarks", session / "landmarks.csv"
+    )
+    assert res.exit_code == 0, res.output
+    assert "4 landmark(s) not made markers (index.tip, thumb.tip, thumb.pad, index.pad)" in (
+        " ".join(res.output.split())
+    )
+    model = load_model(session / "model.json")
+    landmarks = read_landmarks(session / "landmarks.csv", units=model.session_units)
+    om = osim.Model(str(out))
+    state = om.initSystem()
+    joints = robot_hand(model).joints
+    rng = np.random.default_rng(3)
+    t0, r0 = model.reference_poses["hand"]
+    for trial in range(3):
+        q = {j.name: (rng.uniform(j.lower, j.upper) if trial else 0.0) for j in joints}
+        hand_r = r0 @ Rotation.from_rotvec(rng.normal(0, 0.5, 3) * (trial > 0)).as_matrix()
+        hand_t = t0 + rng.normal(0, 100.0, 3) * (trial > 0)
+        coords = hand_coordinates(model, hand_r[None], hand_t[None])[0]
+        set_coordinates(om, state, {**dict(zip(HAND_COORDINATES, coords, strict=True)), **q})
+        checked = 0
+        for name, p in landmarks.items():
+            digit, _, joint = name.partition(".")
+            if digit == "target":
+                want = p
+            elif joint in model.fingers[digit].joints:
+                fm = model.fingers[digit]
+                depth = list(fm.joints).index(joint)  # carried by the joints before it
+                ang = {
+                    k.split("_", 1)[1]: np.array([v])
+                    for k, v in q.items()
+                    if k.startswith(digit + "_")
+                }
+                # the MP's and CMC's landmarks are on the hand: no joint carries them
+                ref = chain_points(fm, "user_axis", ang, p, depth) if depth else p[None]
+                want = carry_by_hand(model, hand_r[None], hand_t[None], ref)[0]
+                if trial == 0:
+                    assert np.abs(want - p).max() < 1e-9
+            else:
+                continue
+            name_in_model = f"target_{joint}" if digit == "target" else f"{digit}_{joint}_dorsal"
+            got = marker(om, state, name_in_model) * 1000.0
+            assert np.abs(got - want).max() < POINT_TOL_MM, (trial, name)
+            checked += 1
+        assert checked == len(landmarks) - 4  # all but the tips and pads

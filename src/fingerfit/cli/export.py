@@ -28,6 +28,13 @@ def export(
         Path | None,
         typer.Option("--osim", help="OpenSim model to write (.osim; metres, radians)."),
     ] = None,
+    landmarks: Annotated[
+        Path | None,
+        typer.Option(
+            "--landmarks",
+            help="--osim: also the session's landmarks.csv (session units) as markers.",
+        ),
+    ] = None,
     variant: Annotated[
         str,
         typer.Option(help=f"Flexion axes: {' or '.join(VARIANTS)} (perpendicular to the bones)."),
@@ -62,6 +69,7 @@ def export(
         margin_deg,
         fix_centres,
         overwrite,
+        landmarks,
     )
 
 
@@ -72,14 +80,20 @@ def _export(
     margin_deg: float,
     fix_centres: bool = False,
     overwrite: bool = False,
+    landmarks: Path | None = None,
 ) -> None:
     """Check the options, build every document, then write them all or none.
 
-    ``targets``: option (``--urdf``, ``--mjcf``, ``--osim``) -> the file it names, or None.
+    ``targets``: option (``--urdf``, ``--mjcf``, ``--osim``) -> the file it names, or None;
+    ``landmarks``: a landmarks CSV whose points the OpenSim model carries as markers.
     """
+    from functools import partial
+
     from ..export import mjcf_string, osim_string, robot_hand, urdf_string
     from ..export import write_text as _write_text
+    from ..export.osim import landmark_markers
     from ..io.atomic import check_target, refuse_writing_inputs
+    from ..io.sessiondir import read_landmarks
     from ..model import VARIANTS, load_model, with_fixed_centres
 
     given = {flag: p for flag, p in targets.items() if p is not None}
@@ -90,7 +104,10 @@ def _export(
         if p.resolve() in seen:
             raise FingerfitError(f"{seen[p.resolve()]} and {flag} name the same file", path=p)
         seen[p.resolve()] = flag
-    refuse_writing_inputs(list(given.values()), [model_path])
+    if landmarks is not None and "--osim" not in given:
+        raise FingerfitError("applies to --osim only", field="--landmarks")
+    inputs = [model_path] if landmarks is None else [model_path, landmarks]
+    refuse_writing_inputs(list(given.values()), inputs)
     for p in given.values():
         check_target(p, overwrite=overwrite)
     if variant not in VARIANTS:
@@ -106,10 +123,23 @@ def _export(
                 f"{joint}: migrating centre fixed at mid-range; it differs from the fitted "
                 f"one by up to {mm:.2f} mm over the observed range of motion",
             )
-    build = {"--urdf": urdf_string, "--mjcf": mjcf_string, "--osim": osim_string}
+    points = None if landmarks is None else read_landmarks(landmarks, units=model.session_units)
+    hand = robot_hand(model, variant, margin_deg)
+    if points:
+        skipped = landmark_markers(model, hand, points)[1]
+        if skipped:
+            notice(
+                "note",
+                f"{len(skipped)} landmark(s) not made markers ({', '.join(skipped)}): a tip "
+                "or pad is the model's <digit>_tip/<digit>_pad, or the digit is not modelled",
+            )
+    build = {
+        "--urdf": urdf_string,
+        "--mjcf": mjcf_string,
+        "--osim": partial(osim_string, landmarks=points),
+    }
     files = {p: build[flag](model, variant, margin_deg) for flag, p in given.items()}
     _write_text(files, overwrite=overwrite)  # all files or none
-    hand = robot_hand(model, variant, margin_deg)
     out.print(
         f"{len(hand.fingers)} digit(s), {len(hand.joints)} joints ({variant} axes, limits = "
         f"observed range of motion ± {margin_deg:g}°; metres, radians) -> "

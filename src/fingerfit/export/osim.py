@@ -24,7 +24,8 @@ The model a biomechanics lab opens in OpenSim, built from the chain description 
   :func:`~.geometry.palm_link`.
 * Each sensor is a ``PhysicalOffsetFrame`` ``<segment>_imu`` (:func:`~fingerfit.io.opensim.frame_name`)
   on its body at its reference pose; each also has a marker of that name at its origin.
-  Markers ``<digit>_tip`` and ``<digit>_pad`` sit on the distal body.
+  Markers ``<digit>_tip`` and ``<digit>_pad`` sit on the distal body; the session's
+  stylus landmarks, when given (:func:`landmark_markers`), are markers too.
 
 No element needs a quaternion: frame orientations are OpenSim's body-fixed X-Y-Z angles
 (rad). Numbers are written with round-trip precision. See ``docs/export.md``, *OpenSim*.
@@ -44,7 +45,14 @@ from ..model import HandModel
 from ..session import HAND_SENSOR
 from ..transforms import FloatArray
 from .files import write_text
-from .geometry import DEFAULT_MARGIN_DEG, HAND_LINK, RobotHand, RobotLink, robot_hand
+from .geometry import (
+    DEFAULT_MARGIN_DEG,
+    HAND_LINK,
+    RobotHand,
+    RobotLink,
+    robot_hand,
+    to_hand_frame,
+)
 
 #: OpenSim document version written (OpenSim 4.6).
 DOCUMENT_VERSION = "40600"
@@ -142,6 +150,7 @@ def _transform(
 
 
 def _path(link: str) -> str:
+    """A body's path in the model (``ground`` is no body)."""
     return "/ground" if link == "ground" else f"/bodyset/{link}"
 
 
@@ -176,7 +185,54 @@ def hand_coordinates(model: HandModel, rotation: FloatArray, position: FloatArra
     return out
 
 
-def _model_element(model: HandModel, hand: RobotHand) -> ET.Element:
+def landmark_markers(
+    model: HandModel, hand: RobotHand, landmarks: dict[str, FloatArray]
+) -> tuple[list[tuple[str, str, FloatArray]], list[str]]:
+    """The session's landmarks as markers of the exported model.
+
+    Parameters
+    ----------
+    model : HandModel
+    hand : RobotHand
+        Its chain description.
+    landmarks : dict[str, ndarray]
+        Name -> position ``(3,)``, tracker coordinates at the reference posture (mm), as
+        :func:`fingerfit.io.read_landmarks` gives them.
+
+    Returns
+    -------
+    markers : list of (name, body, location)
+        A dorsal joint landmark ``<digit>.<joint>`` becomes ``<digit>_<joint>_dorsal`` on
+        the joint's parent segment (the bone whose head it lies over: the hand for the MP
+        and the CMC); a target ``target.<label>`` becomes ``target_<label>`` on ground;
+        ``location`` in the body's frame (m).
+    skipped : list of str
+        Landmarks not made markers: ``<digit>.tip`` and ``<digit>.pad`` (the model's
+        ``<digit>_tip`` and ``<digit>_pad`` are those points), and those of digits the
+        model does not have.
+    """
+    origins = {HAND_LINK: np.zeros(3), **{j.child: j.centre for j, _ in hand.chain()}}
+    parent = {j.name: j.parent for j, _ in hand.chain()}
+    markers, skipped = [], []
+    for name, p in landmarks.items():
+        head, _, tail = name.partition(".")
+        if head == "target":
+            markers.append((f"target_{tail}", "ground", np.asarray(p, dtype=float) / 1000.0))
+            continue
+        fm = model.fingers.get(head)
+        if fm is None or tail not in fm.joints:
+            skipped.append(name)
+            continue
+        # the first axis of the joint: its parent is the segment before the joint
+        link = parent[f"{head}_{fm.axes(tail)[0].name}"]
+        location = to_hand_frame(model, p) - origins[link]
+        markers.append((f"{head}_{tail}_dorsal", link, location))
+    return markers, skipped
+
+
+def _model_element(
+    model: HandModel, hand: RobotHand, landmarks: list[tuple[str, str, FloatArray]]
+) -> ET.Element:
     t0, r0 = (np.asarray(v, dtype=float) for v in model.reference_poses[HAND_SENSOR])
     doc = ET.Element("OpenSimDocument", Version=DOCUMENT_VERSION)
     m = _sub(doc, "Model", name=hand.name)
@@ -252,11 +308,16 @@ def _model_element(model: HandModel, hand: RobotHand) -> ET.Element:
             marker(finger.pad_name, distal, finger.pad)
     for sensor in hand.sensors:
         marker(frame_name(sensor.name), sensor.link, sensor.position)
+    for name, link, location in landmarks:
+        marker(name, link, location)
     return doc
 
 
 def osim_string(
-    model: HandModel, variant: str = "user_axis", margin_deg: float = DEFAULT_MARGIN_DEG
+    model: HandModel,
+    variant: str = "user_axis",
+    margin_deg: float = DEFAULT_MARGIN_DEG,
+    landmarks: dict[str, FloatArray] | None = None,
 ) -> str:
     """The OpenSim model document of a hand model.
 
@@ -268,6 +329,9 @@ def osim_string(
         Fitted flexion axes, or the axes made perpendicular to the bones.
     margin_deg : float
         Joint-limit margin (deg), see :func:`fingerfit.export.geometry.joint_limits`.
+    landmarks : dict[str, ndarray], optional
+        The session's stylus landmarks (tracker coordinates at the reference posture, mm),
+        made markers by :func:`landmark_markers`.
 
     Returns
     -------
@@ -281,7 +345,8 @@ def osim_string(
         Unknown variant or bad model (see :func:`~fingerfit.export.geometry.robot_hand`).
     """
     hand = robot_hand(model, variant, margin_deg)
-    doc = _model_element(model, hand)
+    markers = landmark_markers(model, hand, landmarks or {})[0]
+    doc = _model_element(model, hand, markers)
     doc.insert(
         0,
         ET.Comment(
@@ -299,6 +364,7 @@ def write_osim(
     path: str | Path,
     variant: str = "user_axis",
     margin_deg: float = DEFAULT_MARGIN_DEG,
+    landmarks: dict[str, FloatArray] | None = None,
 ) -> Path:
     """Write the OpenSim model of a hand model atomically (see :func:`osim_string`).
 
@@ -310,6 +376,8 @@ def write_osim(
     variant : {"user_axis", "orthogonal"}
     margin_deg : float
         Joint-limit margin (deg).
+    landmarks : dict[str, ndarray], optional
+        Stylus landmarks (mm, tracker, reference posture) to add as markers.
 
     Returns
     -------
@@ -320,4 +388,4 @@ def write_osim(
     FingerfitError
         As :func:`osim_string`, or when ``path`` cannot be written (no file is left behind).
     """
-    return write_text({Path(path): osim_string(model, variant, margin_deg)})[0]
+    return write_text({Path(path): osim_string(model, variant, margin_deg, landmarks)})[0]
