@@ -51,7 +51,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FingerfitError
-from ..estimate.plausibility.bounds import SEGMENT_FRACTION
 from ..model import VARIANTS, HandModel, JointModel
 from ..session import HAND_SENSOR
 from ..transforms import FloatArray
@@ -484,6 +483,8 @@ def palm_link(model: HandModel) -> RobotLink:
         Named ``hand``, without geometry (``capsule`` None, ``radius`` 0): mass (kg),
         centre of mass (m) and inertia about it (kg m^2), hand frame.
     """
+    from ..estimate.plausibility.bounds import SEGMENT_FRACTION  # the estimate package: lazily
+
     parts = []
     for fname, fm in model.fingers.items():
         if fname == "thumb":

@@ -43,7 +43,7 @@ from scipy.spatial.transform import Rotation
 from ..io.opensim import frame_name
 from ..model import HandModel
 from ..session import HAND_SENSOR
-from ..transforms import FloatArray
+from ..transforms import FloatArray, orthonormal_basis
 from .files import write_text
 from .geometry import (
     DEFAULT_MARGIN_DEG,
@@ -104,15 +104,9 @@ def _inertial(body: ET.Element, link: RobotLink, massless: bool = False) -> None
 def _bone(components: ET.Element, link: RobotLink) -> None:
     """The capsule's cylinder (its axis along the bone: OpenSim cylinders run along y)."""
     start, end = link.capsule
-    d = (end - start) / np.linalg.norm(end - start)
-    x = np.cross(d, np.eye(3)[np.argmin(np.abs(d))])
-    x /= np.linalg.norm(x)
+    e1, e2, d = orthonormal_basis(end - start)  # right-handed, d along the bone
     frame = _offset_frame(
-        components,
-        f"{link.name}_bone",
-        "..",
-        (start + end) / 2,
-        np.column_stack([x, d, np.cross(x, d)]),
+        components, f"{link.name}_bone", "..", (start + end) / 2, np.column_stack([e2, d, e1])
     )
     geometry = _sub(frame, "attached_geometry")
     cylinder = _sub(geometry, "Cylinder", name=f"{link.name}_capsule")
@@ -286,12 +280,9 @@ def _model_element(
         _offset_frame(
             _sub(joint, "frames"), f"{j.parent}_offset", _path(j.parent), j.origin, np.eye(3)
         )
-        x = np.cross(j.axis, np.eye(3)[np.argmin(np.abs(j.axis))])
-        x /= np.linalg.norm(x)
+        e1, e2, _ = orthonormal_basis(j.axis)  # the two unused axes: any independent ones
         _transform(
-            joint,
-            [(j.axis, j.name), (x, None), (np.cross(j.axis, x), None)],
-            [(e, None) for e in np.eye(3)],
+            joint, [(j.axis, j.name), (e1, None), (e2, None)], [(e, None) for e in np.eye(3)]
         )
 
     markers = _sub(_sub(m, "MarkerSet", name="markerset"), "objects")
