@@ -83,16 +83,23 @@ def quality_table(model: HandModel) -> Table:
 
 
 def read_checked_recording(
-    model: HandModel, path: Path, units: str, rate: float | None, force: bool
+    model: HandModel,
+    path: Path,
+    units: str,
+    rate: float | None,
+    force: bool,
+    sensors: list[str] | None = None,
 ) -> Recording:
     """A pose CSV read for a model (``angles``, ``stream --source replay:``): its repair
-    notes shown, then checked against the model -- a wrong ``--units`` or quaternion order,
-    or another subject's recording, gives wrong angles without complaint
-    (:mod:`fingerfit.estimate.plausibility`); ``force`` goes on with warnings."""
+    notes shown, ``sensors`` kept (``--sensors``; all when None), then checked against the
+    model -- a wrong ``--units`` or quaternion order, or another subject's recording, gives
+    wrong angles without complaint (:mod:`fingerfit.estimate.plausibility`); ``force`` goes
+    on with warnings."""
     from ..estimate.plausibility import check_recording, enforce
     from ..io import read_pose_csv
+    from ..track import select_sensors
 
-    rec = read_pose_csv(path, units=units, rate_hz=rate)
+    rec = select_sensors(read_pose_csv(path, units=units, rate_hz=rate), sensors)
     for note in rec.notes:
         notice("note", note)
     with warnings.catch_warnings(record=True) as caught:
@@ -211,14 +218,40 @@ def angles(
             "quaternion order, sensors), with a warning.",
         ),
     ] = False,
+    sensors: Annotated[
+        str | None,
+        typer.Option(
+            help="Use only these sensors of the recording (comma-separated, e.g. "
+            "hand,index.distal): try a reduced layout on a full recording (docs/tracking.md).",
+        ),
+    ] = None,
+    fingers: Annotated[
+        str | None,
+        typer.Option(help="Comma-separated digits to compute (default: every digit of the model)."),
+    ] = None,
+    uncertainty: Annotated[
+        bool,
+        typer.Option(
+            "--uncertainty",
+            help="Also write each angle's standard deviation where the model solved the "
+            "frame (<digit>.<joint>.sd, deg).",
+        ),
+    ] = False,
     quiet: Quiet = False,
 ) -> None:
-    """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
+    """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models.
+
+    A frame with a digit's sensor missing (absent from the recording, a dropout, or left
+    out with --sensors) is solved by the model: docs/tracking.md.
+    """
+    from ..digits import DIGIT_NAMES
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.parquet import angles_meta, write_table_file
-    from ..kinematics import compute_kinematics, kinematics_table
+    from ..kinematics import kinematics_table
     from ..model import load_model
     from ..session import UNITS_TO_MM
+    from ..track import track_recording
+    from ..track.report import tracking_columns, tracking_lines
 
     outputs = [output] if urdf_names is None else [output, urdf_names]
     refuse_writing_inputs(outputs, [model_path, recording])
@@ -228,17 +261,30 @@ def angles(
     units = units or model.session_units
     if units not in UNITS_TO_MM:
         raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
-    rec = read_checked_recording(model, recording, units, rate, force)
+    names = parse_list(fingers, DIGIT_NAMES, "--fingers")
+    for d in names or []:
+        if d not in model.fingers:
+            raise typer.BadParameter(
+                f"the model has no '{d}' (has: {', '.join(model.fingers)})", param_hint="--fingers"
+            )
+    chosen = None if sensors is None else [x.strip() for x in sensors.split(",") if x.strip()]
+    rec = read_checked_recording(model, recording, units, rate, force, chosen)
     with progress(quiet) as bar:
         n = rec.n_frames
         task = bar.add_task("angles and fingertips", total=n + n)
-        kin = compute_kinematics(model, rec)
+        tracked = track_recording(model, rec, fingers=names)
+        kin = tracked.kinematics
         if output.suffix.lower() == ".mot":  # every coordinate of `export --osim`
             from ..export.trajectory import write_coordinates
 
             write_coordinates(output, kin, model, rec)
         else:
             table = kinematics_table(kin, units=units)
+            extra = tracking_columns(tracked, uncertainty)
+            if extra:
+                import pandas as pd
+
+                table = pd.concat([table, pd.DataFrame(extra)], axis=1)
             bar.update(task, advance=n, description=f"writing {output.name}")
             # Atomic, in batches of rows (progress bar): CSV floats in shortest round-trip
             # form, or Parquet (OUT.parquet) float64 with the units in its metadata.
@@ -257,3 +303,5 @@ def angles(
         if output.suffix.lower() == ".mot"
         else f"angles deg, fingertips {units}, tracker frame",
     )
+    for line in tracking_lines(tracked):
+        say("{}", line)

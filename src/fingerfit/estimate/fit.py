@@ -35,6 +35,7 @@ from ..model import (
     estimated_pad,
 )
 from ..session import HAND_SENSOR, JOINTS, Session
+from ..track.statistics import tracking_statistics
 from ..transforms import FloatArray, relative_pose, rotation_vector
 from .axis import AxisFit, orient_flexion
 from .bootstrap import Z95, cycle_axis_ci_deg
@@ -460,6 +461,9 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
         angle_method=options.angle_method or METHOD_ANGLES[options.method],
     )
     model = pinch_pads(session, model)
+    # What tracking with fewer sensors needs: each sensor's spread about the model and
+    # each angle's range and speed, on the calibration recordings (fingerfit.track).
+    model = replace(model, tracking=tracking_statistics(model, session.grasp))
     forced += enforce(check_model(model, session), options.force)
     return replace(model, warnings=tuple(forced))
 
