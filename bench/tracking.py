@@ -86,6 +86,7 @@ OPTION_VARIANTS = {
     "no temporal prior": TrackOptions(temporal=False),
     "no bounds": TrackOptions(bounds=False),
     "neither": TrackOptions(temporal=False, bounds=False),
+    "bounds 0.25": TrackOptions(bound_fraction=0.25),
 }
 DROPOUT_FRACTION = 0.2
 BURST_S = (0.1, 2.0)

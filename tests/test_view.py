@@ -216,7 +216,7 @@ class _Outlet:
     def __init__(self):
         self.robot = []
 
-    def push(self, angles, tips, valid, arrival, robot=None):
+    def push(self, angles, tips, valid, arrival, robot=None, source=None):
         self.robot.append(robot[0].copy())
 
     def has_consumers(self):

@@ -110,6 +110,19 @@ def read_checked_recording(
     return rec
 
 
+def check_solved(tracked, path: Path, force: bool) -> None:
+    """The frames the model solved, checked against it (the residual of its solution: the
+    pivot check of a reduced layout, :func:`fingerfit.estimate.plausibility.check_tracking`);
+    ``force`` goes on with a warning."""
+    from ..estimate.plausibility import check_tracking, enforce
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        enforce(check_tracking(tracked, path), force)
+    for w in caught:
+        notice("warning", str(w.message))
+
+
 @app.command()
 @user_errors
 def fit(
@@ -273,6 +286,7 @@ def angles(
         n = rec.n_frames
         task = bar.add_task("angles and fingertips", total=n + n)
         tracked = track_recording(model, rec, fingers=names)
+        check_solved(tracked, recording, force)
         kin = tracked.kinematics
         if output.suffix.lower() == ".mot":  # every coordinate of `export --osim`
             from ..export.trajectory import write_coordinates

@@ -106,12 +106,12 @@ def view(
 
 def _scene(model, rec, recording: Path, robot, map_path, method, orthogonal, quiet):
     """The :class:`fingerfit.view.Scene` of a recording, with the robot and the truth."""
-    from ..kinematics import compute_kinematics
+    from ..track import track_recording
     from ..view import hand_scene, robot_scene, truth_tips
 
     with progress(quiet) as bar:
         task = bar.add_task("kinematics", total=3 if robot is not None else 2)
-        kin = compute_kinematics(model, rec)
+        kin = track_recording(model, rec).kinematics  # missing sensors solved by the model
         scene = hand_scene(model, rec, kin)
         bar.update(task, advance=1, description="truth")
         scene.truth_tips, note = truth_tips(recording, rec.n_frames)

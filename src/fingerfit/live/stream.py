@@ -46,7 +46,7 @@ import numpy as np
 from ..errors import FingerfitError
 from ..kinematics import KinematicsPlan, compute_kinematics
 from ..model import HandModel
-from ..session import PoseSeries, Recording
+from ..session import HAND_SENSOR, PoseSeries, Recording
 from ..track.live import LiveTracker
 from ..transforms import FloatArray
 from .datalane import DATA_PERIOD, DataLane
@@ -178,6 +178,11 @@ class Streamer:
             LiveTracker(model, self.variants) if model.tracking is not None and self.live else None
         )
         self._nan: dict[int, PoseSeries] = {}
+        self._hand_index = self.sensors.index(HAND_SENSOR)
+        self._digit_sensors = [
+            np.array([self.sensors.index(jm.child) for jm in fm.joints.values()])
+            for fm in model.fingers.values()
+        ]
         self.wall_offset = time.time() - time.monotonic()
         self.summary = Summary()
         # The robot lane's per-frame buffers, allocated once: the values of the frame
@@ -226,7 +231,7 @@ class Streamer:
         presence = sensor_presence(block.recording, self.sensors)
         valid = presence.all(axis=1)
         if self.live:
-            self._send(block, bool(valid[-1]))
+            self._send(block, bool(valid[-1]), presence[-1])
         s.received += n
         s.lost += block.lost
         bad = int(n - np.count_nonzero(valid))
@@ -247,6 +252,14 @@ class Streamer:
         statistics; else they are held)."""
         return self.model.tracking is not None
 
+    def _all_solved(self, present: np.ndarray) -> bool:
+        """Whether the model solves every digit of a frame (``present``: each of
+        :attr:`sensors`): the hand sensor there, and every digit missing one of its own and
+        having another."""
+        return bool(present[self._hand_index]) and all(
+            present[idx].any() and not present[idx].all() for idx in self._digit_sensors
+        )
+
     def _complete(self, rec: Recording) -> Recording:
         """``rec`` with a pose series of NaN for each model sensor it lacks (a source that
         never delivers one: the layout was checked before the stream started)."""
@@ -259,9 +272,9 @@ class Streamer:
             poses.setdefault(x, nan)
         return Recording(rec.name, rec.time, poses, rec.notes)
 
-    def _send(self, block: Block, valid: bool) -> None:
+    def _send(self, block: Block, valid: bool, present: np.ndarray) -> None:
         """The robot lane: the newest frame of ``block`` (``valid``: every sensor present
-        in it) if it is fresh enough."""
+        in it; ``present``: each of :attr:`sensors`) if it is fresh enough."""
         s = self.summary
         n = block.recording.n_frames
         arrived = float(block.arrival[-1])
@@ -275,11 +288,12 @@ class Streamer:
             return
         rec = block.recording if n == 1 else block.recording.slice(slice(n - 1, n))
         t = time.perf_counter()
-        kin = (
-            self.plan.run(rec)
-            if self.plan is not None
-            else compute_kinematics(self.model, rec, self.variants)
-        )
+        if self.tracker is not None and not valid and self._all_solved(present):
+            kin = self.tracker.blank(rec)  # no digit to compute directly: all solved
+        elif self.plan is not None:
+            kin = self.plan.run(rec)
+        else:
+            kin = compute_kinematics(self.model, rec, self.variants)
         source = None
         if self.tracker is not None:
             if valid:

@@ -305,12 +305,14 @@ def start(
     pick[run_end] = True
     cols = np.flatnonzero(pick)
     seed = direct[..., cols]
-    coarse = solve_frames(chains, weights, obs.take(cols), np.where(np.isfinite(seed), seed, mid))
+    sub = obs.take(cols)
+    coarse = solve_frames(chains, weights, sub, np.where(np.isfinite(seed), seed, mid))
+    q = repair(chains, weights, sub, coarse.q, coarse.cost, seed, run_of(linked)[cols])[0]
     # Interpolation within a run only: each run shifted far from the others in time.
-    run = np.cumsum(~linked | (np.arange(m) == 0)) - 1
+    run = run_of(linked)
     span = float(time[-1] - time[0]) + 1.0 if m else 1.0
     t = time - time[0] + run * span
-    flat = coarse.q.reshape(-1, cols.size)
+    flat = q.reshape(-1, cols.size)
     out = np.stack([np.interp(t, t[cols], x) for x in flat]).reshape(direct.shape)
     return np.where(np.isfinite(direct), direct, out)
 
@@ -331,6 +333,92 @@ def last_frame(kin: Kinematics) -> Kinematics:
             for v, ms in kin.motions.items()
         },
     )
+
+
+def run_of(linked: np.ndarray) -> np.ndarray:
+    """Each frame's run of consecutive frames (0, 1, ...), from ``linked`` (whether a frame
+    follows the one before it)."""
+    return np.cumsum(~linked | (np.arange(linked.size) == 0)) - 1
+
+
+#: A frame whose cost exceeds this many times the median frame's (plus
+#: :data:`SUSPECT_FLOOR`) is solved again from other starts (:func:`repair`).
+SUSPECT_RATIO = 4.0
+SUSPECT_FLOOR = 10.0
+#: Passes of :func:`repair` at most (each lets a solution reach one more frame).
+REPAIR_PASSES = 32
+
+
+def repair(
+    chains: Chains,
+    weights: Weights,
+    obs: Observed,
+    q: FloatArray,
+    cost: FloatArray,
+    direct: FloatArray,
+    run: np.ndarray,
+) -> tuple[FloatArray, FloatArray]:
+    """Frames left in a wrong minimum (a mirror solution: a joint flexed the wrong way
+    where the sensors alone cannot tell) solved again from better starts.
+
+    A frame whose cost stands out (:data:`SUSPECT_RATIO` times the median frame's of its
+    chain) is solved again from the solutions of the frames before and after it in its run
+    (a finger moves continuously) and from three points of the calibration's range; the
+    cheapest solution is kept. Passes repeat while they improve a frame, so a good
+    solution travels along a run of wrong ones.
+
+    Parameters
+    ----------
+    chains, weights, obs
+        As :func:`~.solver.solve_frames` (``m`` frames, in time order).
+    q : ndarray, shape (D, L, m)
+        Each frame's solution (rad).
+    cost : ndarray, shape (D, m)
+        Its cost.
+    direct : ndarray, shape (D, L, m)
+        The angles the frames' sensors give directly (NaN elsewhere): kept as starts.
+    run : ndarray of int, shape (m,)
+        Each frame's run of consecutive frames.
+
+    Returns
+    -------
+    q, cost : ndarray
+        Improved.
+    """
+    q, cost = q.copy(), cost.copy()
+    m = q.shape[-1]
+    lo, hi = weights.low[..., None], weights.high[..., None]
+    fixed = [lo + f * (hi - lo) for f in (0.25, 0.5, 0.75)]
+    tried = np.zeros(m, dtype=bool)
+    for _ in range(REPAIR_PASSES):
+        median = np.median(cost, axis=1, keepdims=True)
+        suspect = (cost > SUSPECT_RATIO * median + SUSPECT_FLOOR).any(axis=0)
+        cols = np.flatnonzero(suspect)
+        if cols.size == 0:
+            break
+        prev = np.clip(cols - 1, 0, m - 1)
+        nxt = np.clip(cols + 1, 0, m - 1)
+        starts = [q[..., prev], q[..., nxt]]
+        if not tried[cols].all():
+            starts += [np.broadcast_to(f, q[..., cols].shape) for f in fixed]
+            tried[cols] = True
+        better = False
+        sub = obs.take(cols)
+        same = np.isfinite(direct[..., cols])
+        oks = [run[prev] == run[cols], run[nxt] == run[cols]] + [None] * (len(starts) - 2)
+        for start, ok in zip(starts, oks, strict=True):
+            q0 = np.where(same, direct[..., cols], start)
+            sol = solve_frames(chains, weights, sub, q0)
+            gain = sol.cost < cost[..., cols] * (1.0 - 1e-9)
+            if ok is not None:
+                gain &= ok[None, :]
+            if gain.any():
+                better = True
+                q[..., cols] = np.where(gain[:, None], sol.q, q[..., cols])
+                cost[..., cols] = np.where(gain, sol.cost, cost[..., cols])
+        if not better:
+            break
+    return q, cost
 
 
 def _dilate(mask: np.ndarray, margin: int) -> np.ndarray:

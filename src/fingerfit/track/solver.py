@@ -26,13 +26,14 @@ as one symmetric banded system.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import solveh_banded
 
 from ..transforms import FloatArray
-from .chains import Chains, matmul_rows
+from .chains import ChainPose, Chains, matmul_rows
 
 #: Added to the diagonal of every frame's normal matrix (1/rad^2): makes an undetermined
 #: angle stay where it is (data terms are 1e3-1e6 per rad^2).
@@ -152,6 +153,7 @@ def observe(
     return Observed(pos, rot, present)
 
 
+@functools.cache
 def pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Row and column of each entry of an ``n x n`` upper triangle, row by row."""
     return np.triu_indices(n)
@@ -179,9 +181,12 @@ class Terms:
     rms_mm: FloatArray
 
 
-def data_terms(chains: Chains, weights: Weights, obs: Observed, q: FloatArray) -> Terms:
+def data_terms(
+    chains: Chains, weights: Weights, obs: Observed, q: FloatArray, pose: ChainPose | None = None
+) -> Terms:
     """The sensors' part of the normal equations at ``q (D, L, m)`` (see the module notes),
-    evaluated in blocks of :data:`BLOCK` frames."""
+    evaluated in blocks of :data:`BLOCK` frames; ``pose``: the chains already posed at
+    ``q`` (one block)."""
     m = q.shape[-1]
     if m > BLOCK:
         parts = [
@@ -194,7 +199,8 @@ def data_terms(chains: Chains, weights: Weights, obs: Observed, q: FloatArray) -
                 for f in Terms.__dataclass_fields__
             )
         )
-    pose = chains.pose(q)
+    if pose is None:
+        pose = chains.pose(q)
     n_chain, L, m = q.shape
     present = obs.present
     wp = present * weights.position[..., None]  # (D, S, m)
@@ -260,9 +266,9 @@ def gram_rows(j: FloatArray) -> FloatArray:
     n_chain, L, _, m = j.shape
     rows, cols = pairs(L)
     if m <= SMALL:
-        f = np.moveaxis(j, -1, 1)  # (D, m, L, k)
-        full = f @ np.swapaxes(f, -1, -2)  # (D, m, L, L)
-        return np.moveaxis(full[..., rows, cols], 1, -1)
+        f = j.transpose(0, 3, 1, 2)  # (D, m, L, k)
+        full = f @ f.transpose(0, 1, 3, 2)  # (D, m, L, L)
+        return full[..., rows, cols].transpose(0, 2, 1)
     out = np.empty((n_chain, rows.size, m))
     for p, (r, c) in enumerate(zip(rows, cols, strict=True)):
         np.einsum("dkm,dkm->dm", j[:, r], j[:, c], out=out[:, p])
@@ -330,10 +336,11 @@ def solve_packed(h: FloatArray, g: FloatArray) -> FloatArray:
     if m <= SMALL:
         rows, cols = pairs(L)
         full = np.empty((*h.shape[:-2], m, L, L))
-        packed = np.moveaxis(h, -1, -2)  # (..., m, P)
+        packed = np.swapaxes(h, -1, -2)  # (..., m, P)
         full[..., rows, cols] = packed
         full[..., cols, rows] = packed
-        return np.moveaxis(np.linalg.solve(full, np.moveaxis(g, -1, -2)[..., None])[..., 0], -2, -1)
+        x = np.linalg.solve(full, np.swapaxes(g, -1, -2)[..., None])  # (..., m, L, 1)
+        return np.swapaxes(x[..., 0], -1, -2)
     return solve_cholesky(cholesky_packed(h), g)
 
 
@@ -350,14 +357,18 @@ class Solution:
     hessian : ndarray, shape (D, P, m)
         The sensors' normal matrix at ``q`` (upper triangle), for :func:`uncertainty`.
     iterations : int
+    cost : ndarray, shape (D, m), optional
+        Each frame's cost at ``q`` (:func:`solve_frames`: sensors, bounds and prior).
     """
 
     q: FloatArray
     rms_mm: FloatArray
     hessian: FloatArray
     iterations: int
+    cost: FloatArray | None = None
 
 
+@functools.cache
 def _diagonal(L: int) -> np.ndarray:
     """Rows of the diagonal in the packed upper triangle."""
     rows, cols = pairs(L)
@@ -370,6 +381,7 @@ def gauss_newton_step(
     obs: Observed,
     q: FloatArray,
     prior: tuple[FloatArray, FloatArray] | None = None,
+    pose: ChainPose | None = None,
 ) -> tuple[FloatArray, FloatArray, float]:
     """One Gauss-Newton step of every frame (the live filter's: no step control; a frame
     starts within one frame's motion of its solution).
@@ -384,6 +396,8 @@ def gauss_newton_step(
         ``(centre (D, L, m) rad, information (D, P, m) 1/rad^2)``: adds
         ``(q - centre)^T Lambda (q - centre)``, ``Lambda`` given as its upper triangle
         (:func:`pairs` order): the filter's prior from the frame before.
+    pose : ChainPose, optional
+        The chains posed at ``q`` (kept from the frame before).
 
     Returns
     -------
@@ -397,7 +411,7 @@ def gauss_newton_step(
     """
     pad = (~chains.active)[..., None]
     diag = _diagonal(chains.L)
-    t = data_terms(chains, weights, obs, q)
+    t = data_terms(chains, weights, obs, q, pose)
     bd, bg, _ = bound_terms(weights, q)
     h = t.hessian
     h[:, diag] += bd + RIDGE + pad
@@ -510,7 +524,7 @@ def solve_frames(
         cols = cols[~done]
         if cols.size == 0:
             break
-    return Solution(q, rms, data_h, it)
+    return Solution(q, rms, data_h, it, cost)
 
 
 def smooth(

@@ -35,6 +35,7 @@ from ..errors import FingerfitError
 from ..kinematics import compute_kinematics
 from ..model import HandModel
 from ..session import Recording
+from ..track.recording import last_frame, track_recording
 from ..transforms import FloatArray
 from .rerunlog import (
     blueprint,
@@ -270,6 +271,7 @@ class _Logger:
         self.frames = 0
         self.stream, self.stack = open_view(save, blueprint(robot is not None))
         self._started = False
+        self._anchor = None
 
     def log(
         self, first: int, recording: Recording, rows: np.ndarray | None, q: FloatArray | None
@@ -277,7 +279,13 @@ class _Logger:
         """Log the block whose first frame is the stream's frame ``first``; the robot at
         the block's ``rows`` (all when None) with joints ``q`` (rows, nq)."""
         n = recording.n_frames
-        kin = compute_kinematics(self.model, recording, _VARIANTS)
+        if self.model.tracking is not None and n:
+            # Frames with a missing sensor: solved by the model as the stream's files are,
+            # joined to the previous block by the temporal prior.
+            kin = track_recording(self.model, recording, _VARIANTS, anchor=self._anchor).kinematics
+            self._anchor = last_frame(kin)
+        else:
+            kin = compute_kinematics(self.model, recording, _VARIANTS)
         scene = hand_scene(self.model, recording, kin)
         if not self._started:
             log_static(scene, self.stream)
