@@ -316,7 +316,7 @@ def test_cli_writes_csv_and_identical_npz(hand, tmp_path):
     from typer.testing import CliRunner
 
     from fingerfit.cli import app
-    from fingerfit.io.posecsv import write_pose_csv
+    from fingerfit.io.posewrite import write_pose_csv
     from fingerfit.model import save_model
 
     model, rec = hand

@@ -56,6 +56,10 @@ def export(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace existing output files.")
     ] = False,
+    quiet: Annotated[
+        bool,
+        typer.Option("--quiet", "-q", help="Print nothing but warnings (the files are named)."),
+    ] = False,
 ) -> None:
     """Export the digit chains for robot and biomechanics software: root `hand` (hand sensor
     frame), joints <digit>_<joint>, tips <digit>_tip.
@@ -70,6 +74,7 @@ def export(
         fix_centres,
         overwrite,
         landmarks,
+        quiet,
     )
 
 
@@ -81,6 +86,7 @@ def _export(
     fix_centres: bool = False,
     overwrite: bool = False,
     landmarks: Path | None = None,
+    quiet: bool = False,
 ) -> None:
     """Check the options, build every document, then write them all or none.
 
@@ -140,6 +146,8 @@ def _export(
     }
     files = {p: build[flag](model, variant, margin_deg) for flag, p in given.items()}
     _write_text(files, overwrite=overwrite)  # all files or none
+    if quiet:
+        return
     out.print(
         f"{len(hand.fingers)} digit(s), {len(hand.joints)} joints ({variant} axes, limits = "
         f"observed range of motion ± {margin_deg:g}°; metres, radians) -> "

@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ._names import DEFAULT_METHOD, METHODS
-from .app import Quiet, app, notice, out, parse_list, progress, say, user_errors
+from .app import Quiet, QuietTable, app, notice, out, parse_list, progress, say, user_errors
 
 #: One line per column of the fit table (``docs/methods.md`` explains each figure).
 TABLE_LEGEND = {
@@ -151,7 +151,7 @@ def fit(
             "checks (units, quaternion order); the warnings are stored in the model file.",
         ),
     ] = False,
-    quiet: Quiet = False,
+    quiet: QuietTable = False,
 ) -> None:
     """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
     from ..digits import DIGIT_NAMES as FINGERS
@@ -185,7 +185,8 @@ def fit(
     if model.warnings:
         notice("warning", f"{len(model.warnings)} warning(s) stored in the model file (--force)")
     path = save_model(model, target)
-    out.print(quality_table(model))
+    if not quiet:
+        out.print(quality_table(model))
     say("model written to [bold]{}[/]", path)
 
 

@@ -14,8 +14,17 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import FingerfitError
-from .app import app, notice, out, say, user_errors
-from .convert import SourceFormat
+from .app import QuietTable, app, notice, out, say, user_errors
+
+
+class JointSource(StrEnum):
+    """Input formats of ``fingerfit joint``."""
+
+    pose_csv = "pose-csv"
+    liberty = "liberty"
+    liberty_binary = "liberty-binary"
+    wide_csv = "wide-csv"
+    c3d = "c3d"
 
 
 class JointKind(StrEnum):
@@ -29,7 +38,7 @@ class JointKind(StrEnum):
 
 def read_any(
     source: Path,
-    fmt: SourceFormat,
+    fmt: JointSource,
     *,
     units: str | None,
     rate: float | None,
@@ -113,8 +122,8 @@ def joint(
     kind: Annotated[JointKind, typer.Option(help="Joint model; auto chooses.", case_sensitive=False)] = JointKind.auto,
     method: Annotated[str, typer.Option(help="Hinge estimator: sara, robust or tang2018.")] = "sara",
     fmt: Annotated[
-        SourceFormat | None,
-        typer.Option("--from", help="Input format (default: c3d for .c3d, else pose-csv).", case_sensitive=False),
+        JointSource | None,
+        typer.Option("--from", help="Input format (default: from the file, as for convert).", case_sensitive=False),
     ] = None,
     units: Annotated[
         str | None,
@@ -129,6 +138,7 @@ def joint(
         bool,
         typer.Option("--convention-check/--no-convention-check", help="Refuse a wrong quaternion order or handedness."),
     ] = True,
+    quiet: QuietTable = False,
 ) -> None:  # fmt: skip
     """Find the joint (hinge, two-axis or ball) between two segments of one recording."""
     from ..estimate.joint import fit_joint
@@ -142,7 +152,10 @@ def joint(
         refuse_writing_inputs([output], [source])
         if output.is_dir():
             raise FingerfitError("is a directory; give a file name", path=output)
-    fmt = fmt or (SourceFormat.c3d if source.suffix.lower() == ".c3d" else SourceFormat.pose_csv)
+    if fmt is None:
+        from ..io.trackerfile import infer_format
+
+        fmt = JointSource(infer_format(source))
     rec, declared = read_any(
         source, fmt, units=units, rate=rate, items=items, columns=columns, clusters=clusters
     )
@@ -186,7 +199,8 @@ def joint(
         notice("note", f"{fit.quality.dropped_frames} frame(s) without both poses dropped")
     for note in fit.quality.notes:
         notice("note", note)
-    out.print(_table(fit))
+    if not quiet:
+        out.print(_table(fit))
     if output is not None:
         doc = {"file": str(source), "parent": parent, "child": child, **fit.summary()}
         with atomic_write(output) as fh:

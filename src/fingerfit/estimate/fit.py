@@ -263,8 +263,9 @@ def saddle_estimate(
     data: JointData, flexion_guess: FloatArray | None, abduction_guess: FloatArray | None
 ) -> AxisEstimate:
     """A joint that always has two axes (the thumb's CMC): :func:`.saddle.fit_saddle` over
-    every calibration frame, grouped by recording cycles where there are any; the guesses
-    (parent frame) sign the axes and name the one a recording did not excite."""
+    every calibration frame with both sensors' samples, grouped by recording cycles where
+    there are any; the guesses (parent frame) sign the axes and name the one a recording
+    did not excite."""
     groups = None
     if len(data.periods) >= 2:
         groups = np.full(data.rotation.shape[0], -1)
@@ -273,9 +274,12 @@ def saddle_estimate(
         if (groups < 0).any():  # frames outside the cycles form blocks of their own
             rest = np.flatnonzero(groups < 0)
             groups[rest] = len(data.periods) + rest * 4 // data.rotation.shape[0]
+    ok = np.isfinite(data.rotation).all(axis=(1, 2)) & np.isfinite(data.translation).all(axis=1)
+    if not ok.all():  # a frame missing a sensor's sample (a dropout) tells nothing
+        groups = None if groups is None else groups[ok]
     sf = fit_saddle(
-        data.rotation,
-        data.translation,
+        data.rotation if ok.all() else data.rotation[ok],
+        data.translation if ok.all() else data.translation[ok],
         data.reference_rotation,
         order=data.second_axis or FLEXION_FIRST,
         flexion_guess=flexion_guess,

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..kinematics import Kinematics
 from ..model import HandModel
-from ..session import HAND_SENSOR, PoseSeries, Recording
+from ..session import HAND_SENSOR, PoseSeries, Recording, concat_recordings
 from ..transforms import FloatArray
 from .sources import Block
 
@@ -381,15 +381,7 @@ def concat_blocks(blocks: list[Block]) -> Block:
     """
     if len(blocks) == 1:
         return blocks[0]
-    recs = [b.recording for b in blocks]
-    poses = {
-        k: PoseSeries(
-            np.concatenate([r.poses[k].position for r in recs]),
-            np.concatenate([r.poses[k].rotation for r in recs]),
-        )
-        for k in recs[0].poses
-    }
-    rec = Recording(recs[0].name, np.concatenate([r.time for r in recs]), poses)
+    rec = concat_recordings([b.recording for b in blocks])
     return Block(rec, np.concatenate([b.arrival for b in blocks]), sum(b.lost for b in blocks))
 
 

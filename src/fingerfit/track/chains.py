@@ -52,8 +52,11 @@ def matmul_rows(a: FloatArray, b: FloatArray) -> FloatArray:
 
 def matvec_rows(a: FloatArray, v: FloatArray) -> FloatArray:
     """Per-frame ``a v``, frames last: ``a (..., 3, 3, m)``, ``v (..., 3, m)`` (either with
-    ``m`` 1, broadcast) -> ``(..., 3, m)``."""
-    return matmul_rows(a, v[..., None, :])[..., 0, :]
+    ``m`` 1, broadcast) -> ``(..., 3, m)``: three products over whole rows of frames."""
+    out = a[..., :, 0, :] * v[..., None, 0, :]
+    out += a[..., :, 1, :] * v[..., None, 1, :]
+    out += a[..., :, 2, :] * v[..., None, 2, :]
+    return out
 
 
 @dataclass(frozen=True)

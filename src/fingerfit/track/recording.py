@@ -343,8 +343,8 @@ def run_of(linked: np.ndarray) -> np.ndarray:
 
 #: A frame whose cost exceeds this many times the median frame's (plus
 #: :data:`SUSPECT_FLOOR`) is solved again from other starts (:func:`repair`).
-SUSPECT_RATIO = 4.0
-SUSPECT_FLOOR = 10.0
+SUSPECT_RATIO = 10.0
+SUSPECT_FLOOR = 50.0
 #: Passes of :func:`repair` at most (each lets a solution reach one more frame).
 REPAIR_PASSES = 32
 

@@ -33,7 +33,7 @@ import numpy as np
 from scipy.linalg import solveh_banded
 
 from ..transforms import FloatArray
-from .chains import ChainPose, Chains, matmul_rows
+from .chains import ChainPose, Chains, matmul_rows, matvec_rows
 
 #: Added to the diagonal of every frame's normal matrix (1/rad^2): makes an undetermined
 #: angle stay where it is (data terms are 1e3-1e6 per rad^2).
@@ -129,7 +129,11 @@ def observe(
     """
     m = hand_position.shape[0]
     n_chain = chains.size
-    back = chains.hand_rotation @ np.swapaxes(hand_rotation, -1, -2)  # (m, 3, 3) R_h0 R_h^T
+    # R_h0 R_h^T of every frame, frames last: (3, 3, m).
+    back = np.ascontiguousarray(
+        (chains.hand_rotation @ np.swapaxes(hand_rotation, -1, -2)).transpose(1, 2, 0)
+    )
+    hand_p = np.ascontiguousarray(hand_position.T)  # (3, m)
     pos = np.zeros((n_chain, 3, 3, m))
     rot = np.zeros((n_chain, 3, 3, 3, m))
     present = np.zeros((n_chain, 3, m), dtype=bool)
@@ -140,9 +144,9 @@ def observe(
                 rot[d, s] = np.eye(3)[..., None]
                 continue
             if name not in done:
-                p = np.einsum("mij,mj->im", back, positions[name] - hand_position)
+                p = matvec_rows(back, positions[name].T - hand_p)
                 p += chains.hand_position[:, None]
-                r = np.einsum("mij,mjk->ikm", back, rotations[name])
+                r = matmul_rows(back, np.ascontiguousarray(rotations[name].transpose(1, 2, 0)))
                 ok = np.isfinite(p).all(axis=0) & np.isfinite(r).all(axis=(0, 1))
                 done[name] = (p, r, ok)
             p, r, ok = done[name]
@@ -189,16 +193,18 @@ def data_terms(
     ``q`` (one block)."""
     m = q.shape[-1]
     if m > BLOCK:
-        parts = [
-            data_terms(chains, weights, obs.take(slice(s, s + BLOCK)), q[..., s : s + BLOCK])
-            for s in range(0, m, BLOCK)
-        ]
-        return Terms(
-            *(
-                np.concatenate([getattr(p, f) for p in parts], axis=-1)
-                for f in Terms.__dataclass_fields__
-            )
+        L = chains.L
+        out = Terms(
+            np.empty((q.shape[0], L * (L + 1) // 2, m)),
+            np.empty(q.shape),
+            np.empty((q.shape[0], m)),
+            np.empty((q.shape[0], m)),
         )
+        for s in range(0, m, BLOCK):
+            part = data_terms(chains, weights, obs.take(slice(s, s + BLOCK)), q[..., s : s + BLOCK])
+            for f in Terms.__dataclass_fields__:
+                getattr(out, f)[..., s : s + BLOCK] = getattr(part, f)
+        return out
     if pose is None:
         pose = chains.pose(q)
     n_chain, L, m = q.shape
@@ -206,17 +212,16 @@ def data_terms(
     wp = present * weights.position[..., None]  # (D, S, m)
     wr = present * weights.orientation[..., None]
     e = obs.position - pose.sensor_position  # (D, S, 3, m); 0 - p̂ where absent: weight 0
-    # E = R A^T (R the measured segment rotation, A the predicted one): the vector of its
-    # skew part is the orientation's residual.
-    E = matmul_rows(obs.rotation, np.swapaxes(pose.segment_rotation, 2, 3))
-    skew_part = np.stack(
-        [
-            E[:, :, 2, 1] - E[:, :, 1, 2],
-            E[:, :, 0, 2] - E[:, :, 2, 0],
-            E[:, :, 1, 0] - E[:, :, 0, 1],
-        ],
-        axis=2,
-    )
+    # The orientation's residual: the vector of the skew part of E = R A^T (R the measured
+    # segment rotation, A the predicted one), vee(E - E^T) / 2 = sum_k a_k x r_k / 2 over
+    # the columns a_k of A and r_k of R: no product of the two matrices is needed.
+    A, R = pose.segment_rotation, obs.rotation  # (D, S, 3, 3, m)
+    skew_part = np.zeros(e.shape)
+    for k in range(3):
+        a, r = A[:, :, :, k], R[:, :, :, k]
+        skew_part[:, :, 0] += a[:, :, 1] * r[:, :, 2] - a[:, :, 2] * r[:, :, 1]
+        skew_part[:, :, 1] += a[:, :, 2] * r[:, :, 0] - a[:, :, 0] * r[:, :, 2]
+        skew_part[:, :, 2] += a[:, :, 0] * r[:, :, 1] - a[:, :, 1] * r[:, :, 0]
     skew_part *= 0.5  # (D, S, 3, m)
     # The weighted Jacobian's rows, (D, L, 2 S, 3, m): per segment s three position rows,
     # a_k x (p̂_s - c_k) (+ migration), and three orientation rows, a_k (for a chordal
@@ -440,6 +445,9 @@ def packed_matvec(h: FloatArray, x: FloatArray) -> FloatArray:
 #: a chi-square: a sensor's standard deviation is 1): the step is below a thousandth of
 #: what the frame's sensors determine.
 DECREMENT = 1e-6
+#: The same for :func:`smooth`, per frame on average (a hundredth: the smoother runs on
+#: every frame, from starts already solved frame by frame or interpolated between them).
+SMOOTH_DECREMENT = 1e-4
 
 
 def solve_frames(
@@ -537,7 +545,7 @@ def smooth(
     anchor: tuple[FloatArray, float] | None = None,
     *,
     max_iter: int = 4,
-    decrement: float = DECREMENT,
+    decrement: float = SMOOTH_DECREMENT,
 ) -> Solution:
     """The angles of consecutive frames together, with the temporal prior between them.
 
@@ -586,25 +594,30 @@ def smooth(
         first = np.where(np.isfinite(anchor[0]) & chains.active, np.nan_to_num(w0, posinf=0.0), 0.0)
     band = np.zeros((n_chain, L + 1, m * L))  # upper band storage: row L + r - c, column t L + c
 
-    def evaluate(x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, Terms]:
+    def evaluate(
+        x: FloatArray,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Normal matrix (the sensors' part with ``added`` on its diagonal), right-hand
+        side, each chain's cost, the residual and ``added`` at ``x``."""
         t = data_terms(chains, weights, obs, x)
         bd, bg, bc = bound_terms(weights, x)
-        h = t.hessian.copy()
-        h[:, diag] += bd + RIDGE + pad
+        h = t.hessian
+        added = bd + RIDGE + pad
+        added[:, :, 0] += first
+        h[:, diag] += added
         g = t.gradient + bg
         diff = x[..., 1:] - x[..., :-1]  # (D, L, m - 1)
         pull = link * diff
         g[..., 1:] -= pull
         g[..., :-1] += pull
-        h[:, diag, 0] += first
         g[..., 0] += first * (qa - x[..., 0])
         g *= ~pad
         cost = (t.cost + bc).sum(axis=-1) + (link * diff * diff).sum(axis=(1, 2))  # (D,)
         cost += (first * (x[..., 0] - qa) ** 2).sum(axis=1)
-        return h, g, cost, t
+        return h, g, cost, t.rms_mm, added
 
     q = np.where(pad, 0.0, q0)
-    h, g, cost, terms = evaluate(q)
+    h, g, cost, rms, added = evaluate(q)
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007
         band[:] = 0.0
@@ -624,22 +637,18 @@ def smooth(
         alpha = np.ones(n_chain)
         for _ in range(6):
             trial = wrap(q + step * alpha[:, None, None])
-            h2, g2, cost2, terms2 = evaluate(trial)
+            h2, g2, cost2, rms2, added2 = evaluate(trial)
             ok = cost2 <= cost * (1.0 + 1e-12) + 1e-12
             if ok.all():
                 break
             alpha = np.where(ok, alpha, alpha / 2.0)
         keep = ok[:, None, None]
         q = np.where(keep, trial, q)
-        h, g = np.where(keep, h2, h), np.where(keep, g2, g)
-        terms = Terms(
-            np.where(keep, terms2.hessian, terms.hessian),
-            terms.gradient,
-            terms.cost,
-            np.where(ok[:, None], terms2.rms_mm, terms.rms_mm),
-        )
+        h, g, added = np.where(keep, h2, h), np.where(keep, g2, g), np.where(keep, added2, added)
+        rms = np.where(ok[:, None], rms2, rms)
         cost = np.where(ok, cost2, cost)
-    return Solution(q, terms.rms_mm, terms.hessian, it)
+    h[:, diag] -= added  # the sensors' part alone, for the uncertainty
+    return Solution(q, rms, h, it)
 
 
 def uncertainty(chains: Chains, hessian: FloatArray) -> FloatArray:
