@@ -40,7 +40,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse
 import datetime
 import json
-import multiprocessing as mp
 import platform
 import sys
 import time
@@ -49,6 +48,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from pool import run_tasks
 
 from fingerfit.errors import FingerfitError
 from fingerfit.estimate import FitOptions, fit_session
@@ -384,17 +386,7 @@ def main() -> None:
         seeds = np.random.SeedSequence([args.seed, ci]).spawn(args.subjects)
         tasks += [(cond, CONDITIONS[cond], int(s.generate_state(1)[0]), variants) for s in seeds]
     t0 = time.perf_counter()
-    results = []
-    with mp.get_context("spawn").Pool(args.workers) as pool:
-        for i, r in enumerate(pool.imap_unordered(run_subject, tasks), 1):
-            results.append(r)
-            print(
-                f"\r{i}/{len(tasks)} subjects ({time.perf_counter() - t0:.0f} s)",
-                end="",
-                file=sys.stderr,
-                flush=True,
-            )
-    print(file=sys.stderr)
+    results = run_tasks(run_subject, tasks, args.workers)
     results.sort(key=lambda r: (chosen.index(r["condition"]), r["seed"]))
     summary = summarise(results)
     meta = {

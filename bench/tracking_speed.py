@@ -14,7 +14,11 @@ repeated to ``--frames`` frames (240 Hz) is then computed, in one process, side 
   :meth:`fingerfit.live.stream.Streamer` computes before the values -- the direct
   computation of a prepared :class:`fingerfit.kinematics.KinematicsPlan` and, where a
   sensor is missing, :meth:`fingerfit.track.live.LiveTracker.step` -- p50 / p99 / max over
-  ``--live-frames`` frames, every sensor and one per digit missing, alternately.
+  ``--live-frames`` frames, every sensor and one per digit missing, alternately;
+* **live against offline**: the same frames one at a time (the filter, which cannot look
+  ahead) against the offline solution of the whole recording (the smoother), RMS and
+  largest difference per angle kind, for each digit's middle sensor missing and for the
+  distal sensors only.
 """
 
 from __future__ import annotations
@@ -119,6 +123,52 @@ def live(model, rec: Recording, n: int) -> dict:
     return out
 
 
+KINDS = {
+    "finger MP": ("fingers", ("mp", "mp_abduction")),
+    "finger PIP, DIP": ("fingers", ("pip", "dip")),
+    "thumb CMC": ("thumb", ("cmc", "cmc_abduction")),
+    "thumb MCP, IP": ("thumb", ("mcp", "mcp_abduction", "ip")),
+}
+
+
+def agreement(model, rec: Recording, n: int) -> dict:
+    """The live filter, frame by frame, against the offline solution, deg."""
+    sensors = list(model.reference_poses)
+    out = {}
+    for name, r in layouts(rec).items():
+        if name == "every sensor":
+            continue
+        r = with_every_sensor(r.slice(slice(0, n)), sensors)
+        off = track_recording(model, r, ("user_axis",)).kinematics.motions["user_axis"]
+        tracker = LiveTracker(model)
+        got = {d: {k: np.empty(n) for k in off[d].angles} for d in off}
+        for i in range(n):
+            one = r.slice(slice(i, i + 1))
+            kin = tracker.blank(one)
+            tracker.step(one, kin)
+            for d, m in kin.motions["user_axis"].items():
+                for k, a in m.angles.items():
+                    got[d][k][i] = a[0]
+        rows = {}
+        for kind, (which, names) in KINDS.items():
+            digits = ["thumb"] if which == "thumb" else [d for d in DIGITS if d != "thumb"]
+            diff = np.concatenate(
+                [
+                    np.degrees(got[d][k] - off[d].angles[k])
+                    for d in digits
+                    for k in names
+                    if k in off[d].angles
+                ]
+            )
+            rows[kind] = {
+                "rms_deg": float(np.sqrt(np.mean(diff**2))),
+                "max_deg": float(np.abs(diff).max()),
+            }
+        out[name] = rows
+        print(f"live vs offline, {name}: {json.dumps(rows)}", flush=True)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--json", type=Path, default=None)
@@ -126,6 +176,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--live-frames", type=int, default=3000)
     ap.add_argument("--seed", type=int, default=1234)
+    ap.add_argument("--agreement-frames", type=int, default=2400)
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     sim = simulate_subject(SimConfig(fingers=DIGITS), args.seed)
@@ -140,6 +191,7 @@ def main() -> None:
         "numpy": np.__version__,
         "offline": offline(model, tiled(rec, args.frames), args.repeat),
         "live": live(model, rec, args.live_frames),
+        "live_vs_offline": agreement(model, rec, args.agreement_frames),
     }
     results["load_average"] = [load0, os.getloadavg()]
     if args.json:

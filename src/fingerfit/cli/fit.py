@@ -264,7 +264,7 @@ def angles(
     from ..kinematics import kinematics_table
     from ..model import load_model
     from ..session import UNITS_TO_MM
-    from ..track import track_recording
+    from ..track import check_layout, track_recording
     from ..track.report import tracking_columns, tracking_lines
 
     outputs = [output] if urdf_names is None else [output, urdf_names]
@@ -286,6 +286,9 @@ def angles(
     with progress(quiet) as bar:
         n = rec.n_frames
         task = bar.add_task("angles and fingertips", total=n + n)
+        check_layout(
+            model, set(rec.poses), names or list(model.fingers), str(recording), skip="--fingers"
+        )
         tracked = track_recording(model, rec, fingers=names)
         check_solved(tracked, recording, force)
         kin = tracked.kinematics

@@ -335,19 +335,16 @@ def stream(
     try:
         lsl_out = ros_out = bag_out = rec_out = live_view = None
         ch = channels_of(model, compute_kinematics(model, empty_recording(sensors), ("user_axis",)))
-        if lsl and retargeter is not None:
-            lsl_out = LslOutput(
-                lsl_name,
-                ch.angle_labels,
-                ch.tip_labels,
-                nominal,
-                tips_frame,
-                robot_labels=names,
-                robot_units=robot_joint_units(robot),
-                robot_name=rmap.name,
-                source_labels=ch.source_labels,
+        if lsl:
+            robot_outlet = (
+                {
+                    "robot_labels": names,
+                    "robot_units": robot_joint_units(robot),
+                    "robot_name": rmap.name,
+                }
+                if retargeter is not None
+                else {}
             )
-        elif lsl:
             lsl_out = LslOutput(
                 lsl_name,
                 ch.angle_labels,
@@ -355,6 +352,7 @@ def stream(
                 nominal,
                 tips_frame,
                 source_labels=ch.source_labels,
+                **robot_outlet,
             )
         if ros2 is not None:
             ros_out = Ros2Output(ros2, names, source_names=ch.digits)
