@@ -1,5 +1,6 @@
 """``fingerfit convert``: real tracker files -> the canonical pose CSV of the session format,
-and a pose table from CSV to Parquet or back."""
+a pose table from CSV to Parquet or back, and any of them -> OpenSim's orientation table
+(``.sto``) or markers (``.trc``)."""
 
 from __future__ import annotations
 
@@ -117,7 +118,8 @@ def convert(
         typer.Option(
             "-o",
             "--output",
-            help="Pose CSV to write (OUT.parquet: its Parquet form).",
+            help="Pose CSV to write (OUT.parquet: its Parquet form; OUT.sto: OpenSim "
+            "orientations; OUT.trc: the sensor origins as OpenSim markers, m).",
             show_default=False,
         ),
     ],
@@ -221,12 +223,14 @@ def convert(
     quiet: Quiet = False,
 ) -> None:
     """Convert Liberty/Patriot ASCII or binary, wide CSV or C3D to the pose CSV, or a
-    pose table from CSV to Parquet and back (row for row, the numbers bit for bit)."""
+    pose table from CSV to Parquet and back (row for row, the numbers bit for bit); any of
+    them to OpenSim's orientations (.sto) or markers (.trc)."""
     import numpy as np
 
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.hygiene import check_recording
     from ..io.hygiene import fill_gaps as fill
+    from ..io.opensim import write_markers, write_orientations
     from ..io.posewrite import read_pose_table, write_pose_csv, write_pose_rows
     from ..io.trackerfile import check_format_options, infer_format, read_tracker_file
     from ..session import UNITS_TO_MM, is_sensor_name
@@ -248,7 +252,8 @@ def convert(
         raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--out-units")
     # A pose table is copied row for row (the numbers bit for bit); with --fill-gaps its
     # recording is written, as a tracker file's is.
-    table_copy = fmt is SourceFormat.pose_csv and not fill_gaps
+    opensim = {".sto": write_orientations, ".trc": write_markers}.get(output.suffix.lower())
+    table_copy = fmt is SourceFormat.pose_csv and not fill_gaps and opensim is None
     if fmt is SourceFormat.pose_csv and map_ is not None:
         raise FingerfitError("does not apply to a pose table (it names its sensors)", field="--map")
     outputs = [output] if residuals is None else [output, residuals]
@@ -295,7 +300,9 @@ def convert(
         bar.update(task, advance=1, description=f"writing {output.name}")
         if out_units is None:
             out_units = declared if fmt is SourceFormat.pose_csv else "mm"
-        if table_copy:
+        if opensim is not None:
+            opensim(output, rec)
+        elif table_copy:
             write_pose_rows(output, table, out_units)
         else:
             write_pose_csv(output, rec, units=out_units)

@@ -200,7 +200,13 @@ def angles(
         Path, typer.Argument(help="Pose CSV (canonical format), or its .parquet form.")
     ],
     output: Annotated[
-        Path, typer.Option("-o", "--output", help="Angles CSV to write (.parquet: Parquet).")
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="Angles CSV to write (.parquet: Parquet; .mot: OpenSim motion of the "
+            "exported .osim).",
+        ),
     ],
     units: Annotated[
         str | None,
@@ -286,27 +292,34 @@ def angles(
         tracked = track_recording(model, rec, fingers=names)
         check_solved(tracked, recording, force)
         kin = tracked.kinematics
-        table = kinematics_table(kin, units=units)
-        extra = tracking_columns(tracked, uncertainty)
-        if extra:
-            import pandas as pd
+        if output.suffix.lower() == ".mot":  # every coordinate of `export --osim`
+            from ..export.trajectory import write_coordinates
 
-            table = pd.concat([table, pd.DataFrame(extra)], axis=1)
-        bar.update(task, advance=n, description=f"writing {output.name}")
-        # Atomic, in batches of rows (progress bar): CSV floats in shortest round-trip
-        # form, or Parquet (OUT.parquet) float64 with the units in its metadata.
-        write_table_file(
-            output, table, angles_meta(units), progress=lambda rows: bar.advance(task, rows)
-        )
+            write_coordinates(output, kin, model, rec)
+        else:
+            table = kinematics_table(kin, units=units)
+            extra = tracking_columns(tracked, uncertainty)
+            if extra:
+                import pandas as pd
+
+                table = pd.concat([table, pd.DataFrame(extra)], axis=1)
+            bar.update(task, advance=n, description=f"writing {output.name}")
+            # Atomic, in batches of rows (progress bar): CSV floats in shortest round-trip
+            # form, or Parquet (OUT.parquet) float64 with the units in its metadata.
+            write_table_file(
+                output, table, angles_meta(units), progress=lambda rows: bar.advance(task, rows)
+            )
     if urdf_names is not None:
         from ..export.trajectory import write_trajectory
 
         say("joint trajectory (rad) -> [bold]{}[/]", write_trajectory(urdf_names, kin, model))
     say(
-        "{} frames -> [bold]{}[/] (angles deg, fingertips {}, tracker frame)",
+        "{} frames -> [bold]{}[/] ({})",
         rec.n_frames,
         output,
-        units,
+        "OpenSim coordinates: deg, hand translations m, tracker frame"
+        if output.suffix.lower() == ".mot"
+        else f"angles deg, fingertips {units}, tracker frame",
     )
     for line in tracking_lines(tracked):
         say("{}", line)
