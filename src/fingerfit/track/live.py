@@ -74,6 +74,7 @@ class LiveTracker:
         rows, cols = pairs(chains.L)
         self._direct_info = np.where(rows == cols, spread[:, None], 0.0)
         self._pair_active = chains.active[:, :, None] & chains.active[:, None, :]
+        self._speed2 = np.nan_to_num(self.weights.speed**2, nan=1e12, posinf=1e12)
         self._time = 0.0
         self._digit = [d for _, d in chains.keys]
 
@@ -257,10 +258,12 @@ class LiveTracker:
         full = np.zeros((chains.size, L, L))
         full[:, rows, cols] = self._info
         full[:, cols, rows] = self._info
-        cov = np.linalg.inv(full)
         dt = max(t - self._time, 1e-6)
-        growth = np.nan_to_num((self.weights.speed * dt) ** 2, posinf=1e12)
-        cov[:, np.arange(L), np.arange(L)] += growth
-        info = np.linalg.inv(cov)
+        growth = np.minimum(self._speed2 * (dt * dt), 1e12)  # Q, the diagonal (D, L)
+        # (P + Q)^-1 = (P (I + F Q))^-1 = (I + F Q)^-1 F, F = P^-1 the information: one
+        # solve instead of two inversions.
+        full_q = full * growth[:, None, :]
+        full_q[:, np.arange(L), np.arange(L)] += 1.0
+        info = np.linalg.solve(full_q, full)
         info *= self._pair_active  # padding levels: no prior
         return info[:, rows, cols][..., None]

@@ -216,12 +216,19 @@ def data_terms(
     # segment rotation, A the predicted one), vee(E - E^T) / 2 = sum_k a_k x r_k / 2 over
     # the columns a_k of A and r_k of R: no product of the two matrices is needed.
     A, R = pose.segment_rotation, obs.rotation  # (D, S, 3, 3, m)
-    skew_part = np.zeros(e.shape)
-    for k in range(3):
-        a, r = A[:, :, :, k], R[:, :, :, k]
-        skew_part[:, :, 0] += a[:, :, 1] * r[:, :, 2] - a[:, :, 2] * r[:, :, 1]
-        skew_part[:, :, 1] += a[:, :, 2] * r[:, :, 0] - a[:, :, 0] * r[:, :, 2]
-        skew_part[:, :, 2] += a[:, :, 0] * r[:, :, 1] - a[:, :, 1] * r[:, :, 0]
+    skew_part = np.empty(e.shape)
+    if m == 1:  # one frame (live): E itself, one small matmul
+        E = R[..., 0] @ np.swapaxes(A[..., 0], -1, -2)  # (D, S, 3, 3)
+        np.subtract(E[..., 2, 1], E[..., 1, 2], out=skew_part[:, :, 0, 0])
+        np.subtract(E[..., 0, 2], E[..., 2, 0], out=skew_part[:, :, 1, 0])
+        np.subtract(E[..., 1, 0], E[..., 0, 1], out=skew_part[:, :, 2, 0])
+    else:
+        skew_part[:] = 0.0
+        for k in range(3):
+            a, r = A[:, :, :, k], R[:, :, :, k]
+            skew_part[:, :, 0] += a[:, :, 1] * r[:, :, 2] - a[:, :, 2] * r[:, :, 1]
+            skew_part[:, :, 1] += a[:, :, 2] * r[:, :, 0] - a[:, :, 0] * r[:, :, 2]
+            skew_part[:, :, 2] += a[:, :, 0] * r[:, :, 1] - a[:, :, 1] * r[:, :, 0]
     skew_part *= 0.5  # (D, S, 3, m)
     # The weighted Jacobian's rows, (D, L, 2 S, 3, m): per segment s three position rows,
     # a_k x (p̂_s - c_k) (+ migration), and three orientation rows, a_k (for a chordal
