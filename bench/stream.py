@@ -810,6 +810,8 @@ def against_bare(
         "background_load": load,
         "realtime": realtime,
         "max_age_ms": max_age_ms,
+        "dropped_sensors": list(DROP),
+        "command": "python bench/stream.py " + " ".join(sys.argv[1:]),
         "started_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
         "load_average_at_start": os.getloadavg(),
         "models": {},
