@@ -30,6 +30,7 @@ from ._live import (
     assert_close_where_solved,
     fitted,
     short_recording,
+    solved_tolerance,
     stream_counts,
 )
 from .bad_inputs._cli import refused
@@ -81,7 +82,9 @@ def test_overload_sends_the_newest_fresh_frame_and_records_every_frame(tmp_path:
     got = pd.read_csv(tmp_path / "live.csv")
     assert list(got.columns) == list(table.columns)
     cols = [c for c in table.columns if "ik_rms" not in c]
-    assert_close_where_solved(got[cols].to_numpy(), table[cols].to_numpy(), solved)
+    assert_close_where_solved(
+        got[cols].to_numpy(), table[cols].to_numpy(), solved, solved_tolerance(cols)
+    )
     assert np.isfinite(got.loc[solved, "index.ik_rms_mm"]).all()
     assert not np.isfinite(got.loc[~solved, "index.ik_rms_mm"]).any()
 

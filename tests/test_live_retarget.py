@@ -29,6 +29,7 @@ from ._live import (
     max_age_ms,
     resolve_prefix,
     sent_frames,
+    solved_tolerance,
     stream_counts,
     until,
 )
@@ -135,7 +136,9 @@ def _record_equals_angles(tmp_path: Path, model_path: Path, csv: Path, record: P
     got, want = pd.read_csv(record), pd.read_csv(out)
     assert list(got.columns) == list(want.columns)
     cols = [c for c in want.columns if "ik_rms" not in c]
-    assert_close_where_solved(got[cols].to_numpy(), want[cols].to_numpy(), SOLVED)
+    assert_close_where_solved(
+        got[cols].to_numpy(), want[cols].to_numpy(), SOLVED, solved_tolerance(cols)
+    )
 
 
 def test_stream_retarget_shadow_over_lsl_and_bag_equals_retarget(hand, tmp_path: Path) -> None:
