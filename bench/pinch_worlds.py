@@ -9,8 +9,11 @@ Shadow and Allegro by the ``tip`` method. Scored in every frame of every pinch h
 thumb and the index (``events.csv``: the simulator's truth of when the pads touch, not the
 model's pad distance): the distance between the robot's thumb and index pad points (the
 map's ``pad`` frames; Shadow its tip sites), mm. The target is <= 3 mm in every frame of
-every hold. ``--whole-hand`` adds hands with the thumb and the four fingers in the default
-and MyoHand worlds.
+every hold. Each hand twice: fitted with every pinch event (the holds retargeted are
+those the pads and the contact distance were fitted to), and fitted without
+``pinch.csv``'s events (*unseen holds*: the model knows the one touch of the opposition
+recording, as when a later or live recording is retargeted). ``--whole-hand`` adds hands
+with the thumb and the four fingers in the default and MyoHand worlds.
 
 ``--before REV`` runs this script on that revision's ``src`` (``git archive``) over the same
 hands in a subprocess and prints both side by side.
@@ -33,6 +36,7 @@ import sys
 import tempfile
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -53,49 +57,59 @@ PAIR = {"thumb", "index"}
 TARGET_MM = 3.0
 WHOLE = ("thumb", "index", "middle", "ring", "little")
 WHOLE_WORLDS = ("realistic", "MyoHand world")
+#: The two calibrations of each hand (module docstring).
+SCENARIOS = ("fitted holds", "unseen holds")
 
 
 def run_hand(task: tuple[str, str, dict, int, tuple[str, ...]]) -> dict:
     """One hand: fit, retarget ``pinch.csv`` onto each robot, the pad gap per hold."""
     label, cond, overrides, seed, digits = task
     warnings.simplefilter("ignore")
-    out: dict = {"world": label, "condition": cond, "seed": seed, "robots": {}}
+    out: dict = {"world": label, "condition": cond, "seed": seed}
     try:
         config = SimConfig(fingers=digits, test=False, targets=False, **overrides)
     except (TypeError, FingerfitError) as exc:  # a revision (--before) without the condition
         out["unavailable"] = str(exc)
         return out
     sim = simulate_subject(config, seed)
-    try:
-        model = fit_session(sim.session)
-    except FingerfitError as exc:
-        out["refused"] = str(exc)
-        return out
     rec = sim.session.recording("pinch.csv")
     holds = [
         (rec.time >= e.start) & (rec.time <= e.end)
         for e in sim.session.events
         if e.recording == rec.name and e.is_pinch and {e.finger, e.target} == PAIR
     ]
-    kin = compute_kinematics(model, rec)
-    person = np.linalg.norm(
-        kin.motions["user_axis"]["thumb"].pad - kin.motions["user_axis"]["index"].pad, axis=1
-    )
-    contact = model.pinch_contact("thumb", "index")
-    out["contact_mm"] = None if contact is None else contact.contact_mm["user_axis"]
-    out["person_hold_mm"] = [float(np.median(person[h])) for h in holds]
-    for name in ROBOTS:
-        robot, rmap = resolve(name, None, model.hand)
-        res = retarget(model, rec, robot, rmap, "tip", kin=kin)
-        p = robot.positions(res.q, [rmap.digits["thumb"].pad, rmap.digits["index"].pad])
-        gap = np.linalg.norm(p[:, 0] - p[:, 1], axis=1) * 1000.0
-        tip = np.linalg.norm(res.tips - res.targets, axis=2)
-        out["robots"][name] = {
-            "hold_max_mm": [float(gap[h].max()) for h in holds],
-            "hold_frames_mm": np.concatenate([gap[h] for h in holds]).tolist(),
-            "tip_err_median_mm": float(np.nanmedian(tip)),
-            "violations": int(res.violations),
-        }
+    unseen = [e for e in sim.session.events if e.recording != rec.name]
+    sessions = {
+        SCENARIOS[0]: sim.session,
+        SCENARIOS[1]: replace(sim.session, events=unseen),
+    }
+    for scenario, session in sessions.items():
+        row: dict = {"robots": {}}
+        out[scenario] = row
+        try:
+            model = fit_session(session)
+        except FingerfitError as exc:
+            row["refused"] = str(exc)
+            continue
+        kin = compute_kinematics(model, rec)
+        person = np.linalg.norm(
+            kin.motions["user_axis"]["thumb"].pad - kin.motions["user_axis"]["index"].pad, axis=1
+        )
+        contact = model.pinch_contact("thumb", "index")
+        row["contact_mm"] = None if contact is None else contact.contact_mm["user_axis"]
+        row["person_hold_mm"] = [float(np.median(person[h])) for h in holds]
+        for name in ROBOTS:
+            robot, rmap = resolve(name, None, model.hand)
+            res = retarget(model, rec, robot, rmap, "tip", kin=kin)
+            p = robot.positions(res.q, [rmap.digits["thumb"].pad, rmap.digits["index"].pad])
+            gap = np.linalg.norm(p[:, 0] - p[:, 1], axis=1) * 1000.0
+            tip = np.linalg.norm(res.tips - res.targets, axis=2)
+            row["robots"][name] = {
+                "hold_max_mm": [float(gap[h].max()) for h in holds],
+                "hold_frames_mm": np.concatenate([gap[h] for h in holds]).tolist(),
+                "tip_err_median_mm": float(np.nanmedian(tip)),
+                "violations": int(res.violations),
+            }
     return out
 
 
@@ -115,36 +129,44 @@ def tasks(args: argparse.Namespace, conditions: list[str]) -> list[tuple]:
 
 
 def summarise(results: list[dict]) -> dict:
-    """Per world and robot: holds, holds with a frame over the target, the largest and
-    the median gap over hold frames, the worst hands."""
+    """Per world and calibration (``"<world>; <scenario>"``): :func:`_figures`."""
     summary: dict = {}
     for world in dict.fromkeys(r["world"] for r in results):
-        rs = [r for r in results if r["world"] == world and "unavailable" not in r]
-        summary[world] = {"hands": len(rs), "refused": sum("refused" in r for r in rs)}
-        for name in ROBOTS:
-            fitted = [r for r in rs if name in r["robots"]]
-            maxima = [m for r in fitted for m in r["robots"][name]["hold_max_mm"]]
-            frames = np.concatenate(
-                [r["robots"][name]["hold_frames_mm"] for r in fitted] or [np.zeros(0)]
-            )
-            worst = sorted(
-                ((max(r["robots"][name]["hold_max_mm"], default=0.0), r["seed"]) for r in fitted),
-                reverse=True,
-            )
-            summary[world][name] = {
-                "holds": len(maxima),
-                "holds_over_target": int(sum(m > TARGET_MM for m in maxima)),
-                "max_mm": float(max(maxima, default=float("nan"))),
-                "median_mm": float(np.median(frames)) if frames.size else float("nan"),
-                "tip_err_median_mm": float(
-                    np.median([r["robots"][name]["tip_err_median_mm"] for r in fitted])
-                )
-                if fitted
-                else float("nan"),
-                "violations": int(sum(r["robots"][name]["violations"] for r in fitted)),
-                "worst": [{"seed": s, "max_mm": m} for m, s in worst[:3] if m > TARGET_MM],
-            }
+        for scenario in SCENARIOS:
+            rs = [
+                r[scenario] | {"seed": r["seed"]}
+                for r in results
+                if r["world"] == world and scenario in r
+            ]
+            summary[f"{world}; {scenario}"] = _figures(rs)
     return summary
+
+
+def _figures(rs: list[dict]) -> dict:
+    """One world and calibration: per robot, holds, holds with a frame over the target, the
+    largest and the median gap over hold frames, the worst hands."""
+    out: dict = {"hands": len(rs), "refused": sum("refused" in r for r in rs)}
+    for name in ROBOTS:
+        fitted = [r for r in rs if name in r["robots"]]
+        maxima = [m for r in fitted for m in r["robots"][name]["hold_max_mm"]]
+        frames = np.concatenate(
+            [r["robots"][name]["hold_frames_mm"] for r in fitted] or [np.zeros(0)]
+        )
+        worst = sorted(
+            ((max(r["robots"][name]["hold_max_mm"], default=0.0), r["seed"]) for r in fitted),
+            reverse=True,
+        )
+        tips = [r["robots"][name]["tip_err_median_mm"] for r in fitted]
+        out[name] = {
+            "holds": len(maxima),
+            "holds_over_target": int(sum(m > TARGET_MM for m in maxima)),
+            "max_mm": float(max(maxima, default=float("nan"))),
+            "median_mm": float(np.median(frames)) if frames.size else float("nan"),
+            "tip_err_median_mm": float(np.median(tips)) if tips else float("nan"),
+            "violations": int(sum(r["robots"][name]["violations"] for r in fitted)),
+            "worst": [{"seed": s, "max_mm": m} for m, s in worst[:3] if m > TARGET_MM],
+        }
+    return out
 
 
 def run(args: argparse.Namespace, conditions: list[str]) -> list[dict]:
@@ -262,16 +284,16 @@ def main() -> None:
     if not args.quiet:
         print(markdown(summary, before, args.before))
     if args.json:
-        hands = [
-            {k: v for k, v in r.items() if k != "robots"}
-            | {
-                "robots": {
-                    n: {k: v for k, v in x.items() if k != "hold_frames_mm"}
-                    for n, x in r["robots"].items()
-                }
+
+        def lean(row: dict) -> dict:
+            """A calibration's row without the per-frame gaps."""
+            robots = {
+                n: {k: v for k, v in x.items() if k != "hold_frames_mm"}
+                for n, x in row.get("robots", {}).items()
             }
-            for r in results
-        ]
+            return row | {"robots": robots}
+
+        hands = [{k: lean(v) if k in SCENARIOS else v for k, v in r.items()} for r in results]
         args.json.write_text(
             json.dumps({"meta": meta, "summary": summary, "hands": hands}, indent=1) + "\n"
         )

@@ -308,9 +308,13 @@ class TipSolver:
         frame's posture) leaves that basin; the whole cost from there decides.
         """
         o, pairs = self.options, self.pairs
+        engaged = pw >= 0.5 * o.pinch
+        if not engaged.any():
+            self._last_pinch = 0.0
+            return q, cost, worst, 0
         p, _ = self.problem.kinematics(q)
         off = np.linalg.norm(p[pairs[:, 0]] - p[pairs[:, 1]] - pv, axis=1)
-        off = float(np.max(np.where(pw >= 0.5 * o.pinch, off, 0.0)))
+        off = float(np.max(off[engaged]))
         again = off > self._last_pinch + 0.5 or frame % 10 == 0
         self._last_pinch = off
         if off <= o.pinch_restart_mm or not again:
