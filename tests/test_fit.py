@@ -331,28 +331,24 @@ def test_leave_one_cycle_out_axes_are_sara_refits(realistic_subject) -> None:
     assert ci == pytest.approx(np.degrees(Z95 * jackknife_sd(want)), rel=1e-9)
 
 
-def test_axis_nearly_in_the_sagittal_plane_gets_the_point_nearest_the_digit_line() -> None:
+def test_axis_nearly_in_the_sagittal_plane_gets_the_point_nearest_its_landmark() -> None:
     """An axis 10 deg from the sagittal plane (a thumb CMC with three times the drawn
-    obliquity) crosses it far from the digit: its centre is the axis point nearest the
-    landmark line, said in a note, instead of a refusal of the whole hand. An axis
-    perpendicular to the plane gets the crossing either way; one that also runs along the
-    digit's line is refused."""
+    obliquity) crosses it far from the joint: its centre is the axis point nearest the
+    joint's landmark, said in a note, instead of a refusal of the whole hand. An axis
+    perpendicular to the plane gets the crossing, as before."""
     from fingerfit.estimate.sagittal import Plane, intersect, joint_centre
 
     plane = Plane(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]))
-    point = np.array([20.0, 3.0, 6.0])
-    centre, note = joint_centre(plane, point, np.array([0.0, 0.0, 1.0]), "index mp")
+    point, landmark = np.array([20.0, 3.0, 6.0]), np.array([25.0, 0.0, 10.0])
+    centre, note = joint_centre(plane, point, np.array([0.0, 0.0, 1.0]), landmark)
     np.testing.assert_allclose(centre, [20.0, 3.0, 0.0], atol=1e-12)
     assert note is None
     tilt = np.radians(10.0)
     direction = np.array([0.0, np.cos(tilt), np.sin(tilt)])
     with pytest.raises(FingerfitError, match="within 12 deg of the sagittal plane"):
         intersect(plane, point, direction, "thumb cmc")
-    centre, note = joint_centre(plane, point, direction, "thumb cmc")
-    # Nearest the x axis: s = -(y0 cos + z0 sin), the line's point there.
-    s = -(3.0 * np.cos(tilt) + 6.0 * np.sin(tilt))
+    centre, note = joint_centre(plane, point, direction, landmark)
+    s = (landmark - point) @ direction
     np.testing.assert_allclose(centre, point + s * direction, atol=1e-12)
+    assert abs((landmark - centre) @ direction) < 1e-12
     assert note is not None and note.startswith("the axis runs 10.0 deg from the sagittal plane")
-    along = np.array([np.cos(np.radians(5.0)), 0.0, np.sin(np.radians(5.0))])
-    with pytest.raises(FingerfitError, match="of the digit's line; no reliable joint centre"):
-        joint_centre(plane, point, along, "thumb cmc")

@@ -309,7 +309,11 @@ def saddle_estimate(
 ) -> AxisEstimate:
     """A joint that always has two axes (the thumb's CMC): :func:`.saddle.fit_saddle` over
     every calibration frame, grouped by recording cycles where there are any; the guesses
-    (parent frame) sign the axes and name the one a recording did not excite."""
+    (parent frame) sign the axes and name the one a recording did not excite. The axes are
+    named by the digit's axis order, which anatomy gives and the data place, also where
+    they lie nearer each other's guesses (``SaddleFit.guesses_swapped_deg``): the guesses
+    come from the next joint and can be far off (tens of degrees on simulated thumbs with
+    three times the usual obliquities, whose axes the order named right)."""
     groups = None
     if len(data.periods) >= 2:
         groups = np.full(data.rotation.shape[0], -1)
@@ -326,6 +330,7 @@ def saddle_estimate(
         flexion_guess=flexion_guess,
         abduction_guess=abduction_guess,
         groups=groups,
+        strict_order=False,
     )
     direction = sf.flexion_axis
     axis = AxisFit(sf.flexion_point, direction, np.zeros(0), 0.0, False, 0.0)
@@ -370,6 +375,16 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
                 est, notes, weak = saddle_estimate(data, guesses[0], guesses[1]), [], []
             except FingerfitError as exc:
                 raise FitError(f"{finger} {j}: {exc.reason}") from None
+            swapped = (
+                est.abduction.guesses_swapped_deg if isinstance(est.abduction, SaddleFit) else None
+            )
+            if swapped is not None:
+                weak = [
+                    f"the fitted axes lie nearer each other's guesses ({swapped[0]:.0f} vs "
+                    f"{swapped[1]:.0f} deg as named), the guesses being the next joint's "
+                    "flexion axis and its perpendicular: named by the axis order, flexion "
+                    "proximal, which the data place"
+                ]
         else:
             notes, weak = _check(finger, j, data, options)
             est = estimator(data)
@@ -410,7 +425,7 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
     joints = {}
     migration = {}
     for j, (parent, child, point, a, est, data, notes, ci) in fitted.items():
-        centre, off_plane = joint_centre(plane, point, a, f"{finger} {j}")
+        centre, off_plane = joint_centre(plane, point, a, session.landmark(f"{finger}.{j}"))
         if off_plane is not None:
             notes = [*notes, off_plane]
         joints[j] = (parent, child, centre, a, _quality(data, est, notes, ci))

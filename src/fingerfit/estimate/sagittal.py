@@ -6,7 +6,7 @@ the sagittal plane; the line through them (least squares) fixes the plane up to
 a rotation about that line, which is fixed by making the plane normal the
 mean fitted flexion axis made perpendicular to the line. Each joint centre is
 where its fitted axis meets this plane (paper section 3; Tang et al. 2018 [13]); an axis
-that runs nearly in the plane takes the point nearest the landmark line instead
+that runs nearly in the plane takes its point nearest the joint's landmark instead
 (:func:`joint_centre`).
 """
 
@@ -56,8 +56,8 @@ def sagittal_plane(landmarks: FloatArray, axes: FloatArray, finger: str = "") ->
     return Plane(centroid, unit(n), d)
 
 
-#: ``|sin|`` of the angle between a fitted axis and the sagittal plane (or the digit's
-#: landmark line) below which the two do not cross reliably: 0.2, 11.5 deg.
+#: ``|sin|`` of the angle between a fitted axis and the sagittal plane below which the
+#: two do not cross reliably: 0.2, 11.5 deg.
 MIN_CROSSING = 0.2
 
 
@@ -75,42 +75,30 @@ def intersect(
 
 
 def joint_centre(
-    plane: Plane, point: FloatArray, direction: FloatArray, joint: str = ""
+    plane: Plane, point: FloatArray, direction: FloatArray, landmark: FloatArray
 ) -> tuple[FloatArray, str | None]:
     """The joint centre on a fitted axis line ``point + s * direction`` (tracker, mm).
 
     Where the line meets the sagittal plane (:func:`intersect`, the paper's rule). A line
     within 12 deg of the plane meets it far away or not at all, and a degree of axis error
     moves that point by centimetres; its centre is then the point of the line nearest the
-    digit's landmark line (``plane.point``, ``plane.direction``), which for a line
-    perpendicular to the plane is the same point. Where along its line a joint centre lies
-    changes no angle or fingertip of the model (a rotation about a line is the same about
-    any of its points), only the segment lengths and the orthogonal variant.
+    joint's own dorsal ``landmark`` (3,), which lies over the joint. Where along its line a
+    joint centre lies changes no angle or fingertip of the model (a rotation about a line
+    is the same about any of its points), only the segment lengths and the orthogonal
+    variant.
 
     Returns
     -------
     centre : ndarray, shape (3,)
     note : str or None
-        For the quality notes, when the centre is the nearest point.
-
-    Raises
-    ------
-    FingerfitError
-        The line also runs within 12 deg of the digit's landmark line (no nearest point).
+        For the quality notes, when the centre is the point nearest the landmark.
     """
-    if abs(plane.normal @ direction) >= MIN_CROSSING:
-        return intersect(plane, point, direction, joint), None
-    along = direction @ plane.direction
-    if 1.0 - along**2 < MIN_CROSSING**2:
-        raise FingerfitError(
-            f"{joint}: the fitted axis runs within {np.degrees(np.arcsin(MIN_CROSSING)):.0f} "
-            "deg of the sagittal plane and of the digit's line; no reliable joint centre"
-        )
-    w = point - plane.point
-    s = (along * (w @ plane.direction) - w @ direction) / (1.0 - along**2)
-    angle = np.degrees(np.arcsin(abs(plane.normal @ direction)))
+    crossing = abs(plane.normal @ direction)
+    if crossing >= MIN_CROSSING:
+        return intersect(plane, point, direction), None
     note = (
-        f"the axis runs {angle:.1f} deg from the sagittal plane (no reliable crossing): "
-        "its centre is the point of the axis nearest the digit's landmark line"
+        f"the axis runs {np.degrees(np.arcsin(crossing)):.1f} deg from the sagittal plane "
+        "(no reliable crossing): its centre is the point of the axis nearest the joint's "
+        "landmark"
     )
-    return point + s * direction, note
+    return point + ((landmark - point) @ direction) * direction, note
