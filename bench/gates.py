@@ -53,6 +53,8 @@ from fingerfit.simulate.truth import relative_truth_in_parent
 from fingerfit.transforms import angle_between_axes
 
 DIGITS = ("thumb", "index", "middle", "ring", "little")
+#: Words of the quality notes that flag a joint as weakly determined (a warning of the fit).
+FLAGS = ("weak evidence", "known only to", "fitted anyway")
 #: Words of a refusal message -> the gate that spoke.
 GATES = (
     ("grasp cycle(s) found", "cycles"),
@@ -91,7 +93,7 @@ def joint_rows(sim, model) -> list[dict]:
                     "axis_ci_deg": q.axis_ci_deg,
                     "axis_error_deg": float(np.degrees(angle_between_axes(axis, true_axis))),
                     "two_axes": j in fm.second_axes,
-                    "notes": [n for n in q.notes if "weak evidence" in n or "anyway" in n],
+                    "notes": [n for n in q.notes if any(w in n for w in FLAGS)],
                 }
             )
     return rows
@@ -145,6 +147,10 @@ def summarise(results: list[dict], conditions: list[str]) -> dict:
             return float(min(vals)) if vals else None
 
         errors = np.array([j["axis_error_deg"] for j in joints]) if joints else np.zeros(0)
+        worst = sorted(
+            ({"seed": r["seed"], **j} for r in usable for j in r.get("joints", [])),
+            key=lambda j: -j["axis_error_deg"],
+        )[:3]
         summary[cond] = {
             "hands": len(usable),
             "unavailable": len(rs) - len(usable),
@@ -159,6 +165,7 @@ def summarise(results: list[dict], conditions: list[str]) -> dict:
             ),
             "axis_error_p95_deg": float(np.percentile(errors, 95)) if errors.size else None,
             "axis_error_max_deg": float(errors.max()) if errors.size else None,
+            "largest_errors": worst,
         }
     return summary
 
@@ -242,21 +249,24 @@ def markdown(summary: dict, before: dict | None, rev: str | None) -> str:
     lines += ["", "Refusals after:", ""]
     lines += [f"- {c}, seed {r['seed']}: {r['message']}" for c, r in refusals]
     lines += ["- none"] if not refusals else []
-    weak = [(c, j) for c, s in summary.items() for j in s["weak_joints"]]
-    lines += [
-        "",
-        "### Joints fitted on weak evidence (after)",
-        "",
+    head = [
         "| world | seed | joint | ROM deg | pooled s5/s6 | axis +/- deg (95 %) | "
-        "true axis error deg | two axes |",
-        "|---|---|---|---|---|---|---|---|",
+        "true axis error deg | two axes | flagged |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
-    for c, j in weak:
-        lines.append(
+
+    def row(c: str, j: dict) -> str:
+        return (
             f"| {c} | {j['seed']} | {j['joint']} | {_f(j['rom_deg'])} | "
             f"{_f(j['pooled_conditioning'], '.2f')} | {_f(j['axis_ci_deg'])} | "
-            f"{j['axis_error_deg']:.1f} | {'yes' if j['two_axes'] else 'no'} |"
+            f"{j['axis_error_deg']:.1f} | {'yes' if j['two_axes'] else 'no'} | "
+            f"{'yes' if j['notes'] else 'no'} |"
         )
+
+    lines += ["", "### Joints the fit flagged (after): weak evidence, axis confidence", ""]
+    lines += head + [row(c, j) for c, s in summary.items() for j in s["weak_joints"]]
+    lines += ["", "### The largest true axis errors per world (after)", ""]
+    lines += head + [row(c, j) for c, s in summary.items() for j in s["largest_errors"]]
     return "\n".join(lines)
 
 
