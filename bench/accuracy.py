@@ -33,7 +33,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse
 import datetime
 import json
-import multiprocessing as mp
 import platform
 import sys
 import time
@@ -47,6 +46,7 @@ from scipy import stats
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from peers import HAVE_BIOBUDDY, biobuddy_sara, biobuddy_score, joint_frames
+from pool import run_tasks
 
 import fingerfit.estimate.fit as fit_module
 from fingerfit.errors import FingerfitError
@@ -613,17 +613,7 @@ def main() -> None:
             (cond, CONDITIONS[cond], int(s.generate_state(1)[0]), args.only_default) for s in seeds
         ]
     t0 = time.perf_counter()
-    results = []
-    with mp.get_context("spawn").Pool(args.workers) as pool:
-        for i, r in enumerate(pool.imap_unordered(run_subject, tasks), 1):
-            results.append(r)
-            print(
-                f"\r{i}/{len(tasks)} subjects ({time.perf_counter() - t0:.0f} s)",
-                end="",
-                file=sys.stderr,
-                flush=True,
-            )
-    print(file=sys.stderr)
+    results = run_tasks(run_subject, tasks, args.workers)
     summary = summarise(results, chosen)
     cmd = "python bench/accuracy.py " + " ".join(sys.argv[1:])
     meta = {

@@ -70,7 +70,7 @@ def start():
     return status("VmRSS:")
 
 import numpy as np
-import fingerfit.io.posecsv as posecsv, fingerfit.io.widecsv as widecsv
+import fingerfit.io.posecsv as posecsv, fingerfit.io.posewrite as posewrite, fingerfit.io.widecsv as widecsv
 import fingerfit.io.liberty as liberty
 from fingerfit.session import UNITS_TO_MM
 
@@ -109,7 +109,7 @@ def read(p):
 
 def write(rec, p):
     if kind.startswith("write-pose"):
-        posecsv.write_pose_csv(p, rec)
+        posewrite.write_pose_csv(p, rec)
     elif kind.startswith("write-wide"):
         widecsv.write_wide_csv(p, rec)
     elif kind.startswith("write-angles"):
@@ -278,7 +278,7 @@ def make_files(directory: Path, rows: int) -> dict[str, tuple[Path, Path, int]]:
     from fingerfit.estimate import FitOptions, fit_session
     from fingerfit.io.liberty import write_liberty_ascii, write_liberty_binary
     from fingerfit.io.parquet import angles_meta, write_table_file
-    from fingerfit.io.posecsv import write_pose_csv
+    from fingerfit.io.posewrite import write_pose_csv
     from fingerfit.io.widecsv import write_wide_csv
     from fingerfit.kinematics import compute_kinematics, kinematics_table
     from fingerfit.session import PoseSeries, Recording

@@ -15,7 +15,9 @@ afterwards, so paths written into files are equal), with the same commands:
    writers), then the commands they write to ``commands.sh``: ``fingerfit convert`` of
    every Liberty file (the readers), ``session`` and ``fit``;
 3. ``fingerfit joint`` on a converted grasp recording, each kind (the joint API and its
-   refusals).
+   refusals);
+4. ``fingerfit export`` of the demo's models as URDF and MJCF, both variants (the robot
+   writers).
 
 Every file below the working folder is compared, and so are each command's exit status
 and its standard output and error (as written, after masking the durations listed in
@@ -90,6 +92,20 @@ def joints(work: Path) -> list[list[str]]:
     ]  # fmt: skip
 
 
+def exports(work: Path) -> list[list[str]]:
+    """``fingerfit export`` of every model written (the demo's and the fitted sessions'),
+    URDF and MJCF, each variant."""
+    models = sorted(work.glob("demo/study/models/*.json")) + sorted(work.glob("*/**/model.json"))
+    out = []
+    for m in models:
+        rel = m.relative_to(work)
+        stem = "-".join(rel.with_suffix("").parts)
+        for v in ("user_axis", "orthogonal"):
+            out.append(["export", str(rel), "--urdf", f"export/{stem}-{v}.urdf",
+                        "--mjcf", f"export/{stem}-{v}.xml", "--variant", v])  # fmt: skip
+    return out
+
+
 def run(src: Path, work: Path, subjects: int) -> None:
     """Every command with the tree ``src``, in ``work``; logs in ``work/_log``."""
     env = {**os.environ, "PYTHONPATH": str(src.resolve()), "COLUMNS": "100"}
@@ -116,6 +132,9 @@ def run(src: Path, work: Path, subjects: int) -> None:
     for args in scripted(work):
         fingerfit(args)
     for args in joints(work):
+        fingerfit(args)
+    (work / "export").mkdir()
+    for args in exports(work):
         fingerfit(args)
 
 

@@ -150,11 +150,21 @@ def per_frame_compute(model, rec: Recording, n: int = 2000, retargeter=None) -> 
     }
 
 
+#: Sensors left out of every replayed recording (``--drop``): the stream solves their
+#: digits' frames with the model.
+DROP: list[str] = []
+
+
 def long_recording(rec: Recording, seconds: float, rate: float = 240.0) -> Recording:
-    """``rec`` repeated to ``seconds`` at ``rate`` (time continues across repeats)."""
+    """``rec`` repeated to ``seconds`` at ``rate`` (time continues across repeats), without
+    the sensors of :data:`DROP`."""
     n = round(seconds * rate)
     idx = np.arange(n) % rec.n_frames
-    poses = {k: PoseSeries(v.position[idx], v.rotation[idx]) for k, v in rec.poses.items()}
+    poses = {
+        k: PoseSeries(v.position[idx], v.rotation[idx])
+        for k, v in rec.poses.items()
+        if k not in DROP
+    }
     return Recording("bench.csv", np.arange(n) / rate, poses)
 
 
@@ -598,13 +608,25 @@ def bare_frames(model, rec: Recording, robot: str | None, path: Path) -> Path:
         channels, ``valid`` last (``PREFIX-angles``, deg; ``PREFIX-robot``, rad);
         ``dds (n, j)`` rad and ``names (j,)``: the ``JointState``'s.
     """
+    from fingerfit.live.values import sensor_presence, source_codes
+    from fingerfit.track import track_recording
+    from fingerfit.track.recording import with_every_sensor
+
     sensors = model_sensors(model)
-    kin = compute_kinematics(model, rec, ("user_axis",))
-    values = block_values(kin, channels_of(model, kin), rec, sensors, "tracker")
+    rec = with_every_sensor(rec, sensors)
+    kin = track_recording(model, rec, ("user_axis",)).kinematics  # a sensor left out: solved
+    ch = channels_of(model, kin)
+    source = source_codes(sensor_presence(rec, sensors), sensors, model, ch.digits, True)
+    values = block_values(kin, ch, rec, sensors, "tracker", source)
     if robot is None:
         from fingerfit.export.geometry import joint_names
 
-        lsl, dds, names = values.angles, values.joints, joint_names(model)
+        # The angles outlet's channels: the angles, each digit's source, then valid.
+        lsl, dds, names = (
+            np.hstack([values.angles, values.source]),
+            values.joints,
+            joint_names(model),
+        )
     else:
         from fingerfit.retarget import Retargeter, resolve
 
@@ -935,9 +957,16 @@ def main() -> None:
         help="part 6 with --realtime: the consumers at normal priority",
     )
     ap.add_argument("--max-age", type=float, default=20.0, help="part 6: --max-age (ms)")
+    ap.add_argument(
+        "--drop",
+        default="",
+        help="comma-separated sensors left out of every replayed recording (the model "
+        "solves their digits' frames)",
+    )
     ap.add_argument("--lane-run", nargs=2, type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--bare-run", nargs="+", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    DROP[:] = [x.strip() for x in args.drop.split(",") if x.strip()]
     from fingerfit.live import quiet_lsl
 
     quiet_lsl()  # this process's consumers: no liblsl log lines in the report

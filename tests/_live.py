@@ -11,12 +11,16 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from typer.testing import CliRunner
 
 from fingerfit.cli import app
 from fingerfit.io import write_pose_csv
+from fingerfit.kinematics import kinematics_table
 from fingerfit.session import PoseSeries, Recording
 from fingerfit.simulate import write_subject
+from fingerfit.track import track_recording
+from fingerfit.track.report import tracking_columns
 
 from .conftest import subject
 
@@ -47,6 +51,33 @@ def write_recording(path: Path, n: int = 240, holes: tuple[tuple[int, str], ...]
     """:func:`short_recording` as a pose CSV (missing samples are absent rows)."""
     write_pose_csv(path, short_recording(n, holes))
     return path
+
+
+#: How far a frame the model solved one frame at a time (a stream's robot lane) or block by
+#: block (its files) may lie from `fingerfit angles`' solution of the whole recording:
+#: deg (angles) and mm (tips, pads).
+SOLVED_DEG, SOLVED_MM = 0.5, 0.5
+
+
+def angles_of(model, rec: Recording) -> tuple[pd.DataFrame, np.ndarray]:
+    """What `fingerfit angles` writes for ``rec`` (the model solving missing sensors), and
+    the frames in which the model solved a digit."""
+    tracked = track_recording(model, rec)
+    table = kinematics_table(tracked.kinematics, units=model.session_units)
+    table = pd.concat([table, pd.DataFrame(tracking_columns(tracked))], axis=1)
+    solved = np.zeros(rec.n_frames, dtype=bool)
+    for t in tracked.digits.values():
+        solved |= t.model
+    return table, solved
+
+
+def assert_close_where_solved(
+    got: np.ndarray, want: np.ndarray, solved: np.ndarray, tol: float = SOLVED_DEG
+) -> None:
+    """``got`` equals ``want`` to 1e-9 in every row but the ``solved`` ones, which agree to
+    ``tol`` (NaN where ``want`` is NaN)."""
+    np.testing.assert_allclose(got[~solved], want[~solved], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got[solved], want[solved], rtol=0, atol=tol)
 
 
 def resolve_prefix(prefix: str, n: int, proc: subprocess.Popen | None = None) -> dict:
@@ -106,7 +137,12 @@ def max_age_ms(output: str) -> float:
 
 
 def sent_frames(
-    stamps: np.ndarray, t_rec: np.ndarray, speed: float, got: np.ndarray, want: np.ndarray
+    stamps: np.ndarray,
+    t_rec: np.ndarray,
+    speed: float,
+    got: np.ndarray,
+    want: np.ndarray,
+    exact: np.ndarray | None = None,
 ) -> np.ndarray:
     """Which frames of a replay a consumer received (the robot lane sends a subset).
 
@@ -123,6 +159,9 @@ def sent_frames(
     speed : float
     got, want : ndarray, shape (m, k) and (n, k)
         Received values and the recording's (e.g. `fingerfit angles`' columns).
+    exact : ndarray of bool, shape (n,), optional
+        The frames whose values must match to 1e-9 (default: those with every value
+        finite); others (solved by the model one frame at a time) are not compared.
 
     Returns
     -------
@@ -137,6 +176,8 @@ def sent_frames(
         if np.abs(tr[idx] - target).max() > 1e-4:
             continue
         full = np.isfinite(want[idx]).all(axis=1)  # frames with a missing sensor are held
+        if exact is not None:
+            full &= exact[idx]
         if full.any() and np.allclose(got[full], want[idx][full], rtol=0, atol=1e-9):
             return idx
     raise AssertionError("the received rows are no subset of the recording's frames")
@@ -154,9 +195,12 @@ class FakeLsl:
         self.valid: list[np.ndarray] = []
         self.arrival: list[np.ndarray] = []
         self.robot: list[np.ndarray] = []
+        self.source: list[np.ndarray] = []
 
-    def push(self, angles, tips, valid, arrival, robot=None) -> None:
+    def push(self, angles, tips, valid, arrival, robot=None, source=None) -> None:
         self.angles.append(angles.copy())
+        if source is not None:
+            self.source.append(source.copy())
         self.valid.append(valid.copy())
         self.arrival.append(arrival.copy())
         if robot is not None:
@@ -179,6 +223,9 @@ class FakeRos2:
 
     def push(self, positions, wall) -> None:
         self.positions.append(positions.copy())
+
+    def push_source(self, codes, wall) -> None:
+        pass
 
     def has_consumers(self) -> bool:
         return True

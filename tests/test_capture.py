@@ -17,8 +17,8 @@ from fingerfit.cli import app
 from fingerfit.estimate import FitOptions
 from fingerfit.estimate.cycles import extract_cycles
 from fingerfit.io import load_session, read_pose_csv
-from fingerfit.io.posecsv import write_pose_csv
-from fingerfit.session import joint_sensors
+from fingerfit.io.posewrite import write_pose_csv
+from fingerfit.session import PoseSeries, joint_sensors
 from fingerfit.simulate import SimConfig, simulate_subject, write_subject
 from fingerfit.transforms import relative_pose
 
@@ -306,3 +306,264 @@ def test_view_options_are_refused_in_one_line(simulated, tmp_path):
     r = _capture(sub, new, grasp, extra=["--view", "--view-save", str(tmp_path / "x.rrd")])
     assert r.exit_code == 2 and "--view" in r.output
     assert not (new / "grasp.csv").exists()
+
+
+# --- Ctrl-C: what was recorded is kept, or nothing is left and the reason said ---------
+
+
+def _listing(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())} if folder.exists() else {}
+
+
+class _Replay:
+    """A replay that sends this process a Ctrl-C (SIGINT) after ``after`` blocks."""
+
+    def __init__(self, rec, after: int, size: int = 50):
+        self.rec, self.after, self.size, self.closed = rec, after, size, False
+
+    def blocks(self):
+        import os
+        import signal
+
+        from fingerfit.live.sources import Block
+
+        for k, i in enumerate(range(0, self.rec.n_frames, self.size)):
+            if k == self.after:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(1.0)  # the handler raises before this ends
+            part = self.rec.slice(slice(i, i + self.size))
+            yield Block(part, np.zeros(part.n_frames))
+
+    def close(self):
+        self.closed = True
+
+
+def _new_capture(sub, folder, tmp_path, name, extra=()):
+    """``capture`` into a new folder, the reference and landmarks given as options."""
+    return CliRunner().invoke(
+        app,
+        ["capture", str(tmp_path / name), "--source", f"replay:{folder / 'grasp.csv'}",
+         "--subject", "S01", "--fingers", ",".join(DIGITS),
+         "--reference", str(folder / "reference.csv"), "--landmarks", str(folder / "landmarks.csv"),
+         *extra],
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("after", [0, 6])
+def test_ctrl_c_while_recording_keeps_what_was_recorded(simulated, tmp_path, monkeypatch, after):
+    import fingerfit.cli.capture as cli
+
+    sub, folder = simulated
+    rec = read_pose_csv(folder / "grasp.csv", units=sub.session.units)
+    monkeypatch.setattr(cli, "_open_source", lambda spec, plan, stations: _Replay(rec, after))
+    r = _new_capture(sub, folder, tmp_path, "P09")
+    new = tmp_path / "P09"
+    if after == 0:  # before any frame: nothing left, and why
+        assert r.exit_code == 2, r.output
+        assert "interrupted before any frame was recorded; no file written" in r.output
+        assert not new.exists()
+        return
+    assert r.exit_code == 0, r.output
+    assert f"{after * 50} frames" in r.output and "(interrupted)" in r.output
+    got = read_pose_csv(new / "grasp.csv", units=sub.session.units)
+    np.testing.assert_array_equal(got.time, rec.time[: after * 50])
+    assert sorted(_listing(new)) == ["grasp.csv", "landmarks.csv", "reference.csv", "session.toml"]
+    assert load_session(new).grasp[0].n_frames == after * 50
+
+
+def test_ctrl_c_before_recording_leaves_nothing(simulated, tmp_path, monkeypatch):
+    """A Ctrl-C while the capture reads and checks the folder (here: the reference
+    recording): no copy of --reference or --landmarks, no folder, the reason said."""
+    import os
+    import signal
+
+    import fingerfit.io as fio
+
+    sub, folder = simulated
+    real = fio.read_pose_csv
+
+    def read_and_interrupt(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(1.0)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fio, "read_pose_csv", read_and_interrupt)
+    r = _new_capture(sub, folder, tmp_path, "P10")
+    assert r.exit_code == 2, r.output
+    assert "interrupted before recording began: nothing written" in r.output
+    assert "Traceback" not in r.output
+    assert not (tmp_path / "P10").exists()
+
+
+def test_ctrl_c_after_recording_keeps_it_and_says_the_evidence_is_missing(
+    simulated, tmp_path, monkeypatch
+):
+    """Ctrl-C twice: once while the files are written (held until they are), once in the
+    final evidence: the recording is kept whole, the evidence said to be missing."""
+    import os
+    import signal
+
+    import fingerfit.capture as cap
+    from fingerfit.capture import folder as capture_folder
+
+    sub, folder = simulated
+    real_write, real_evidence = capture_folder.write_capture, cap.evidence
+
+    def write_interrupted(plan, rec):
+        os.kill(os.getpid(), signal.SIGINT)  # held: the files are written first
+        return real_write(plan, rec)
+
+    def evidence(session, digits, options=None, *, second=True):
+        if second:  # the final evidence: Ctrl-C lands in it
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)
+        return real_evidence(session, digits, options, second=second)
+
+    monkeypatch.setattr(cap, "write_capture", write_interrupted)
+    monkeypatch.setattr(cap, "evidence", evidence)
+    r = _capture(sub, _start(folder, tmp_path, "P11"), f"replay:{folder / 'grasp.csv'}@1000")
+    assert r.exit_code == 0, r.output
+    assert "interrupted: the recording is kept; its evidence was not computed" in r.output
+    got = read_pose_csv(tmp_path / "P11" / "grasp.csv", units=sub.session.units)
+    assert got.n_frames == sub.session.grasp[0].n_frames
+    assert [g.name for g in load_session(tmp_path / "P11").grasp] == ["grasp.csv"]
+
+
+def test_a_ctrl_c_while_a_child_starts_ends_it_without_a_word(capfd, monkeypatch):
+    """The child is started with SIGINT blocked and ignores it; a Ctrl-C at its start
+    reaches the parent once the child exists, which ends it: no traceback anywhere."""
+    import os
+    import signal
+    from multiprocessing.context import SpawnProcess
+
+    from fingerfit import processes
+
+    q = processes.context().Queue()
+    child = processes.start_child(_report_signals, (q,), "probe")
+    handler, blocked = q.get(timeout=60)
+    processes.end_child(child, 60)
+    assert handler == int(signal.SIG_IGN) and int(signal.SIGINT) not in blocked
+    real_start, real_end, ended = SpawnProcess.start, processes.end_child, []
+
+    def start_then_interrupt(self):
+        real_start(self)
+        os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C as the child starts
+
+    def end(proc, timeout_s=0.0):
+        ended.append(proc)
+        real_end(proc, timeout_s)
+
+    monkeypatch.setattr(SpawnProcess, "start", start_then_interrupt)
+    monkeypatch.setattr(processes, "end_child", end)
+    with pytest.raises(KeyboardInterrupt):
+        processes.start_child(_report_signals, (q,), "probe")
+    assert len(ended) == 1 and ended[0].exitcode is not None  # ended, not left to start
+    time.sleep(0.5)
+    assert "Traceback" not in capfd.readouterr().err
+
+
+def _report_signals(q) -> None:
+    """A child's target: its SIGINT handler and blocked signals, after the fingerfit
+    start (:func:`fingerfit.processes.child_ignores_interrupt`)."""
+    import signal
+
+    from fingerfit.processes import child_ignores_interrupt
+
+    child_ignores_interrupt()
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, set())
+    q.put((int(signal.getsignal(signal.SIGINT)), {int(s) for s in blocked}))
+
+
+# --- refused before the source opens: what the capture could not use --------------------
+
+
+def _never_opened(monkeypatch):
+    """Make opening the source fail the test: the refusal must come before it."""
+    import fingerfit.live.sources as src
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the source was opened")
+
+    monkeypatch.setattr(src, "ReplaySource", refuse)
+
+
+def test_a_replay_without_the_sessions_sensors_is_refused(with_thumb, tmp_path, monkeypatch):
+    sub, folder = with_thumb
+    rec = read_pose_csv(folder / "grasp.csv", units=sub.session.units)
+    rec.poses = {k: v for k, v in rec.poses.items() if not k.startswith("thumb.")}
+    j = write_pose_csv(tmp_path / "j.csv", rec, units=sub.session.units)
+    new = _start(folder, tmp_path, "T1")
+    before = _listing(new)
+    _never_opened(monkeypatch)
+    r = _capture(sub, new, f"replay:{j}@1000", digits=("thumb", "index"), extra=["--name", "j.csv"])
+    assert r.exit_code == 2, r.output
+    assert "j.csv: no samples for sensor 'thumb.metacarpal', which the session's digits" in r.output
+    assert _listing(new) == before
+
+
+def test_fingers_without_their_sensors_in_the_reference_are_refused(
+    simulated, tmp_path, monkeypatch
+):
+    sub, folder = simulated
+    new = _start(folder, tmp_path, "T2")
+    _never_opened(monkeypatch)
+    r = _capture(sub, new, f"replay:{folder / 'grasp.csv'}@1000", digits=("index", "ring"))
+    assert r.exit_code == 2, r.output
+    assert "no samples for sensor 'ring.proximal' of the ring (--fingers)" in r.output
+    assert sorted(_listing(new)) == ["landmarks.csv", "reference.csv"]
+
+
+def test_the_folder_is_checked_before_recording(simulated, tmp_path, monkeypatch):
+    """A read-only session.toml, options that contradict it, and a listed recording that
+    is missing: each said before the source opens, the folder untouched; options that
+    repeat session.toml are fine."""
+    sub, folder = simulated
+    grasp = f"replay:{folder / 'grasp.csv'}@1000"
+    new = _start(folder, tmp_path, "T3")
+    r = _capture(sub, new, grasp)
+    assert r.exit_code == 0, r.output
+    before = _listing(new)
+    toml = new / "session.toml"
+    _never_opened(monkeypatch)
+    toml.chmod(0o444)
+    try:
+        r = _capture(sub, new, grasp, extra=["--name", "g2.csv"])
+    finally:
+        toml.chmod(0o644)
+    assert r.exit_code == 2 and "session.toml: is read-only" in r.output, r.output
+    for option, value in (("--fingers", "index"), ("--subject", "S02"), ("--rate", "120"),
+                          ("--hand", "right" if sub.session.hand == "left" else "left")):  # fmt: skip
+        args = ["capture", str(new), "--source", grasp, option, value, "--name", "g2.csv"]
+        r = CliRunner().invoke(app, args)
+        assert r.exit_code == 2 and f"field '{option}': the folder's session.toml says" in r.output
+    assert _listing(new) == before
+    (new / "grasp.csv").unlink()  # listed, missing: recorded again under its name
+    monkeypatch.undo()
+    r = _capture(sub, new, grasp)  # repeats session.toml: accepted
+    assert r.exit_code == 0, r.output
+    assert [g.name for g in load_session(new).grasp] == ["grasp.csv"]
+    r = _capture(sub, new, grasp)
+    assert r.exit_code == 2 and "the folder has grasp.csv: give --name" in r.output
+
+
+def test_a_thumb_dropout_neither_stops_the_fit_nor_reaches_the_table(with_thumb, tmp_path):
+    """A few frames without a thumb sensor's sample: the thumb's CMC is fitted over the
+    other frames (its saddle fit took no missing frame), and the capture's table says
+    nothing of NumPy."""
+    sub, folder = with_thumb
+    new = shutil.copytree(folder, tmp_path / "T4")
+    rec = read_pose_csv(new / "grasp.csv", units=sub.session.units)
+    rec.poses["thumb.metacarpal"].position[1000:1005] = np.nan
+    rec.poses["thumb.metacarpal"].rotation[1000:1005] = np.nan
+    write_pose_csv(new / "grasp.csv", rec, units=sub.session.units)
+    res = CliRunner().invoke(app, ["fit", str(new), "-q", "-o", str(tmp_path / "m.json")])
+    assert res.exit_code == 0, res.output
+    rec.poses = {k: PoseSeries(v.position.copy(), v.rotation.copy()) for k, v in rec.poses.items()}
+    for s in ("thumb.metacarpal", "thumb.proximal", "thumb.distal"):
+        rec.poses[s].position[40:] = np.nan
+        rec.poses[s].rotation[40:] = np.nan
+    j = write_pose_csv(tmp_path / "j.csv", rec, units=sub.session.units)
+    r = _capture(sub, _start(folder, tmp_path, "T5"), f"replay:{j}@1000", digits=("thumb", "index"))
+    assert r.exit_code == 0, r.output
+    assert "NaN" not in r.output and "infinite" not in r.output, r.output
+    assert "thumb cmc (0 cycle(s), ROM n/a, second axis not identified: " in r.output

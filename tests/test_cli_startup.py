@@ -6,6 +6,7 @@ measured by ``bench/speed.py`` (docs/performance.md), not asserted here.
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import sys
@@ -89,3 +90,38 @@ def test_signature_names_mirror_the_real_ones() -> None:
     from fingerfit.live import sources
 
     assert _names.DEFAULT_RECONNECT_S == sources.DEFAULT_RECONNECT_S
+
+
+@pytest.mark.parametrize("columns", [80, 120])
+def test_help_wraps_each_description_only_where_the_line_is_full(columns) -> None:
+    """``fingerfit --help``: each command's description is its docstring's first
+    paragraph, broken only where the next word would not fit."""
+    import os
+    import re
+
+    from fingerfit.cli import app
+
+    env = {**os.environ, "COLUMNS": str(columns), "TERMINAL_WIDTH": str(columns)}
+    res = subprocess.run(
+        [sys.executable, "-c", "from fingerfit.cli import main; main()", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
+    rows = [ln for ln in res.stdout.splitlines() if ln.startswith("│")]
+    start = rows.index(next(r for r in rows if re.match(r"│ capture ", r)))
+    cell = re.match(r"│ capture +", rows[start]).end() - 1  # where descriptions start
+    described: dict[str, list[str]] = {}
+    name = None
+    for r in rows[start:]:
+        head, text = r[1:cell].strip(), r[cell:-1].rstrip()
+        name = head or name
+        described.setdefault(name, []).append(text.strip())
+    docs = {i.name or i.callback.__name__: i.callback.__doc__ for i in app.registered_commands}
+    room = max(len(line) for lines in described.values() for line in lines)  # <= the column's
+    for name, lines in described.items():
+        want = " ".join(docs[name].strip().split("\n\n")[0].split())
+        assert " ".join(lines) == want, (name, lines)
+        for line, after in itertools.pairwise(lines):
+            assert len(line) + 1 + len(after.split()[0]) > room, (name, line, after)

@@ -157,7 +157,7 @@ def test_export_errors_leave_no_files(fitted: Path, tmp_path: Path) -> None:
     _one_error_line(
         _run("export", model, "--urdf", urdf, "--mjcf", mjcf, "--variant", "tilted"), "--variant"
     )
-    _one_error_line(_run("export", model), "--urdf and/or --mjcf")
+    _one_error_line(_run("export", model), "--urdf, --mjcf and/or --osim")
     _one_error_line(_run("export", model, "--urdf", urdf, "--margin-deg", "-1"), "--margin-deg")
     bad = tmp_path / "bad.json"
     bad.write_text("{ not json")

@@ -20,6 +20,7 @@ from fingerfit.errors import FingerfitError
 from fingerfit.io import fastcsv, liberty, posecsv, widecsv
 from fingerfit.io.fastcsv import NotPlain, write_table
 from fingerfit.io.liberty import ascii as liberty_ascii
+from fingerfit.io.posewrite import write_pose_csv
 from fingerfit.session import PoseSeries, Recording
 from fingerfit.transforms import quat_wxyz_from_matrix
 
@@ -109,7 +110,7 @@ def _mutated(path: Path, text: str, line: int, which: int) -> None:
 
 def test_pose_csv_many_batches_bit_identical(tmp_path, monkeypatch):
     rec = recording(500, 1)
-    path = posecsv.write_pose_csv(tmp_path / "a.csv", rec)
+    path = write_pose_csv(tmp_path / "a.csv", rec)
     monkeypatch.setattr(fastcsv, "CHUNK_BYTES", 256)  # about 2 rows per batch
     for rate in (None, 240.0):
         res = both(
@@ -133,7 +134,7 @@ def test_pose_csv_many_batches_bit_identical(tmp_path, monkeypatch):
     chunk=st.sampled_from([64, 300, 1 << 16]),
 )
 def test_pose_csv_mutations_agree(tmp_path, monkeypatch, line, which, chunk):
-    text = (posecsv.write_pose_csv(tmp_path / "a.csv", recording(20, 2))).read_text()
+    text = (write_pose_csv(tmp_path / "a.csv", recording(20, 2))).read_text()
     path = tmp_path / "m.csv"
     _mutated(path, text, line, which)
     monkeypatch.setattr(fastcsv, "CHUNK_BYTES", chunk)

@@ -349,7 +349,7 @@ def _same_recording(a, b) -> None:
 def _messy_pose_table(recording, rng) -> pd.DataFrame:
     """The recording's long table with frames lost, samples lost, empty fields, sensors in
     varying order within a frame, and an unused sensor name in the dictionary."""
-    from fingerfit.io.posecsv import pose_table
+    from fingerfit.io.posewrite import pose_table
 
     df = pose_table(recording)
     keep = rng.random(len(df)) > 0.05
@@ -365,11 +365,11 @@ def test_streamed_pose_read_is_the_reference_bit_for_bit(
 ) -> None:
     """The streaming reader of pose Parquet files is taken for ordinary files and gives
     what the reference path (the whole table, then the CSV reader's assembly) gives."""
-    from fingerfit.io import posecsv
+    from fingerfit.io import posecsv, poseparquet, posewrite
 
     rng = np.random.default_rng(3)
     tables = {
-        "plain": posecsv._pose_columns(recording, 1.0),
+        "plain": posewrite.pose_columns(recording, 1.0),
         "messy": {c: v for c, v in _messy_pose_table(recording, rng).items()},
     }
     for name, cols in tables.items():
@@ -378,14 +378,14 @@ def test_streamed_pose_read_is_the_reference_bit_for_bit(
         )
         fast = posecsv.read_pose_csv(path, units="mm", rate_hz=240)
         with monkeypatch.context() as m:
-            m.setattr(posecsv, "_assemble", _no_assembly)  # the streaming path only
+            m.setattr(poseparquet, "assemble_rows", _no_assembly)  # the streaming path only
             _same_recording(fast, posecsv.read_pose_csv(path, units="mm", rate_hz=240))
             _same_recording(
                 posecsv.read_pose_csv(path, units="mm"),
                 posecsv.read_pose_csv(path, units="mm"),
             )
         with monkeypatch.context() as m:
-            m.setattr(posecsv, "_read_parquet_fast", _no_assembly)  # the reference only
+            m.setattr(poseparquet, "_read_parquet_fast", _no_assembly)  # the reference only
             _same_recording(fast, posecsv.read_pose_csv(path, units="mm", rate_hz=240))
             slow = posecsv.read_pose_csv(path, units="mm")
         _same_recording(slow, posecsv.read_pose_csv(path, units="mm"))
@@ -412,9 +412,9 @@ def test_pose_checks_near_their_limits_are_the_reference(
 ) -> None:
     """The streaming reader's checks of whole blocks give what the reference path says,
     at the edge of the quaternion norm's tolerance and of plausible coordinates."""
-    from fingerfit.io import posecsv
+    from fingerfit.io import posecsv, poseparquet, posewrite
 
-    cols = posecsv._pose_columns(recording, 1.0)
+    cols = posewrite.pose_columns(recording, 1.0)
     for c in ("qw", "qx", "qy", "qz"):
         cols[c] = cols[c].copy()
         cols[c][7] *= qw_scale
@@ -426,14 +426,14 @@ def test_pose_checks_near_their_limits_are_the_reference(
         return
     got = posecsv.read_pose_csv(path, units="mm", rate_hz=240)
     with monkeypatch.context() as m:
-        m.setattr(posecsv, "_read_parquet_fast", _no_assembly)  # the reference only
+        m.setattr(poseparquet, "_read_parquet_fast", _no_assembly)  # the reference only
         _same_recording(got, posecsv.read_pose_csv(path, units="mm", rate_hz=240))
 
 
 def test_pose_duplicates_go_to_the_reference_path(tmp_path: Path, recording) -> None:
-    from fingerfit.io import posecsv
+    from fingerfit.io import posecsv, posewrite
 
-    df = posecsv.pose_table(recording)
+    df = posewrite.pose_table(recording)
     dup = pd.concat([df.iloc[:5], df]).sort_values("time", kind="stable").reset_index(drop=True)
     path = fpq.write_parquet(tmp_path / "dup.parquet", dict(dup.items()), fpq.pose_meta("mm"))
     rec = posecsv.read_pose_csv(path, units="mm", rate_hz=240)
@@ -451,7 +451,7 @@ def _no_assembly(*args, **kwargs):
 def test_blocked_writers_write_the_whole_table(tmp_path: Path, recording, monkeypatch) -> None:
     """Pose and wide recordings are written a row group of frames at a time: the same
     rows and numbers, bit for bit, as the whole table."""
-    from fingerfit.io import posecsv, widecsv
+    from fingerfit.io import posecsv, posewrite, widecsv
 
     monkeypatch.setattr(fpq, "ROW_GROUP_ROWS", 1000)
     monkeypatch.setattr(transforms, "_QUAT_BLOCK", 77)
@@ -459,7 +459,7 @@ def test_blocked_writers_write_the_whole_table(tmp_path: Path, recording, monkey
     for units in ("mm", "cm"):
         got = pq.read_table(write_pose_csv(tmp_path / "p.parquet", rec, units=units))
         assert pq.ParquetFile(tmp_path / "p.parquet").metadata.num_row_groups > 2
-        want = posecsv._pose_columns(rec, {"mm": 1.0, "cm": 10.0}[units])
+        want = posewrite.pose_columns(rec, {"mm": 1.0, "cm": 10.0}[units])
         codes, names = want.pop("sensor")
         assert got.column("sensor").to_pylist() == [names[c] for c in codes]
         for c, v in want.items():

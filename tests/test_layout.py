@@ -131,3 +131,20 @@ def test_a_cycle_is_found_lazy_and_type_only_imports_included(tmp_path) -> None:
     graph = import_graph(tmp_path, "pkg")
     assert graph["pkg.c"] == {"pkg.a"} and graph["pkg.sub"] == {"pkg.sub.b"}
     assert import_cycles(graph) == {("pkg.a", "pkg.sub.b")}
+
+
+def test_the_view_imports_nothing_above_it() -> None:
+    """The view draws what lower layers compute: no module of ``fingerfit.view`` imports
+    the capture or the command line (the capture's evidence type lives in
+    ``fingerfit.estimate.evidence``, which both use)."""
+    graph = import_graph(SRC, "fingerfit")
+    above = ("fingerfit.capture", "fingerfit.cli")
+    arrows = sorted(
+        (m, d)
+        for m, deps in graph.items()
+        if m == "fingerfit.view" or m.startswith("fingerfit.view.")
+        for d in deps
+        if d.startswith(above)
+    )
+    assert not arrows, arrows
+    assert "fingerfit.estimate.evidence" in graph["fingerfit.view.evidence"]

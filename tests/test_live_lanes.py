@@ -22,7 +22,16 @@ from fingerfit.live.stream import Streamer, channels_of, run
 from fingerfit.model import load_model
 from fingerfit.session import PoseSeries, Recording
 
-from ._live import FakeLsl, FakeRos2, Logged, fitted, short_recording, stream_counts
+from ._live import (
+    FakeLsl,
+    FakeRos2,
+    Logged,
+    angles_of,
+    assert_close_where_solved,
+    fitted,
+    short_recording,
+    stream_counts,
+)
 from .bad_inputs._cli import refused
 from .bad_inputs._cli import run as cli
 
@@ -56,14 +65,25 @@ def test_overload_sends_the_newest_fresh_frame_and_records_every_frame(tmp_path:
     idx = np.searchsorted(arrivals, sent)
     np.testing.assert_array_equal(arrivals[idx], sent)
     assert np.all(np.diff(idx) > 0)
-    # Its values: `fingerfit angles`' row, a missing sensor holding the last frame sent.
-    table = kinematics_table(compute_kinematics(model, rec), units=model.session_units)
+    # Its values: `fingerfit angles`' row (a frame with a missing sensor solved by the
+    # model, one frame at a time), a frame nothing can solve holding the last frame sent.
+    table, solved = angles_of(model, rec)
     ch = channels_of(model, compute_kinematics(model, rec.slice(slice(0, 2)), ("user_axis",)))
     held = table[ch.angle_labels].iloc[idx].ffill().to_numpy()
-    np.testing.assert_allclose(np.vstack(lsl.angles), held, rtol=0, atol=1e-9)
-    # The record: every frame, `fingerfit angles`' numbers.
+    assert_close_where_solved(np.vstack(lsl.angles), held, solved[idx])
+    # The source channels: the model solved frames 50, 51 (index.middle) and 300
+    # (index.distal); frame 120 (no hand) was held.
+    source = np.vstack(lsl.source)[:, ch.digits.index("index")]
+    code = np.zeros(N)
+    code[[50, 51, 300]], code[120] = 1, 2
+    np.testing.assert_array_equal(source, code[idx])
+    # The record: every frame, `fingerfit angles`' numbers (block by block where solved).
     got = pd.read_csv(tmp_path / "live.csv")
-    pd.testing.assert_frame_equal(got, table, check_exact=False, rtol=0, atol=1e-9)
+    assert list(got.columns) == list(table.columns)
+    cols = [c for c in table.columns if "ik_rms" not in c]
+    assert_close_where_solved(got[cols].to_numpy(), table[cols].to_numpy(), solved)
+    assert np.isfinite(got.loc[solved, "index.ik_rms_mm"]).all()
+    assert not np.isfinite(got.loc[~solved, "index.ik_rms_mm"]).any()
 
 
 def test_a_frame_older_than_max_age_is_never_sent(tmp_path: Path) -> None:
@@ -205,8 +225,8 @@ def test_a_frame_that_goes_stale_in_its_compute_is_not_held() -> None:
     outlasted --max-age) does not become the value a later frame's missing sensor keeps."""
     model = load_model(fitted()[1])
     # Frame 30 computes for 30 ms (--max-age 10 ms); every frame after it that can be sent
-    # next lacks the distal sensor, so its angles that need it are held.
-    rec = short_recording(60, tuple((i, "index.distal") for i in range(31, 60)))
+    # next lacks the hand sensor, so nothing can be computed or solved: its values are held.
+    rec = short_recording(60, tuple((i, "hand") for i in range(31, 60)))
     lsl = FakeLsl()
     slow = _SlowOnce(float(rec.time[30]), 0.03)
     streamer = Streamer(model, lsl=lsl, retargeter=slow, max_age=0.010)

@@ -14,12 +14,11 @@ import pandas as pd
 import pytest
 
 from fingerfit.io.liberty import liberty_binary_bytes, parse_liberty_binary, records_to_recording
-from fingerfit.kinematics import compute_kinematics, kinematics_table
 from fingerfit.live.liberty_serial import ITEMS, RECORD, parse_records
 from fingerfit.live.stream import model_sensors
 from fingerfit.model import load_model
 
-from ._live import fitted, short_recording, stream_counts, until
+from ._live import angles_of, fitted, short_recording, stream_counts, until
 from .bad_inputs._cli import refused, run
 from .liberty_emulator import Faults, LibertyEmulator
 
@@ -37,7 +36,7 @@ def _expected(emu: LibertyEmulator, model, n: int) -> pd.DataFrame:
     rec = records_to_recording(
         recs, "emulated.bin", units="cm", rate_hz=240.0, sensors=emu.stations
     )
-    return kinematics_table(compute_kinematics(model, rec), units=model.session_units)
+    return angles_of(model, rec)[0]
 
 
 def test_liberty_stream_resynchronises_and_ends_on_unplug(tmp_path) -> None:
@@ -77,9 +76,15 @@ def test_liberty_stream_resynchronises_and_ends_on_unplug(tmp_path) -> None:
     np.testing.assert_allclose(
         got.loc[keep, cols].to_numpy(), want.loc[keep, cols].to_numpy(), rtol=0, atol=1e-9
     )
-    for i in damaged:  # the damaged record's sensor is missing in that frame only
-        assert got.loc[i, cols].isna().any()
-        assert np.isfinite(want.loc[i, cols].to_numpy(float)).all()
+    # A damaged record's sensor is missing in that frame only: the model solves frames 100
+    # and 150 (index.proximal, index.distal missing), nothing can solve 200 (no hand).
+    for i in (100, 150):
+        assert np.isfinite(got.loc[i, cols].to_numpy(float)).all()
+    # Without the hand: the MP and the tips are empty, PIP and DIP (their sensors there)
+    # computed directly.
+    assert got.loc[200, ["index.mp", "index.tip.x", "index.ik_rms_mm"]].isna().all()
+    assert np.isfinite(got.loc[200, ["index.pip", "index.dip"]].to_numpy(float)).all()
+    assert not np.isfinite(want.loc[keep, "index.ik_rms_mm"]).any()
 
 
 def test_liberty_stream_stops_cleanly_after_duration(tmp_path) -> None:
@@ -109,7 +114,9 @@ def test_liberty_stream_stops_cleanly_after_duration(tmp_path) -> None:
     assert seconds >= 0.3
     got = pd.read_csv(tmp_path / "a.csv")
     assert 0 < len(got) == stream_counts(res.output)["recorded"] < 2 * N
-    assert np.isfinite(got.to_numpy()).all()
+    angles = got[[c for c in got.columns if "ik_rms" not in c]]
+    assert np.isfinite(angles.to_numpy()).all()
+    assert got["index.ik_rms_mm"].isna().all()  # every frame computed from its sensors
 
 
 def test_parser_resynchronises_after_every_kind_of_damage() -> None:

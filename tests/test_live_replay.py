@@ -46,6 +46,9 @@ FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
 N = 240
 HOLES = ((50, "index.middle"), (51, "index.middle"), (120, "hand"))
 DEADLINE = HANG_S
+#: How far a frame the model solved one at a time (the robot lane) or block by block (the
+#: files) may lie from `fingerfit angles`' solution of the whole recording: deg, mm.
+SOLVED_DEG, SOLVED_MM = 0.5, 0.5
 
 
 def _angles(tmp_path: Path, csv: Path, model: Path) -> pd.DataFrame:
@@ -90,6 +93,13 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     participant = DomainParticipant(domain)
     qos = Qos(Policy.Reliability.Reliable(0), Policy.History.KeepAll)
     reader = DataReader(participant, Topic(participant, "rt" + topic, JointState, qos=qos), qos=qos)
+    sq = Qos(
+        Policy.Reliability.Reliable(0), Policy.History.KeepLast(1), Policy.Durability.TransientLocal
+    )
+    src_reader = DataReader(
+        participant, Topic(participant, "rt" + topic + "/source", JointState, qos=sq), qos=sq
+    )
+    sources: list = []
     record, bag = tmp_path / "live.csv", tmp_path / "bag"
     lsl_start, wall_start = pylsl.local_clock(), time.time()  # before any frame's arrival
     proc = subprocess.Popen(
@@ -126,6 +136,7 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
                     stamps[kind] += ts
                     received[kind] += [now] * len(ts)
             messages.extend(m for m in reader.take(N=1000) if isinstance(m, JointState))
+            sources.extend(m for m in src_reader.take(N=1000) if isinstance(m, JointState))
             if leaver is not None and len(data["tips"]) > 20:
                 leaver.close_stream()
                 leaver = None
@@ -147,32 +158,47 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     t_rec = want["time"].to_numpy()
     valid = np.ones(N)
     valid[[i for i, _ in HOLES]] = 0
+    # Frames 50 and 51 lack index.middle: solved by the model (the robot lane one frame at
+    # a time, `angles` and the files with the frames around them: the same within
+    # SOLVED_DEG and SOLVED_MM); frame 120 lacks the hand: nothing to solve, held.
+    solved = np.zeros(N, dtype=bool)
+    solved[[50, 51]] = True
+    source = np.zeros((N, len(ch.digits)))
+    source[solved, ch.digits.index("index")] = 1
+    source[120] = 2
     idx = None
-    for kind, labels, unit, ctype in (
-        ("angles", ch.angle_labels, "degrees", "JointAngles"),
-        ("tips", ch.tip_labels, "millimeters", "MoCap"),
+    for kind, labels, unit, ctype, tol in (
+        ("angles", ch.angle_labels, "degrees", "JointAngles", SOLVED_DEG),
+        ("tips", ch.tip_labels, "millimeters", "MoCap", SOLVED_MM),
     ):
         info = infos[kind]
         assert info.type() == ctype and info.channel_format() == pylsl.cf_double64
         assert info.nominal_srate() == pytest.approx(480.0, rel=1e-6)  # 240 Hz at @2
         root = ET.fromstring(info.as_xml())
         chans = root.find("desc/channels").findall("channel")
-        assert [c.findtext("label") for c in chans] == [*labels, "valid"]
-        assert [c.findtext("unit") for c in chans][:-1] == [unit] * len(labels)
+        assert [c.findtext("label") for c in chans] == [*labels, *ch.source_labels, "valid"]
+        assert [c.findtext("unit") for c in chans][: len(labels)] == [unit] * len(labels)
         assert all(c.findtext("type") for c in chans)
         x = np.asarray(data[kind])
-        assert x.shape == (sent, len(labels) + 1)  # every frame sent reaches the consumer
+        k = len(labels)
+        assert x.shape == (sent, k + len(ch.digits) + 1)  # every frame sent is received
         ts, rx = np.asarray(stamps[kind]), np.asarray(received[kind])
         # Which frames were sent: the same on every outlet (one push per frame).
-        idx = sent_frames(ts, t_rec, 2.0, x[:, :-1], want[labels].to_numpy())
+        idx = sent_frames(ts, t_rec, 2.0, x[:, :k], want[labels].to_numpy(), ~solved)
         assert np.all(np.diff(idx) > 0)  # in order, never one twice
-        # A missing sensor holds the last value sent.
+        # A frame nothing can solve holds the last value sent; a solved one is close to
+        # `angles`' solution; every other frame is `angles`' value.
         held = want[labels].iloc[idx].ffill().to_numpy()
-        np.testing.assert_allclose(x[:, :-1], held, rtol=0, atol=1e-9)
+        close = solved[idx]
+        np.testing.assert_allclose(x[~close, :k], held[~close], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(x[close, :k], held[close], rtol=0, atol=tol)
+        np.testing.assert_array_equal(x[:, k:-1], source[idx])
         np.testing.assert_array_equal(x[:, -1], valid[idx])
         assert np.all(np.diff(ts) > 0)
         assert np.all(ts > lsl_start) and np.all(rx > ts)  # arrival on the LSL clock
-    assert ch.angle_labels == [c for c in want.columns if c.count(".") == 1 and c != "time"]
+    assert ch.angle_labels == [
+        c for c in want.columns if c.count(".") == 1 and c != "time" and "ik_rms" not in c
+    ]
 
     # --- ROS 2 over DDS: names, radians, stamps (the frames LSL got) --------------------
     assert len(messages) == sent
@@ -180,26 +206,56 @@ def test_stream_to_lsl_dds_bag_and_csv_equals_angles(tmp_path: Path) -> None:
     assert all(list(m.name) == names for m in messages)
     pos = np.array([m.position for m in messages])
     rad = np.radians(want[[n.replace("_", ".", 1) for n in names]])
-    np.testing.assert_allclose(pos, rad.iloc[idx].ffill().to_numpy(), rtol=0, atol=1e-9)
+    close = solved[idx]
+    expect = rad.iloc[idx].ffill().to_numpy()
+    np.testing.assert_allclose(pos[~close], expect[~close], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(pos[close], expect[close], rtol=0, atol=np.radians(SOLVED_DEG))
     stamp = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in messages])
     assert np.all(np.diff(stamp) > 0) and wall_start < stamp[0] and stamp[-1] < time.time()
     np.testing.assert_allclose(np.diff(stamp), np.diff(stamps["angles"]), atol=1e-6)
     assert {m.header.frame_id for m in messages} == {"hand"}
+    # The source topic: what each digit's values come from, as the frames sent changed it.
+    # The writer keeps the current message only (a state, not a log): a change superseded
+    # before it went out may be skipped, and DDS may hand the transient-local sample over
+    # twice (repeats dropped here); the messages are the changes in order, ending with the
+    # last.
+    assert sources and all(list(m.name) == ch.digits for m in sources)
+    changes = [list(m.position) for m in sources]
+    changes = [c for i, c in enumerate(changes) if i == 0 or c != changes[i - 1]]
+    rows = [list(r) for r in source[idx]]
+    expected = [r for i, r in enumerate(rows) if i == 0 or r != rows[i - 1]]
+    it = iter(expected)
+    assert all(c in it for c in changes) and changes[-1] == expected[-1], (changes, expected)
 
     # --- rosbag2: every frame ------------------------------------------------------------
     store = get_typestore(Stores.ROS2_HUMBLE)
     with Reader(bag) as r:
-        (conn,) = r.connections
-        assert conn.topic == topic and conn.msgtype == "sensor_msgs/msg/JointState"
-        msgs = [store.deserialize_cdr(raw, conn.msgtype) for _, _, raw in r.messages()]
+        conns = {c.topic: c for c in r.connections}
+        assert set(conns) == {topic, f"{topic}/source"}
+        conn = conns[topic]
+        assert conn.msgtype == "sensor_msgs/msg/JointState"
+        msgs = [store.deserialize_cdr(raw, conn.msgtype) for _, _, raw in r.messages([conn])]
+        src = conns[f"{topic}/source"]
+        src_msgs = [store.deserialize_cdr(raw, src.msgtype) for _, _, raw in r.messages([src])]
     assert len(msgs) == N
     bag_pos = np.array([m.position for m in msgs])
-    np.testing.assert_allclose(bag_pos, rad.ffill().to_numpy(), rtol=0, atol=1e-9)
+    all_rad = rad.ffill().to_numpy()
+    np.testing.assert_allclose(bag_pos[~solved], all_rad[~solved], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        bag_pos[solved], all_rad[solved], rtol=0, atol=np.radians(SOLVED_DEG)
+    )
+    # Every change of source, in order: from the sensors, the model (50), the sensors
+    # (52), held (120), the sensors (121).
+    assert [list(m.position)[ch.digits.index("index")] for m in src_msgs] == [0, 1, 0, 2, 0]
 
     # --- the angles CSV: `fingerfit angles` for the same frames ---------------------------
     got = pd.read_csv(record)
     assert list(got.columns) == list(want.columns)
-    pd.testing.assert_frame_equal(got, want, check_exact=False, rtol=0, atol=1e-9)
+    pd.testing.assert_frame_equal(got[~solved], want[~solved], check_exact=False, rtol=0, atol=1e-9)
+    index = [c for c in want.columns if c.startswith("index.") and "ik_rms" not in c]
+    np.testing.assert_allclose(
+        got.loc[solved, index].to_numpy(), want.loc[solved, index].to_numpy(), atol=SOLVED_MM
+    )
 
 
 def _default_sigint() -> None:

@@ -22,13 +22,17 @@ from .bad_inputs._cli import refused, run
 from .conftest import subject
 
 
-def _same_table(parquet: Path, csv: Path, fmt: str) -> pd.DataFrame:
-    """The Parquet table's columns equal the CSV's, bit for bit (NaN where empty)."""
+def _same_table(parquet: Path, csv: Path, fmt: str, atol: float = 0.0) -> pd.DataFrame:
+    """The Parquet table's columns equal the CSV's, bit for bit (NaN where empty), or to
+    ``atol``."""
     got = fpq.read_parquet(parquet, fmt)
     want = pd.read_csv(csv)
     assert got.names == list(want.columns)
     for c in want.columns:
-        assert np.array_equal(got.columns[c], want[c].to_numpy(float), equal_nan=True), c
+        if atol:
+            np.testing.assert_allclose(got.columns[c], want[c].to_numpy(float), atol=atol)
+        else:
+            assert np.array_equal(got.columns[c], want[c].to_numpy(float), equal_nan=True), c
     return want
 
 
@@ -51,6 +55,33 @@ def test_session_of_parquet_recordings_fits_like_the_csv_session(tmp_path: Path)
                      "test.parquet"]  # fmt: skip
     assert 'grasp = ["grasp.parquet"]' in (tmp_path / "parquet" / "session.toml").read_text()
     assert models["csv"] == models["parquet"]
+
+
+def test_parquet_session_takes_events_naming_the_csv_recordings(tmp_path: Path) -> None:
+    """events.csv written for targets.csv names the recording of a session converted to
+    targets.parquet by its stem; a name no recording has is refused with its line and
+    the session's recordings."""
+    from fingerfit.io import load_session
+
+    src = write_subject(subject("realistic", 2), tmp_path / "src")
+    args = ["session", tmp_path / "pq", "--subject", "S", "--rate", "240", "--fingers", "index"]
+    for opt, name in (("--reference", "reference"), ("--grasp", "grasp"), ("--targets", "targets")):
+        rec = read_pose_csv(src / f"{name}.csv", units="mm", rate_hz=240)
+        args += [opt, write_pose_csv(tmp_path / f"{name}.parquet", rec, units="mm")]
+    args += ["--landmarks", src / "landmarks.csv", "-q"]
+    assert "targets.csv," in (src / "events.csv").read_text()
+    r = run(*args, "--events", src / "events.csv")
+    assert r.exit_code == 0, r.output
+    session = load_session(tmp_path / "pq")
+    assert session.events and {e.recording for e in session.events} == {"targets.parquet"}
+    assert (tmp_path / "pq" / "events.csv").read_bytes() == (src / "events.csv").read_bytes()
+    bad = tmp_path / "events.csv"
+    lines = (src / "events.csv").read_text().splitlines()
+    lines[2] = lines[2].replace("targets.csv", "target.csv")
+    bad.write_text("\n".join(lines) + "\n")
+    line = refused(run(*args[:1], tmp_path / "pq2", *args[2:], "--events", bad), "events.csv:3:")
+    assert "unknown recording 'target.csv' (the session's recordings: reference.parquet, " in line
+    assert not (tmp_path / "pq2").exists()
 
 
 def test_angles_and_urdf_names_to_parquet(tmp_path: Path) -> None:
@@ -77,7 +108,10 @@ def test_stream_record_parquet_equals_angles(tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     r = run("angles", model, csv, "-o", tmp_path / "a.csv", "-q")
     assert r.exit_code == 0, r.output
-    want = _same_table(tmp_path / "live.parquet", tmp_path / "a.csv", fpq.ANGLES)
+    # To 1e-9, not to the bit: the stream computes the frames in the blocks they arrive in,
+    # one frame under load, and BLAS sums a one-column product in another order than a
+    # long one (the last bits of a few values differ).
+    want = _same_table(tmp_path / "live.parquet", tmp_path / "a.csv", fpq.ANGLES, atol=1e-9)
     assert len(want) == 480
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "live.parquet", "rec.csv"]
     assert pq.ParquetFile(tmp_path / "live.parquet").metadata.num_row_groups >= 1
@@ -178,3 +212,67 @@ def test_retarget_to_parquet(tmp_path: Path) -> None:
     refused(run("retarget", model, tmp_path / "test.csv", "--robot", tmp_path / "toy.xml",
                 "--map", tmp_path / "toy.toml", "-o", tmp_path / "o" / "q.txt"),
             "field '--output'", ".csv or .parquet")  # fmt: skip
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.uint64)
+
+
+def test_convert_a_pose_table_to_parquet_and_back_bit_for_bit(tmp_path: Path) -> None:
+    """No --from: the extension chooses. The rows stay the rows of the file (its sensor
+    order within a frame, a sample with an empty field, a frame lost), the numbers bit for
+    bit (-0.0, a subnormal, digits beyond the shortest form), the units the file's own."""
+    rec = subject("exact", 1).session.grasp[0].slice(slice(0, 40))
+    text = write_pose_csv(tmp_path / "g.csv", rec).read_text().splitlines()
+    head, body = text[0], text[1:]
+    n_s = len(rec.sensors)
+    body[0], body[1] = body[1], body[0]  # another sensor order in the first frame
+    del body[5 * n_s : 6 * n_s]  # frame 5 lost
+    f = body[3].split(",")
+    f[2], f[3], f[4], f[5] = "-0.0", "5e-324", "12.500000000000000001", ""
+    body[3] = ",".join(f)
+    src = tmp_path / "odd.csv"
+    src.write_text("\n".join([head, *body]) + "\n")
+    r = run("convert", src, "-o", tmp_path / "odd.parquet", "-q")
+    assert r.exit_code == 0, r.output
+    got = fpq.read_parquet(tmp_path / "odd.parquet", fpq.POSE, text=("sensor",))
+    assert got.meta["fingerfit.units"] == "mm" and got.n_rows == len(body)
+    rows = [line.split(",") for line in body]
+    codes, names = got.columns["sensor"]
+    assert [names[c] for c in codes] == [r[1] for r in rows]
+    for j, c in enumerate(("time", "x", "y", "z", "qw", "qx", "qy", "qz")):
+        want = np.array([float(r[j + (j > 0)] or "nan") for r in rows])
+        assert np.array_equal(_bits(got.columns[c]), _bits(want)), c
+    # and back: the CSV fingerfit wrote comes back byte for byte
+    r = run("convert", tmp_path / "g.csv", "-o", tmp_path / "g.parquet", "-q")
+    assert r.exit_code == 0, r.output
+    r = run("convert", tmp_path / "g.parquet", "-o", tmp_path / "back.csv", "-q")
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "back.csv").read_bytes() == (tmp_path / "g.csv").read_bytes()
+    # a table in cm stays in cm both ways, and says so in its metadata
+    r = run("convert", tmp_path / "g.csv", "-o", tmp_path / "cm.parquet", "--units", "cm",
+            "--no-unit-check")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert fpq.parquet_schema(tmp_path / "cm.parquet")[1]["fingerfit.units"] == "cm"
+    r = run("convert", tmp_path / "cm.parquet", "-o", tmp_path / "cm.csv", "--no-unit-check")
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "cm.csv").read_bytes() == (tmp_path / "g.csv").read_bytes()
+
+
+def test_convert_says_what_it_cannot_tell(tmp_path: Path) -> None:
+    """A file that is not a pose table needs --from; a Parquet file named .csv is named as
+    one, never shown as its binary bytes (by convert and by every reader of a pose CSV)."""
+    rec = subject("exact", 1).session.grasp[0]
+    wide = write_wide_csv(tmp_path / "w.csv", rec, units="cm")
+    line = refused(run("convert", wide, "-o", tmp_path / "o.parquet"), "w.csv", "'--from'")
+    assert "give --from liberty, liberty-binary, wide-csv or c3d" in line
+    hidden = tmp_path / "grasp.csv"
+    hidden.write_bytes(write_pose_csv(tmp_path / "g.parquet", rec).read_bytes())
+    for args in (
+        ("convert", hidden, "-o", tmp_path / "o.parquet"),
+        ("joint", hidden, "--parent", "hand", "--child", "index.proximal"),
+    ):
+        line = refused(run(*args), "grasp.csv:1:")
+        assert "not text: a Parquet file (name it grasp.parquet" in line, line
+        assert "PAR1" not in line
+    assert not (tmp_path / "o.parquet").exists()

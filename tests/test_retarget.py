@@ -316,7 +316,7 @@ def test_cli_writes_csv_and_identical_npz(hand, tmp_path):
     from typer.testing import CliRunner
 
     from fingerfit.cli import app
-    from fingerfit.io.posecsv import write_pose_csv
+    from fingerfit.io.posewrite import write_pose_csv
     from fingerfit.model import save_model
 
     model, rec = hand
@@ -485,23 +485,31 @@ def test_shipped_maps_are_package_data():
 
 @pytest.mark.parametrize("method", ["tip", "joint"])
 def test_retargeter_in_blocks_equals_the_whole_recording(hand, method):
-    """Live retargeting (blocks as they arrive, a sensor missing across a block boundary)
-    gives the offline joints (to rounding: the person's kinematics of a short block take
-    another NumPy path, equal to ~1e-14)."""
+    """Live retargeting (blocks as they arrive, a digit's sensors all missing across a block
+    boundary: nothing can solve it, it keeps its pose) gives the offline joints (to
+    rounding: the person's kinematics of a short block take another NumPy path, equal to
+    ~1e-14). One sensor missing is solved by the model instead: no frame is held."""
     from fingerfit.retarget import Retargeter
     from fingerfit.session import PoseSeries, Recording
 
     model, rec = hand
     n = 90
-    poses = {}
-    for k, v in rec.poses.items():
-        pos, rot = v.position[:n].copy(), v.rotation[:n].copy()
-        if k == "index.middle":
-            pos[28:41] = np.nan  # missing from frame 28 to 40
-            rot[28:41] = np.nan
-        poses[k] = PoseSeries(pos, rot)
-    cut = Recording(rec.name, rec.time[:n], poses)
     robot, rmap = resolve("allegro", None, model.hand)
+
+    def cut_with_gap(sensors: tuple[str, ...]) -> Recording:
+        poses = {}
+        for k, v in rec.poses.items():
+            pos, rot = v.position[:n].copy(), v.rotation[:n].copy()
+            if k in sensors:
+                pos[28:41] = np.nan  # missing from frame 28 to 40
+                rot[28:41] = np.nan
+            poses[k] = PoseSeries(pos, rot)
+        return Recording(rec.name, rec.time[:n], poses)
+
+    solved = retarget(model, cut_with_gap(("index.middle",)), robot, rmap, method)
+    assert not any("missing" in note for note in solved.notes)
+    assert np.isfinite(solved.q).all()
+    cut = cut_with_gap(("index.proximal", "index.middle", "index.distal"))
     whole = retarget(model, cut, robot, rmap, method)
     assert any("missing" in note for note in whole.notes)
     live = Retargeter(model, robot, rmap, method)

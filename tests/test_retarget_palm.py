@@ -126,7 +126,7 @@ def test_cli_prints_the_palm_frame_against_the_hand_sensor(tilted, tmp_path):
     from typer.testing import CliRunner
 
     from fingerfit.cli import app
-    from fingerfit.io.posecsv import write_pose_csv
+    from fingerfit.io.posewrite import write_pose_csv
     from fingerfit.model import save_model
     from fingerfit.session import PoseSeries, Recording
 

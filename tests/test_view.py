@@ -83,8 +83,7 @@ def test_view_save_writes_every_entity_once_per_frame(simulated, tmp_path):
         "/person/orthogonal/tips",
         "/sensors",
         "/truth/tips",
-        "/robot/skeleton",
-        "/robot/joints",
+        "/robot/geometry",
         "/robot/tips",
     ]
     expected += [f"/angles/{d}/{a}" for d in DIGITS for a in model.fingers[d].angle_names()]
@@ -191,7 +190,7 @@ def test_stream_view_save_has_every_frame_and_the_angles_tips(simulated, tmp_pat
     assert f"view {n} logged, 0 dropped" in r.output, r.output  # --view-save: every frame
     expected = ["/person/skeleton", "/person/joints", "/person/axes", "/person/tips"]
     expected += ["/person/pads", "/person/orthogonal/tips", "/sensors"]
-    expected += ["/robot/skeleton", "/robot/joints", "/robot/tips"]
+    expected += ["/robot/geometry", "/robot/tips"]
     expected += [f"/angles/{d}/{a}" for d in DIGITS for a in model.fingers[d].angle_names()]
     assert set(expected) <= set(rows), sorted(set(expected) - set(rows))
     for entity in rows:
@@ -210,13 +209,98 @@ def test_stream_view_save_has_every_frame_and_the_angles_tips(simulated, tmp_pat
         np.testing.assert_allclose(got, np.degrees(offline.q[:, j]), atol=1e-6, err_msg=name)
 
 
+def _transforms(rows, entity: str) -> tuple[np.ndarray, np.ndarray]:
+    """An entity's transform per frame, in frame order: translation (n, 3), matrix (n, 3, 3)
+    (Rerun stores it column by column)."""
+    t = np.array([v[0] for _, v in sorted(rows[entity]["Transform3D:translation"])])
+    m = np.array([v[0] for _, v in sorted(rows[entity]["Transform3D:mat3x3"])])
+    return t, m.reshape(-1, 3, 3).transpose(0, 2, 1)
+
+
+@pytest.mark.parametrize("robot_name", ["shadow", "allegro"])
+def test_view_draws_the_robot_with_its_own_geometry(simulated, tmp_path, robot_name):
+    """MJCF (Shadow) and URDF (Allegro): the hand's visual meshes, once, each under its
+    link; a transform per link per frame (m, the robot's world) and one per frame for the
+    robot's world beside the person (mm). Composed, they put each digit's tip frame where
+    the robot's points are drawn (``robot/tips``, from the robot's own kinematics)."""
+    pytest.importorskip("rerun")
+    pytest.importorskip("mujoco")
+    pytest.importorskip("pinocchio")
+    from rerun.chunk import RrdReader
+
+    from fingerfit.io import read_pose_csv, write_pose_csv
+    from fingerfit.retarget import resolve
+    from fingerfit.view.robotgeometry import robot_geometry
+
+    model, sub, folder, model_path = simulated
+    rec = read_pose_csv(folder / sub.session.grasp[0].name).slice(slice(0, 240, 3))
+    short = write_pose_csv(tmp_path / "g.csv", rec)
+    out = tmp_path / "robot.rrd"
+    args = ["view", str(model_path), str(short), "--robot", robot_name, "--save", str(out)]
+    r = CliRunner().invoke(app, [*args, "-q"])
+    assert r.exit_code == 0, r.output
+    rows, _ = _read(out)
+    assert "/robot/skeleton" not in rows and "/robot/joints" not in rows
+    robot, rmap = resolve(robot_name, None, model.hand)
+    geometry = robot_geometry(robot, rmap.palm)
+    meshes, vertices = 0, 0
+    for chunk in RrdReader(out).stream().to_chunks():
+        if chunk.is_static and chunk.entity_path.startswith("/robot/geometry/"):
+            batch = chunk.to_record_batch()
+            if "Mesh3D:vertex_positions" in batch.schema.names:
+                meshes += 1
+                vertices += len(batch.column("Mesh3D:vertex_positions").to_pylist()[0])
+    want = [v for v in geometry.visuals if v.kind == "mesh"]
+    assert meshes == len(want) > 10 and vertices == sum(len(v.vertices) for v in want)
+    n = rec.n_frames
+    world_t, world_m = _transforms(rows, "/robot/geometry")
+    assert world_t.shape == (n, 3)
+    np.testing.assert_allclose(np.linalg.det(world_m), 1000.0**3, rtol=1e-5)  # m -> mm
+    tips = np.array([v for _, v in sorted(rows["/robot/tips"]["Points3D:positions"])])
+    zero = np.zeros(robot.nq)
+    link0_t, link0_r = geometry.link_poses(zero)
+    for k, d in enumerate(rmap.digits):
+        frame = rmap.digits[d].tip
+        if robot.mujoco_model is not None:  # the site's body
+            mj = robot.mujoco_model
+            site = mj.site(frame).id
+            link = geometry.links.index(mj.body(int(mj.site_bodyid[site])).name)
+        else:
+            link = geometry.links.index(frame)
+        tip0 = robot.pose(zero, frame)[0]
+        local = link0_r[0, link].T @ (tip0 - link0_t[0, link])  # m, the link's frame
+        entity = "/robot/geometry/" + geometry.links[link].replace(":", "\\:")
+        lt, lm = _transforms(rows, entity)
+        at = world_t + np.einsum("nij,nj->ni", world_m, lt + lm @ local)
+        np.testing.assert_allclose(at, tips[:, k], atol=0.01, err_msg=d)  # mm
+
+
+def test_a_robot_without_visual_geometry_is_drawn_as_lines(simulated, tmp_path, monkeypatch):
+    pytest.importorskip("rerun")
+    pytest.importorskip("mujoco")
+    from fingerfit.view import scene
+    from fingerfit.view.robotgeometry import RobotGeometry
+
+    _, sub, folder, model_path = simulated
+    monkeypatch.setattr(scene, "robot_geometry", lambda robot, palm: RobotGeometry([], [], None))
+    out = tmp_path / "lines.rrd"
+    grasp = folder / sub.session.grasp[0].name
+    r = CliRunner().invoke(
+        app, ["view", str(model_path), str(grasp), "--robot", "shadow", "--save", str(out), "-q"]
+    )
+    assert r.exit_code == 0, r.output
+    rows, _ = _read(out)
+    assert {"/robot/skeleton", "/robot/joints", "/robot/tips"} <= set(rows)
+    assert not any(e.startswith("/robot/geometry") for e in rows)
+
+
 class _Outlet:
     """A live output that keeps what it is sent (the robot lane's pushes)."""
 
     def __init__(self):
         self.robot = []
 
-    def push(self, angles, tips, valid, arrival, robot=None):
+    def push(self, angles, tips, valid, arrival, robot=None, source=None):
         self.robot.append(robot[0].copy())
 
     def has_consumers(self):
@@ -383,6 +467,23 @@ def test_web_view_serves_the_viewer_and_the_data(web_view):
             assert _listening_on(port) == {"0100007F"}, (port, _listening_on(port))
 
 
+def test_web_view_listens_on_this_machine_only(web_view):
+    """The socket table of ``fingerfit view --web`` and of every process it started:
+    every listening socket is on 127.0.0.1 or ::1 (the two printed ports among them)."""
+    from urllib.parse import parse_qs, urlsplit
+
+    psutil = pytest.importorskip("psutil")
+    parts = urlsplit(web_view)
+    grpc_port = urlsplit(parse_qs(parts.query)["url"][0]).port
+    listening = set()
+    for proc in psutil.Process().children(recursive=True):
+        for conn in proc.net_connections(kind="inet"):
+            if conn.status == psutil.CONN_LISTEN:
+                listening.add((conn.laddr.ip, conn.laddr.port))
+    assert {("127.0.0.1", parts.port), ("127.0.0.1", grpc_port)} <= listening, listening
+    assert {ip for ip, _ in listening} <= {"127.0.0.1", "::1"}, listening
+
+
 def test_web_view_renders_in_headless_chromium_and_asks_nothing_beyond_this_machine(
     web_view, tmp_path
 ):
@@ -426,3 +527,67 @@ def test_web_view_renders_in_headless_chromium_and_asks_nothing_beyond_this_mach
     assert pixels.shape == (800, 1400, 3)
     assert pixels.std() > 0.05  # not a blank page
     assert coloured_share(pixels, SCENE_BOX) > 0.005  # the hand, drawn in the 3D view
+
+
+def _chunks(path) -> dict[str, int]:
+    """Entity -> the temporal chunks of a .rrd."""
+    from rerun.chunk import RrdReader
+
+    out: dict[str, int] = defaultdict(int)
+    for chunk in RrdReader(path).stream().to_chunks():
+        if not chunk.is_static:
+            out[chunk.entity_path] += 1
+    return out
+
+
+def test_live_view_save_joins_blocks_into_few_chunks(simulated, tmp_path):
+    """``--view-save`` gets a stream's frames in small blocks; the file holds them in
+    chunks of FILE_BATCH_FRAMES (each chunk carries about 1.2 kB of Rerun's own), so it is
+    no larger than the file of the same frames logged at once."""
+    pytest.importorskip("rerun")
+    from fingerfit.view import FILE_BATCH_FRAMES, LiveView, hand_scene, save_rrd
+
+    model, sub, _, _ = simulated
+    rec = sub.session.grasp[0].slice(slice(0, 600))
+    view = LiveView(model, tmp_path / "live.rrd")
+    for i in range(0, rec.n_frames, 3):  # 3 frames a block, as a real-time stream
+        view.push(rec.slice(slice(i, i + 3)))
+    view.close()
+    assert view.logged == rec.n_frames
+    chunks = _chunks(tmp_path / "live.rrd")
+    assert chunks and max(chunks.values()) <= -(-rec.n_frames // FILE_BATCH_FRAMES), chunks
+    whole = save_rrd(hand_scene(model, rec, compute_kinematics(model, rec)), tmp_path / "w.rrd")
+    assert (tmp_path / "live.rrd").stat().st_size < 1.05 * whole.stat().st_size
+    rows, _ = _read(tmp_path / "live.rrd")
+    assert sorted(rows["/person/tips"]["frame"]) == list(range(rec.n_frames))
+
+
+def test_a_script_makes_a_live_view_without_a_main_guard(simulated, tmp_path):
+    """The view's process runs nothing of the script that made it: no
+    ``if __name__ == "__main__":`` is needed, and the script's top level runs once."""
+    pytest.importorskip("rerun")
+    import subprocess
+
+    _, sub, folder, model_path = simulated
+    script = tmp_path / "live_script.py"
+    script.write_text(
+        "from pathlib import Path\n"
+        "from fingerfit.io import read_pose_csv\n"
+        "from fingerfit.model import load_model\n"
+        "from fingerfit.view import LiveView\n"
+        f"model = load_model({str(model_path)!r})\n"
+        f"rec = read_pose_csv({str(folder / sub.session.grasp[0].name)!r}).slice(slice(0, 40))\n"
+        "with open('ran.txt', 'a') as fh:\n"
+        "    fh.write('top level\\n')\n"
+        "view = LiveView(model, Path('live.rrd'))\n"
+        "view.push(rec)\n"
+        "view.close()\n"
+        "print('logged', view.logged)\n"
+    )
+    res = subprocess.run(
+        [sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=120
+    )
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "logged 40", res.stdout + res.stderr
+    assert (tmp_path / "ran.txt").read_text() == "top level\n"
+    assert (tmp_path / "live.rrd").is_file()

@@ -215,6 +215,32 @@ class Recording:
         )
 
 
+def concat_recordings(recordings: list[Recording]) -> Recording:
+    """Recordings that follow one another (blocks of a stream) as one, frames in order.
+
+    Parameters
+    ----------
+    recordings : list of Recording
+        Non-empty; every one with the sensors of the first (mm, tracker frame).
+
+    Returns
+    -------
+    Recording
+        The first's name; time ``(n,)`` s and per sensor positions ``(n, 3)`` mm and
+        rotations ``(n, 3, 3)``, ``n`` the frames of all.
+    """
+    if len(recordings) == 1:
+        return recordings[0]
+    poses = {
+        k: PoseSeries(
+            np.concatenate([r.poses[k].position for r in recordings]),
+            np.concatenate([r.poses[k].rotation for r in recordings]),
+        )
+        for k in recordings[0].poses
+    }
+    return Recording(recordings[0].name, np.concatenate([r.time for r in recordings]), poses)
+
+
 @dataclass(frozen=True)
 class TargetEvent:
     """The tip of digit ``finger`` touches something during [start, end] s.

@@ -180,3 +180,45 @@ def test_convert_never_writes_onto_its_source(tmp_path: Path) -> None:
               "--rate", "240", "--map", "1=hand,2=index.proximal,3=index.middle,4=index.distal")  # fmt: skip
     refused(res, "would overwrite the input", str(alias))
     assert listing(tmp_path) == before and d.is_dir()
+
+
+def test_a_failed_write_leaves_no_folder_it_made(tmp_path: Path) -> None:
+    """A file or a folder written all-or-nothing into folders that did not exist: on
+    failure the new folders go too; a folder that existed, or holds something else, stays."""
+    from fingerfit.io.atomic import atomic_write, staged_directory, write_files
+
+    (tmp_path / "old").mkdir()
+    with pytest.raises(RuntimeError), atomic_write(tmp_path / "a/b/f.txt") as fh:
+        fh.write("half")
+        raise RuntimeError("fails part-way")
+    with pytest.raises(KeyboardInterrupt), staged_directory(tmp_path / "old/c/d/out") as tmp:
+        (tmp / "x.txt").write_text("half")
+        raise KeyboardInterrupt
+    with pytest.raises(TypeError):  # the second file's content cannot be written
+        write_files({tmp_path / "e/f/g.txt": "x", tmp_path / "e/i/h.txt": None})  # type: ignore[dict-item]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old"]
+    assert not any((tmp_path / "old").iterdir())
+    with pytest.raises(RuntimeError), staged_directory(tmp_path / "new/out"):
+        (tmp_path / "new" / "other.txt").write_text("someone else's")
+        raise RuntimeError
+    assert (tmp_path / "new" / "other.txt").exists()  # not removed: not empty
+
+
+def test_quiet_prints_no_table(fitted: Path, tmp_path: Path) -> None:
+    """``-q`` on ``fit`` and ``joint`` leaves out the table (only the line naming the file
+    written); ``export -q`` prints nothing; without it each prints its table or line."""
+    for quiet in ([], ["-q"]):
+        res = run("fit", fitted, "-o", tmp_path / f"m{len(quiet)}.json", *quiet)
+        assert res.exit_code == 0, res.output
+        assert ("s5/s6" in res.output) is not bool(quiet), res.output
+        assert f"model written to {tmp_path / f'm{len(quiet)}.json'}" in res.output
+        j = tmp_path / f"j{len(quiet)}.json"
+        res = run("joint", fitted / "grasp.csv", "--parent", "index.proximal", "--child",
+                  "index.middle", "--kind", "hinge", "-o", j, *quiet)  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert ("pivot residual" in res.output) is not bool(quiet), res.output
+        assert f"joint written to {j}" in res.output and j.exists()
+        res = run("export", fitted / "model.json", "--urdf", tmp_path / f"h{len(quiet)}.urdf",
+                  *quiet)  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert (res.output.strip() == "") is bool(quiet), res.output

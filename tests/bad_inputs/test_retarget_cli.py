@@ -18,7 +18,7 @@ from ._cli import listing, refused, run
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory) -> Path:
     from fingerfit.estimate import fit_session
-    from fingerfit.io.posecsv import write_pose_csv
+    from fingerfit.io.posewrite import write_pose_csv
     from fingerfit.model import save_model
 
     sub = subject("exact", 11)

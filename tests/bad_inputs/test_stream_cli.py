@@ -52,7 +52,11 @@ CASES = [
         ["--stations", "thumb.x"],
     ),
     (["--source", "liberty:DIR/tty", "--stations", "0=hand"], {}, ["--stations", "1-16"]),
-    (["--source", "liberty:DIR/tty", "--stations", "1=hand"], {}, ["--stations", "no station"]),
+    (
+        ["--source", "liberty:DIR/tty", "--stations", "1=hand"],
+        {},
+        ["--stations", "no sensor on the digit", "would determine every joint"],
+    ),
     (["--source", "replay:RECORDING", "--units", "m"], {}, ["rec.csv"]),
     (["--source", "replay:RECORDING", "--tips-frame", "world"], {}, ["--tips-frame"]),
 ]

@@ -114,5 +114,11 @@ def test_a_robot_file_with_its_map_streams(folder, tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     store = get_typestore(Stores.ROS2_HUMBLE)
     with Reader(bag) as reader:
-        msgs = [store.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages()]
+        topics = [c.topic for c, _, _ in reader.messages()]
+        msgs = [
+            store.deserialize_cdr(raw, c.msgtype)
+            for c, _, raw in reader.messages()
+            if not c.topic.endswith("/source")
+        ]
     assert len(msgs) == 48 and list(msgs[0].name) == ["a_mp", "a_pip", "b_mp"]
+    assert sum(t.endswith("/source") for t in topics) == 1  # every sensor there throughout

@@ -226,6 +226,20 @@ def test_subject_id_never_leaves_the_output_folder(sessions, tmp_path, bad) -> N
     _no_leftovers(tmp_path, before)
 
 
+def test_a_refused_study_leaves_no_new_parent_folders(sessions, tmp_path) -> None:
+    """``--out a/b/c/out`` whose parents are new: a refusal removes them again (a folder
+    that was there before, or that holds something else meanwhile, stays)."""
+    src = _set_subject(shutil.copytree(sessions["P02"], tmp_path / "s"), "../../../evil")
+    (tmp_path / "kept").mkdir()
+    before = listing(tmp_path)
+    for out in ("a/b/c/out", "kept/b/out"):
+        refused(run("study", src, "--out", tmp_path / out), "subject")
+        _no_leftovers(tmp_path, before)
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["kept", "s"]
+    refused(run("study", tmp_path / "kept", "--out", tmp_path / "x/y/out"), "no session.toml")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept", "s"]
+
+
 def test_bad_subject_id_skipped_with_keep_going(sessions, tmp_path) -> None:
     src = _set_subject(shutil.copytree(sessions["P02"], tmp_path / "s"), "../escape")
     out = tmp_path / "out"

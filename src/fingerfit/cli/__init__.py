@@ -13,7 +13,9 @@ from . import (  # noqa: F401  (registers the commands)
     study,
     view,
 )
-from .app import app, run
+from .app import app, one_line_summaries, run
+
+one_line_summaries()
 
 main = run
 

@@ -58,6 +58,18 @@ Quiet = Annotated[
 ]
 
 
+#: The ``--quiet`` of a command whose result is a table (``fit``, ``joint``).
+QuietTable = Annotated[
+    bool,
+    typer.Option(
+        "--quiet",
+        "-q",
+        help="No progress bar and no table: only the line naming the file written, notes "
+        "and warnings.",
+    ),
+]
+
+
 def progress(quiet: bool = False) -> Progress:
     """The progress bar of every command: on stderr, transient, off when quiet or piped.
 
@@ -141,6 +153,16 @@ def _version(value: bool) -> None:
 
         out.print(f"fingerfit {__version__}")
         raise typer.Exit()
+
+
+def one_line_summaries() -> None:
+    """Give each registered command its line in ``fingerfit --help``: the first paragraph
+    of its docstring as one line of text, which the help wraps to the terminal (the
+    docstring's own line breaks, which Rich's help keeps, would break it mid-sentence)."""
+    for info in app.registered_commands:
+        doc = info.callback.__doc__ if info.callback is not None else None
+        if info.short_help is None and doc:
+            info.short_help = " ".join(doc.strip().split("\n\n")[0].split())
 
 
 def run() -> None:

@@ -1,4 +1,6 @@
-"""``fingerfit convert``: real tracker files -> the canonical pose CSV of the session format."""
+"""``fingerfit convert``: real tracker files -> the canonical pose CSV of the session format,
+a pose table from CSV to Parquet or back, and any of them -> OpenSim's orientation table
+(``.sto``) or markers (``.trc``)."""
 
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from .app import Quiet, app, notice, out, progress, user_errors
 class SourceFormat(StrEnum):
     """Input formats of ``fingerfit convert``."""
 
+    pose_csv = "pose-csv"
     liberty = "liberty"
     liberty_binary = "liberty-binary"
     wide_csv = "wide-csv"
@@ -115,19 +118,27 @@ def convert(
         typer.Option(
             "-o",
             "--output",
-            help="Pose CSV to write (OUT.parquet: its Parquet form).",
+            help="Pose CSV to write (OUT.parquet: its Parquet form; OUT.sto: OpenSim "
+            "orientations; OUT.trc: the sensor origins as OpenSim markers, m).",
             show_default=False,
         ),
     ],
     fmt: Annotated[
-        SourceFormat,
-        typer.Option("--from", help="Input format.", case_sensitive=False, show_default=False),
-    ],
+        SourceFormat | None,
+        typer.Option(
+            "--from",
+            help="Input format (default: from the file: a pose CSV by its header, .parquet "
+            "by its metadata, .c3d; Liberty files and wide CSV need it).",
+            case_sensitive=False,
+            show_default=False,
+        ),
+    ] = None,
     units: Annotated[
         str | None,
         typer.Option(
             help="Position units in the input (mm, cm, m, in). Default: in for liberty "
-            "formats (the device default), POINT:UNITS for c3d; required for wide-csv."
+            "formats (the device default), POINT:UNITS for c3d, mm for a pose CSV, the "
+            "file's own for .parquet; required for wide-csv."
         ),
     ] = None,
     rate: Annotated[
@@ -203,19 +214,30 @@ def convert(
             help="Reject implausible distances between neighbouring hand sensors.",
         ),
     ] = True,
-    out_units: Annotated[str, typer.Option(help="Units of x,y,z in the written pose CSV.")] = "mm",
+    out_units: Annotated[
+        str | None,
+        typer.Option(
+            help="Units of x,y,z in the written pose CSV (default: mm; a pose table keeps its own)."
+        ),
+    ] = None,
     quiet: Quiet = False,
 ) -> None:
-    """Convert Liberty/Patriot ASCII or binary, wide CSV or C3D to the pose CSV."""
+    """Convert Liberty/Patriot ASCII or binary, wide CSV or C3D to the pose CSV, or a
+    pose table from CSV to Parquet and back (row for row, the numbers bit for bit); any of
+    them to OpenSim's orientations (.sto) or markers (.trc)."""
     import numpy as np
 
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.hygiene import check_recording
     from ..io.hygiene import fill_gaps as fill
-    from ..io.posecsv import write_pose_csv
-    from ..io.trackerfile import check_format_options, read_tracker_file
+    from ..io.opensim import write_markers, write_orientations
+    from ..io.posewrite import read_pose_table, write_pose_csv, write_pose_rows
+    from ..io.trackerfile import check_format_options, infer_format, read_tracker_file
     from ..session import UNITS_TO_MM, is_sensor_name
 
+    if not source.is_file():
+        raise FingerfitError("file not found", path=source)
+    fmt = SourceFormat(infer_format(source)) if fmt is None else fmt
     check_format_options(
         fmt.value,
         units,
@@ -226,10 +248,14 @@ def convert(
         residuals=residuals,
         rate=rate,
     )
-    if out_units not in UNITS_TO_MM:
+    if out_units is not None and out_units not in UNITS_TO_MM:
         raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--out-units")
-    if not source.is_file():
-        raise FingerfitError("file not found", path=source)
+    # A pose table is copied row for row (the numbers bit for bit); with --fill-gaps its
+    # recording is written, as a tracker file's is.
+    opensim = {".sto": write_orientations, ".trc": write_markers}.get(output.suffix.lower())
+    table_copy = fmt is SourceFormat.pose_csv and not fill_gaps and opensim is None
+    if fmt is SourceFormat.pose_csv and map_ is not None:
+        raise FingerfitError("does not apply to a pose table (it names its sensors)", field="--map")
     outputs = [output] if residuals is None else [output, residuals]
     refuse_writing_inputs(outputs, [source] if static is None else [source, static])
     for target in outputs:
@@ -238,19 +264,23 @@ def convert(
     sensors = parse_map(map_, numeric=numeric)
     with progress(quiet) as bar:
         task = bar.add_task(f"reading {source.name}", total=3)
-        read = read_tracker_file(
-            source,
-            fmt.value,
-            units=units,
-            rate=rate,
-            items=items,
-            columns=columns,
-            clusters=clusters,
-            sensors=sensors,
-            static=static,
-            keep_repeats=keep_repeats,
-        )
-        rec, fits = read.recording, read.fits
+        if table_copy:
+            table = read_pose_table(source, units=units, rate_hz=rate)
+            rec, fits, declared = table.recording, {}, table.units
+        else:
+            read = read_tracker_file(
+                source,
+                fmt.value,
+                units=units,
+                rate=rate,
+                items=items,
+                columns=columns,
+                clusters=clusters,
+                sensors=sensors,
+                static=static,
+                keep_repeats=keep_repeats,
+            )
+            rec, fits, declared = read.recording, read.fits, read.declared_units
 
         bad = [s for s in rec.sensors if not is_sensor_name(s)]
         if bad:
@@ -268,7 +298,14 @@ def convert(
             rec, source, units=unit_check, max_speed_mm_s=max_speed, max_turn_deg_s=max_turn
         )
         bar.update(task, advance=1, description=f"writing {output.name}")
-        write_pose_csv(output, rec, units=out_units)
+        if out_units is None:
+            out_units = declared if fmt is SourceFormat.pose_csv else "mm"
+        if opensim is not None:
+            opensim(output, rec)
+        elif table_copy:
+            write_pose_rows(output, table, out_units)
+        else:
+            write_pose_csv(output, rec, units=out_units)
         if residuals is not None:
             _write_residuals(residuals, rec, fits)
         bar.advance(task)

@@ -1,4 +1,4 @@
-"""``fingerfit export``: the individual finger model as URDF and/or MuJoCo MJCF."""
+"""``fingerfit export``: the individual hand model as URDF, MuJoCo MJCF and/or OpenSim."""
 
 from __future__ import annotations
 
@@ -24,6 +24,17 @@ def export(
     mjcf: Annotated[
         Path | None, typer.Option("--mjcf", help="MuJoCo MJCF file to write (metres, radians).")
     ] = None,
+    osim: Annotated[
+        Path | None,
+        typer.Option("--osim", help="OpenSim model to write (.osim; metres, radians)."),
+    ] = None,
+    landmarks: Annotated[
+        Path | None,
+        typer.Option(
+            "--landmarks",
+            help="--osim: also the session's landmarks.csv (session units) as markers.",
+        ),
+    ] = None,
     variant: Annotated[
         str,
         typer.Option(help=f"Flexion axes: {' or '.join(VARIANTS)} (perpendicular to the bones)."),
@@ -45,37 +56,65 @@ def export(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace existing output files.")
     ] = False,
+    quiet: Annotated[
+        bool,
+        typer.Option("--quiet", "-q", help="Print nothing but warnings (the files are named)."),
+    ] = False,
 ) -> None:
-    """Export the finger chains for robot software: root link `hand` (hand sensor frame),
-    joints <finger>_mp|pip|dip, fingertip frame <finger>_tip.
+    """Export the digit chains for robot and biomechanics software: root `hand` (hand sensor
+    frame), joints <digit>_<joint>, tips <digit>_tip.
 
-    Both files are written or neither; an existing file is replaced only with --overwrite.
+    Every file is written or none; an existing file is replaced only with --overwrite.
     """
-    _export(model_path, urdf, mjcf, variant, margin_deg, fix_centres, overwrite)
+    _export(
+        model_path,
+        {"--urdf": urdf, "--mjcf": mjcf, "--osim": osim},
+        variant,
+        margin_deg,
+        fix_centres,
+        overwrite,
+        landmarks,
+        quiet,
+    )
 
 
 def _export(
     model_path: Path,
-    urdf: Path | None,
-    mjcf: Path | None,
+    targets: dict[str, Path | None],
     variant: str,
     margin_deg: float,
     fix_centres: bool = False,
     overwrite: bool = False,
+    landmarks: Path | None = None,
+    quiet: bool = False,
 ) -> None:
-    """Check the options, build every document, then write them all or none."""
-    from ..export import mjcf_string, robot_hand, urdf_string
+    """Check the options, build every document, then write them all or none.
+
+    ``targets``: option (``--urdf``, ``--mjcf``, ``--osim``) -> the file it names, or None;
+    ``landmarks``: a landmarks CSV whose points the OpenSim model carries as markers.
+    """
+    from functools import partial
+
+    from ..export import mjcf_string, osim_string, robot_hand, urdf_string
     from ..export import write_text as _write_text
+    from ..export.osim import landmark_markers
     from ..io.atomic import check_target, refuse_writing_inputs
+    from ..io.sessiondir import read_landmarks
     from ..model import VARIANTS, load_model, with_fixed_centres
 
-    if urdf is None and mjcf is None:
-        raise FingerfitError("nothing to write: give --urdf and/or --mjcf")
-    if urdf is not None and mjcf is not None and urdf.resolve() == mjcf.resolve():
-        raise FingerfitError("--urdf and --mjcf name the same file", path=urdf)
-    targets = [p for p in (urdf, mjcf) if p is not None]
-    refuse_writing_inputs(targets, [model_path])
-    for p in targets:
+    given = {flag: p for flag, p in targets.items() if p is not None}
+    if not given:
+        raise FingerfitError("nothing to write: give --urdf, --mjcf and/or --osim")
+    seen: dict[Path, str] = {}
+    for flag, p in given.items():
+        if p.resolve() in seen:
+            raise FingerfitError(f"{seen[p.resolve()]} and {flag} name the same file", path=p)
+        seen[p.resolve()] = flag
+    if landmarks is not None and "--osim" not in given:
+        raise FingerfitError("applies to --osim only", field="--landmarks")
+    inputs = [model_path] if landmarks is None else [model_path, landmarks]
+    refuse_writing_inputs(list(given.values()), inputs)
+    for p in given.values():
         check_target(p, overwrite=overwrite)
     if variant not in VARIANTS:
         raise FingerfitError(f"must be one of {', '.join(VARIANTS)}", field="--variant")
@@ -90,13 +129,25 @@ def _export(
                 f"{joint}: migrating centre fixed at mid-range; it differs from the fitted "
                 f"one by up to {mm:.2f} mm over the observed range of motion",
             )
-    files: dict[Path, str] = {}
-    if urdf is not None:
-        files[urdf] = urdf_string(model, variant, margin_deg)
-    if mjcf is not None:
-        files[mjcf] = mjcf_string(model, variant, margin_deg)
-    _write_text(files, overwrite=overwrite)  # all files or none
+    points = None if landmarks is None else read_landmarks(landmarks, units=model.session_units)
     hand = robot_hand(model, variant, margin_deg)
+    if points:
+        skipped = landmark_markers(model, hand, points)[1]
+        if skipped:
+            notice(
+                "note",
+                f"{len(skipped)} landmark(s) not made markers ({', '.join(skipped)}): a tip "
+                "or pad is the model's <digit>_tip/<digit>_pad, or the digit is not modelled",
+            )
+    build = {
+        "--urdf": urdf_string,
+        "--mjcf": mjcf_string,
+        "--osim": partial(osim_string, landmarks=points),
+    }
+    files = {p: build[flag](model, variant, margin_deg) for flag, p in given.items()}
+    _write_text(files, overwrite=overwrite)  # all files or none
+    if quiet:
+        return
     out.print(
         f"{len(hand.fingers)} digit(s), {len(hand.joints)} joints ({variant} axes, limits = "
         f"observed range of motion ± {margin_deg:g}°; metres, radians) -> "

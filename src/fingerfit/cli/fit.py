@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ._names import DEFAULT_METHOD, METHODS
-from .app import Quiet, app, notice, out, parse_list, progress, say, user_errors
+from .app import Quiet, QuietTable, app, notice, out, parse_list, progress, say, user_errors
 
 #: One line per column of the fit table (``docs/methods.md`` explains each figure).
 TABLE_LEGEND = {
@@ -83,16 +83,23 @@ def quality_table(model: HandModel) -> Table:
 
 
 def read_checked_recording(
-    model: HandModel, path: Path, units: str, rate: float | None, force: bool
+    model: HandModel,
+    path: Path,
+    units: str,
+    rate: float | None,
+    force: bool,
+    sensors: list[str] | None = None,
 ) -> Recording:
     """A pose CSV read for a model (``angles``, ``stream --source replay:``): its repair
-    notes shown, then checked against the model -- a wrong ``--units`` or quaternion order,
-    or another subject's recording, gives wrong angles without complaint
-    (:mod:`fingerfit.estimate.plausibility`); ``force`` goes on with warnings."""
+    notes shown, ``sensors`` kept (``--sensors``; all when None), then checked against the
+    model -- a wrong ``--units`` or quaternion order, or another subject's recording, gives
+    wrong angles without complaint (:mod:`fingerfit.estimate.plausibility`); ``force`` goes
+    on with warnings."""
     from ..estimate.plausibility import check_recording, enforce
     from ..io import read_pose_csv
+    from ..track import select_sensors
 
-    rec = read_pose_csv(path, units=units, rate_hz=rate)
+    rec = select_sensors(read_pose_csv(path, units=units, rate_hz=rate), sensors)
     for note in rec.notes:
         notice("note", note)
     with warnings.catch_warnings(record=True) as caught:
@@ -101,6 +108,19 @@ def read_checked_recording(
     for w in caught:
         notice("warning", str(w.message))
     return rec
+
+
+def check_solved(tracked, path: Path, force: bool) -> None:
+    """The frames the model solved, checked against it (the residual of its solution: the
+    pivot check of a reduced layout, :func:`fingerfit.estimate.plausibility.check_tracking`);
+    ``force`` goes on with a warning."""
+    from ..estimate.plausibility import check_tracking, enforce
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        enforce(check_tracking(tracked, path), force)
+    for w in caught:
+        notice("warning", str(w.message))
 
 
 @app.command()
@@ -131,7 +151,7 @@ def fit(
             "checks (units, quaternion order); the warnings are stored in the model file.",
         ),
     ] = False,
-    quiet: Quiet = False,
+    quiet: QuietTable = False,
 ) -> None:
     """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
     from ..digits import DIGIT_NAMES as FINGERS
@@ -165,7 +185,8 @@ def fit(
     if model.warnings:
         notice("warning", f"{len(model.warnings)} warning(s) stored in the model file (--force)")
     path = save_model(model, target)
-    out.print(quality_table(model))
+    if not quiet:
+        out.print(quality_table(model))
     say("model written to [bold]{}[/]", path)
 
 
@@ -179,7 +200,13 @@ def angles(
         Path, typer.Argument(help="Pose CSV (canonical format), or its .parquet form.")
     ],
     output: Annotated[
-        Path, typer.Option("-o", "--output", help="Angles CSV to write (.parquet: Parquet).")
+        Path,
+        typer.Option(
+            "-o",
+            "--output",
+            help="Angles CSV to write (.parquet: Parquet; .mot: OpenSim motion of the "
+            "exported .osim).",
+        ),
     ],
     units: Annotated[
         str | None,
@@ -205,14 +232,40 @@ def angles(
             "quaternion order, sensors), with a warning.",
         ),
     ] = False,
+    sensors: Annotated[
+        str | None,
+        typer.Option(
+            help="Use only these sensors of the recording (comma-separated, e.g. "
+            "hand,index.distal): try a reduced layout on a full recording (docs/tracking.md).",
+        ),
+    ] = None,
+    fingers: Annotated[
+        str | None,
+        typer.Option(help="Comma-separated digits to compute (default: every digit of the model)."),
+    ] = None,
+    uncertainty: Annotated[
+        bool,
+        typer.Option(
+            "--uncertainty",
+            help="Also write each angle's standard deviation where the model solved the "
+            "frame (<digit>.<joint>.sd, deg).",
+        ),
+    ] = False,
     quiet: Quiet = False,
 ) -> None:
-    """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models."""
+    """Joint angles (deg) and fingertips of every frame, user-axis and orthogonal models.
+
+    A frame with a digit's sensor missing (absent from the recording, a dropout, or left
+    out with --sensors) is solved by the model: docs/tracking.md.
+    """
+    from ..digits import DIGIT_NAMES
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.parquet import angles_meta, write_table_file
-    from ..kinematics import compute_kinematics, kinematics_table
+    from ..kinematics import kinematics_table
     from ..model import load_model
     from ..session import UNITS_TO_MM
+    from ..track import check_layout, track_recording
+    from ..track.report import tracking_columns, tracking_lines
 
     outputs = [output] if urdf_names is None else [output, urdf_names]
     refuse_writing_inputs(outputs, [model_path, recording])
@@ -222,25 +275,51 @@ def angles(
     units = units or model.session_units
     if units not in UNITS_TO_MM:
         raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
-    rec = read_checked_recording(model, recording, units, rate, force)
+    names = parse_list(fingers, DIGIT_NAMES, "--fingers")
+    for d in names or []:
+        if d not in model.fingers:
+            raise typer.BadParameter(
+                f"the model has no '{d}' (has: {', '.join(model.fingers)})", param_hint="--fingers"
+            )
+    chosen = None if sensors is None else [x.strip() for x in sensors.split(",") if x.strip()]
+    rec = read_checked_recording(model, recording, units, rate, force, chosen)
     with progress(quiet) as bar:
         n = rec.n_frames
         task = bar.add_task("angles and fingertips", total=n + n)
-        kin = compute_kinematics(model, rec)
-        table = kinematics_table(kin, units=units)
-        bar.update(task, advance=n, description=f"writing {output.name}")
-        # Atomic, in batches of rows (progress bar): CSV floats in shortest round-trip
-        # form, or Parquet (OUT.parquet) float64 with the units in its metadata.
-        write_table_file(
-            output, table, angles_meta(units), progress=lambda rows: bar.advance(task, rows)
+        check_layout(
+            model, set(rec.poses), names or list(model.fingers), str(recording), skip="--fingers"
         )
+        tracked = track_recording(model, rec, fingers=names)
+        check_solved(tracked, recording, force)
+        kin = tracked.kinematics
+        if output.suffix.lower() == ".mot":  # every coordinate of `export --osim`
+            from ..export.trajectory import write_coordinates
+
+            write_coordinates(output, kin, model, rec)
+        else:
+            table = kinematics_table(kin, units=units)
+            extra = tracking_columns(tracked, uncertainty)
+            if extra:
+                import pandas as pd
+
+                table = pd.concat([table, pd.DataFrame(extra)], axis=1)
+            bar.update(task, advance=n, description=f"writing {output.name}")
+            # Atomic, in batches of rows (progress bar): CSV floats in shortest round-trip
+            # form, or Parquet (OUT.parquet) float64 with the units in its metadata.
+            write_table_file(
+                output, table, angles_meta(units), progress=lambda rows: bar.advance(task, rows)
+            )
     if urdf_names is not None:
         from ..export.trajectory import write_trajectory
 
         say("joint trajectory (rad) -> [bold]{}[/]", write_trajectory(urdf_names, kin, model))
     say(
-        "{} frames -> [bold]{}[/] (angles deg, fingertips {}, tracker frame)",
+        "{} frames -> [bold]{}[/] ({})",
         rec.n_frames,
         output,
-        units,
+        "OpenSim coordinates: deg, hand translations m, tracker frame"
+        if output.suffix.lower() == ".mot"
+        else f"angles deg, fingertips {units}, tracker frame",
     )
+    for line in tracking_lines(tracked):
+        say("{}", line)

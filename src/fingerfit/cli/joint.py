@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import FingerfitError
-from .app import app, notice, out, say, user_errors
+from .app import QuietTable, app, notice, out, say, user_errors
 
 
 class JointSource(StrEnum):
@@ -123,7 +123,7 @@ def joint(
     method: Annotated[str, typer.Option(help="Hinge estimator: sara, robust or tang2018.")] = "sara",
     fmt: Annotated[
         JointSource | None,
-        typer.Option("--from", help="Input format (default: c3d for .c3d, else pose-csv).", case_sensitive=False),
+        typer.Option("--from", help="Input format (default: from the file, as for convert).", case_sensitive=False),
     ] = None,
     units: Annotated[
         str | None,
@@ -138,6 +138,7 @@ def joint(
         bool,
         typer.Option("--convention-check/--no-convention-check", help="Refuse a wrong quaternion order or handedness."),
     ] = True,
+    quiet: QuietTable = False,
 ) -> None:  # fmt: skip
     """Find the joint (hinge, two-axis or ball) between two segments of one recording."""
     from ..estimate.joint import fit_joint
@@ -151,7 +152,10 @@ def joint(
         refuse_writing_inputs([output], [source])
         if output.is_dir():
             raise FingerfitError("is a directory; give a file name", path=output)
-    fmt = fmt or (JointSource.c3d if source.suffix.lower() == ".c3d" else JointSource.pose_csv)
+    if fmt is None:
+        from ..io.trackerfile import infer_format
+
+        fmt = JointSource(infer_format(source))
     rec, declared = read_any(
         source, fmt, units=units, rate=rate, items=items, columns=columns, clusters=clusters
     )
@@ -195,7 +199,8 @@ def joint(
         notice("note", f"{fit.quality.dropped_frames} frame(s) without both poses dropped")
     for note in fit.quality.notes:
         notice("note", note)
-    out.print(_table(fit))
+    if not quiet:
+        out.print(_table(fit))
     if output is not None:
         doc = {"file": str(source), "parent": parent, "child": child, **fit.summary()}
         with atomic_write(output) as fh:

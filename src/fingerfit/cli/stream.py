@@ -302,6 +302,7 @@ def stream(
 
         path, speed = src.parse_replay(source)
         rec = read_checked_recording(model, path, units, rate, force)
+        check_stream_layout(model, set(rec.poses), path)
         the_source = src.ReplaySource(rec, speed)
         step = float(np.nanmedian(np.diff(rec.time))) if rec.n_frames > 1 else 0.0
         native = rate or (1.0 / step if step > 0 else 0.0)
@@ -311,11 +312,17 @@ def stream(
         mapping = (
             src.parse_stations(stations, sensors) if stations else src.default_stations(sensors)
         )
+        check_stream_layout(model, set(mapping.values()), None, "--stations")
         nominal = rate or src.LIBERTY_RATE_HZ
         the_source = src.LibertySource(port, baud, mapping, nominal, reconnect_s)
     else:
         name = src.split_spec(source)[1]
-        the_source = src.LslSource(name, sensors, reconnect=reconnect_s)
+        the_source = src.LslSource(
+            name,
+            sensors,
+            reconnect=reconnect_s,
+            check=lambda present: check_stream_layout(model, present, f"lsl:{name}"),
+        )
         nominal = 0.0
 
     from ..export.geometry import joint_names
@@ -328,23 +335,29 @@ def stream(
     try:
         lsl_out = ros_out = bag_out = rec_out = live_view = None
         ch = channels_of(model, compute_kinematics(model, empty_recording(sensors), ("user_axis",)))
-        if lsl and retargeter is not None:
+        if lsl:
+            robot_outlet = (
+                {
+                    "robot_labels": names,
+                    "robot_units": robot_joint_units(robot),
+                    "robot_name": rmap.name,
+                }
+                if retargeter is not None
+                else {}
+            )
             lsl_out = LslOutput(
                 lsl_name,
                 ch.angle_labels,
                 ch.tip_labels,
                 nominal,
                 tips_frame,
-                robot_labels=names,
-                robot_units=robot_joint_units(robot),
-                robot_name=rmap.name,
+                source_labels=ch.source_labels,
+                **robot_outlet,
             )
-        elif lsl:
-            lsl_out = LslOutput(lsl_name, ch.angle_labels, ch.tip_labels, nominal, tips_frame)
         if ros2 is not None:
-            ros_out = Ros2Output(ros2, names)
+            ros_out = Ros2Output(ros2, names, source_names=ch.digits)
         if ros2_bag is not None:
-            bag_out = BagOutput(ros2_bag, ros2 or "/joint_states", names)
+            bag_out = BagOutput(ros2_bag, ros2 or "/joint_states", names, source_names=ch.digits)
         if record is not None:
             rec_out = RecordOutput(record, units)
         if view or view_save is not None:
@@ -469,6 +482,28 @@ def check_view_save(path: Path, view: bool, record: Path | None) -> None:
     check_target(path)
 
 
+def check_stream_layout(
+    model, sensors: set[str], where: Path | str | None, field: str | None = None
+) -> None:
+    """Refuse a source whose sensors cannot determine every joint of the model (one line
+    naming the joint and the sensor that would: :func:`fingerfit.track.check_layout`), and
+    say in a note which sensors it lacks (their digits are solved by the model, or held by
+    a model without calibration statistics)."""
+    from ..track import check_layout
+
+    layouts = check_layout(
+        model, sensors, list(model.fingers), None if where is None else str(where), field
+    )
+    missing = [s for lay in layouts.values() for s in lay.missing]
+    if missing:
+        how = (
+            "solved by the model (docs/tracking.md)"
+            if model.tracking is not None
+            else "held: the model has no tracking statistics (fit it again to solve them)"
+        )
+        notice("note", f"the source has no {', '.join(missing)}: those digits' frames are {how}")
+
+
 def summary_line(
     summary,
     live: bool,
@@ -509,7 +544,9 @@ def summary_line(
     text = f"{s.received} frames received in {s.seconds:.1f} s"
     if counts:
         text += ": " + ", ".join(counts)
-    text += f" ({s.lost} lost, {s.invalid} with a missing sensor held"
+    text += f" ({s.lost} lost, {s.invalid} with a missing sensor"
+    if s.invalid:
+        text += f": {s.invalid - s.held} solved by the model, {s.held} held"
     if s.silences:
         text += f", {s.silences} silence{'s' * (s.silences > 1)}"
     if s.outages:

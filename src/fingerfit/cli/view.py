@@ -106,12 +106,12 @@ def view(
 
 def _scene(model, rec, recording: Path, robot, map_path, method, orthogonal, quiet):
     """The :class:`fingerfit.view.Scene` of a recording, with the robot and the truth."""
-    from ..kinematics import compute_kinematics
+    from ..track import track_recording
     from ..view import hand_scene, robot_scene, truth_tips
 
     with progress(quiet) as bar:
         task = bar.add_task("kinematics", total=3 if robot is not None else 2)
-        kin = compute_kinematics(model, rec)
+        kin = track_recording(model, rec).kinematics  # missing sensors solved by the model
         scene = hand_scene(model, rec, kin)
         bar.update(task, advance=1, description="truth")
         scene.truth_tips, note = truth_tips(recording, rec.n_frames)
@@ -131,33 +131,45 @@ def _scene(model, rec, recording: Path, robot, map_path, method, orthogonal, qui
 
 
 def _serve_web(scene, what: str, web_port: int, grpc_port: int) -> None:
-    """Serve the scene over gRPC and the web viewer over HTTP, both on ``127.0.0.1``;
-    the browser gets the viewer through :class:`fingerfit.view.webserve.ViewerProxy`
-    (its Content-Security-Policy keeps the page on this machine)."""
+    """Serve the scene over gRPC and the web viewer over HTTP, nothing beyond
+    ``127.0.0.1``: the viewer's files from the ``rerun`` command bound there
+    (:class:`fingerfit.view.webserve.LocalViewerServer`), to the browser through
+    :class:`fingerfit.view.webserve.ViewerProxy` (its Content-Security-Policy keeps the
+    page on this machine). Until Ctrl-C or SIGTERM, which stop both servers."""
+    import signal
     import time
 
-    import rerun as rr
-
     from ..view import blueprint, log_scene, new_stream, no_usage_reporting
-    from ..view.webserve import ViewerProxy, free_port, serve_grpc_local
+    from ..view.webserve import LocalViewerServer, ViewerProxy, serve_grpc_local
 
-    with no_usage_reporting():
-        stream = new_stream()
-        try:
-            uri = serve_grpc_local(stream, grpc_port, blueprint(scene.robot is not None))
-            proxy = ViewerProxy(web_port, free_port(), grpc_port)
-            log_scene(scene, stream)
-            stream.flush()
-            rr.serve_web_viewer(web_port=proxy.upstream_port, open_browser=False, connect_to=uri)
-        except (OSError, RuntimeError) as exc:
-            raise FingerfitError(f"cannot serve the viewer ({exc})", field="--web") from None
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)  # terminated: both servers stopped too
+    viewer = proxy = stream = None
+    try:
+        with no_usage_reporting():
+            stream = new_stream()
+            try:
+                uri = serve_grpc_local(stream, grpc_port, blueprint(scene.robot is not None))
+                log_scene(scene, stream)
+                stream.flush()
+                viewer = LocalViewerServer(uri)
+                proxy = ViewerProxy(web_port, viewer.port, grpc_port)
+            except (OSError, RuntimeError) as exc:
+                raise FingerfitError(f"cannot serve the viewer ({exc})", field="--web") from None
         say("{}: open [bold]{}[/] (Ctrl-C to stop)", what, proxy.url(uri))
-        try:
-            while True:
-                time.sleep(1.0)
-        except KeyboardInterrupt:
-            proxy.close()
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        if stream is not None:
             stream.disconnect()
+    finally:
+        if proxy is not None:
+            proxy.close()
+        if viewer is not None:
+            viewer.close()
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _spawn(scene, what: str) -> None:

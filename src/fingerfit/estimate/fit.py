@@ -37,6 +37,7 @@ from ..model import (
     estimated_pad,
 )
 from ..session import HAND_SENSOR, JOINTS, Session
+from ..track.statistics import tracking_statistics
 from ..transforms import FloatArray, relative_pose, rotation_vector
 from .axis import AxisFit, orient_flexion
 from .bootstrap import Z95, cycle_axis_ci_deg
@@ -308,12 +309,13 @@ def saddle_estimate(
     data: JointData, flexion_guess: FloatArray | None, abduction_guess: FloatArray | None
 ) -> AxisEstimate:
     """A joint that always has two axes (the thumb's CMC): :func:`.saddle.fit_saddle` over
-    every calibration frame, grouped by recording cycles where there are any; the guesses
-    (parent frame) sign the axes and name the one a recording did not excite. The axes are
-    named by the digit's axis order, which anatomy gives and the data place, also where
-    they lie nearer each other's guesses (``SaddleFit.guesses_swapped_deg``): the guesses
-    come from the next joint and can be far off (tens of degrees on simulated thumbs with
-    three times the usual obliquities, whose axes the order named right)."""
+    every calibration frame with both sensors' samples, grouped by recording cycles where
+    there are any; the guesses (parent frame) sign the axes and name the one a recording
+    did not excite. The axes are named by the digit's axis order, which anatomy gives and
+    the data place, also where they lie nearer each other's guesses
+    (``SaddleFit.guesses_swapped_deg``): the guesses come from the next joint and can be
+    far off (tens of degrees on simulated thumbs with three times the usual obliquities,
+    whose axes the order named right)."""
     groups = None
     if len(data.periods) >= 2:
         groups = np.full(data.rotation.shape[0], -1)
@@ -322,9 +324,12 @@ def saddle_estimate(
         if (groups < 0).any():  # frames outside the cycles form blocks of their own
             rest = np.flatnonzero(groups < 0)
             groups[rest] = len(data.periods) + rest * 4 // data.rotation.shape[0]
+    ok = np.isfinite(data.rotation).all(axis=(1, 2)) & np.isfinite(data.translation).all(axis=1)
+    if not ok.all():  # a frame missing a sensor's sample (a dropout) tells nothing
+        groups = None if groups is None else groups[ok]
     sf = fit_saddle(
-        data.rotation,
-        data.translation,
+        data.rotation if ok.all() else data.rotation[ok],
+        data.translation if ok.all() else data.translation[ok],
         data.reference_rotation,
         order=data.second_axis or FLEXION_FIRST,
         flexion_guess=flexion_guess,
@@ -524,6 +529,9 @@ def fit_session(session: Session, options: FitOptions | None = None) -> HandMode
         angle_method=options.angle_method or METHOD_ANGLES[options.method],
     )
     model = pinch_pads(session, model)
+    # What tracking with fewer sensors needs: each sensor's spread about the model and
+    # each angle's range and speed, on the calibration recordings (fingerfit.track).
+    model = replace(model, tracking=tracking_statistics(model, session.grasp))
     forced += enforce(check_model(model, session), options.force)
     return replace(model, warnings=tuple(forced))
 

@@ -1,7 +1,9 @@
-"""The digit chains of a hand model in robot terms: links, joints, limits, inertials.
+"""The digit chains of a hand model in robot terms: links, joints, limits, inertials,
+the sensors' frames and the points the digits carry.
 
-One computation shared by the URDF and MJCF writers (and the trajectory writer's
-joint names), so the two files cannot disagree.
+The one description of the chain that every writer reads (URDF, MJCF, OpenSim, and the
+trajectory writers' joint names): the chain is walked here only, so the files cannot
+disagree.
 
 Frames and units
 ----------------
@@ -31,6 +33,14 @@ per-cycle range of motion recorded in the model's :class:`~fingerfit.model.Joint
 angles are 0 at the reference (stretched) posture and flexion is positive.
 Without a recorded range, anatomical defaults (:data:`DEFAULT_RANGE_DEG`) are
 used. See ``docs/export.md``.
+
+Masses
+------
+Each phalanx (and the thumb's metacarpal) is a solid capsule of density :data:`DENSITY`
+from its joint centre to the next (the distal one to the tip), its radius a fraction of
+the digit's proximal segment length (:data:`RADIUS_FRACTION`). The palm (the hand link,
+which only a model with a free hand needs: OpenSim) is the fingers' metacarpals by the
+same rule (:func:`palm_link`).
 """
 
 from __future__ import annotations
@@ -163,7 +173,11 @@ class RobotFinger:
     tip : ndarray, shape (3,)
         Fingertip in the distal link frame (m).
     tip_name : str
-        ``<finger>_tip`` (URDF link, MJCF site).
+        ``<finger>_tip`` (URDF link, MJCF site, OpenSim marker).
+    pad : ndarray, shape (3,) or None
+        Pad point in the distal link frame (m); ``None`` for a model without pads.
+    pad_name : str
+        ``<finger>_pad`` (OpenSim marker).
     """
 
     name: str
@@ -171,6 +185,34 @@ class RobotFinger:
     links: tuple[RobotLink, ...]
     tip: FloatArray
     tip_name: str
+    pad: FloatArray | None = None
+    pad_name: str = ""
+
+    def chain(self) -> list[tuple[RobotJoint, RobotLink]]:
+        """Each joint with the link it moves, proximal to distal."""
+        return list(zip(self.joints, self.links, strict=True))
+
+
+@dataclass(frozen=True)
+class RobotSensor:
+    """A tracker sensor fixed on a link: its frame at the reference posture.
+
+    Attributes
+    ----------
+    name : str
+        The sensor (``hand``, ``index.proximal``, ...).
+    link : str
+        The link that carries it.
+    position : ndarray, shape (3,)
+        Sensor origin in the link frame (m).
+    rotation : ndarray, shape (3, 3)
+        Sensor -> link frame (columns: the sensor's axes in link coordinates).
+    """
+
+    name: str
+    link: str
+    position: FloatArray
+    rotation: FloatArray
 
 
 @dataclass(frozen=True)
@@ -185,17 +227,30 @@ class RobotHand:
     margin_deg : float
         Joint-limit margin (deg).
     fingers : tuple of RobotFinger
+    sensors : tuple of RobotSensor
+        The hand sensor (on ``hand``, at its origin) and every segment sensor.
+    palm : RobotLink
+        The hand link's mass and inertia (:func:`palm_link`), for a model whose hand is
+        free; the URDF and MJCF fix the hand to the world and leave it without.
     """
 
     name: str
     variant: str
     margin_deg: float
     fingers: tuple[RobotFinger, ...]
+    sensors: tuple[RobotSensor, ...] = ()
+    palm: RobotLink | None = None
 
     @property
     def joints(self) -> list[RobotJoint]:
         """Every joint, finger by finger, proximal to distal."""
         return [j for f in self.fingers for j in f.joints]
+
+    def chain(self) -> list[tuple[RobotJoint, RobotLink]]:
+        """Every joint with the link it moves, finger by finger, proximal to distal: the
+        order every writer builds its tree in (``joint.parent`` is ``hand`` or the link
+        of the pair before)."""
+        return [pair for f in self.fingers for pair in f.chain()]
 
 
 def to_hand_frame(model: HandModel, points: FloatArray) -> FloatArray:
@@ -338,6 +393,7 @@ def robot_hand(
     _hand_pose(model)
     r0 = model.reference_poses[HAND_SENSOR][1]
     fingers = []
+    sensors = [_sensor(model, HAND_SENSOR, HAND_LINK, np.zeros(3))]
     for fname, fm in model.fingers.items():
         names = list(fm.joints)
         centres = to_hand_frame(model, np.stack([fm.joints[j].center for j in names] + [fm.tip]))
@@ -389,10 +445,104 @@ def robot_hand(
                     mass, com, inertia = capsule_inertial(np.zeros(3), end, radius)
                     links.append(RobotLink(child, (np.zeros(3), end), radius, mass, com, inertia))
                 parent, parent_origin = child, centre
+            sensors.append(_sensor(model, fm.joints[j].child, child, centre))
         tip = centres[3] - parent_origin
-        fingers.append(RobotFinger(fname, tuple(joints), tuple(links), tip, f"{fname}_tip"))
+        pad = None if fm.pad is None else to_hand_frame(model, fm.pad) - parent_origin
+        fingers.append(
+            RobotFinger(
+                fname, tuple(joints), tuple(links), tip, f"{fname}_tip", pad, f"{fname}_pad"
+            )
+        )
     name = f"fingerfit_{model.subject}_{model.hand}"
-    return RobotHand(name, variant, float(margin_deg), tuple(fingers))
+    return RobotHand(
+        name, variant, float(margin_deg), tuple(fingers), tuple(sensors), palm_link(model)
+    )
+
+
+def palm_link(model: HandModel) -> RobotLink:
+    """The hand link's mass and inertia from the digits' segment lengths.
+
+    The palm is taken as the metacarpals of the fingers in the model, each a solid
+    capsule of density :data:`DENSITY` (:func:`capsule_inertial`) collinear with the
+    finger's proximal phalanx at the reference posture (the stretched hand), from its MP
+    centre proximally. Its length is the proximal phalanx's scaled by the Buchholz et al.
+    (1992) ratio of the finger's metacarpal to its proximal phalanx
+    (:data:`~fingerfit.estimate.plausibility.bounds.SEGMENT_FRACTION`, e.g. index
+    0.463 / 0.245), its radius ``RADIUS_FRACTION["metacarpal"]`` of the proximal phalanx
+    (the thumb metacarpal's rule). A model without a finger gets one such capsule
+    proximal of the thumb's CMC centre, along the thumb's metacarpal, as long as an index
+    metacarpal of the hand length the thumb's segments give.
+
+    Parameters
+    ----------
+    model : HandModel
+
+    Returns
+    -------
+    RobotLink
+        Named ``hand``, without geometry (``capsule`` None, ``radius`` 0): mass (kg),
+        centre of mass (m) and inertia about it (kg m^2), hand frame.
+    """
+    from ..estimate.plausibility.bounds import SEGMENT_FRACTION  # the estimate package: lazily
+
+    parts = []
+    for fname, fm in model.fingers.items():
+        if fname == "thumb":
+            continue
+        base, proximal = fm.joints["mp"].center, fm.joints["pip"].center
+        fraction = SEGMENT_FRACTION[fname]
+        length = fm.segment_lengths["proximal"] * fraction["metacarpal"] / fraction["proximal"]
+        parts.append((base, base - proximal, length, fm.segment_lengths["proximal"]))
+    if not parts:
+        fm = model.fingers["thumb"]
+        fraction = SEGMENT_FRACTION["thumb"]
+        hand_length = np.mean([fm.segment_lengths[s] / fraction[s] for s in fm.segments])
+        base = fm.joints["cmc"].center
+        parts.append(
+            (
+                base,
+                base - fm.joints["mcp"].center,
+                SEGMENT_FRACTION["index"]["metacarpal"] * hand_length,
+                SEGMENT_FRACTION["index"]["proximal"] * hand_length,
+            )
+        )
+    masses, coms, inertias = [], [], []
+    for base, direction, length, proximal_length in parts:
+        start = to_hand_frame(model, base)
+        end = start + to_hand_frame_vector(model, direction) / np.linalg.norm(direction) * (
+            length / 1000.0
+        )
+        radius = RADIUS_FRACTION["metacarpal"] * proximal_length / 1000.0
+        mass, com, inertia = capsule_inertial(start, end, radius)
+        masses.append(mass)
+        coms.append(com)
+        inertias.append(inertia)
+    mass = float(sum(masses))
+    com = np.average(coms, axis=0, weights=masses)
+    inertia = sum(
+        i + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+        for m, c, i in zip(masses, coms, inertias, strict=True)
+        for d in [c - com]
+    )
+    return RobotLink(HAND_LINK, None, 0.0, mass, com, inertia)
+
+
+def to_hand_frame_vector(model: HandModel, vectors: FloatArray) -> FloatArray:
+    """Tracker directions ``(..., 3)`` at the reference posture -> hand sensor frame (same
+    units, not translated): ``R_h0^T v``."""
+    return np.asarray(vectors, dtype=float) @ _hand_pose(model)[1]
+
+
+def _sensor(model: HandModel, sensor: str, link: str, link_origin: FloatArray) -> RobotSensor:
+    """A sensor's reference pose in the frame of ``link`` (origin ``link_origin``, hand
+    frame, m; parallel to the hand frame)."""
+    t, r = model.reference_poses[sensor]
+    return RobotSensor(
+        sensor,
+        link,
+        to_hand_frame(model, t) - link_origin,
+        _hand_pose(model)[1].T @ np.asarray(r, dtype=float),
+    )
 
 
 def _gimbal(name: str) -> RobotLink:

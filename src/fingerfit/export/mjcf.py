@@ -54,33 +54,34 @@ def _build_spec(hand: RobotHand, mujoco):
     spec.compiler.autolimits = True
     spec.option.timestep = TIMESTEP_S
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    root = spec.worldbody.add_body(name=HAND_LINK)
-    for finger in hand.fingers:
-        parent = root
-        for j, link in zip(finger.joints, finger.links, strict=True):
-            body = parent.add_body(name=link.name, pos=j.origin.tolist())
-            body.explicitinertial = True
-            body.mass = link.mass
-            body.ipos = link.com.tolist()
-            body.fullinertia = _full_inertia(link.inertia)
-            body.add_joint(
-                name=j.name,
-                type=mujoco.mjtJoint.mjJNT_HINGE,
-                axis=j.axis.tolist(),
-                range=[j.lower, j.upper],
-                limited=mujoco.mjtLimited.mjLIMITED_TRUE,
-                damping=j.damping,
+    bodies = {HAND_LINK: spec.worldbody.add_body(name=HAND_LINK)}
+    for j, link in hand.chain():
+        body = bodies[j.parent].add_body(name=link.name, pos=j.origin.tolist())
+        bodies[link.name] = body
+        body.explicitinertial = True
+        body.mass = link.mass
+        body.ipos = link.com.tolist()
+        body.fullinertia = _full_inertia(link.inertia)
+        body.add_joint(
+            name=j.name,
+            type=mujoco.mjtJoint.mjJNT_HINGE,
+            axis=j.axis.tolist(),
+            range=[j.lower, j.upper],
+            limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            damping=j.damping,
+        )
+        if link.capsule is not None:
+            body.add_geom(
+                name=link.name,
+                type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                fromto=np.concatenate(link.capsule).tolist(),
+                size=[link.radius, 0.0, 0.0],
+                rgba=list(FINGER_RGBA),
             )
-            if link.capsule is not None:
-                body.add_geom(
-                    name=link.name,
-                    type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                    fromto=np.concatenate(link.capsule).tolist(),
-                    size=[link.radius, 0.0, 0.0],
-                    rgba=list(FINGER_RGBA),
-                )
-            parent = body
-        parent.add_site(name=finger.tip_name, pos=finger.tip.tolist(), size=[0.002, 0.0, 0.0])
+    for finger in hand.fingers:
+        bodies[finger.links[-1].name].add_site(
+            name=finger.tip_name, pos=finger.tip.tolist(), size=[0.002, 0.0, 0.0]
+        )
     return spec
 
 
@@ -88,26 +89,26 @@ def _restore_precision(xml: str, hand: RobotHand, comment: str) -> str:
     """Rewrite every kinematic and inertial number of ``to_xml`` with full precision."""
     root = ET.fromstring(xml)
     bodies = {b.get("name"): b for b in root.iter("body")}
+    for j, link in hand.chain():
+        body = bodies[link.name]
+        body.set("pos", _num(j.origin))
+        inertial = body.find("inertial")
+        inertial.attrib.clear()
+        inertial.attrib.update(
+            pos=_num(link.com),
+            mass=_num([link.mass]),
+            fullinertia=_num(_full_inertia(link.inertia)),
+        )
+        joint = body.find("joint")
+        joint.set("axis", _num(j.axis))
+        joint.set("range", _num([j.lower, j.upper]))
+        geom = body.find("geom")
+        if geom is not None:
+            for key in ("pos", "quat", "size"):
+                geom.attrib.pop(key, None)
+            geom.set("fromto", _num(np.concatenate(link.capsule)))
+            geom.set("size", _num([link.radius]))
     for finger in hand.fingers:
-        for j, link in zip(finger.joints, finger.links, strict=True):
-            body = bodies[link.name]
-            body.set("pos", _num(j.origin))
-            inertial = body.find("inertial")
-            inertial.attrib.clear()
-            inertial.attrib.update(
-                pos=_num(link.com),
-                mass=_num([link.mass]),
-                fullinertia=_num(_full_inertia(link.inertia)),
-            )
-            joint = body.find("joint")
-            joint.set("axis", _num(j.axis))
-            joint.set("range", _num([j.lower, j.upper]))
-            geom = body.find("geom")
-            if geom is not None:
-                for key in ("pos", "quat", "size"):
-                    geom.attrib.pop(key, None)
-                geom.set("fromto", _num(np.concatenate(link.capsule)))
-                geom.set("size", _num([link.radius]))
         site = next(s for s in bodies[finger.links[-1].name].iter("site"))
         site.set("pos", _num(finger.tip))
     root.insert(0, ET.Comment(comment))

@@ -62,6 +62,23 @@ def _capsule_shapes(ydf, link: RobotLink) -> list[tuple[np.ndarray, object]]:
     ]
 
 
+def _link(ydf, link: RobotLink):
+    """A moving link: its inertial and capsule (visual and collision)."""
+    shapes = _capsule_shapes(ydf, link)
+    return ydf.Link(
+        name=link.name,
+        inertial=ydf.Inertial(origin=_pose(link.com), mass=link.mass, inertia=link.inertia),
+        visuals=[
+            ydf.Visual(origin=o, geometry=g, material=ydf.Material(name="finger"))
+            for o, g in shapes
+        ],
+        collisions=[
+            ydf.Collision(name=f"{link.name}_{i}", origin=o, geometry=g)
+            for i, (o, g) in enumerate(shapes)
+        ],
+    )
+
+
 def urdf_string(
     model: HandModel, variant: str = "user_axis", margin_deg: float = DEFAULT_MARGIN_DEG
 ) -> str:
@@ -97,24 +114,8 @@ def urdf_string(
     links = [ydf.Link(name=HAND_LINK)]
     joints = []
     for finger in hand.fingers:
-        for j, link in zip(finger.joints, finger.links, strict=True):
-            shapes = _capsule_shapes(ydf, link)
-            links.append(
-                ydf.Link(
-                    name=link.name,
-                    inertial=ydf.Inertial(
-                        origin=_pose(link.com), mass=link.mass, inertia=link.inertia
-                    ),
-                    visuals=[
-                        ydf.Visual(origin=o, geometry=g, material=ydf.Material(name="finger"))
-                        for o, g in shapes
-                    ],
-                    collisions=[
-                        ydf.Collision(name=f"{link.name}_{i}", origin=o, geometry=g)
-                        for i, (o, g) in enumerate(shapes)
-                    ],
-                )
-            )
+        for j, link in finger.chain():
+            links.append(_link(ydf, link))
             joints.append(
                 ydf.Joint(
                     name=j.name,

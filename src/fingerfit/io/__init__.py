@@ -1,6 +1,8 @@
 """Readers and writers: files -> :class:`~fingerfit.session.Session` and back.
 
-* :mod:`.posecsv` -- the canonical pose CSV of the session format;
+* :mod:`.posecsv` -- the canonical pose CSV of the session format (its Parquet form
+  :mod:`.poseparquet`, both checked and placed by :mod:`.poserows`, written by
+  :mod:`.posewrite`);
 * :mod:`.sessiondir` -- whole session directories (``session.toml`` + CSVs);
 * :mod:`.atomic` -- all-or-nothing file writes;
 * :mod:`.liberty`, :mod:`.widecsv`, :mod:`.c3d` -- real tracker files (Polhemus
@@ -11,7 +13,8 @@
 
 from .c3d import read_c3d, read_c3d_segments
 from .liberty import read_liberty_ascii, read_liberty_binary
-from .posecsv import read_pose_csv, write_pose_csv
+from .posecsv import read_pose_csv
+from .posewrite import write_pose_csv
 from .sessiondir import load_session, save_session
 from .widecsv import read_wide_csv
 

@@ -63,15 +63,55 @@ def check_target(path: str | Path, *, overwrite: bool = True) -> None:
             raise FingerfitError("is read-only; not replaced", path=path)
 
 
-def _temp_beside(path: Path, suffix: str = ".part") -> tuple[int, Path]:
-    """Create the parent folders and an empty temporary file beside ``path``."""
+def make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and every missing folder above it.
+
+    Returns
+    -------
+    list of Path
+        The folders this call created, deepest first (:func:`remove_made`).
+
+    Raises
+    ------
+    OSError
+        A folder could not be created (those created before it are removed).
+    """
+    made = []
+    at = Path(folder)
+    while not at.exists() and at.parent != at:
+        made.append(at)
+        at = at.parent
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        for f in reversed(made):
+            f.mkdir(exist_ok=True)
+    except OSError:
+        remove_made(made)
+        raise
+    return made
+
+
+def remove_made(folders: Iterable[Path]) -> None:
+    """Remove the folders :func:`make_parents` created, deepest first, each only while it is
+    empty: a refused or failed command leaves no folder behind it."""
+    for f in folders:
+        try:
+            f.rmdir()
+        except OSError:  # not empty (something else wrote there), or gone
+            return
+
+
+def _temp_beside(path: Path, suffix: str = ".part") -> tuple[int, Path, list[Path]]:
+    """Create the parent folders and an empty temporary file beside ``path``; the folders
+    created (:func:`make_parents`) come back too, for removal on failure."""
+    made: list[Path] = []
+    try:
+        made = make_parents(path.parent)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
         os.chmod(tmp, 0o666 & ~_umask())
     except OSError as exc:
+        remove_made(made)
         raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=path) from None
-    return fd, Path(tmp)
+    return fd, Path(tmp), made
 
 
 @contextlib.contextmanager
@@ -79,8 +119,9 @@ def atomic_path(path: str | Path, *, suffix: str = ".part") -> Iterator[Path]:
     """A temporary path beside ``path``, renamed over ``path`` when the block succeeds.
 
     For writers that take a file name (ezc3d): the block writes the yielded path. If
-    the block raises, the temporary file is removed and ``path`` is left untouched.
-    ``path`` is checked first with :func:`check_target` (an existing file is replaced).
+    the block raises, the temporary file is removed and ``path`` is left untouched, as is
+    its folder (one it had to create is removed again). ``path`` is checked first with
+    :func:`check_target` (an existing file is replaced).
 
     Parameters
     ----------
@@ -97,7 +138,7 @@ def atomic_path(path: str | Path, *, suffix: str = ".part") -> Iterator[Path]:
     """
     path = Path(path)
     check_target(path)
-    fd, tmp = _temp_beside(path, suffix)
+    fd, tmp, made = _temp_beside(path, suffix)
     os.close(fd)
     try:
         yield tmp
@@ -105,10 +146,12 @@ def atomic_path(path: str | Path, *, suffix: str = ".part") -> Iterator[Path]:
     except OSError as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        remove_made(made)
         raise FingerfitError(f"cannot write ({exc.strerror or exc})", path=path) from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        remove_made(made)
         raise
 
 
@@ -162,10 +205,12 @@ def write_files(files: Mapping[Path, str | bytes], *, overwrite: bool = True) ->
     temps: dict[Path, Path] = {}
     backups: dict[Path, Path] = {}
     placed: list[Path] = []
+    made: list[Path] = []  # folders created, removed again on failure
     current = paths[0] if paths else Path()
     try:
         for current, content in zip(paths, files.values(), strict=True):
-            fd, temps[current] = _temp_beside(current)
+            fd, temps[current], new = _temp_beside(current)
+            made = new + made
             data = content.encode("utf-8") if isinstance(content, str) else content
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
@@ -187,6 +232,8 @@ def write_files(files: Mapping[Path, str | bytes], *, overwrite: bool = True) ->
         for tmp in [*temps.values(), *backups.values()]:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
+        if len(placed) < len(paths):
+            remove_made(made)
     return paths
 
 
@@ -244,18 +291,22 @@ def staged_directory(target: str | Path, *, overwrite: bool = False) -> Iterator
     ------
     FingerfitError
         ``target`` is a file, or a non-empty folder without ``overwrite``; errors
-        raised in the block name ``target`` instead of the staging folder.
+        raised in the block name ``target`` instead of the staging folder. On any
+        failure the folders above ``target`` that it created are removed again.
     """
     target = Path(target)
     check_folder_target(target, overwrite=overwrite)
+    made: list[Path] = []
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
+        made = make_parents(target.parent)
         staging = Path(
             tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".partial", dir=target.parent)
         )
         os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it 0700; the result is a normal folder
     except OSError as exc:
+        remove_made(made)
         raise FingerfitError(f"cannot create ({exc.strerror or exc})", path=target) from None
+    done = False
     try:
         try:
             yield staging
@@ -273,8 +324,11 @@ def staged_directory(target: str | Path, *, overwrite: bool = False) -> Iterator
             raise FingerfitError(f"cannot create ({exc.strerror or exc})", path=target) from None
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+        done = True
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+        if not done:
+            remove_made(made)
 
 
 def _same_file(a: Path, b: Path) -> bool:

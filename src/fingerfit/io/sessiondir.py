@@ -12,6 +12,7 @@ Layout (see ``docs/formats.md``)::
 from __future__ import annotations
 
 import csv
+import dataclasses
 import difflib
 import io
 import json
@@ -38,7 +39,8 @@ from ..session import (
 from ..transforms import FloatArray
 from .atomic import atomic_write
 from .hygiene import MAX_RATE_HZ, implausible_message, implausible_rows
-from .posecsv import check_field_counts, read_pose_csv, write_pose_csv
+from .posecsv import check_field_counts, read_pose_csv
+from .posewrite import write_pose_csv
 
 SESSION_FILE = "session.toml"
 LANDMARKS_FILE = "landmarks.csv"
@@ -287,6 +289,35 @@ def read_events(path: str | Path) -> list[TargetEvent]:
     return events
 
 
+def match_event_recordings(events: list[TargetEvent], names: list[str]) -> list[TargetEvent]:
+    """Events naming a recording by another extension, renamed to the session's file.
+
+    An event's ``recording`` that is no recording's name but has the stem of exactly
+    one (``targets.csv`` for a session converted to ``targets.parquet``) names that
+    recording; any other name is left for the session's check to refuse.
+
+    Parameters
+    ----------
+    events : list of TargetEvent
+    names : list of str
+        The file names of the session's recordings.
+
+    Returns
+    -------
+    list of TargetEvent
+    """
+    stems: dict[str, list[str]] = {}
+    for n in names:
+        stems.setdefault(Path(n).stem, []).append(n)
+    out = []
+    for ev in events:
+        found = stems.get(Path(ev.recording).stem, [])
+        if ev.recording not in names and len(found) == 1:
+            ev = dataclasses.replace(ev, recording=found[0])
+        out.append(ev)
+    return out
+
+
 def load_session(
     directory: str | Path, *, parsed: Session | None = None, test: bool = True
 ) -> Session:
@@ -419,6 +450,8 @@ def load_session(
     else:
         landmarks = read_landmarks(landmarks_file, units)
         events = read_events(events_file) if events_file is not None else []
+    recordings = [reference, *grasp, *targets, *test]
+    events = match_event_recordings(events, [r.name for r in recordings])
     session = Session(
         subject=subject,
         hand=hand,
@@ -464,11 +497,16 @@ def _check_complete(session: Session) -> None:
                     f"missing landmark '{finger}.{lm}' (finger '{finger}' is listed in {SESSION_FILE})",
                     path=session.path / LANDMARKS_FILE,
                 )
-    names = {r.name for r in session.recordings()}
-    for ev in session.events:
+    names = [r.name for r in session.recordings()]
+    for i, ev in enumerate(session.events):
         if ev.recording not in names:
             raise FingerfitError(
-                f"event names unknown recording '{ev.recording}'", path=session.path / "events.csv"
+                f"event names unknown recording '{shown(ev.recording)}' (the session's "
+                f"recordings: {', '.join(names)}; a name with another extension is taken "
+                "when its stem is one recording's)",
+                path=session.path / "events.csv",
+                line=i + 2,
+                field="recording",
             )
         if ev.is_pinch:
             if ev.target not in session.fingers or ev.finger not in session.fingers:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import FingerfitError
+from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, Recording
 
 #: ``--from`` values and the units each reads positions in when ``--units`` is not given
@@ -53,6 +53,58 @@ class TrackerFile:
     recording: Recording
     declared_units: str
     fits: dict = field(default_factory=dict)
+
+
+def infer_format(source: Path) -> str:
+    """The ``--from`` format of a file given without it, from its name and content.
+
+    A ``.parquet`` file by the table its metadata names (``fingerfit.pose/1``:
+    ``pose-csv``, ``fingerfit.wide/1``: ``wide-csv``), a ``.c3d`` file ``c3d``, a text
+    file whose first line is the pose CSV's header ``pose-csv``. A Liberty file or a
+    wide CSV does not say what it is: those need ``--from``.
+
+    Parameters
+    ----------
+    source : Path
+
+    Returns
+    -------
+    str
+        A key of :data:`DEFAULT_UNITS`.
+
+    Raises
+    ------
+    FingerfitError
+        The format cannot be told (``field '--from'``), or a Parquet file holds a table
+        that is not a recording.
+    """
+    from .parquet import FORMAT_KEY, POSE, WIDE, is_parquet, parquet_schema
+    from .posecsv import PARQUET_MAGIC, header_line, is_pose_header, read_magic
+
+    if is_parquet(source):
+        table = parquet_schema(source)[1].get(FORMAT_KEY)
+        if table in (POSE, WIDE):
+            return "pose-csv" if table == POSE else "wide-csv"
+        what = f"a '{shown(table)}' table" if table else f"no '{FORMAT_KEY}' metadata"
+        raise FingerfitError(
+            f"holds {what}, not a recording ({POSE} or {WIDE})", path=source, field="--from"
+        )
+    if source.suffix.lower() == ".c3d":
+        return "c3d"
+    try:
+        pose = is_pose_header(header_line(source))
+    except FingerfitError as exc:  # a binary file: a Liberty binary capture, or not a recording
+        if read_magic(source) == PARQUET_MAGIC:
+            raise exc from None  # a Parquet file under another name: that error says so
+        pose = False
+    if pose:
+        return "pose-csv"
+    raise FingerfitError(
+        "neither a pose CSV nor a .parquet or .c3d file: give --from liberty, "
+        "liberty-binary, wide-csv or c3d",
+        path=source,
+        field="--from",
+    )
 
 
 def check_format_options(fmt: str, units: str | None, **given: Any) -> None:
@@ -113,9 +165,12 @@ def read_tracker_file(
     TrackerFile
     """
     if fmt == "pose-csv":
+        from .parquet import UNITS_KEY, is_parquet, parquet_schema
         from .posecsv import read_pose_csv
 
-        return TrackerFile(read_pose_csv(source, units=units or "mm", rate_hz=rate), units or "mm")
+        if units is None:  # a Parquet file states its units; a CSV's default is mm
+            units = parquet_schema(source)[1].get(UNITS_KEY, "mm") if is_parquet(source) else "mm"
+        return TrackerFile(read_pose_csv(source, units=units, rate_hz=rate), units)
     if fmt in ("liberty", "liberty-binary"):
         from .liberty import read_liberty_ascii, read_liberty_binary
 

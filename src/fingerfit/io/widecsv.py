@@ -37,9 +37,10 @@ from scipy.spatial.transform import Rotation
 from ..errors import FingerfitError, shown
 from ..session import UNITS_TO_MM, PoseSeries, Recording
 from ..transforms import row_norms
-from .fastcsv import NotPlain, put_quat_rows, put_rows, put_scaled_rows, read_header
+from .fastcsv import NotPlain, put_quat_rows, put_rows, put_scaled_rows
 from .hygiene import check_recording, implausible_rows, missing_note, plain_block
-from .posecsv import check_field_counts, sensor_quats
+from .posecsv import check_field_counts, header_line
+from .posewrite import sensor_quats
 from .wideframes import QUAT_NORM_TOLERANCE as QUAT_NORM_TOLERANCE
 from .wideframes import RATE_TOLERANCE as RATE_TOLERANCE
 from .wideframes import _assemble, _frame_grid
@@ -200,7 +201,7 @@ def read_wide_csv(
             pass  # the reference path below says what is wrong, or reads what is unusual
         vals, tcol, stations, names, notes = _decode_parquet(path, lay, sensors)
         return _assemble(path, vals, tcol, stations, names, notes, lay, units, rate_hz, check, 1)
-    first = read_header(path).split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
+    first = header_line(path)
     header = [h.strip() for h in first.split(",")]
     if len(set(header)) != len(header):
         dup = next(h for h in header if header.count(h) > 1)

@@ -8,9 +8,12 @@ import time
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from ..kinematics import KinematicsPlan, compute_kinematics, kinematics_table
 from ..model import HandModel
+from ..track.recording import last_frame, track_recording
+from ..track.report import tracking_columns
 from ..transforms import FloatArray
 from .outputs import BagOutput, RecordOutput
 from .sources import MAX_BLOCK, Block
@@ -22,6 +25,8 @@ from .values import (
     concat_blocks,
     empty_recording,
     hold,
+    sensor_presence,
+    source_codes,
 )
 
 #: Seconds between the data lane's passes over what is queued.
@@ -93,6 +98,8 @@ class DataLane:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._last: FloatArray | None = None
+        self.solves = model.tracking is not None
+        self._anchor = None  # the last frame written: the next block's temporal anchor
         self.error: BaseException | None = None
         self.ok = True
         self._thread = threading.Thread(target=self._run, name="fingerfit-data-lane", daemon=True)
@@ -130,7 +137,7 @@ class DataLane:
                     # No frame at all: still a complete CSV (an empty recording's header).
                     variants = ("user_axis", "orthogonal")
                     kin = compute_kinematics(self.model, empty_recording(self.sensors), variants)
-                    self.record.push(kinematics_table(kin, units=self.record_units))
+                    self.record.push(self._table(kin, None))
         except BaseException as exc:  # handed to the loop, which raises it
             self.error, ok = exc, False
         # The files are closed on this thread (a bag's SQLite objects belong to it).
@@ -158,13 +165,28 @@ class DataLane:
     def _write_one(self, block: Block) -> None:
         rec, s = block.recording, self.summary
         t = time.perf_counter()
+        presence = sensor_presence(rec, self.sensors)
+        complete = bool(presence.all())
+        kin = tracked = None
         if not self.computes:
-            kin = None
+            pass
+        elif not complete and self.solves and rec.n_frames:
+            # Frames with a missing sensor: solved by the model as `fingerfit angles` does,
+            # joined to the previous block by the temporal prior.
+            tracked = track_recording(self.model, rec, self.variants, anchor=self._anchor)
+            kin = tracked.kinematics
         elif self.plan is not None and rec.n_frames:
             kin = self.plan.run(rec)
         else:
             kin = compute_kinematics(self.model, rec, self.variants)
+        if kin is not None and rec.n_frames and self.solves:
+            self._anchor = last_frame(kin)
         joints = robot = None
+        source = (
+            None
+            if complete
+            else source_codes(presence, self.sensors, self.model, self.channels.digits, self.solves)
+        )
         if self.retargeter is not None:
             robot = self.retargeter.step(rec, kin)[0]
         if self.bag is not None:
@@ -174,14 +196,21 @@ class DataLane:
                 joints = block_values(kin, self.channels, rec, self.sensors, "tracker").joints
         compute = time.perf_counter() - t
         if self.record is not None:
-            self.record.push(kinematics_table(kin, units=self.record_units))
+            self.record.push(self._table(kin, tracked))
         if joints is not None and self.bag is not None:
             last = self._last if self._last is not None else np.full(joints.shape[1], np.nan)
             if joints.size and not np.isfinite(joints).all():
                 joints = hold(joints, last)
             if joints.shape[0]:
                 self._last = joints[-1]
-            self.bag.push(joints, block.arrival + self.wall_offset)
+            wall = block.arrival + self.wall_offset
+            self.bag.push(joints, wall)
+            codes = (
+                source
+                if source is not None
+                else np.zeros((rec.n_frames, len(self.channels.digits)))
+            )
+            self.bag.push_source(codes, wall)
         if self.view is not None:
             self.view.push(rec, robot)
             s.view_dropped = self.view.dropped
@@ -194,6 +223,20 @@ class DataLane:
         if rec.n_frames:
             s.data_lag = max(s.data_lag, time.monotonic() - float(block.arrival[0]))
         s.recorded += rec.n_frames
+
+    def _table(self, kin, tracked) -> pd.DataFrame:
+        """The record's rows: the angles table, with the columns ``fingerfit angles`` adds
+        for a model that can solve frames (``<digit>.ik_rms_mm``, empty where direct)."""
+        table = kinematics_table(kin, units=self.record_units)
+        if not self.solves:
+            return table
+        n = kin.time.shape[0]
+        extra = (
+            tracking_columns(tracked)
+            if tracked is not None
+            else {f"{d}.ik_rms_mm": np.full(n, np.nan) for d in kin.motions["user_axis"]}
+        )
+        return pd.concat([table, pd.DataFrame(extra)], axis=1)
 
     def finish(self, ok: bool = True) -> None:
         """Write every queued frame (``ok``; else discard them), close the files (kept

@@ -2,7 +2,8 @@
 
 * :class:`LslOutput` -- outlets ``PREFIX-angles`` (type ``JointAngles``, channels
   ``<digit>.<joint>`` in degrees) and ``PREFIX-tips`` (type ``MoCap``, channels
-  ``<digit>.tip.x|y|z`` in millimetres), each with a last channel ``valid``; double64;
+  ``<digit>.tip.x|y|z`` in millimetres), each followed by ``<digit>.source`` (0 from the
+  digit's sensors, 1 solved by the model, 2 held) and a last channel ``valid``; double64;
   XDF channel metadata (label, unit, type); each sample stamped with its frame's arrival
   on the LSL clock. With ``--retarget``, a third outlet ``PREFIX-robot`` (type
   ``JointAngles``, one channel per robot joint, radians).
@@ -10,7 +11,10 @@
   ``<digit>_<joint>`` of the exported URDF, or the robot's joints with ``--retarget``) on
   the DDS topic ``rt/<topic>`` with the type name ``sensor_msgs::msg::dds_::JointState_``,
   final (XCDR1) types, reliable keep-last-10, domain ``ROS_DOMAIN_ID``; ``header.stamp`` =
-  arrival on the system clock.
+  arrival on the system clock; beside it, ``<topic>/source``: a ``JointState`` whose
+  names are the digits and whose positions say what each digit's values come from (0, 1,
+  2 as above), published when it changes (reliable, keep last 1, transient local: a late
+  subscriber gets the current one).
 * :class:`BagOutput` -- the same messages in a rosbag2 (rosbags), written all-or-nothing.
 * :class:`RecordOutput` -- the angles CSV ``fingerfit angles`` writes, all-or-nothing.
 """
@@ -117,6 +121,9 @@ class LslOutput:
         radians.
     robot_name : str
         The robot (stated in the stream description).
+    source_labels : list of str, optional
+        ``<digit>.source`` channels after the angles and after the tips
+        (:attr:`fingerfit.live.values.Channels.source_labels`).
     """
 
     def __init__(
@@ -130,21 +137,25 @@ class LslOutput:
         robot_labels: list[str] | None = None,
         robot_units: list[str] | None = None,
         robot_name: str = "",
+        source_labels: list[str] | None = None,
     ) -> None:
         pylsl = require("pylsl")
         self.pylsl = pylsl
         self.outlets = []
         self._rows: list[FloatArray] = []
+        sources = [(lab, "code", "Source") for lab in source_labels or []]
+        self._sources = len(sources)
         specs = [
             (
                 f"{prefix}-angles",
                 "JointAngles",
-                [(lab, "degrees", "JointAngle") for lab in angle_labels],
+                [(lab, "degrees", "JointAngle") for lab in angle_labels] + sources,
             ),
             (
                 f"{prefix}-tips",
                 "MoCap",
-                [(lab, "millimeters", "Position" + lab[-1].upper()) for lab in tip_labels],
+                [(lab, "millimeters", "Position" + lab[-1].upper()) for lab in tip_labels]
+                + sources,
             ),
         ]
         if robot_labels is not None:
@@ -167,6 +178,10 @@ class LslOutput:
             _channel_info(info, channels)
             info.desc().append_child_value("tips_frame", tips_frame)
             info.desc().append_child_value("valid", "1 when every sensor of the frame was present")
+            if sources and not name.endswith("-robot"):
+                info.desc().append_child_value(
+                    "source", "per digit: 0 from its sensors, 1 solved by the model, 2 held"
+                )
             if name.endswith("-robot"):
                 info.desc().append_child_value("robot", robot_name)
             self.outlets.append(pylsl.StreamOutlet(info, chunk_size=0, max_buffered=10))
@@ -201,6 +216,7 @@ class LslOutput:
         valid: FloatArray,
         arrival: FloatArray,
         robot: FloatArray | None = None,
+        source: FloatArray | None = None,
     ) -> None:
         """Push frames.
 
@@ -216,18 +232,28 @@ class LslOutput:
             ``time.monotonic()`` seconds; pushed as LSL timestamps.
         robot : ndarray, shape (n, n_robot_joints), optional
             The robot's joints (rad; m for a slide joint), when the outlet exists.
+        source : ndarray, shape (n, n_digits), optional
+            The ``<digit>.source`` codes (with ``source_labels``; default 0).
         """
+        k = self._sources
+        if k and source is None:
+            source = np.zeros((valid.shape[0], k))
         values = (angles, tips) if robot is None else (angles, tips, robot)
         if valid.shape[0] == 1:  # the robot lane: one frame, into buffers allocated once
             stamp = float(arrival[0]) + self.offset  # one sample: its own stamp
-            for o, x, row in zip(self.outlets, values, self._rows, strict=True):
-                row[0, :-1] = x[0]
+            for i, (o, x, row) in enumerate(zip(self.outlets, values, self._rows, strict=True)):
+                if k and i < 2:
+                    row[0, : -1 - k] = x[0]
+                    row[0, -1 - k : -1] = source[0]
+                else:
+                    row[0, :-1] = x[0]
                 row[0, -1] = valid[0]
                 o.push_chunk(row, stamp)
             return
         stamps = (arrival + self.offset).tolist()
-        for o, x in zip(self.outlets, values, strict=True):
-            o.push_chunk(np.column_stack([x, valid]), stamps)
+        for i, (o, x) in enumerate(zip(self.outlets, values, strict=True)):
+            parts = [x, source, valid] if k and i < 2 else [x, valid]
+            o.push_chunk(np.column_stack(parts), stamps)
 
     #: How long (s) :meth:`close` lets connected consumers receive the last frames. liblsl
     #: sends from its own thread and drops what is still queued when an outlet is
@@ -273,6 +299,19 @@ def ros2_qos():
     )
 
 
+def source_qos():
+    """The ``<topic>/source`` QoS: reliable, keep last 1, transient local (a subscriber
+    that joins late gets the current message)."""
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds.util import duration
+
+    return Qos(
+        Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
+        Policy.History.KeepLast(1),
+        Policy.Durability.TransientLocal,
+    )
+
+
 def stamp(seconds: float) -> tuple[int, int]:
     """System-clock seconds -> ``(sec, nanosec)`` of a ``builtin_interfaces/Time``."""
     ns = round(seconds * 1e9)
@@ -291,9 +330,19 @@ class Ros2Output:
         with ``--retarget``, the robot's ``joint_names``).
     frame_id : str
         ``header.frame_id``.
+    source_names : list of str, optional
+        The digits: a second topic ``<topic>/source`` says what each digit's values come
+        from (positions 0 from its sensors, 1 solved by the model, 2 held), published when
+        it changes (:meth:`push_source`).
     """
 
-    def __init__(self, topic: str, names: list[str], frame_id: str = "hand") -> None:
+    def __init__(
+        self,
+        topic: str,
+        names: list[str],
+        frame_id: str = "hand",
+        source_names: list[str] | None = None,
+    ) -> None:
         dds_name = dds_topic(topic)
         domain = ros_domain_id()
         require("cyclonedds")
@@ -313,6 +362,14 @@ class Ros2Output:
         self.writer = DataWriter(self.participant, self.topic, qos=qos)
         self.names = list(names)
         self.frame_id = frame_id
+        self.source_names = list(source_names or [])
+        self._source: list[float] | None = None
+        if self.source_names:
+            sq = source_qos()
+            self.source_topic = Topic(
+                self.participant, f"{dds_name}/source", self.JointState, qos=sq
+            )
+            self.source_writer = DataWriter(self.participant, self.source_topic, qos=sq)
 
     def has_consumers(self) -> bool:
         """Whether a subscriber is matched."""
@@ -334,6 +391,21 @@ class Ros2Output:
         for p, w in zip(positions, wall.tolist(), strict=True):
             self.writer.write(self.message(p, w))
 
+    def push_source(self, codes: FloatArray, wall: float) -> None:
+        """Publish ``<topic>/source`` when the digits' source ``codes (n_digits,)`` changed
+        since the last message (``wall``: system-clock s)."""
+        if not self.source_names:
+            return
+        values = codes.tolist()
+        if values == self._source:
+            return
+        self._source = values
+        sec, nsec = stamp(wall)
+        msg = self.JointState(
+            self.Header(self.Time(sec, nsec), self.frame_id), self.source_names, values, [], []
+        )
+        self.source_writer.write(msg)
+
     def close(self) -> None:
         """Let matched readers acknowledge the last messages (up to 1 s), then delete the
         participant (and with it the writer)."""
@@ -343,6 +415,8 @@ class Ros2Output:
             self.writer.wait_for_acks(duration(seconds=1))
         with contextlib.suppress(Exception):
             del self.writer, self.topic
+        with contextlib.suppress(Exception):
+            del self.source_writer, self.source_topic
         with contextlib.suppress(Exception):
             del self.participant
 
@@ -362,9 +436,19 @@ class BagOutput:
         ROS 2 topic of the connection (``/joint_states`` by default).
     names : list of str
     frame_id : str
+    source_names : list of str, optional
+        The digits: ``<topic>/source`` messages (:class:`Ros2Output`'s) are written when
+        the digits' source changes (:meth:`push_source`).
     """
 
-    def __init__(self, path: Path, topic: str, names: list[str], frame_id: str = "hand") -> None:
+    def __init__(
+        self,
+        path: Path,
+        topic: str,
+        names: list[str],
+        frame_id: str = "hand",
+        source_names: list[str] | None = None,
+    ) -> None:
         dds_topic(topic)  # the same name rules
         require("rosbags")
         from rosbags.rosbag2 import Writer
@@ -391,6 +475,9 @@ class BagOutput:
         self.frame_id = frame_id
         self.topic = "/" + topic.lstrip("/")
         self.conn = None
+        self.source_conn = None
+        self.source_names = list(source_names or [])
+        self._source: FloatArray | None = None
         t = self.store.types
         self._msg = t["sensor_msgs/msg/JointState"]
         self._header = t["std_msgs/msg/Header"]
@@ -405,6 +492,10 @@ class BagOutput:
             self.conn = self.writer.add_connection(
                 self.topic, "sensor_msgs/msg/JointState", typestore=self.store
             )
+            if self.source_names:
+                self.source_conn = self.writer.add_connection(
+                    f"{self.topic}/source", "sensor_msgs/msg/JointState", typestore=self.store
+                )
 
     def push(self, positions: FloatArray, wall: FloatArray) -> None:
         """Write one message per frame (``positions (n, n_joints)`` rad, ``wall (n,)`` s)."""
@@ -421,6 +512,30 @@ class BagOutput:
             )
             data = self.store.serialize_cdr(msg, "sensor_msgs/msg/JointState")
             self.writer.write(self.conn, sec * 1_000_000_000 + nsec, data)
+
+    def push_source(self, codes: FloatArray, wall: FloatArray) -> None:
+        """Write a ``<topic>/source`` message at every frame whose digits' source
+        ``codes (n, n_digits)`` differs from the frame before (``wall (n,)`` s)."""
+        if not self.source_names or not len(codes):
+            return
+        self._open()
+        before = np.vstack(
+            [self._source if self._source is not None else codes[:1] - 1, codes[:-1]]
+        )
+        changed = np.flatnonzero((codes != before).any(axis=1))
+        empty = np.zeros(0)
+        for i in changed:
+            sec, nsec = stamp(float(wall[i]))
+            msg = self._msg(
+                self._header(self._time(sec, nsec), self.frame_id),
+                self.source_names,
+                np.asarray(codes[i], dtype=np.float64),
+                empty,
+                empty,
+            )
+            data = self.store.serialize_cdr(msg, "sensor_msgs/msg/JointState")
+            self.writer.write(self.source_conn, sec * 1_000_000_000 + nsec, data)
+        self._source = codes[-1].copy()
 
     def close(self, ok: bool = True) -> None:
         """Finish the bag and move it into place (``ok``) or remove it; on the thread that

@@ -10,10 +10,14 @@ Frames go through :func:`fingerfit.kinematics.compute_kinematics` -- the functio
 * the **data lane** (``--record``, ``--ros2-bag``) writes every frame, on its own thread
   and in vectorised blocks, so a recording is complete whatever the robot lane skipped.
 
-Per output column, a frame whose value could not be computed (a sensor missing) holds the
-column's last value; the ``valid`` channel says whether every sensor the model uses was
-present in the frame. The angles CSV (``--record``) gets the frames as ``fingerfit
-angles`` writes them (empty fields where a sensor is missing), not the held values.
+A frame with a missing sensor is solved by the model (:mod:`fingerfit.track`: the robot
+lane one frame at a time with :class:`~fingerfit.track.live.LiveTracker`, the data lane
+block by block as ``fingerfit angles`` does); the ``<digit>.source`` channels say what
+each digit's values come from. Per output column, a value the model cannot solve (the
+hand sensor or every sensor of a digit missing) holds the column's last value; the
+``valid`` channel says whether every sensor the model uses was present in the frame. The
+angles CSV (``--record``) gets the frames as ``fingerfit angles`` writes them (empty fields
+where nothing could be computed), not the held values.
 
 With a :class:`fingerfit.retarget.Retargeter` (``--retarget ROBOT``), the sent frames'
 kinematics then go through :meth:`~fingerfit.retarget.Retargeter.step`, which keeps the
@@ -42,6 +46,8 @@ import numpy as np
 from ..errors import FingerfitError
 from ..kinematics import KinematicsPlan, compute_kinematics
 from ..model import HandModel
+from ..session import HAND_SENSOR, PoseSeries, Recording
+from ..track.live import LiveTracker
 from ..transforms import FloatArray
 from .datalane import DATA_PERIOD, DataLane
 from .outputs import BagOutput, LslOutput, RecordOutput, Ros2Output
@@ -59,6 +65,8 @@ from .values import (
     hold,
     model_sensors,
     robot_joint_units,
+    sensor_presence,
+    source_codes,
 )
 
 #: Seconds between status-line updates.
@@ -164,6 +172,17 @@ class Streamer:
             if model.angle_method == "swing_twist" and self.live
             else None
         )
+        # Frames with a missing sensor: solved by the model, one at a time (a model without
+        # calibration statistics cannot: those frames are held).
+        self.tracker = (
+            LiveTracker(model, self.variants) if model.tracking is not None and self.live else None
+        )
+        self._nan: dict[int, PoseSeries] = {}
+        self._hand_index = self.sensors.index(HAND_SENSOR)
+        self._digit_sensors = [
+            np.array([self.sensors.index(jm.child) for jm in fm.joints.values()])
+            for fm in model.fingers.values()
+        ]
         self.wall_offset = time.time() - time.monotonic()
         self.summary = Summary()
         # The robot lane's per-frame buffers, allocated once: the values of the frame
@@ -207,20 +226,55 @@ class Streamer:
         if n == 0:
             return
         s = self.summary
-        valid = frames_valid(block.recording, self.sensors)
+        if any(x not in block.recording.poses for x in self.sensors):
+            block = Block(self._complete(block.recording), block.arrival, block.lost)
+        presence = sensor_presence(block.recording, self.sensors)
+        valid = presence.all(axis=1)
         if self.live:
-            self._send(block, bool(valid[-1]))
+            self._send(block, bool(valid[-1]), presence[-1])
         s.received += n
         s.lost += block.lost
-        s.invalid += int(n - np.count_nonzero(valid))
+        bad = int(n - np.count_nonzero(valid))
+        s.invalid += bad
+        if bad:
+            codes = source_codes(
+                presence, self.sensors, self.model, self.channels.digits, self.solves
+            )
+            s.held += int(np.count_nonzero((codes == 2).any(axis=1)))
         if self.data is not None:
             if self.data.error is not None:
                 raise self.data.error
             self.data.put(block)
 
-    def _send(self, block: Block, valid: bool) -> None:
+    @property
+    def solves(self) -> bool:
+        """Whether frames with a missing sensor are solved by the model (its calibration
+        statistics; else they are held)."""
+        return self.model.tracking is not None
+
+    def _all_solved(self, present: np.ndarray) -> bool:
+        """Whether the model solves every digit of a frame (``present``: each of
+        :attr:`sensors`): the hand sensor there, and every digit missing one of its own and
+        having another."""
+        return bool(present[self._hand_index]) and all(
+            present[idx].any() and not present[idx].all() for idx in self._digit_sensors
+        )
+
+    def _complete(self, rec: Recording) -> Recording:
+        """``rec`` with a pose series of NaN for each model sensor it lacks (a source that
+        never delivers one: the layout was checked before the stream started)."""
+        n = rec.n_frames
+        nan = self._nan.get(n)
+        if nan is None:
+            nan = self._nan[n] = PoseSeries(np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan))
+        poses = dict(rec.poses)
+        for x in self.sensors:
+            poses.setdefault(x, nan)
+        return Recording(rec.name, rec.time, poses, rec.notes)
+
+    def _send(self, block: Block, valid: bool, present: np.ndarray) -> None:
         """The robot lane: the newest frame of ``block`` (``valid``: every sensor present
-        in it) if it is fresh enough."""
+        in it; ``present``: each of :attr:`sensors`) if it is fresh enough."""
         s = self.summary
         n = block.recording.n_frames
         arrived = float(block.arrival[-1])
@@ -234,14 +288,21 @@ class Streamer:
             return
         rec = block.recording if n == 1 else block.recording.slice(slice(n - 1, n))
         t = time.perf_counter()
-        kin = (
-            self.plan.run(rec)
-            if self.plan is not None
-            else compute_kinematics(self.model, rec, self.variants)
-        )
+        if self.tracker is not None and not valid and self._all_solved(present):
+            kin = self.tracker.blank(rec)  # no digit to compute directly: all solved
+        elif self.plan is not None:
+            kin = self.plan.run(rec)
+        else:
+            kin = compute_kinematics(self.model, rec, self.variants)
+        source = None
+        if self.tracker is not None:
+            if valid:
+                self.tracker.remember(kin, float(rec.time[0]))
+            else:
+                source = self.tracker.step(rec, kin)
         robot = self.retargeter.step(rec, kin)[0] if self.retargeter is not None else None
         compute = time.perf_counter() - t
-        held = self._frame.values(kin, rec, robot)
+        held = self._frame.values(kin, rec, robot, source)
         for key, row in held.items():
             self._fill(key, row)
         sent_age = time.monotonic() - arrived
@@ -279,7 +340,11 @@ class Streamer:
 
     def _push(self, held: dict, valid: FloatArray, arrival: FloatArray, robot: bool) -> None:
         if self.lsl is not None:
-            self.lsl.push(held["angles"], held["tips"], valid, arrival, held.get("robot"))
+            self.lsl.push(
+                held["angles"], held["tips"], valid, arrival, held.get("robot"), held["source"]
+            )
+        if self.ros2 is not None:
+            self.ros2.push_source(held["source"][0], float(arrival[0]) + self.wall_offset)
         if self.ros2 is not None:
             self.ros2.push(held["robot"] if robot else held["joints"], arrival + self.wall_offset)
 
@@ -306,7 +371,14 @@ class Streamer:
             self._last["robot"] = rest.copy()
         arrival = np.array([now])
         if self.lsl is not None:
-            self.lsl.push(held["angles"], held["tips"], np.zeros(1), arrival, held.get("robot"))
+            self.lsl.push(
+                held["angles"],
+                held["tips"],
+                np.zeros(1),
+                arrival,
+                held.get("robot"),
+                held.get("source"),
+            )
         if self.ros2 is not None and release:
             self.ros2.push(held["robot"], arrival + self.wall_offset)
 
@@ -350,7 +422,8 @@ class StatusLine:
         s.compute_window.clear()
         sys.stderr.write(
             f"\r{rate:6.1f} frames/s  latency {np.median(lat):5.2f} ms (max {lat.max():5.2f})"
-            f"  compute {np.median(comp):5.2f} ms/frame  lost {s.lost}  held {s.invalid}"
+            f"  compute {np.median(comp):5.2f} ms/frame  lost {s.lost}"
+            f"  model {s.invalid - s.held}  held {s.held}"
             f"  sent {s.sent}  skipped {s.skipped}  stale {s.stale}  recorded {s.recorded}"
             "\x1b[K"
         )
@@ -601,4 +674,6 @@ __all__ = [
     "model_sensors",
     "robot_joint_units",
     "run",
+    "sensor_presence",
+    "source_codes",
 ]

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..kinematics import Kinematics
 from ..model import HandModel
-from ..session import HAND_SENSOR, PoseSeries, Recording
+from ..session import HAND_SENSOR, PoseSeries, Recording, concat_recordings
 from ..transforms import FloatArray
 from .sources import Block
 
@@ -77,6 +77,12 @@ class Channels:
     def tip_labels(self) -> list[str]:
         return [f"{d}.tip.{c}" for d in self.digits for c in "xyz"]
 
+    @property
+    def source_labels(self) -> list[str]:
+        """``<digit>.source``: what each digit's values in a frame come from
+        (:data:`fingerfit.track.live.FROM_SENSORS`, ``FROM_MODEL``, ``HELD``)."""
+        return [f"{d}.source" for d in self.digits]
+
 
 def channels_of(model: HandModel, kin: Kinematics) -> Channels:
     """The channels of ``model`` from kinematics computed with it (any block)."""
@@ -101,12 +107,65 @@ class Values:
         Radians, :attr:`Channels.joint_names` order.
     valid : ndarray, shape (n,)
         1.0 when every sensor was present, else 0.0.
+    source : ndarray, shape (n, n_digits)
+        Per digit (:attr:`Channels.digits` order): 0 from its sensors, 1 solved by the
+        model (a sensor missing), 2 held (not solvable: the hand sensor or every sensor
+        of the digit missing).
     """
 
     angles: FloatArray
     tips: FloatArray
     joints: FloatArray
     valid: FloatArray
+    source: FloatArray
+
+
+def sensor_presence(recording: Recording, sensors: list[str]) -> np.ndarray:
+    """Whether each sensor of ``sensors`` is present in each frame, ``(n, S)`` bool: one
+    ``isfinite`` over the sensors' poses side by side (a sensor the recording lacks is
+    absent in every frame)."""
+    n = recording.n_frames
+    poses = [recording.poses.get(s) for s in sensors]
+    have = [p for p in poses if p is not None]
+    if not have:
+        return np.zeros((n, len(sensors)), dtype=bool)
+    k = len(have)
+    ok = np.isfinite(np.concatenate([p.position.reshape(n, 3) for p in have], axis=1))
+    out_pos = ok.reshape(n, k, 3).all(axis=2)
+    ok = np.isfinite(np.concatenate([p.rotation.reshape(n, 9) for p in have], axis=1))
+    present = out_pos & ok.reshape(n, k, 9).all(axis=2)
+    if k == len(sensors):
+        return present
+    out = np.zeros((n, len(sensors)), dtype=bool)
+    out[:, [i for i, p in enumerate(poses) if p is not None]] = present
+    return out
+
+
+def source_codes(
+    presence: np.ndarray, sensors: list[str], model: HandModel, digits: list[str], solves: bool
+) -> np.ndarray:
+    """What each digit's values in each frame come from, ``(n, n_digits)`` (``Values.source``).
+
+    Parameters
+    ----------
+    presence : ndarray of bool, shape (n, S)
+        :func:`sensor_presence` of ``sensors``.
+    sensors : list of str
+    model : HandModel
+    digits : list of str
+    solves : bool
+        Whether frames with a missing sensor are solved by the model (a model with
+        calibration statistics); else they are held.
+    """
+    col = {s: i for i, s in enumerate(sensors)}
+    hand = presence[:, col[HAND_SENSOR]]
+    out = np.zeros((presence.shape[0], len(digits)))
+    for k, d in enumerate(digits):
+        own = presence[:, [col[jm.child] for jm in model.fingers[d].joints.values()]]
+        complete = hand & own.all(axis=1)
+        solvable = hand & own.any(axis=1) & solves
+        out[:, k] = np.where(complete, 0.0, np.where(solvable, 1.0, 2.0))
+    return out
 
 
 def frames_valid(recording: Recording, sensors: list[str]) -> np.ndarray:
@@ -134,7 +193,12 @@ def frames_valid(recording: Recording, sensors: list[str]) -> np.ndarray:
 
 
 def block_values(
-    kin: Kinematics, channels: Channels, recording: Recording, sensors: list[str], tips_frame: str
+    kin: Kinematics,
+    channels: Channels,
+    recording: Recording,
+    sensors: list[str],
+    tips_frame: str,
+    source: FloatArray | None = None,
 ) -> Values:
     """The streamed values of one block (before holding).
 
@@ -148,6 +212,8 @@ def block_values(
     sensors : list of str
         Sensors whose presence makes a frame valid.
     tips_frame : {"tracker", "hand"}
+    source : ndarray, shape (n, n_digits), optional
+        :func:`source_codes` of the block (default: 0, from the sensors).
 
     Returns
     -------
@@ -180,7 +246,9 @@ def block_values(
             flexion = a[base] if base in a else next(iter(a.values()))
             joints[:, k] = np.where(np.isfinite(flexion), 0.0, np.nan)
     valid = frames_valid(recording, sensors)
-    return Values(angles, tips, joints, valid.astype(float))
+    if source is None:
+        source = np.zeros((n, len(channels.digits)))
+    return Values(angles, tips, joints, valid.astype(float), source)
 
 
 class FrameValues:
@@ -204,6 +272,7 @@ class FrameValues:
         self.tips_frame = tips_frame
         self.angles = np.empty((1, len(channels.angles)))
         self.tips = np.empty((1, 3 * len(channels.digits)))
+        self.source = np.zeros((1, len(channels.digits)))
         self.joints = np.empty((1, len(channels.joint_names)))
         self.robot: FloatArray | None = None
         # Per joint name: its digit, its angle and, for an ab/adduction the model may not
@@ -213,8 +282,14 @@ class FrameValues:
             d, kind = name.split("_", 1)
             self._joints.append((d, kind, kind.removesuffix("_abduction")))
 
-    def values(self, kin: Kinematics, rec: Recording, robot: FloatArray | None) -> dict:
-        """``{"angles", "tips", "joints"[, "robot"]}``, each of shape (1, k), as
+    def values(
+        self,
+        kin: Kinematics,
+        rec: Recording,
+        robot: FloatArray | None,
+        source: dict[str, int] | None = None,
+    ) -> dict:
+        """``{"angles", "tips", "joints", "source"[, "robot"]}``, each of shape (1, k), as
         :func:`block_values` (and the robot's joints, copied) gives them for the one
         frame of ``rec``.
 
@@ -226,8 +301,17 @@ class FrameValues:
             One frame (mm, tracker frame).
         robot : ndarray, shape (1, n_robot), optional
             The robot's joints (rad).
+        source : dict, optional
+            Digit -> what its values come from (:data:`fingerfit.track.live.FROM_SENSORS`
+            ...); default: every digit from its sensors.
         """
         motions = kin.motions["user_axis"]
+        src = self.source[0]
+        if source is None:
+            src[:] = 0.0
+        else:
+            for k, d in enumerate(self.channels.digits):
+                src[k] = source[d]
         a = self.angles[0]
         for k, (d, j) in enumerate(self.channels.angles):
             a[k] = motions[d].angles[j][0]
@@ -246,7 +330,12 @@ class FrameValues:
             else:  # an ab/adduction not computed: 0 where the joint's flexion exists
                 flexion = angles[base] if base in angles else next(iter(angles.values()))
                 q[k] = 0.0 if math.isfinite(flexion[0]) else math.nan
-        out = {"angles": self.angles, "tips": self.tips, "joints": self.joints}
+        out = {
+            "angles": self.angles,
+            "tips": self.tips,
+            "joints": self.joints,
+            "source": self.source,
+        }
         if robot is not None:
             if self.robot is None or self.robot.shape != robot.shape:
                 self.robot = np.empty(robot.shape)
@@ -292,15 +381,7 @@ def concat_blocks(blocks: list[Block]) -> Block:
     """
     if len(blocks) == 1:
         return blocks[0]
-    recs = [b.recording for b in blocks]
-    poses = {
-        k: PoseSeries(
-            np.concatenate([r.poses[k].position for r in recs]),
-            np.concatenate([r.poses[k].rotation for r in recs]),
-        )
-        for k in recs[0].poses
-    }
-    rec = Recording(recs[0].name, np.concatenate([r.time for r in recs]), poses)
+    rec = concat_recordings([b.recording for b in blocks])
     return Block(rec, np.concatenate([b.arrival for b in blocks]), sum(b.lost for b in blocks))
 
 
@@ -329,7 +410,11 @@ class Summary:
     lost : int
         Frames the source lost (device frame-count gaps); not received.
     invalid : int
-        Received frames with a missing sensor (values held, ``valid`` 0).
+        Received frames with a missing sensor (``valid`` 0).
+    held : int
+        Of those, frames with a digit the model could not solve (the hand sensor or every
+        sensor of the digit missing, or a model without calibration statistics): its
+        values held. The others were solved by the model.
     silences : int
         Times the source fell silent for ``silence`` s (the watchdog fired).
     outages, reconnects : int
@@ -370,6 +455,7 @@ class Summary:
     recorded: int = 0
     lost: int = 0
     invalid: int = 0
+    held: int = 0
     silences: int = 0
     outages: int = 0
     reconnects: int = 0

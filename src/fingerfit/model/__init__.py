@@ -28,6 +28,7 @@ from .hand import (
     orthogonal_second_axis,
     with_fixed_centres,
 )
+from .tracking import AngleRange, SensorSpread, TrackingStats
 
 __all__ = [
     "ANGLE_METHODS",
@@ -36,12 +37,15 @@ __all__ = [
     "PAD_FROM_TIP",
     "PAD_SOURCES",
     "VARIANTS",
+    "AngleRange",
     "DigitModel",
     "HandModel",
     "JointModel",
     "JointQuality",
     "PinchContact",
     "SegmentFrame",
+    "SensorSpread",
+    "TrackingStats",
     "assemble_digit",
     "estimated_pad",
     "load_model",

@@ -29,6 +29,7 @@ from .hand import (
     PinchContact,
     SegmentFrame,
 )
+from .tracking import AngleRange, SensorSpread, TrackingStats
 
 FORMAT = "fingerfit.model/1"
 #: Largest coordinate or length accepted from a model file (mm): the readers' limit,
@@ -123,6 +124,40 @@ def model_to_dict(model: HandModel) -> dict[str, Any]:
             if model.pinch_contacts
             else {}
         ),
+        **({"tracking": _tracking_doc(model.tracking)} if model.tracking is not None else {}),
+    }
+
+
+def _tracking_doc(t: TrackingStats) -> dict[str, Any]:
+    """The ``tracking`` entry: calibration statistics for tracking (``docs/formats.md``)."""
+    return {
+        "recordings": list(t.recordings),
+        "frames": t.frames,
+        "sensors": {
+            v: {
+                k: {
+                    "position_mm": float(x.position_mm),
+                    "orientation_deg": float(x.orientation_deg),
+                    "frames": x.frames,
+                }
+                for k, x in sensors.items()
+            }
+            for v, sensors in t.sensors.items()
+        },
+        "angles": {
+            v: {
+                d: {
+                    k: {
+                        "low_deg": float(a.low_deg),
+                        "high_deg": float(a.high_deg),
+                        "speed_deg_s": float(a.speed_deg_s),
+                    }
+                    for k, a in angles.items()
+                }
+                for d, angles in digits.items()
+            }
+            for v, digits in t.angles.items()
+        },
     }
 
 
@@ -357,6 +392,7 @@ def load_model(path: str | Path) -> HandModel:
         ),
         warnings=_warnings(r, doc),
         pinch_contacts=_pinch_contacts(r, doc, fingers),
+        tracking=_tracking(r, doc, fingers, poses),
     )
 
 
@@ -462,3 +498,50 @@ def _warnings(r: _Reader, doc: dict[str, Any]) -> tuple[str, ...]:
     if not isinstance(w, list) or not all(isinstance(x, str) for x in w):
         raise r.err("warnings", "must be a list of strings")
     return tuple(w)
+
+
+def _tracking(
+    r: _Reader, doc: dict[str, Any], fingers: dict[str, DigitModel], poses: dict
+) -> TrackingStats | None:
+    """The optional ``tracking`` entry (older files: none), every figure checked: a spread
+    for every sensor of the model's digits and a range for every angle, per variant."""
+    if "tracking" not in doc:
+        return None
+    t = doc["tracking"]
+    recordings = r.get(t, "recordings", "tracking")
+    if not isinstance(recordings, list) or not all(isinstance(x, str) for x in recordings):
+        raise r.err("tracking.recordings", "must be a list of strings")
+    frames = r.count(r.get(t, "frames", "tracking"), "tracking.frames")
+    sensors: dict[str, dict[str, SensorSpread]] = {}
+    angles: dict[str, dict[str, dict[str, AngleRange]]] = {}
+    sdoc, adoc = r.get(t, "sensors", "tracking"), r.get(t, "angles", "tracking")
+    needed = [jm.child for fm in fingers.values() for jm in fm.joints.values()]
+    for v in VARIANTS:
+        vs = r.get(sdoc, v, "tracking.sensors")
+        sensors[v] = {}
+        for name in needed:
+            w = f"tracking.sensors.{v}.{name}"
+            x = r.get(vs, name, f"tracking.sensors.{v}")
+            pos = r.number(r.get(x, "position_mm", w), f"{w}.position_mm")
+            rot = r.number(r.get(x, "orientation_deg", w), f"{w}.orientation_deg")
+            for key, val in (("position_mm", pos), ("orientation_deg", rot)):
+                if not (math.isfinite(val) and 0 < val <= MAX_MODEL_MM):
+                    raise r.err(f"{w}.{key}", "must be a positive finite number")
+            sensors[v][name] = SensorSpread(pos, rot, r.count(r.get(x, "frames", w), f"{w}.frames"))
+        va = r.get(adoc, v, "tracking.angles")
+        angles[v] = {}
+        for d, fm in fingers.items():
+            da = r.get(va, d, f"tracking.angles.{v}")
+            angles[v][d] = {}
+            for k in fm.angle_names():
+                w = f"tracking.angles.{v}.{d}.{k}"
+                x = r.get(da, k, f"tracking.angles.{v}.{d}")
+                lo = r.number(r.get(x, "low_deg", w), f"{w}.low_deg")
+                hi = r.number(r.get(x, "high_deg", w), f"{w}.high_deg")
+                sp = r.number(r.get(x, "speed_deg_s", w), f"{w}.speed_deg_s")
+                if not (-360 <= lo <= 0 <= hi <= 360):
+                    raise r.err(w, "needs -360 <= low_deg <= 0 <= high_deg <= 360")
+                if not (math.isfinite(sp) and sp > 0):
+                    raise r.err(f"{w}.speed_deg_s", "must be a positive finite number")
+                angles[v][d][k] = AngleRange(lo, hi, sp)
+    return TrackingStats(tuple(recordings), frames, sensors, angles)

@@ -16,6 +16,7 @@ import numpy as np
 from .. import __version__
 from ..digits import DIGITS, second_axis
 from ..transforms import FloatArray
+from .tracking import TrackingStats
 
 VARIANTS = ("user_axis", "orthogonal")
 # How joint angles are computed from the sensors (``docs/methods.md``): the paper's
@@ -269,6 +270,10 @@ class HandModel:
     pinch_contacts : tuple of PinchContact
         Per pair of digits that pinched in the session, how close their pads come while
         touching (``"pinch_contacts"`` in the file; empty without pinch events).
+    tracking : TrackingStats, optional
+        Each sensor's spread about the model and each angle's range in the calibration
+        recordings (``"tracking"`` in the file), which tracking with fewer sensors needs
+        (:mod:`fingerfit.track`); ``None`` in files written before it existed.
     """
 
     subject: str
@@ -281,6 +286,7 @@ class HandModel:
     angle_method: str = "projection"
     warnings: tuple[str, ...] = ()
     pinch_contacts: tuple[PinchContact, ...] = ()
+    tracking: TrackingStats | None = None
 
     def pinch_contact(self, a: str, b: str) -> PinchContact | None:
         """The :class:`PinchContact` of digits ``a`` and ``b`` (either order), or None."""

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FingerfitError, shown
-from ..kinematics import Kinematics, compute_kinematics
+from ..kinematics import Kinematics
 from ..model import HandModel
 from ..session import Recording
+from ..track import track_recording
 from ..transforms import FloatArray
 from .joint import AngleCopy
 from .limits import Limits, limits_of
@@ -392,10 +393,11 @@ class Retargeter:
         return float(mm)
 
     def kinematics(self, recording: Recording) -> Kinematics:
-        """The person's kinematics :meth:`step` needs (the retargeted digits, one variant)."""
-        return compute_kinematics(
+        """The person's kinematics :meth:`step` needs (the retargeted digits, one variant;
+        frames with a missing sensor solved by the model, :mod:`fingerfit.track`)."""
+        return track_recording(
             self.model, recording, variants=(self.variant,), fingers=self.setup.digits
-        )
+        ).kinematics
 
     def step(
         self, recording: Recording, kin: Kinematics | None = None

@@ -25,6 +25,9 @@ are imported by their own names.
 from __future__ import annotations
 
 from .live import (
+    FILE_BATCH_FRAMES as FILE_BATCH_FRAMES,
+)
+from .live import (
     VIEW_NICE as VIEW_NICE,
 )
 from .live import (

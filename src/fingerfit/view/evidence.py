@@ -34,7 +34,7 @@ from .rerunlog import _arrows, _indexes, _static, close_view, open_view
 from .scene import _SENSOR_AXIS_COLOURS, SENSOR_AXIS_MM, require_rerun
 
 if TYPE_CHECKING:
-    from ..capture import JointEvidence
+    from ..estimate.evidence import JointEvidence
     from ..session import Recording
 
 #: The series of the evidence: ``(entity under evidence/, title, the threshold's name)``.
@@ -76,7 +76,7 @@ class EvidenceView:
         The recording's sensors, drawn in this order.
     need : tuple of (int, float, float)
         The thresholds the series are drawn against: cycles, median range of motion
-        (deg), axis confidence half-angle (deg) (:func:`fingerfit.capture.thresholds`).
+        (deg), axis confidence half-angle (deg) (:func:`fingerfit.estimate.evidence.thresholds`).
     table : callable
         ``table(rows, frames)``: the evidence table of an update as Markdown (the
         capture's own, :func:`fingerfit.capture.markdown_table`).

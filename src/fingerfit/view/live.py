@@ -3,11 +3,19 @@ process of its own.
 
 The stream's data lane hands every block of frames to :class:`LiveView`, which only puts
 the block's poses (and the robot's joints, when the view shows a robot) on a bounded
-queue. A child process (started with ``spawn``; its priority lowered by
-:data:`VIEW_NICE`) computes the block's kinematics and scene and logs them to Rerun with
-the functions ``fingerfit view`` uses. So neither the view's NumPy work nor Rerun's
-Python side runs in the stream's interpreter, where it would take turns with the robot
-lane.
+queue. A child process (:func:`fingerfit.processes.start_child`: ``spawn``, no script
+of the caller's run again, Ctrl-C left to the stream; its priority lowered by
+:data:`VIEW_NICE`) computes the kinematics and scene of the blocks and logs them to
+Rerun with the functions ``fingerfit view`` uses. So neither the view's NumPy work nor
+Rerun's Python side runs in the stream's interpreter, where it would take turns with the
+robot lane.
+
+Rerun stores every entity's rows of one logging call as a chunk, with about 1.2 kB of
+its own beside the numbers (schema, metadata, framing; measured on a five-digit hand):
+logged block by block as the data lane hands them over (about 20 blocks a second), the
+chunks' own bytes were half the file. So the process joins consecutive blocks before it
+logs them: for a viewer, the blocks waiting when it is free (the viewer is never further
+behind); for a file, :data:`FILE_BATCH_FRAMES` frames at a time.
 
 What reaches the view (:attr:`LiveView.policy`):
 
@@ -22,10 +30,8 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import multiprocessing
 import os
 import queue
-import signal
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +40,9 @@ import numpy as np
 from ..errors import FingerfitError
 from ..kinematics import compute_kinematics
 from ..model import HandModel
-from ..session import Recording
+from ..processes import child_ignores_interrupt, context, end_child, start_child
+from ..session import Recording, concat_recordings
+from ..track.recording import last_frame, track_recording
 from ..transforms import FloatArray
 from .rerunlog import (
     blueprint,
@@ -56,6 +64,9 @@ from .scene import (
 VIEW_QUEUE_BLOCKS = 16
 #: The ``os.nice`` increment of the view's process: the stream's own process comes first.
 VIEW_NICE = 10
+#: Frames the view's process joins before it logs them to a file (``--view-save``): a
+#: few seconds of a stream, a few chunks per entity (module docstring).
+FILE_BATCH_FRAMES = 1024
 #: Seconds between checks that the view's process is alive while waiting on it (a check
 #: of liveness only: nothing waits for this long when the process answers).
 _POLL_S = 0.5
@@ -116,9 +127,8 @@ class LiveView:
 
     Notes
     -----
-    The process is started with ``multiprocessing``'s ``spawn``, which imports the main
-    module of a script again: a script that makes a ``LiveView`` keeps its work under
-    ``if __name__ == "__main__":`` (the ``fingerfit`` command does).
+    A script may make a ``LiveView`` at its top level: the view's process runs none of
+    the script (:mod:`fingerfit.processes`).
     """
 
     def __init__(
@@ -135,16 +145,15 @@ class LiveView:
             raise ValueError(f"policy must be one of {POLICIES}, not {self.policy!r}")
         self.frames = self.dropped = self.logged = 0
         self.sent: collections.deque | None = None
-        ctx = multiprocessing.get_context("spawn")
+        ctx = context()
         self._queue = ctx.Queue(VIEW_QUEUE_BLOCKS)
         self._reply, child_end = ctx.Pipe(duplex=False)
-        self._proc: Any = ctx.Process(
-            target=_serve,
-            args=(self._queue, child_end, model, save, robot, os.getpid()),
-            name="fingerfit-view",
-            daemon=True,  # never outlives the stream
+        batch = FILE_BATCH_FRAMES if save is not None else 0
+        self._proc: Any = start_child(  # a daemon: never outlives the stream
+            _serve,
+            (self._queue, child_end, model, save, robot, os.getpid(), batch),
+            "fingerfit-view",
         )
-        self._proc.start()
         child_end.close()
         try:
             self._answer("ready")
@@ -246,10 +255,7 @@ class LiveView:
     def _end(self) -> None:
         """Join the view's process (ended after its answer) and release the queue."""
         proc, self._proc = self._proc, None
-        proc.join(timeout=30 * _POLL_S)
-        if proc.exitcode is None:  # only after an error of this side
-            proc.terminate()
-            proc.join()
+        end_child(proc, 30 * _POLL_S)  # terminated only after an error of this side
         self._queue.cancel_join_thread()  # the process has read up to "end", or is gone
         self._queue.close()
         self._reply.close()
@@ -270,6 +276,7 @@ class _Logger:
         self.frames = 0
         self.stream, self.stack = open_view(save, blueprint(robot is not None))
         self._started = False
+        self._anchor = None
 
     def log(
         self, first: int, recording: Recording, rows: np.ndarray | None, q: FloatArray | None
@@ -277,12 +284,18 @@ class _Logger:
         """Log the block whose first frame is the stream's frame ``first``; the robot at
         the block's ``rows`` (all when None) with joints ``q`` (rows, nq)."""
         n = recording.n_frames
-        kin = compute_kinematics(self.model, recording, _VARIANTS)
+        if self.model.tracking is not None and n:
+            # Frames with a missing sensor: solved by the model as the stream's files are,
+            # joined to the previous block by the temporal prior.
+            kin = track_recording(self.model, recording, _VARIANTS, anchor=self._anchor).kinematics
+            self._anchor = last_frame(kin)
+        else:
+            kin = compute_kinematics(self.model, recording, _VARIANTS)
         scene = hand_scene(self.model, recording, kin)
         if not self._started:
             log_static(scene, self.stream)
             if self.placement is not None:
-                log_robot_static(self.placement.digits, self.stream)
+                log_robot_static(self.placement.digits, self.stream, self.placement.geometry)
             self._started = True
         log_frames(scene, self.stream, first)
         if self.placement is not None and q is not None:
@@ -308,6 +321,48 @@ def _portable(exc: BaseException) -> BaseException:
     return exc
 
 
+class _Joined:
+    """Consecutive blocks of the stream joined into one before they are logged: the
+    frames, and the robot's rows and joints of each (``LiveView.push``'s items)."""
+
+    def __init__(self) -> None:
+        self.items: list[tuple[int, Recording, np.ndarray | None, FloatArray | None]] = []
+        self.frames = 0
+
+    def follows(self, first: int, recording: Recording) -> bool:
+        """Whether a block starting at frame ``first`` continues the joined ones (no
+        dropped block between, the same sensors)."""
+        if not self.items:
+            return True
+        last_first, last, _, _ = self.items[-1]
+        return first == last_first + last.n_frames and recording.sensors == last.sensors
+
+    def add(
+        self, first: int, recording: Recording, rows: np.ndarray | None, q: FloatArray | None
+    ) -> None:
+        self.items.append((first, recording, rows, q))
+        self.frames += recording.n_frames
+
+    def take(self) -> tuple[int, Recording, np.ndarray | None, FloatArray | None]:
+        """The joined block as :meth:`_Logger.log` takes it, and empty again."""
+        items, self.items, self.frames = self.items, [], 0
+        first = items[0][0]
+        recording = concat_recordings([it[1] for it in items])
+        if all(rows is None for _, _, rows, _ in items):
+            qs = [q for *_, q in items if q is not None]
+            return first, recording, None, np.concatenate(qs) if qs else None
+        at, qs = [], []
+        for start, rec, rows, q in items:
+            if rows is None:
+                rows = np.arange(rec.n_frames)
+            if rows.size and q is not None:
+                at.append(rows + (start - first))
+                qs.append(q)
+        if not at:
+            return first, recording, np.zeros(0, dtype=int), np.zeros((0, 0))
+        return first, recording, np.concatenate(at), np.concatenate(qs)
+
+
 def _serve(
     blocks: Any,
     reply: Any,
@@ -315,15 +370,18 @@ def _serve(
     save: Path | None,
     robot: RobotSpec | None,
     parent: int,
+    batch: int,
 ) -> None:
-    """The view's process: log every block taken from ``blocks`` until ``("end", ok)``.
+    """The view's process: log every block taken from ``blocks`` until ``("end", ok)``,
+    consecutive blocks joined (:class:`_Joined`): ``batch`` frames at a time, or with
+    ``batch`` 0 those waiting whenever the queue is empty.
 
     Answers on ``reply``: ``("ready", None)`` once the viewer or file is open, then
     ``("done", frames logged)``; or ``("error", exception)``. Ctrl-C is left to the
     stream, which ends the view through the queue; if the stream's process (``parent``,
     its pid) is gone, the view ends too (its file not kept).
     """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    child_ignores_interrupt()
     with contextlib.suppress(OSError):
         os.nice(VIEW_NICE)
     try:
@@ -332,6 +390,7 @@ def _serve(
         reply.send(("error", _portable(exc)))
         return
     reply.send(("ready", None))
+    joined = _Joined()
     try:
         while True:
             try:
@@ -342,9 +401,16 @@ def _serve(
                 else:
                     continue
             if item[0] == "end":
+                if joined.items and item[1]:
+                    logger.log(*joined.take())
                 logger.close(bool(item[1]))
                 break
-            logger.log(*item[1:])
+            first, recording = item[1], item[2]
+            if not joined.follows(first, recording):
+                logger.log(*joined.take())
+            joined.add(*item[1:])
+            if joined.frames >= (batch or FILE_BATCH_FRAMES) or (not batch and blocks.empty()):
+                logger.log(*joined.take())
     except BaseException as exc:
         with contextlib.suppress(BaseException):
             logger.close(False)

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..transforms import FloatArray
+from .robotgeometry import RobotGeometry, Visual, vertex_normals
 from .scene import (
     _COLOURS,
     _SENSOR_AXIS_COLOURS,
@@ -61,6 +62,17 @@ def _arrows(rr, stream, entity: str, idx, origins: FloatArray, vectors: FloatArr
         columns=rr.Arrows3D.columns(
             origins=origins.reshape(-1, 3), vectors=vectors.reshape(-1, 3)
         ).partition(np.full(n, k)),
+        recording=stream,
+    )
+
+
+def _transforms(rr, stream, entity: str, idx, translation: FloatArray, matrix: FloatArray) -> None:
+    """One transform per frame: ``translation (n, 3)``, ``matrix (n, 3, 3)`` (child ->
+    parent)."""
+    rr.send_columns(
+        entity,
+        indexes=idx,
+        columns=rr.Transform3D.columns(translation=translation, mat3x3=matrix.reshape(-1, 9)),
         recording=stream,
     )
 
@@ -149,27 +161,64 @@ def log_static(scene: Scene, stream) -> None:
             rr.Points3D.from_fields(colors=[_COLOURS["truth"]], radii=[2.0], labels=have),
         )
     if scene.robot is not None:
-        log_robot_static(scene.robot.digits, stream)
+        log_robot_static(scene.robot.digits, stream, scene.robot.geometry)
 
 
-def log_robot_static(digits: list[str], stream) -> None:
-    """The robot's colours, radii and labels, logged once."""
+def _link_entity(rr, geometry: RobotGeometry, k: int) -> str:
+    return f"robot/geometry/{rr.escape_entity_path_part(geometry.links[k])}"
+
+
+def log_robot_static(digits: list[str], stream, geometry: RobotGeometry | None = None) -> None:
+    """The robot's colours, radii and labels, and its own shapes (``geometry``), logged
+    once: each shape under its link, ``robot/geometry/<link>/<shape>``, with its pose in
+    the link (m); without a shape, the lines and points that draw it instead."""
     rr = require_rerun()
-    _static(
-        rr,
-        stream,
-        "robot/skeleton",
-        rr.LineStrips3D.from_fields(colors=[_COLOURS["robot"]], radii=[2.0]),
-    )
-    _static(
-        rr, stream, "robot/joints", rr.Points3D.from_fields(colors=[_COLOURS["robot"]], radii=[3.0])
-    )
+    if geometry is not None and geometry.visuals:
+        for v in geometry.visuals:
+            entity = f"{_link_entity(rr, geometry, v.link)}/{rr.escape_entity_path_part(v.name)}"
+            pose = rr.Transform3D(translation=v.translation, mat3x3=v.rotation)
+            rr.log(entity, pose, _shape(rr, v), static=True, recording=stream)
+    else:
+        _static(
+            rr,
+            stream,
+            "robot/skeleton",
+            rr.LineStrips3D.from_fields(colors=[_COLOURS["robot"]], radii=[2.0]),
+        )
+        _static(
+            rr,
+            stream,
+            "robot/joints",
+            rr.Points3D.from_fields(colors=[_COLOURS["robot"]], radii=[3.0]),
+        )
     _static(
         rr,
         stream,
         "robot/tips",
         rr.Points3D.from_fields(colors=[_COLOURS["robot_tips"]], radii=[4.0], labels=digits),
     )
+
+
+def _shape(rr, v: Visual):
+    """The Rerun archetype of one shape, in its own frame (m)."""
+    colour = np.round(np.clip(v.rgba, 0.0, 1.0) * 255).astype(np.uint8)
+    if v.kind == "mesh":
+        return rr.Mesh3D(
+            vertex_positions=v.vertices,
+            triangle_indices=v.triangles,
+            vertex_normals=vertex_normals(v.vertices, v.triangles),
+            albedo_factor=colour,
+        )
+    if v.kind == "box":
+        return rr.Boxes3D(half_sizes=[v.size], colors=[colour], fill_mode="solid")
+    if v.kind in ("sphere", "ellipsoid"):
+        return rr.Ellipsoids3D(half_sizes=[v.size], colors=[colour], fill_mode="solid")
+    radius, half = v.size[0], v.size[1]
+    if v.kind == "capsule":  # Rerun's runs from its origin along +z
+        return rr.Capsules3D(
+            lengths=[2 * half], radii=[radius], translations=[[0.0, 0.0, -half]], colors=[colour]
+        )
+    return rr.Cylinders3D(lengths=[2 * half], radii=[radius], colors=[colour], fill_mode="solid")
 
 
 def log_frames(scene: Scene, stream, first: int = 0) -> None:
@@ -233,14 +282,34 @@ def log_frames(scene: Scene, stream, first: int = 0) -> None:
 
 
 def log_robot_frames(robot: RobotScene, stream, frames: np.ndarray, time: FloatArray) -> None:
-    """Send a robot hand's frames (``robot/skeleton|joints|tips``, ``robot_angles/<joint>``
-    in degrees) at the recording's frames ``frames`` (n,) and times ``time`` (n,) s."""
+    """Send a robot hand's frames at the recording's frames ``frames`` (n,) and times
+    ``time`` (n,) s: its shapes' transforms -- ``robot/geometry`` the robot's world
+    placed beside the person (mm, tracker frame: translation, and its axes times 1000 mm
+    per m), ``robot/geometry/<link>`` each link's pose in it (m) -- or, without shapes,
+    ``robot/skeleton|joints``; ``robot/tips`` and ``robot_angles/<joint>`` in degrees."""
     rr = require_rerun()
-    if robot.q.shape[0] == 0:
+    n = robot.q.shape[0]
+    if n == 0:
         return
     idx = _indexes(rr, time, frames)
-    _strips(rr, stream, "robot/skeleton", idx, robot.points, robot.strips)
-    _points(rr, stream, "robot/joints", idx, robot.points[:, 1 : -len(robot.digits)])
+    if robot.drawn:
+        assert robot.geometry is not None and robot.placement_rotation is not None
+        scaled = 1000.0 * robot.placement_rotation  # m -> mm
+        offset = robot.placement_translation
+        ok = np.isfinite(scaled).all(axis=(1, 2)) & np.isfinite(offset).all(axis=1)
+        if ok.any() and not ok.all():  # no hand sample: the placement of the nearest before
+            near = np.maximum.accumulate(np.where(ok, np.arange(n), -1))
+            near[near < 0] = np.flatnonzero(ok)[0]  # (before the first: the first)
+            scaled, offset = scaled[near], offset[near]
+        _transforms(rr, stream, "robot/geometry", idx, offset, scaled)
+        for k in range(len(robot.geometry.links)):
+            entity = _link_entity(rr, robot.geometry, k)
+            _transforms(
+                rr, stream, entity, idx, robot.link_translation[:, k], robot.link_rotation[:, k]
+            )
+    else:
+        _strips(rr, stream, "robot/skeleton", idx, robot.points, robot.strips)
+        _points(rr, stream, "robot/joints", idx, robot.points[:, 1 : -len(robot.digits)])
     _points(rr, stream, "robot/tips", idx, robot.tips)
     for j, name in enumerate(robot.joint_names):
         rr.send_columns(

@@ -18,6 +18,7 @@ from ..kinematics import Kinematics, compute_kinematics
 from ..model import HandModel
 from ..session import HAND_SENSOR, Recording
 from ..transforms import FloatArray, rotate_about_lines
+from .robotgeometry import RobotGeometry, robot_geometry
 
 #: The optional extra that installs Rerun.
 EXTRA = "view"
@@ -75,6 +76,20 @@ class RobotScene:
     digits : list of str
         Every digit of the robot's map (those the model lacks hold the neutral posture).
     notes : list of str
+    geometry : RobotGeometry, optional
+        The robot's own visual shapes (:mod:`.robotgeometry`); None or without a shape:
+        the robot is drawn as lines through ``points``.
+    link_translation : ndarray, shape (n, L, 3), optional
+        Each link of ``geometry`` per frame: its origin (m, robot world frame) ...
+    link_rotation : ndarray, shape (n, L, 3, 3), optional
+        ... and its axes (link -> robot world).
+    placement_translation : ndarray, shape (n, 3), optional
+        The robot world's origin per frame (tracker frame, mm) ...
+    placement_rotation : ndarray, shape (n, 3, 3), optional
+        ... and its axes (robot world -> tracker): a point ``x`` (m) of the robot world is
+        at ``placement_translation + 1000 * placement_rotation @ x`` mm, as ``points``
+        are placed. NaN at frames without the hand sensor's sample (logged as the frame
+        before: :func:`fingerfit.view.log_robot_frames`).
     """
 
     name: str
@@ -85,6 +100,16 @@ class RobotScene:
     tips: FloatArray
     digits: list[str]
     notes: list[str] = field(default_factory=list)
+    geometry: RobotGeometry | None = None
+    link_translation: FloatArray | None = None
+    link_rotation: FloatArray | None = None
+    placement_translation: FloatArray | None = None
+    placement_rotation: FloatArray | None = None
+
+    @property
+    def drawn(self) -> bool:
+        """Whether the robot is drawn with its own shapes (else as lines)."""
+        return self.geometry is not None and bool(self.geometry.visuals)
 
 
 @dataclass
@@ -138,6 +163,14 @@ def _carry(model: HandModel, recording: Recording, points: FloatArray) -> FloatA
     p0, r0 = model.reference_poses[HAND_SENSOR]
     local = (points - p0) @ r0  # r0^T (p - p0), row-wise
     return np.einsum("nij,nkj->nki", hand.rotation, local) + hand.position[:, None, :]
+
+
+def _carry_axes(model: HandModel, recording: Recording, axes: FloatArray) -> FloatArray:
+    """Reference-posture axes ``(3, 3)`` (columns) carried by the hand sensor's rotation:
+    ``(n, 3, 3)``, the turn :func:`_carry` gives points."""
+    hand = recording.pose(HAND_SENSOR)
+    r0 = model.reference_poses[HAND_SENSOR][1]
+    return hand.rotation @ (r0.T @ axes)
 
 
 def hand_scene(model: HandModel, recording: Recording, kin: Kinematics | None = None) -> Scene:
@@ -313,6 +346,7 @@ class RobotPlacement:
         )
         side = 1.0 if model.hand == "left" else -1.0  # palm y is ulnar on a left hand
         self.shift = self.shift + np.array([0.0, side * offset_mm, 0.0])
+        self.geometry = robot_geometry(robot, rmap.palm)
 
     def scene(self, q: FloatArray, recording: Recording, notes=None) -> RobotScene:
         """The robot posed by ``q`` (n, nq) at the frames of ``recording`` (n frames)."""
@@ -324,11 +358,8 @@ class RobotPlacement:
         tips = robot.positions(q, self.tip_frames)  # (n, d, 3) m, robot world
         origin = np.broadcast_to(s.robot_palm.origin, (n, 1, 3))
         world = np.concatenate([origin, anchors, tips], axis=1)
-        # Robot world (m) -> robot palm frame (mm) -> the person's palm frame, beside the hand.
-        local = (world - s.robot_palm.origin) @ s.robot_palm.rotation * self.mm + self.shift
-        ref = s.palm.origin + local @ s.palm.rotation.T
-        points = _carry(self.model, recording, ref)
-        return RobotScene(
+        points = self._place(recording, world)
+        out = RobotScene(
             name=self.rmap.name,
             joint_names=tuple(robot.joint_names),
             q=q,
@@ -337,7 +368,23 @@ class RobotPlacement:
             tips=points[:, 1 + len(self.used) :],
             digits=list(self.digits),
             notes=list(notes or []),
+            geometry=self.geometry,
         )
+        if out.drawn:
+            out.link_translation, out.link_rotation = self.geometry.link_poses(q)
+            # The same placement as the points: the robot world's origin and axes.
+            out.placement_translation = self._place(recording, np.zeros((n, 1, 3)))[:, 0]
+            axes = s.palm.rotation @ s.robot_palm.rotation.T  # robot world -> person's palm
+            out.placement_rotation = _carry_axes(self.model, recording, axes)
+        return out
+
+    def _place(self, recording: Recording, world: FloatArray) -> FloatArray:
+        """Robot-world points ``(n, k, 3)`` (m) beside the person: tracker frame, mm."""
+        s = self.setup
+        # Robot world (m) -> robot palm frame (mm) -> the person's palm frame, beside the hand.
+        local = (world - s.robot_palm.origin) @ s.robot_palm.rotation * self.mm + self.shift
+        ref = s.palm.origin + local @ s.palm.rotation.T
+        return _carry(self.model, recording, ref)
 
 
 # --- Logging ---------------------------------------------------------------------------------

@@ -50,7 +50,13 @@ from .bounds import RECORDING_RESIDUAL_MM as RECORDING_RESIDUAL_MM
 from .bounds import SCALE_TOLERANCE as SCALE_TOLERANCE
 from .bounds import SENSOR_HEIGHT_MM as SENSOR_HEIGHT_MM
 from .bounds import UNIT_NAMES as UNIT_NAMES
-from .checks import RecordingCheck, check_recording, check_session, recording_checks
+from .checks import (
+    RecordingCheck,
+    check_recording,
+    check_session,
+    check_tracking,
+    recording_checks,
+)
 from .convention import (
     CONVENTIONS,
     MIRRORS,
@@ -89,6 +95,7 @@ __all__ = [
     "check_recording",
     "check_recording_units",
     "check_session",
+    "check_tracking",
     "convention_checks",
     "convention_problems",
     "enforce",

@@ -28,6 +28,7 @@ from .units import check_landmarks, check_recording_units
 
 if TYPE_CHECKING:
     from ...model import HandModel
+    from ...track import Tracked
 
 
 def check_session(
@@ -130,6 +131,45 @@ def recording_checks(model: HandModel, recording: Recording) -> list[RecordingCh
                 res[k] = float(np.sqrt(np.mean(np.sum((t - target) ** 2, axis=1))))
             out.append(RecordingCheck(f, j, scale, res, float(np.linalg.norm(c_c))))
     return out
+
+
+def check_tracking(tracked: Tracked, path: Path | None = None) -> list[Problem]:
+    """Problems of the frames a model solved (``fingerfit angles`` with missing sensors).
+
+    A layout without two sensors on one joint (the hand and each distal sensor) leaves the
+    pivot check of :func:`check_recording` nothing to compare; the residual of the model's
+    solution takes its place: sensors in the wrong units, with quaternions in another
+    order, or of another subject do not fit the model at any angles.
+
+    Parameters
+    ----------
+    tracked : fingerfit.track.Tracked
+    path : Path, optional
+        The recording, for the message.
+
+    Returns
+    -------
+    list of Problem
+        One for the digit whose median residual (mm, RMS over the frame's sensors) over the
+        frames it was solved in exceeds :data:`RECORDING_RESIDUAL_MM` the most.
+    """
+    worst = None
+    for d, t in tracked.digits.items():
+        rms = t.rms_mm[t.model]
+        rms = rms[np.isfinite(rms)]
+        if rms.size and (median := float(np.median(rms))) > RECORDING_RESIDUAL_MM:
+            if worst is None or median > worst[1]:
+                worst = (d, median)
+    if worst is None:
+        return []
+    return [
+        Problem(
+            f"{worst[0]}: the sensors do not fit the model where it solved the frames "
+            f"(median residual {worst[1]:.1f} mm, expected < {RECORDING_RESIDUAL_MM:g} mm): "
+            "wrong --units or quaternion order, or another subject's recording?",
+            path=path,
+        )
+    ]
 
 
 def check_recording(

@@ -242,13 +242,15 @@ def default_stations(sensors: list[str]) -> dict[int, str]:
 
 
 def parse_stations(text: str, sensors: list[str]) -> dict[int, str]:
-    """``"1=hand,2=index.proximal,..."`` -> station -> sensor; every model sensor once.
+    """``"1=hand,2=index.proximal,..."`` -> station -> sensor: any of the model's sensors
+    once (a sensor without a station is missing in every frame; whether the rest determine
+    the joints is checked by the caller, :func:`fingerfit.track.check_layout`).
 
     Raises
     ------
     FingerfitError
         ``field '--stations'``: a malformed pair, a station outside 1-16, a sensor
-        the model does not use, a repeat, or a model sensor without a station.
+        the model does not use, or a repeat.
     """
     out: dict[int, str] = {}
     for part in text.split(","):
@@ -266,7 +268,4 @@ def parse_stations(text: str, sensors: list[str]) -> dict[int, str]:
         if int(key) in out or name in out.values():
             raise FingerfitError(f"'{shown(part)}' repeats a station or sensor", field="--stations")
         out[int(key)] = name
-    missing = [s for s in sensors if s not in out.values()]
-    if missing:
-        raise FingerfitError(f"no station for sensor '{missing[0]}'", field="--stations")
     return out

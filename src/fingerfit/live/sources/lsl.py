@@ -51,21 +51,24 @@ def mocap_layout(
     labels, units : list of str
         Channel labels (``<sensor>.x|y|z``, ``<sensor>.qw|qx|qy|qz``) and units.
     sensors : list of str
-        Sensors the model needs.
+        Sensors the model uses; a sensor with none of its channels is absent (the
+        stream's layout is checked by the caller), one with some of them is an error.
     name : str
         Stream name, for messages.
 
     Returns
     -------
     positions, quaternions : dict[str, ndarray]
-        sensor -> channel indices ``(3,)`` x, y, z and ``(4,)`` w, x, y, z.
+        sensor -> channel indices ``(3,)`` x, y, z and ``(4,)`` w, x, y, z, for the
+        sensors the stream has.
     scale : ndarray, shape (n_channels,)
         Factor to millimetres per channel (1 for quaternion channels).
 
     Raises
     ------
     FingerfitError
-        A sensor without all seven channels, or a position unit not understood.
+        A sensor with some but not all of its seven channels, no sensor at all, or a
+        position unit not understood.
     """
     if not any(labels):
         raise FingerfitError(
@@ -79,6 +82,8 @@ def mocap_layout(
     for s in sensors:
         pi = [where.get(f"{s}.{c}") for c in "xyz"]
         qi = [where.get(f"{s}.{c}") for c in _QUAT]
+        if all(i is None for i in pi + qi):
+            continue  # not in this stream
         if None in pi or None in qi:
             raise FingerfitError(
                 f"no channels {s}.x|y|z and {s}.qw|qx|qy|qz (labels: "
@@ -95,6 +100,12 @@ def mocap_layout(
                 )
             scale[i] = _UNIT_MM[u]
         pos[s], quat[s] = np.array(pi), np.array(qi)
+    if not pos:
+        raise FingerfitError(
+            f"no channels {sensors[0]}.x|y|z and {sensors[0]}.qw|qx|qy|qz, nor of any other "
+            f"sensor of the model (labels: {shown(', '.join(labels), 80)})",
+            path=f"lsl:{name}",
+        )
     return pos, quat, scale
 
 
@@ -126,6 +137,11 @@ class LslSource:
         Seconds to wait for the stream to appear.
     reconnect : float
         Seconds to keep looking for a lost stream (0: the stream ends at once).
+    check : callable, optional
+        Called with the set of sensors a stream it finds has (each time it finds one);
+        raises :class:`FingerfitError` when they cannot determine the model's joints
+        (``fingerfit stream`` checks the layout, :func:`fingerfit.track.check_layout`).
+        Default: every sensor of ``sensors`` is needed.
 
     Attributes
     ----------
@@ -141,8 +157,10 @@ class LslSource:
         sensors: list[str],
         timeout: float = 5.0,
         reconnect: float = DEFAULT_RECONNECT_S,
+        check: Callable[[set[str]], None] | None = None,
     ) -> None:
         self._pylsl = pylsl = require("pylsl")
+        self.check = check or self._every_sensor
         self.name = f"lsl:{name}"
         self.stream = name
         self.sensors = sensors
@@ -209,12 +227,19 @@ class LslSource:
                 units.append(ch.child_value("unit"))
                 ch = ch.next_sibling()
             pos, quat, scale = mocap_layout(labels, units, self.sensors, self.stream)
+            self.check(set(pos))
             inlet.open_stream(timeout=timeout)
         except BaseException:
             with contextlib.suppress(Exception):
                 inlet.close_stream()
             raise
         self.inlet, self.pos, self.quat, self.scale = inlet, pos, quat, scale
+
+    def _every_sensor(self, present: set[str]) -> None:
+        """The default layout check: every sensor of :attr:`sensors`."""
+        for s in self.sensors:
+            if s not in present:
+                raise FingerfitError(f"no channels {s}.x|y|z and {s}.qw|qx|qy|qz", path=self.name)
 
     def _refind(self) -> Iterator[None]:
         """The stream was lost: warn once and find it again within ``reconnect`` s
