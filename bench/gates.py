@@ -31,11 +31,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse
 import datetime
 import json
-import multiprocessing as mp
 import platform
-import subprocess
 import sys
-import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -45,6 +42,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import CONDITIONS
+from pool import run_tasks
+from revision import run_at_revision
 
 from fingerfit.errors import FingerfitError
 from fingerfit.estimate import FitOptions, fit_session
@@ -176,36 +175,14 @@ def run(args: argparse.Namespace, conditions: list[str]) -> list[dict]:
     for ci, cond in enumerate(conditions):
         seeds = np.random.SeedSequence([args.seed, ci]).spawn(args.subjects)
         tasks += [(cond, CONDITIONS[cond], int(s.generate_state(1)[0])) for s in seeds]
-    results = []
-    t0 = time.perf_counter()
-    with mp.get_context("spawn").Pool(args.workers) as pool:
-        for i, r in enumerate(pool.imap_unordered(run_subject, tasks), 1):
-            results.append(r)
-            print(
-                f"\r{i}/{len(tasks)} hands ({time.perf_counter() - t0:.0f} s)",
-                end="",
-                file=sys.stderr,
-                flush=True,
-            )
-    print(file=sys.stderr)
-    return results
+    return run_tasks(run_subject, tasks, args.workers, "hands")
 
 
 def run_before(rev: str, args: argparse.Namespace) -> dict:
-    """This script on revision ``rev``'s ``src`` (``git archive``), same hands."""
-    root = Path(__file__).resolve().parent.parent
-    with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(
-            ["git", "-C", str(root), "archive", rev, "src"], check=True, capture_output=True
-        ).stdout
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
-        out = Path(tmp) / "before.json"
-        cmd = [sys.executable, __file__, "--json", str(out), "--quiet"]
-        cmd += ["--subjects", str(args.subjects), "--workers", str(args.workers)]
-        cmd += ["--seed", str(args.seed), "--conditions", args.conditions]
-        env = dict(os.environ, PYTHONPATH=str(Path(tmp) / "src"))
-        subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
-        return json.loads(out.read_text())["summary"]
+    """This script on revision ``rev``'s ``src``, same hands."""
+    cmd = ["--quiet", "--subjects", str(args.subjects), "--workers", str(args.workers)]
+    cmd += ["--seed", str(args.seed), "--conditions", args.conditions]
+    return run_at_revision(rev, __file__, cmd)["summary"]
 
 
 def _f(x: float | None, fmt: str = ".1f") -> str:

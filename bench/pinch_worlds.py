@@ -29,11 +29,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse
 import datetime
 import json
-import multiprocessing as mp
 import platform
-import subprocess
 import sys
-import tempfile
 import time
 import warnings
 from dataclasses import replace
@@ -44,6 +41,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import CONDITIONS
+from pool import run_tasks
+from revision import run_at_revision
 
 from fingerfit.errors import FingerfitError
 from fingerfit.estimate import fit_session
@@ -170,39 +169,18 @@ def _figures(rs: list[dict]) -> dict:
 
 
 def run(args: argparse.Namespace, conditions: list[str]) -> list[dict]:
-    """Every hand, in ``args.workers`` processes."""
+    """Every hand, in ``args.workers`` processes, in the order of :func:`tasks`."""
     todo = tasks(args, conditions)
-    results = []
-    t0 = time.perf_counter()
-    with mp.get_context("spawn").Pool(args.workers) as pool:
-        for i, r in enumerate(pool.imap_unordered(run_hand, todo), 1):
-            results.append(r)
-            print(
-                f"\r{i}/{len(todo)} hands ({time.perf_counter() - t0:.0f} s)",
-                end="",
-                file=sys.stderr,
-                flush=True,
-            )
-    print(file=sys.stderr)
+    results = run_tasks(run_hand, todo, args.workers, "hands")
     order = {t[0]: i for i, t in enumerate(todo)}
     return sorted(results, key=lambda r: (order[r["world"]], r["seed"]))
 
 
 def run_before(rev: str, args: argparse.Namespace) -> dict:
-    """This script on revision ``rev``'s ``src`` (``git archive``), same hands."""
-    root = Path(__file__).resolve().parent.parent
-    with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(
-            ["git", "-C", str(root), "archive", rev, "src"], check=True, capture_output=True
-        ).stdout
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
-        out = Path(tmp) / "before.json"
-        cmd = [sys.executable, __file__, "--json", str(out), "--quiet"]
-        cmd += ["--seeds", str(args.seeds), "--workers", str(args.workers)]
-        cmd += ["--conditions", args.conditions] + (["--whole-hand"] if args.whole_hand else [])
-        env = dict(os.environ, PYTHONPATH=str(Path(tmp) / "src"))
-        subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
-        return json.loads(out.read_text())["summary"]
+    """This script on revision ``rev``'s ``src``, same hands."""
+    cmd = ["--quiet", "--seeds", str(args.seeds), "--workers", str(args.workers)]
+    cmd += ["--conditions", args.conditions] + (["--whole-hand"] if args.whole_hand else [])
+    return run_at_revision(rev, __file__, cmd)["summary"]
 
 
 def markdown(summary: dict, before: dict | None, rev: str | None) -> str:
