@@ -19,7 +19,9 @@ robot's reach the residuals are large, the linearisation poor, and plain Gauss-N
 alternated between two postures (on the Allegro it held a pinch 6 mm open).
 The prior is the ``joint`` method's posture (the person's angles through the map): a
 weak pull that picks, among robot postures reaching the same tips, the one most like the
-person's, and keeps the solver out of the local minima of fingers folded at a limit.
+person's, and keeps the solver out of the local minima of fingers folded at a limit. A
+pinch that stays open while its weight is high (digits at limits on the far sides of it)
+is closed alone and the frame solved again from there (``TipOptions.pinch_restart_mm``).
 Everything inside an iteration is NumPy over joints and frames of the robot; the only
 Python loops are over video frames (sequential by the warm start) and iterations.
 """
