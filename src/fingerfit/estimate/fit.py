@@ -257,13 +257,26 @@ def _check(finger: str, joint: str, data: JointData, options: FitOptions) -> tup
     return problems, weak
 
 
-def _one_axis_problems(data: JointData, est: AxisEstimate, options: FitOptions) -> list[str]:
-    """Refusal messages of the one-axis gates: the pooled system does not single out one
-    axis, or the per-cycle centres do not spread along it. None for a joint fitted with
-    two axes (the thumb's CMC, a joint the model choice gave two): the
-    rotation off its flexion axis is its second axis."""
+def _one_axis_problems(
+    data: JointData, est: AxisEstimate, options: FitOptions
+) -> tuple[list[str], list[str]]:
+    """``(problems, weak)`` of the one-axis gates after the fit: the pooled system does not
+    single out one axis, or the per-cycle centres do not spread along it.
+
+    A joint fitted with two axes is not judged by them as one: the rotation off its flexion
+    axis is its second axis (the thumb's CMC; a joint the model choice gave two). Its
+    flexion axis far from the cycles' own rotation axis is weak evidence, fitted and warned
+    about, not refused.
+    """
+    if isinstance(est.abduction, SaddleFit):
+        return [], []
+    far = est.axis.null_agreement_deg > options.max_null_disagreement_deg
     if est.abduction is not None:
-        return []
+        weak = [
+            f"the two-axis fit's flexion axis is {est.axis.null_agreement_deg:.0f} deg from the "
+            "cycles' own rotation axis (SVD null vectors)"
+        ]
+        return [], weak if far else []
     problems = []
     c = est.pooled_conditioning
     if c is not None and c < options.min_conditioning:
@@ -275,13 +288,13 @@ def _one_axis_problems(data: JointData, est: AxisEstimate, options: FitOptions) 
             f"{_shown_below(c, options.min_conditioning)} times the rotation off it (s5/s6 "
             f"below {options.min_conditioning:g}){hint}"
         )
-    if est.axis.null_agreement_deg > options.max_null_disagreement_deg:
+    if far:
         problems.append(
             f"the per-cycle centres do not spread along one axis (fitted axis "
             f"{est.axis.null_agreement_deg:.0f} deg from the cycles' own rotation axis); "
             f"method '{options.method}' is unreliable for this motion"
         )
-    return problems
+    return problems, []
 
 
 def _quality(data: JointData, est: AxisEstimate, notes: list[str], ci: float) -> JointQuality:
@@ -393,9 +406,9 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
         else:
             notes, weak = _check(finger, j, data, options)
             est = estimator(data)
-        problems = _one_axis_problems(data, est, options)
+        problems, weak_fit = _one_axis_problems(data, est, options)
         ci = axis_ci_deg(data, est.abduction, est.choice)
-        for w in weak:
+        for w in [*weak, *weak_fit]:
             # Fitted, not refused: the motion is real, the axis's confidence says how well
             # it is known.
             known = f"+/-{ci:.1f} deg (95 %)" if np.isfinite(ci) else "not known (one cycle)"
