@@ -261,8 +261,8 @@ def pinch_terms(
         mirrored, scaled by the pair's mean scale, times ``u``: 0 at and below
         ``contact_mm``, rising linearly to 1 at :data:`PINCH_FAR_MM` and beyond. The
         robot's gap is then flat near contact (a touch the model sees 3 mm wider than its
-        contact distance leaves the robot's pads under 1 mm apart), and the person's own
-        gap, scaled, where the pinch term stops weighing.
+        contact distance asks the robot's pads for a gap under 1 mm at a pair scale of 1),
+        and the person's own gap, scaled, where the pinch term stops weighing.
     weights : ndarray, shape (n, p)
         ``1 - u``: 0 beyond :data:`PINCH_FAR_MM`, rising linearly to 1 at ``contact_mm``.
     distance : ndarray, shape (n, p)
