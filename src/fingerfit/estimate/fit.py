@@ -82,9 +82,8 @@ class FitOptions:
         note giving its axis confidence (weak evidence, real motion).
     rom_floor_deg : float
         A median cycle range of motion below this refuses the joint (deg): it barely
-        moved. On simulated joints of 3 deg the fitted axes were 24-60 deg off with
-        tracker noise twice Liberty's; from 4 deg they were within 3 deg
-        (``docs/methods.md``, *Quality gates*).
+        moved. On simulated index fingers of 3-4 deg the MP's fitted axis was 4-60 deg
+        off (``bench/rom_floor.py``; ``docs/methods.md``, *Quality gates*).
     max_null_disagreement_deg : float
         A one-axis joint whose axis is further than this from the cycles' own rotation axis
         (SVD null vectors) is refused (deg): the centres did not spread along it.
