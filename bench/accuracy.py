@@ -47,6 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from peers import HAVE_BIOBUDDY, biobuddy_sara, biobuddy_score, joint_frames
 from pool import run_tasks
+from revision import run_at_revision
 
 import fingerfit.estimate.fit as fit_module
 from fingerfit.errors import FingerfitError
@@ -433,23 +434,10 @@ def before_after(before: dict, after: dict, rev: str) -> str:
 
 def run_before(rev: str, args: argparse.Namespace) -> dict:
     """The default method of revision ``rev`` on the same subjects: this script run on
-    that revision's ``src`` (``git archive``) in a subprocess."""
-    import subprocess
-    import tempfile
-
-    root = Path(__file__).resolve().parent.parent
-    with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(
-            ["git", "-C", str(root), "archive", rev, "src"], check=True, capture_output=True
-        ).stdout
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
-        out = Path(tmp) / "before.json"
-        cmd = [sys.executable, __file__, "--only-default", "--json", str(out)]
-        cmd += ["--subjects", str(args.subjects), "--workers", str(args.workers)]
-        cmd += ["--seed", str(args.seed), "--conditions", args.conditions]
-        env = dict(os.environ, PYTHONPATH=str(Path(tmp) / "src"))
-        subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
-        return json.loads(out.read_text())["summary"]
+    that revision's ``src`` in a subprocess (:func:`revision.run_at_revision`)."""
+    cmd = ["--only-default", "--subjects", str(args.subjects), "--workers", str(args.workers)]
+    cmd += ["--seed", str(args.seed), "--conditions", args.conditions]
+    return run_at_revision(rev, __file__, cmd)["summary"]
 
 
 def targets(summary: dict) -> list[tuple[str, bool, str]]:

@@ -12,8 +12,9 @@ per-frame solve time (p50 / p99, ms), and how closely the robot's tips copy the 
 true fingertips (simulator truth, each in its finger's true anatomical frame) after the
 best scale and offset per digit (RMS, mm, mean over digits: what a palm frame turned
 against the hand's anatomy or a target out of reach costs). Then whole-hand subjects (thumb, pad points) on
-``pinch.csv``: the robot pad points' distance during the person's touches (person's pad
-points closer than ``CONTACT_MM``), per thumb-finger pair the map names.
+``pinch.csv``: the robot pad points' distance during the person's pinch holds (the frames
+of the ``events.csv`` pinch events of each thumb-finger pair the map names: the
+simulator's truth of when the pads touch, not the model's pad distance).
 
 ``--dex-python`` adds dex-retargeting (``pip install dex-retargeting torch`` in a venv of
 its own, docs/retargeting.md; that venv's python is ``FINGERFIT_DEX_PYTHON`` there) on the Allegro URDF, the robot file fingerfit loads (it
@@ -42,7 +43,7 @@ import numpy as np
 from fingerfit.estimate import fit_session
 from fingerfit.kinematics import compute_kinematics
 from fingerfit.retarget import (
-    CONTACT_MM,
+    PINCH_FAR_MM,
     person_points,
     pinch_terms,
     resolve,
@@ -330,7 +331,7 @@ def main() -> None:
                 )
     # Whole hand (thumb + four fingers, pad points): the pinch recording.
     print(
-        "| robot | method | source | pinch distance median mm | p95 mm | touch frames | "
+        "| robot | method | source | pinch distance median mm | p95 mm | max mm | touch frames | "
         "tip error median mm | tip vs person RMS mm | violations | jerk rad/s^3 | solve p50 ms | p99 ms |"
     )
     pinch_rows = []
@@ -348,7 +349,12 @@ def main() -> None:
             kin = compute_kinematics(model, rec)
             pads = person_points(s, model, kin, rec, "user_axis", "pad")
             pairs, _, _, dist = pinch_terms(s, pads)
-            touch = dist < CONTACT_MM  # the person's pads touch (pair, frame)
+            touch = np.zeros(dist.shape, dtype=bool)  # the person's pads touch (frame, pair)
+            for e in sub.session.events:
+                if e.recording == rec.name and e.is_pinch:
+                    for i, pair in enumerate(pairs):
+                        if {e.finger, e.target} == set(pair):
+                            touch[(rec.time >= e.start) & (rec.time <= e.end), i] = True
             pad_frames = [rmap.digits[d].pad for d in s.digits]
             pad_ref = targets(s, np.stack([pads[d] for d in s.digits], axis=1), s.digits)
             ref = None
@@ -375,9 +381,13 @@ def main() -> None:
                     * (pp[:, :, None, :] - pp[:, None, :, :])
                     * mirror
                 )
-                _, vec0, _, _ = pinch_terms(s, pads, 0.0)  # the tip method's, unshortened
+                # The tip method's vector where the pinch term does not shorten it (pads
+                # PINCH_FAR_MM apart and more).
+                _, vec0, _, _ = pinch_terms(s, pads, 0.0)
                 for i, (x, y) in enumerate(pairs):
-                    if not np.allclose(vec0[:, i], pair_vec[:, order.index(x), order.index(y)]):
+                    far = dist[:, i] >= PINCH_FAR_MM
+                    ours = pair_vec[far, order.index(x), order.index(y)]
+                    if not far.any() or not np.allclose(vec0[far, i], ours):
                         raise SystemExit(f"DexPilot's {x}-{y} vector is not the pinch term's")
                 for label, mode, alpha, ftol in DEX_RUNS:
                     if mode == "position":
@@ -408,6 +418,7 @@ def main() -> None:
                     "pad_err_median_mm": float(np.nanmedian(pad_err)),
                     "pinch_median_mm": float(np.median(rd[touch])),
                     "pinch_p95_mm": float(np.percentile(rd[touch], 95)),
+                    "pinch_max_mm": float(np.max(rd[touch])),
                     "tip_err_median_mm": float(np.nanmedian(err)),
                     "tip_err_p95_mm": float(np.nanpercentile(err, 95)),
                     "tip_vs_person_rms_mm": person_agreement(s, model, sub, rec, q, slice(None)),
@@ -416,7 +427,7 @@ def main() -> None:
                 pinch_rows.append(r)
                 print(
                     f"| {robot_name} | {method} | {variant} | {r['pinch_median_mm']:.1f} | "
-                    f"{r['pinch_p95_mm']:.1f} | {r['touch_frames']} | "
+                    f"{r['pinch_p95_mm']:.1f} | {r['pinch_max_mm']:.1f} | {r['touch_frames']} | "
                     f"{r['tip_err_median_mm']:.2f} | {r['tip_vs_person_rms_mm']:.2f} | "
                     f"{r['violations']} | "
                     f"{r['jerk_rad_s3']:.0f} | {r['solve_p50_ms']:.3f} | "

@@ -245,8 +245,8 @@ def test_robust_rejects_a_sensor_slip_and_glitches() -> None:
 
 
 def test_refusals_name_the_joint(monkeypatch) -> None:
-    small = simulate_subject(SimConfig(rom_scale=0.12, test=False, targets=False), 3)
-    with pytest.raises(FitError, match=r"index mp: median range of motion .* below 15 deg"):
+    small = simulate_subject(SimConfig(rom_scale=0.06, test=False, targets=False), 3)
+    with pytest.raises(FitError, match=r"index mp: the joint barely moved: .* below 5 deg"):
         fit_session(small.session)
     # Rotation about two axes at once: no hinge axis to find.
     sim = subject("exact", 11)

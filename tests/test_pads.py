@@ -93,13 +93,18 @@ def test_one_hold_meets_half_way_between_the_priors() -> None:
     np.testing.assert_allclose(fit.local["index"], pb, atol=0.05)
 
 
-def test_a_pad_on_the_dorsal_side_keeps_its_prior() -> None:
+def test_a_pad_on_the_dorsal_side_keeps_its_prior_and_its_partner_meets_it() -> None:
+    """The holds put the thumb's point on its nail side: the thumb keeps its prior, and the
+    index is fitted again to meet that prior (mean gap 4.5 mm over the three postures),
+    not left where it met the discarded point (13 mm from the thumb's prior in every
+    frame)."""
     pa, pb = np.array([0.0, 0.0, 8.0]), np.array([0.0, 0.0, -8.0])  # thumb's above: nail
     rels = [Rotation.from_rotvec(v) for v in ([0, 0, 0], [0.5, 0, 0], [0, 0.6, 0.2])]
     prior = {"thumb": np.array([0.0, 0.0, -5.0]), "index": pb}
     fit = fit_pads(_holds_session(rels, pa, pb), prior, DORSAL)
     assert fit is not None and fit.kept_prior == ["thumb"]
     np.testing.assert_array_equal(fit.local["thumb"], prior["thumb"])
+    assert fit.gap_mm[("thumb", "index")] < 5.0, fit.gap_mm
 
 
 def test_no_pinch_event_no_fit() -> None:

@@ -391,6 +391,68 @@ def test_whole_hand_pinch_brings_the_robot_pads_together(name):
     assert np.median(gaps["joint"]) > 20.0
 
 
+def _hold_gaps(model, sub, name, event, before_s=1.0):
+    """The robot's thumb-index pad distance (mm) in every frame of the person's pinch hold
+    ``event``, retargeting ``pinch.csv`` from ``before_s`` seconds before it."""
+    from fingerfit.session import PoseSeries, Recording
+
+    full = sub.session.recording("pinch.csv")
+    cut = (full.time >= event.start - before_s) & (full.time <= event.end)
+    rec = Recording(
+        full.name,
+        full.time[cut],
+        {k: PoseSeries(v.position[cut], v.rotation[cut]) for k, v in full.poses.items()},
+    )
+    robot, rmap = resolve(name, None, model.hand)
+    res = retarget(model, rec, robot, rmap, "tip")
+    assert res.violations == 0
+    hold = (rec.time >= event.start) & (rec.time <= event.end)
+    p = robot.positions(res.q[hold], [rmap.digits["thumb"].pad, rmap.digits["index"].pad])
+    return np.linalg.norm(p[:, 0] - p[:, 1], axis=1) * MM
+
+
+def test_robot_pinch_closes_in_holds_the_fit_did_not_see():
+    """Thumb + index hand calibrated without ``pinch.csv``'s events (its model knows one
+    touch, in the opposition recording), then ``pinch.csv`` retargeted: holds the pads and
+    the contact distance were not fitted to, as a later or live recording is. The model's
+    touching pads come 5.2 mm apart in the third hold against a contact distance of 1.8 mm
+    from the one touch it knew: the robot's pads stayed 3.5 mm apart. The contact distance
+    now covers a hold the pads were not fitted to (leave-one-event-out; one event: the
+    priors), and the robot's gap is flat near contact: every hold frame < 3 mm on both
+    robots (measured 0.4 and 0.8 mm)."""
+    from dataclasses import replace
+
+    from fingerfit.estimate import fit_session
+
+    sub = subject("realistic", 6, ("thumb", "index"))
+    events = [e for e in sub.session.events if e.recording != "pinch.csv"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = fit_session(replace(sub.session, events=events))
+    assert model.pinch_contact("thumb", "index").events == 1
+    holds = [e for e in sub.session.events if e.recording == "pinch.csv" and e.is_pinch]
+    for name in ("shadow", "allegro"):
+        gaps = _hold_gaps(model, sub, name, holds[-1])
+        assert gaps.size > 100 and gaps.max() < 3.0, (name, gaps.max())
+
+
+def test_robot_pinch_leaves_a_posture_caught_at_its_limits():
+    """Allegro, thumb + index hand (seed 1): approaching the third tip pinch the robot's
+    index and thumb came to rest at their joint limits on the far sides of the pinch, a
+    posture from which no Gauss-Newton step closes it: the pads stayed 21.3 mm apart through
+    the whole hold while the first two closed to 0.6 mm. The pinch restart closes the pinch
+    alone from there and solves the frame again: every hold frame < 3 mm (0.9 mm)."""
+    from fingerfit.estimate import fit_session
+
+    sub = subject("realistic", 1, ("thumb", "index"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = fit_session(sub.session)
+    holds = [e for e in sub.session.events if e.recording == "pinch.csv" and e.is_pinch]
+    gaps = _hold_gaps(model, sub, "allegro", holds[-1], before_s=0.85)
+    assert gaps.size > 100 and gaps.max() < 3.0, gaps.max()
+
+
 def test_cli_signature_names_mirror_the_real_ones():
     from fingerfit.cli import _names
     from fingerfit.retarget import METHODS, Retargeter

@@ -145,6 +145,18 @@ def test_the_proximal_axis_comes_from_the_data_and_a_wrong_order_is_refused() ->
             flexion_guess=c.flexion_axis,
             abduction_guess=c.abduction_axis,
         )
+    # Not strict: named by the order, the disagreement reported instead.
+    g = fit_saddle(
+        *args,
+        order="abduction_first",
+        flexion_guess=c.flexion_axis,
+        abduction_guess=c.abduction_axis,
+        strict_order=False,
+    )
+    swapped, named = g.guesses_swapped_deg
+    assert swapped < 2.0 and named > 60.0, g.guesses_swapped_deg
+    assert _deg(g.proximal_axis, c.flexion_axis) < 1.5
+    assert fit_saddle(*args, flexion_guess=c.flexion_axis).guesses_swapped_deg is None
 
 
 def _one_axis_case(abduction_amplitude_deg: float, seed: int = 1) -> SaddleCase:

@@ -7,7 +7,7 @@ simulated subjects of ``tests/conftest.py``:
 * ``P01`` -- realistic subject 2: grasp, targets, test recording, ground truth;
 * ``P02`` -- exact subject 11 with only reference and grasp (no targets, no truth);
 * ``P07`` -- P02 whose grasp recording is the static reference: cannot be fitted;
-* ``P09`` -- an exact subject with a small range of motion: fitted only with ``--force``.
+* ``P09`` -- an exact subject whose joints barely move: fitted only with ``--force``.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def sessions(tmp_path_factory) -> dict[str, Path]:
     p02 = save_session(bare, root / "P02")
     static = dataclasses.replace(exact.reference, name="grasp.csv")
     p07 = save_session(dataclasses.replace(bare, subject="P07", grasp=[static]), root / "P07")
-    small = simulate_subject(SimConfig.exact(rom_scale=0.2, targets=False, test=False), 11, "P09")
+    small = simulate_subject(SimConfig.exact(rom_scale=0.07, targets=False, test=False), 11, "P09")
     p09 = save_session(small.session, root / "P09")
     return {"P01": p01, "P02": p02, "P07": p07, "P09": p09}
 
@@ -254,20 +254,23 @@ def test_force_shows_the_warnings(sessions, tmp_path) -> None:
     before = listing(tmp_path)
     refused(
         run("study", sessions["P09"], "--out", tmp_path / "o"),
-        "P09: index mp: median range of motion",
+        "P09: index mp: the joint barely moved: median range of motion",
         "--force",
     )
     _no_leftovers(tmp_path, before)
     out = tmp_path / "forced"
     res = run("study", sessions["P09"], "--out", out, "--force")
     assert res.exit_code == 0, res.output
-    assert "warning: P09: index mp: median range of motion" in res.output
+    assert "warning: P09: index mp: the joint barely moved" in res.output
     sm = _summary(out)
     assert sm["forced"] is True
-    assert any("median range of motion" in w for w in sm["warnings"]["P09"])
+    assert any("barely moved" in w for w in sm["warnings"]["P09"])
     report = (out / "report.html").read_text()
     assert "<h2 id=warnings>Warnings</h2>" in report
-    assert re.search(r"<li>P09: index mp: median range of motion [\d.]+ deg is below 15", report)
+    assert re.search(
+        r"<li>P09: index mp: the joint barely moved: median range of motion [\d.]+ deg is below 5",
+        report,
+    )
 
 
 def test_broken_truth_file_is_named(sessions, tmp_path) -> None:

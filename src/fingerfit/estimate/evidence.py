@@ -14,8 +14,9 @@ records, and ``fingerfit.view.evidence`` draws it.
   itself (:func:`fingerfit.estimate.fit.saddle_estimate`: both axes turned far enough,
   or the fit's refusal).
 
-A joint is *enough* when it passes the rules by which ``fingerfit fit`` refuses a joint
-(cycles, range of motion) and the axis confidence bound above which the fit warns; the
+A joint is *enough* when it has the cycles without which ``fingerfit fit`` refuses a
+joint, the range of motion below which the fit warns (weak evidence) and the axis
+confidence bound above which the fit warns; the
 thumb's CMC, which the fit takes without the cycle rules, when its saddle fit succeeds and
 its axis confidence passes (``docs/capture.md``).
 """
@@ -46,9 +47,10 @@ def thresholds(options: FitOptions | None = None) -> tuple[int, float, float]:
     """``(cycles, range of motion deg, axis confidence half-angle deg)`` a joint needs:
     the fit's own (``FitOptions``).
 
-    The fit refuses a joint with fewer than ``max(min_cycles, 2)`` cycles or a median range
-    of motion under ``min_rom_deg``, and warns (keeping the joint) when its axis
-    confidence half-angle is over ``max_axis_ci_deg`` (``fingerfit.estimate.fit``).
+    The fit refuses a joint with fewer than ``max(min_cycles, 2)`` cycles (or a median
+    range of motion under ``rom_floor_deg``), and warns (keeping the joint) when the median
+    range of motion is under ``min_rom_deg`` or its axis confidence half-angle over
+    ``max_axis_ci_deg`` (``fingerfit.estimate.fit``).
     """
     options = options or FitOptions()
     return max(options.min_cycles, 2), float(options.min_rom_deg), float(options.max_axis_ci_deg)

@@ -10,10 +10,12 @@ Per finger and joint (paper section 3):
 4. segment lengths, fingertip, local frames and the orthogonal-axis variant;
 5. the pads of digits that pinch, fitted to the pinch holds (:mod:`.pads`).
 
-A joint whose motion cannot determine an axis (too few cycles, too little
-range of motion, a degenerate system) is refused with a message naming it,
-unless ``force`` is set, in which case the problem is recorded in the joint's
-quality notes and warned about.
+A joint whose motion cannot determine an axis (too few cycles, a joint that barely
+moved, rotation about no single axis where one axis is fitted) is refused with a message
+naming it, unless ``force`` is set, in which case the problem is recorded in the joint's
+quality notes and warned about. Weak evidence from real motion (a range of motion below
+what a calibration should reach, an axis known to only several degrees) is fitted, warned
+about and noted with the axis's confidence, not refused: a refusal stops the whole hand.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from .methods import (
 from .pads import pinch_pads
 from .plausibility import check_model, check_session, enforce
 from .saddle import SaddleFit, fit_saddle
-from .sagittal import intersect, sagittal_plane
+from .sagittal import joint_centre, sagittal_plane
 from .twoaxis import TwoAxisFit
 
 
@@ -75,10 +77,16 @@ class FitOptions:
     min_cycles : int
         Fewer movement periods than this refuse the joint.
     min_rom_deg : float
-        A median cycle range of motion below this refuses the joint (deg).
+        The median cycle range of motion a calibration should reach (deg; ``fingerfit
+        capture`` asks for it). Below it the joint is fitted with a warning and a quality
+        note giving its axis confidence (weak evidence, real motion).
+    rom_floor_deg : float
+        A median cycle range of motion below this refuses the joint (deg): it barely
+        moved. On simulated index fingers of 3-4 deg the MP's fitted axis was 4-60 deg
+        off (``bench/rom_floor.py``; ``docs/methods.md``, *Quality gates*).
     max_null_disagreement_deg : float
-        An axis further than this from the cycles' own rotation axis (SVD null
-        vectors) refuses the joint (deg): the centres did not spread along it.
+        A one-axis joint whose axis is further than this from the cycles' own rotation axis
+        (SVD null vectors) is refused (deg): the centres did not spread along it.
     force : bool
         Fit anyway, with warnings, instead of refusing.
     fingers : tuple of str, optional
@@ -88,8 +96,11 @@ class FitOptions:
         the method's own (``projection`` for ``tang2018``, as in the paper;
         ``swing_twist`` for the others -- ``docs/methods.md`` has the measurement).
     min_conditioning : float
-        Pooled methods: a pooled ``s5/s6`` below this -- rotation about the best
-        axis less than this many times the rotation off it -- refuses the joint.
+        Pooled methods: a joint fitted with one axis whose pooled ``s5/s6`` is below this
+        -- rotation about the best axis less than this many times the rotation off it --
+        is refused. A joint that may have a second axis is judged after the model choice
+        (``twoaxis``, ``rolling``): when two axes are chosen, this one-axis figure does not
+        apply.
     max_axis_ci_deg : float
         A flexion axis whose 95 % confidence half-angle over the grasp cycles
         (:func:`axis_ci_deg`) exceeds this gets a warning and a quality note (deg; the
@@ -102,6 +113,7 @@ class FitOptions:
     method: str = DEFAULT_METHOD
     min_cycles: int = 3
     min_rom_deg: float = 15.0
+    rom_floor_deg: float = 5.0
     max_null_disagreement_deg: float = 20.0
     force: bool = False
     fingers: tuple[str, ...] | None = None
@@ -212,30 +224,76 @@ def _refuse_or_warn(
         warnings.warn(f"{finger} {joint}: {p} (fitted anyway)", FitWarning, stacklevel=3)
 
 
-def _check(finger: str, joint: str, data: JointData, options: FitOptions) -> list[str]:
-    """Problems with the motion that make a joint undeterminable; raises unless ``force``."""
-    problems = []
+def _shown_below(value: float, bound: float) -> str:
+    """``value`` printed with as many decimals (1 to 6) as it takes to read below
+    ``bound`` (14.96 against 15 is "14.96", not "15.0")."""
+    for decimals in range(1, 7):
+        text = f"{value:.{decimals}f}"
+        if float(text) < bound:
+            break
+    return text
+
+
+def _check(finger: str, joint: str, data: JointData, options: FitOptions) -> tuple[list, list]:
+    """``(problems, weak)`` of the motion before the fit: problems make the joint
+    undeterminable (raises unless ``force``); ``weak`` is evidence to fit and warn about."""
+    problems, weak = [], []
     n = len(data.periods)
+    rom = float(np.degrees(np.median(data.rom))) if n else 0.0
     if n < max(options.min_cycles, 2):
         problems.append(f"only {n} grasp cycle(s) found (need {options.min_cycles})")
-    elif np.degrees(np.median(data.rom)) < options.min_rom_deg:
+    elif rom < options.rom_floor_deg:
         problems.append(
-            f"median range of motion {np.degrees(np.median(data.rom)):.1f} deg is below "
-            f"{options.min_rom_deg:g} deg"
+            f"the joint barely moved: median range of motion "
+            f"{_shown_below(rom, options.rom_floor_deg)} deg is below {options.rom_floor_deg:g} deg"
+        )
+    elif rom < options.min_rom_deg:
+        weak.append(
+            f"median range of motion {_shown_below(rom, options.min_rom_deg)} deg is below the "
+            f"{options.min_rom_deg:g} deg a calibration should reach"
         )
     _refuse_or_warn(finger, joint, problems, options, hard=n < 2)
-    return problems
+    return problems, weak
 
 
-def _conditioning_problem(est: AxisEstimate, options: FitOptions) -> list[str]:
-    """A refusal message when the pooled system does not single out one axis."""
+def _one_axis_problems(
+    data: JointData, est: AxisEstimate, options: FitOptions
+) -> tuple[list[str], list[str]]:
+    """``(problems, weak)`` of the one-axis gates after the fit: the pooled system does not
+    single out one axis, or the per-cycle centres do not spread along it.
+
+    A joint fitted with two axes is not judged by them as one: the rotation off its flexion
+    axis is its second axis (the thumb's CMC; a joint the model choice gave two). Its
+    flexion axis far from the cycles' own rotation axis is weak evidence, fitted and warned
+    about, not refused.
+    """
+    if isinstance(est.abduction, SaddleFit):
+        return [], []
+    far = est.axis.null_agreement_deg > options.max_null_disagreement_deg
+    if est.abduction is not None:
+        weak = [
+            f"the two-axis fit's flexion axis is {est.axis.null_agreement_deg:.0f} deg from the "
+            "cycles' own rotation axis (SVD null vectors)"
+        ]
+        return [], weak if far else []
+    problems = []
     c = est.pooled_conditioning
-    if c is None or c >= options.min_conditioning:
-        return []
-    return [
-        f"the motion does not determine a hinge axis: rotation about the best axis is only "
-        f"{c:.1f} times the rotation off it (s5/s6 below {options.min_conditioning:g})"
-    ]
+    if c is not None and c < options.min_conditioning:
+        hint = ""
+        if est.choice is None and data.second_axis is not None:
+            hint = "; the joint may have a second axis: method 'twoaxis' tests for it"
+        problems.append(
+            f"the motion does not determine a hinge axis: rotation about the best axis is only "
+            f"{_shown_below(c, options.min_conditioning)} times the rotation off it (s5/s6 "
+            f"below {options.min_conditioning:g}){hint}"
+        )
+    if far:
+        problems.append(
+            f"the per-cycle centres do not spread along one axis (fitted axis "
+            f"{est.axis.null_agreement_deg:.0f} deg from the cycles' own rotation axis); "
+            f"method '{options.method}' is unreliable for this motion"
+        )
+    return problems, []
 
 
 def _quality(data: JointData, est: AxisEstimate, notes: list[str], ci: float) -> JointQuality:
@@ -265,7 +323,11 @@ def saddle_estimate(
     """A joint that always has two axes (the thumb's CMC): :func:`.saddle.fit_saddle` over
     every calibration frame with both sensors' samples, grouped by recording cycles where
     there are any; the guesses (parent frame) sign the axes and name the one a recording
-    did not excite."""
+    did not excite. The axes are named by the digit's axis order, which anatomy gives and
+    the data place, also where they lie nearer each other's guesses
+    (``SaddleFit.guesses_swapped_deg``): the guesses come from the next joint and can be
+    far off (tens of degrees on simulated thumbs with three times the usual obliquities,
+    whose axes the order named right)."""
     groups = None
     if len(data.periods) >= 2:
         groups = np.full(data.rotation.shape[0], -1)
@@ -285,6 +347,7 @@ def saddle_estimate(
         flexion_guess=flexion_guess,
         abduction_guess=abduction_guess,
         groups=groups,
+        strict_order=False,
     )
     direction = sf.flexion_axis
     axis = AxisFit(sf.flexion_point, direction, np.zeros(0), 0.0, False, 0.0)
@@ -326,14 +389,31 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             side = 1.0 if session.hand == "right" else -1.0
             guesses = np.stack([nxt, side * np.cross(along, nxt)]) @ reference[parent][1]
             try:
-                est, notes = saddle_estimate(data, guesses[0], guesses[1]), []
+                est, notes, weak = saddle_estimate(data, guesses[0], guesses[1]), [], []
             except FingerfitError as exc:
                 raise FitError(f"{finger} {j}: {exc.reason}") from None
+            swapped = (
+                est.abduction.guesses_swapped_deg if isinstance(est.abduction, SaddleFit) else None
+            )
+            if swapped is not None:
+                weak = [
+                    f"the fitted axes lie nearer each other's guesses ({swapped[0]:.0f} vs "
+                    f"{swapped[1]:.0f} deg as named), the guesses being the next joint's "
+                    "flexion axis and its perpendicular: named by the axis order, flexion "
+                    "proximal, which the data place"
+                ]
         else:
-            notes = _check(finger, j, data, options)
+            notes, weak = _check(finger, j, data, options)
             est = estimator(data)
-        problems = _conditioning_problem(est, options)
+        problems, weak_fit = _one_axis_problems(data, est, options)
         ci = axis_ci_deg(data, est.abduction, est.choice)
+        for w in [*weak, *weak_fit]:
+            # Fitted, not refused: the motion is real, the axis's confidence says how well
+            # it is known.
+            known = f"+/-{ci:.1f} deg (95 %)" if np.isfinite(ci) else "not known (one cycle)"
+            w = f"weak evidence: {w}; fitted, the flexion axis is known to {known}"
+            warnings.warn(f"{finger} {j}: {w}", FitWarning, stacklevel=2)
+            notes = [*notes, w]
         if ci > options.max_axis_ci_deg:
             # A warning, not a refusal: cycles of different recordings (grasp, opposition)
             # need not agree, and a good session can exceed the bound (docs/capture.md).
@@ -344,12 +424,6 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
             )
             warnings.warn(f"{finger} {j}: {uncertain}", FitWarning, stacklevel=2)
             notes = [*notes, uncertain]
-        if est.axis.null_agreement_deg > options.max_null_disagreement_deg:
-            problems.append(
-                f"the per-cycle centres do not spread along one axis (fitted axis "
-                f"{est.axis.null_agreement_deg:.0f} deg from the cycles' own rotation axis); "
-                f"method '{options.method}' is unreliable for this motion"
-            )
         if problems:
             _refuse_or_warn(finger, j, problems, options, hard=False)
             notes = [*notes, *problems]
@@ -368,7 +442,9 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
     joints = {}
     migration = {}
     for j, (parent, child, point, a, est, data, notes, ci) in fitted.items():
-        centre = intersect(plane, point, a, f"{finger} {j}")
+        centre, off_plane = joint_centre(plane, point, a, session.landmark(f"{finger}.{j}"))
+        if off_plane is not None:
+            notes = [*notes, off_plane]
         joints[j] = (parent, child, centre, a, _quality(data, est, notes, ci))
         if est.migration is not None:
             # The migration is per radian of the angle about the estimator's axis sense.

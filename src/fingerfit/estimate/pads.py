@@ -23,8 +23,10 @@ degrees) is the holds', large enough to settle what they leave free (tracker noi
 turns the sensors by well under a degree).
 
 A pad that ends up on the dorsal side of its distal segment (above the line from the
-last joint centre to the nail-edge tip) is not a pulp: that digit keeps its prior and
-the fit says so.
+last joint centre to the nail-edge tip) is not a pulp: that digit keeps its prior, the
+fit says so, and the other digits are fitted again to meet it where it is (else a partner
+fitted to meet the discarded point stays apart from it by as much, 11 mm on a simulated
+MyoHand hand).
 """
 
 from __future__ import annotations
@@ -33,17 +35,17 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..digits import DIGITS
-from ..kinematics import Kinematics, compute_kinematics
+from ..digits import DIGIT_NAMES, DIGITS
+from ..kinematics import Kinematics, carry_by_hand, chain_points, compute_kinematics
 from ..model import VARIANTS, HandModel, PinchContact
-from ..session import Session
+from ..session import HAND_SENSOR, Session, TargetEvent
 from ..transforms import FloatArray
 
 #: Candidate ridge weights of each digit's prior pad against one pinch event's mean
 #: squared gap; the fit takes the one whose pads best coincide in held-out events.
 PRIOR_WEIGHTS = tuple(10.0**k for k in range(-4, 4))
-#: The percentile of the model's pad distance over the hold frames below which a pair's
-#: pads count as touching (:class:`fingerfit.model.PinchContact`).
+#: The percentile of the model's pad distance over one hold's frames that the hold
+#: counts as touching (:class:`fingerfit.model.PinchContact`: the largest over the holds).
 CONTACT_PERCENTILE = 95.0
 
 
@@ -54,7 +56,8 @@ class PinchHolds:
     Attributes
     ----------
     digits : tuple of (str, str)
-        The two digits, as ``events.csv`` names them (``finger``, ``target``).
+        The two digits, in the order of :data:`fingerfit.digits.DIGIT_NAMES` (events
+        naming them in either order are the same pair).
     events : int
         Pinch events of the pair with at least one complete frame.
     frames : int
@@ -87,6 +90,11 @@ class PadFit:
         pads are fitted without that event.
     kept_prior : list of str
         Digits whose holds put the pad on the dorsal side; they keep their prior.
+    events : list of TargetEvent
+        The pinch events used.
+    held_out_local : list of dict[str, ndarray (3,)]
+        Per event of :attr:`events`, the pads fitted without it at the chosen weight
+        (distal sensor frames, mm; digits of :attr:`kept_prior` at their priors).
     """
 
     local: dict[str, FloatArray]
@@ -95,23 +103,31 @@ class PadFit:
     prior_weight: float
     held_out_mm: dict[float, float]
     kept_prior: list[str] = field(default_factory=list)
+    events: list[TargetEvent] = field(default_factory=list)
+    held_out_local: list[dict[str, FloatArray]] = field(default_factory=list)
+
+
+def _pair(a: str, b: str) -> tuple[str, str]:
+    """Two digits in the order of :data:`DIGIT_NAMES`."""
+    return (a, b) if DIGIT_NAMES.index(a) <= DIGIT_NAMES.index(b) else (b, a)
 
 
 def _holds(
     session: Session, digits: set[str]
-) -> dict[tuple[str, str], list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]]]:
-    """Pair -> per event ``(R_a (k, 3, 3), t_a (k, 3), R_b, t_b)`` over its complete
-    hold frames (tracker frame, mm)."""
+) -> dict[tuple[str, str], list[tuple[TargetEvent, tuple]]]:
+    """Pair (:func:`_pair`) -> per event, the event and ``(R_a (k, 3, 3), t_a (k, 3),
+    R_b, t_b)`` over its complete hold frames (tracker frame, mm)."""
     out: dict[tuple[str, str], list] = {}
     for ev in session.events:
         if not ev.is_pinch or ev.finger not in digits or ev.target not in digits:
             continue
+        pair = _pair(ev.finger, ev.target)
         rec = session.recording(ev.recording)
-        a, b = rec.pose(DIGITS[ev.finger].distal_sensor), rec.pose(DIGITS[ev.target].distal_sensor)
+        a, b = (rec.pose(DIGITS[d].distal_sensor) for d in pair)
         k = (rec.time >= ev.start) & (rec.time <= ev.end) & a.valid & b.valid
         if k.any():
-            out.setdefault((ev.finger, ev.target), []).append(
-                (a.rotation[k], a.position[k], b.rotation[k], b.position[k])
+            out.setdefault(pair, []).append(
+                (ev, (a.rotation[k], a.position[k], b.rotation[k], b.position[k]))
             )
     return out
 
@@ -148,7 +164,7 @@ def fit_pads(
     # stacked pad points x: its frames summed once, the fits below are m x m solves.
     normal, linear, const = [], [], []
     for (a, b), events in holds.items():
-        for ra, ta, rb, tb in events:
+        for _, (ra, ta, rb, tb) in events:
             rows = np.zeros((len(ta), 3, m))
             rows[:, :, col[a] : col[a] + 3] = ra
             rows[:, :, col[b] : col[b] + 3] = -rb
@@ -160,11 +176,19 @@ def fit_pads(
     q = np.concatenate([prior[d] for d in names])
     big_n, big_c = np.sum(normal, axis=0), np.sum(linear, axis=0)
 
-    def solve(weight: float, skip: int | None = None) -> FloatArray:
+    def solve(weight: float, skip: int | None = None, fixed: tuple[str, ...] = ()) -> FloatArray:
+        """The pads minimising the events' gaps and the ridge (``skip``: without that
+        event; ``fixed``: those digits held at their priors)."""
         n, c = big_n + weight * np.eye(m), big_c + weight * q
         if skip is not None:
             n, c = n - normal[skip], c - linear[skip]
-        return np.linalg.solve(n, c)
+        held = np.zeros(m, dtype=bool)
+        for d in fixed:
+            held[col[d] : col[d] + 3] = True
+        x = q.copy()
+        free = ~held
+        x[free] = np.linalg.solve(n[np.ix_(free, free)], c[free] - n[np.ix_(free, held)] @ q[held])
+        return x
 
     def held_out(weight: float) -> float:
         err = 0.0
@@ -177,9 +201,20 @@ def fit_pads(
     # The strongest prior within rounding of the best held-out gap.
     best = min(scores)
     weight = max(w for w, sc in zip(PRIOR_WEIGHTS, scores, strict=True) if sc <= best + 1e-12)
-    x = solve(weight)
+    x, kept = solve(weight), []
+    while True:  # a digit whose pad is dorsal keeps its prior; the others meet it there
+        dorsal_now = [
+            d
+            for d in names
+            if d not in kept and (x[col[d] : col[d] + 3] - dorsal[d][0]) @ dorsal[d][1] >= 0
+        ]
+        if not dorsal_now:
+            break
+        kept += dorsal_now
+        if len(kept) == len(names):
+            break
+        x = solve(weight, fixed=tuple(kept))
     local = {d: x[col[d] : col[d] + 3] for d in names}
-    kept = [d for d in names if (local[d] - dorsal[d][0]) @ dorsal[d][1] >= 0]
     for d in kept:
         local[d] = np.asarray(prior[d], dtype=float)
     gap = {
@@ -190,16 +225,21 @@ def fit_pads(
                         np.linalg.norm(
                             ra @ local[pair[0]] + ta - (rb @ local[pair[1]] + tb), axis=1
                         )
-                        for ra, ta, rb, tb in events
+                        for _, (ra, ta, rb, tb) in events
                     ]
                 )
             )
         )
         for pair, events in holds.items()
     }
-    pairs = [PinchHolds(p, len(ev), sum(len(e[1]) for e in ev)) for p, ev in holds.items()]
+    pairs = [PinchHolds(p, len(ev), sum(len(e[1][1]) for e in ev)) for p, ev in holds.items()]
     held = {w: float(np.sqrt(max(sc, 0.0))) for w, sc in zip(PRIOR_WEIGHTS, scores, strict=True)}
-    return PadFit(local, pairs, gap, weight, held, kept)
+    without = []
+    for e in range(len(normal)):
+        xe = solve(weight, e, tuple(kept))
+        without.append({d: xe[col[d] : col[d] + 3] for d in names})
+    events = [ev for evs in holds.values() for ev, _ in evs]
+    return PadFit(local, pairs, gap, weight, held, kept, events, without)
 
 
 def pinch_pads(session: Session, model: HandModel) -> HandModel:
@@ -217,9 +257,12 @@ def pinch_pads(session: Session, model: HandModel) -> HandModel:
     HandModel
         The pads of the digits the holds place (:func:`fit_pads`, tracker coordinates at
         the reference posture, mm) with ``pad_source = "pinch"``, and per pair of digits
-        a :class:`~fingerfit.model.PinchContact`: the :data:`CONTACT_PERCENTILE`-th
-        percentile of the model's pad distance over the hold frames, per variant. The
-        model unchanged when the session has no pinch event.
+        a :class:`~fingerfit.model.PinchContact`, per variant: the largest over the pair's
+        pinch events of the :data:`CONTACT_PERCENTILE`-th percentile of the model's pad
+        distance over the event's frames, with the pads fitted to every event and with
+        the pads fitted without that event (one event: the priors) -- how far apart the
+        model puts touching pads in a hold the pads were not fitted to, which a recording
+        retargeted later is. The model unchanged when the session has no pinch event.
     """
     prior, dorsal = {}, {}
     for d, fm in model.fingers.items():
@@ -238,27 +281,50 @@ def pinch_pads(session: Session, model: HandModel) -> HandModel:
             p0, r0 = model.reference_poses[DIGITS[d].distal_sensor]
             fingers[d] = replace(fingers[d], pad=r0 @ p + p0, pad_source="pinch")
     model = replace(model, fingers=fingers)
-    contacts = []
     kin_cache: dict[str, Kinematics] = {}
-    for pair in fit.pairs:
-        a, b = pair.digits
-        gaps: dict[str, list[FloatArray]] = {v: [] for v in VARIANTS}
-        for ev in session.events:
-            if (ev.finger, ev.target) != (a, b):
-                continue
-            rec = session.recording(ev.recording)
-            if ev.recording not in kin_cache:
-                digits = [d for d in model.fingers if d in fit.local]
-                kin_cache[ev.recording] = compute_kinematics(model, rec, fingers=digits)
-            k = (rec.time >= ev.start) & (rec.time <= ev.end)
-            for v in VARIANTS:
-                m = kin_cache[ev.recording].motions[v]
-                gaps[v].append(np.linalg.norm(m[a].pad[k] - m[b].pad[k], axis=1))
-        contact = {}
+    per_event: dict[tuple[str, str], dict[str, list[float]]] = {}
+    for ev, without in zip(fit.events, fit.held_out_local, strict=True):
+        pair = _pair(ev.finger, ev.target)
+        rec = session.recording(ev.recording)
+        if ev.recording not in kin_cache:
+            digits = [d for d in model.fingers if d in fit.local]
+            kin_cache[ev.recording] = compute_kinematics(model, rec, fingers=digits)
+        k = (rec.time >= ev.start) & (rec.time <= ev.end)
+        hand = rec.pose(HAND_SENSOR)
         for v in VARIANTS:
-            g = np.concatenate(gaps[v])
-            g = g[np.isfinite(g)]
-            contact[v] = float(np.percentile(g, CONTACT_PERCENTILE)) if g.size else float("nan")
+            m = kin_cache[ev.recording].motions[v]
+            pads = [m[d].pad[k] for d in pair]
+            pads += [
+                carry_by_hand(
+                    model,
+                    hand.rotation[k],
+                    hand.position[k],
+                    chain_points(
+                        model.fingers[d],
+                        v,
+                        {n: x[k] for n, x in m[d].angles.items()},
+                        _reference_point(model, d, without[d]),
+                    ),
+                )
+                for d in pair
+            ]
+            for pa, pb in zip(pads[::2], pads[1::2], strict=True):
+                g = np.linalg.norm(pa - pb, axis=1)
+                g = g[np.isfinite(g)]
+                if g.size:
+                    figures = per_event.setdefault(pair, {w: [] for w in VARIANTS})
+                    figures[v].append(float(np.percentile(g, CONTACT_PERCENTILE)))
+    contacts = []
+    for pair in fit.pairs:
+        figures = per_event.get(pair.digits, {})
+        contact = {v: max(figures.get(v, []), default=float("nan")) for v in VARIANTS}
         if all(np.isfinite(list(contact.values()))):
             contacts.append(PinchContact(pair.digits, pair.events, pair.frames, contact))
     return replace(model, pinch_contacts=tuple(contacts))
+
+
+def _reference_point(model: HandModel, digit: str, local: FloatArray) -> FloatArray:
+    """A point of ``digit``'s distal sensor frame (mm) in tracker coordinates at the
+    reference posture."""
+    p0, r0 = model.reference_poses[DIGITS[digit].distal_sensor]
+    return r0 @ local + p0

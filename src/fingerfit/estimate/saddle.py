@@ -137,6 +137,10 @@ class SaddleFit:
         SDs show the errors that differ between clusters (noise, cycle-to-cycle
         variation), not a bias every cluster shares (the tracker's smooth distortion
         field, skin sliding that follows the angles alike in every cycle).
+    guesses_swapped_deg : tuple of float, optional
+        With ``strict_order=False``: when the fitted axes lie nearer each other's guesses,
+        the mean angle (deg) of the axes to the guesses swapped and as named; None when
+        the names agree with the guesses (or without guesses).
     """
 
     order: str
@@ -156,6 +160,7 @@ class SaddleFit:
     abduction_sd_deg: float
     offset_sd_mm: float
     clusters: int
+    guesses_swapped_deg: tuple[float, float] | None = None
 
     @property
     def proximal_axis(self) -> FloatArray:
@@ -356,6 +361,7 @@ def fit_saddle(
     abduction_guess: FloatArray | None = None,
     groups: FloatArray | None = None,
     weights: FloatArray | None = None,
+    strict_order: bool = True,
 ) -> SaddleFit:
     """Fit a saddle joint (two non-intersecting, non-perpendicular axes) to a motion.
 
@@ -379,6 +385,12 @@ def fit_saddle(
         default ``DEFAULT_BLOCKS`` contiguous blocks of frames.
     weights : ndarray, shape (n,), optional
         Non-negative frame weights.
+    strict_order : bool
+        With both guesses, refuse a fit whose axes lie nearer each other's guesses (the
+        names ``order`` gives would be swapped). False: name them by ``order`` (the data
+        place the proximal axis) and report the disagreement in
+        :attr:`SaddleFit.guesses_swapped_deg` -- for a caller whose order is anatomy's
+        and whose guesses are rough.
 
     Returns
     -------
@@ -438,8 +450,9 @@ def fit_saddle(
     low = min(ranges, key=lambda key: ranges[key])
     if ranges[low] < MIN_RANGE_DEG:
         _refuse_low_range(sol, low, ranges[low], fg, ag)
+    swapped = None
     if fg is not None and ag is not None:
-        _check_order(sol, order, fg, ag)
+        swapped = _check_order(sol, order, fg, ag, strict_order)
 
     labels = np.arange(n) * DEFAULT_BLOCKS // n if groups is None else groups
     fl_sd, ab_sd, off_sd, clusters = _jackknife(
@@ -463,6 +476,7 @@ def fit_saddle(
         abduction_sd_deg=ab_sd,
         offset_sd_mm=off_sd,
         clusters=clusters,
+        guesses_swapped_deg=swapped,
     )
 
 
@@ -555,23 +569,29 @@ def _refuse_low_range(
     )
 
 
-def _check_order(sol: _Solution, order: str, fg: FloatArray, ag: FloatArray) -> None:
-    """Refuse when the data make the other axis proximal than ``order`` says.
+def _check_order(
+    sol: _Solution, order: str, fg: FloatArray, ag: FloatArray, strict: bool
+) -> tuple[float, float] | None:
+    """Whether the data make the other axis proximal than ``order`` says.
 
     The data tell the proximal axis from the distal one (second order); ``order`` only
     names them. If both fitted axes lie nearer the other axis's guess, the names would be
-    swapped: a plausible-looking wrong answer.
+    swapped: a plausible-looking wrong answer, refused (``strict``) or returned as the
+    mean angles (deg) of the axes to the guesses swapped and as named.
     """
     kept = _line_angle(sol.flexion_axis, fg) + _line_angle(sol.abduction_axis, ag)
     swapped = _line_angle(sol.flexion_axis, ag) + _line_angle(sol.abduction_axis, fg)
-    if swapped < kept:
-        proximal = "abduction" if order == "flexion_first" else "flexion"
-        raise FingerfitError(
-            f"the data make the {_NAMES[proximal]} axis the proximal one (fixed in the "
-            f"parent), against order={order!r} (the guessed axes fit "
-            f"{swapped / 2:.0f} deg vs {kept / 2:.0f} deg swapped vs as ordered): check the "
-            "axis order or the guesses"
-        )
+    if swapped >= kept:
+        return None
+    if not strict:
+        return swapped / 2, kept / 2
+    proximal = "abduction" if order == "flexion_first" else "flexion"
+    raise FingerfitError(
+        f"the data make the {_NAMES[proximal]} axis the proximal one (fixed in the "
+        f"parent), against order={order!r} (the guessed axes fit "
+        f"{swapped / 2:.0f} deg vs {kept / 2:.0f} deg swapped vs as ordered): check the "
+        "axis order or the guesses"
+    )
 
 
 __all__ = ["MIN_RANGE_DEG", "SaddleFit", "fit_saddle"]

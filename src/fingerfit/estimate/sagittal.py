@@ -5,7 +5,9 @@ Construction (documented in ``docs/methods.md``): the dorsal landmarks
 the sagittal plane; the line through them (least squares) fixes the plane up to
 a rotation about that line, which is fixed by making the plane normal the
 mean fitted flexion axis made perpendicular to the line. Each joint centre is
-where its fitted axis meets this plane (paper section 3; Tang et al. 2018 [13]).
+where its fitted axis meets this plane (paper section 3; Tang et al. 2018 [13]); an axis
+that runs nearly in the plane takes its point nearest the joint's landmark instead
+(:func:`joint_centre`).
 """
 
 from __future__ import annotations
@@ -54,14 +56,49 @@ def sagittal_plane(landmarks: FloatArray, axes: FloatArray, finger: str = "") ->
     return Plane(centroid, unit(n), d)
 
 
+#: ``|sin|`` of the angle between a fitted axis and the sagittal plane below which the
+#: two do not cross reliably: 0.2, 11.5 deg.
+MIN_CROSSING = 0.2
+
+
 def intersect(
     plane: Plane, point: FloatArray, direction: FloatArray, joint: str = ""
 ) -> FloatArray:
     """Where the line ``point + s * direction`` meets ``plane`` (mm); ``joint`` names it in errors."""
     den = plane.normal @ direction
-    if abs(den) < 0.2:
+    if abs(den) < MIN_CROSSING:
         raise FingerfitError(
-            f"{joint}: the fitted axis is within {np.degrees(np.arcsin(0.2)):.0f} deg of the sagittal plane; "
-            "no reliable joint centre"
+            f"{joint}: the fitted axis is within {np.degrees(np.arcsin(MIN_CROSSING)):.0f} deg "
+            "of the sagittal plane; no reliable joint centre"
         )
     return point + (plane.normal @ (plane.point - point)) / den * direction
+
+
+def joint_centre(
+    plane: Plane, point: FloatArray, direction: FloatArray, landmark: FloatArray
+) -> tuple[FloatArray, str | None]:
+    """The joint centre on a fitted axis line ``point + s * direction`` (tracker, mm).
+
+    Where the line meets the sagittal plane (:func:`intersect`, the paper's rule). A line
+    within 12 deg of the plane meets it far away or not at all, and a degree of axis error
+    moves that point by centimetres; its centre is then the point of the line nearest the
+    joint's own dorsal ``landmark`` (3,), which lies over the joint. Where along its line a
+    joint centre lies changes no angle or fingertip of the model (a rotation about a line
+    is the same about any of its points), only the segment lengths and the orthogonal
+    variant.
+
+    Returns
+    -------
+    centre : ndarray, shape (3,)
+    note : str or None
+        For the quality notes, when the centre is the point nearest the landmark.
+    """
+    crossing = abs(plane.normal @ direction)
+    if crossing >= MIN_CROSSING:
+        return intersect(plane, point, direction), None
+    note = (
+        f"the axis runs {np.degrees(np.arcsin(crossing)):.1f} deg from the sagittal plane "
+        "(no reliable crossing): its centre is the point of the axis nearest the joint's "
+        "landmark"
+    )
+    return point + ((landmark - point) @ direction) * direction, note

@@ -224,14 +224,17 @@ class PinchContact:
     Attributes
     ----------
     digits : tuple of (str, str)
-        The two digits (``events.csv`` ``finger``, ``target``).
+        The two digits, in the order of :data:`fingerfit.digits.DIGIT_NAMES` (the events
+        may name them either way).
     events, frames : int
         Pinch events of the pair and their hold frames.
     contact_mm : dict[str, float]
-        Variant (``user_axis``, ``orthogonal``) -> the 95th percentile over the hold
-        frames of the distance between the two digits' pads as the model computes them
-        (:mod:`fingerfit.kinematics`), mm: below it the person's pads touch
-        (``fingerfit retarget``'s pinch term).
+        Variant (``user_axis``, ``orthogonal``) -> the largest over the pair's holds of the
+        95th percentile over the hold's frames of the distance between the two digits'
+        pads as the model computes them (:mod:`fingerfit.kinematics`), with the pads
+        fitted to every hold and without that hold
+        (:func:`fingerfit.estimate.pads.pinch_pads`), mm: below it the person's pads
+        touch (``fingerfit retarget``'s pinch term).
     """
 
     digits: tuple[str, str]

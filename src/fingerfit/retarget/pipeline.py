@@ -258,9 +258,13 @@ def pinch_terms(
     pairs : list of (str, str)
     vectors : ndarray, shape (n, p, 3)
         Target of robot ``pad_a - pad_b`` (robot palm frame, mm): the person's vector,
-        mirrored, scaled by the pair's mean scale, shortened by ``contact_mm``.
+        mirrored, scaled by the pair's mean scale, times ``u``: 0 at and below
+        ``contact_mm``, rising linearly to 1 at :data:`PINCH_FAR_MM` and beyond. The
+        robot's gap is then flat near contact (a touch the model sees 3 mm wider than its
+        contact distance asks the robot's pads for a gap under 1 mm at a pair scale of 1),
+        and the person's own gap, scaled, where the pinch term stops weighing.
     weights : ndarray, shape (n, p)
-        0 beyond :data:`PINCH_FAR_MM`, rising linearly to 1 at ``contact_mm``.
+        ``1 - u``: 0 beyond :data:`PINCH_FAR_MM`, rising linearly to 1 at ``contact_mm``.
     distance : ndarray, shape (n, p)
         Person's pad distance (mm).
     """
@@ -273,11 +277,10 @@ def pinch_terms(
     dist = np.linalg.norm(v, axis=2)
     k = np.array([0.5 * (s.scale[a] + s.scale[b]) for a, b in pairs])
     contact_mm = np.broadcast_to(np.asarray(contact_mm, dtype=float), (len(pairs),))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        shrink = np.where(dist > 0, np.maximum(dist - contact_mm, 0.0) / dist, 0.0)
-    vec = k[:, None] * v * shrink[:, :, None]
-    w = np.clip((PINCH_FAR_MM - dist) / (PINCH_FAR_MM - contact_mm), 0.0, 1.0)
-    return pairs, vec, np.nan_to_num(w), dist
+    span = np.maximum(PINCH_FAR_MM - contact_mm, 1e-9)
+    u = np.clip((dist - contact_mm) / span, 0.0, 1.0)
+    vec = k[:, None] * v * u[:, :, None]
+    return pairs, vec, np.nan_to_num(1.0 - u), dist
 
 
 def person_points(

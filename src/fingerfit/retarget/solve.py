@@ -19,7 +19,9 @@ robot's reach the residuals are large, the linearisation poor, and plain Gauss-N
 alternated between two postures (on the Allegro it held a pinch 6 mm open).
 The prior is the ``joint`` method's posture (the person's angles through the map): a
 weak pull that picks, among robot postures reaching the same tips, the one most like the
-person's, and keeps the solver out of the local minima of fingers folded at a limit.
+person's, and keeps the solver out of the local minima of fingers folded at a limit. A
+pinch that stays open while its weight is high (digits at limits on the far sides of it)
+is closed alone and the frame solved again from there (``TipOptions.pinch_restart_mm``).
 Everything inside an iteration is NumPy over joints and frames of the robot; the only
 Python loops are over video frames (sequential by the warm start) and iterations.
 """
@@ -66,6 +68,12 @@ class TipOptions:
         from the prior posture and keep the cheaper solution (only while that error grows
         by more than 0.5 mm a frame, or every 10th frame: an unreachable target costs a second
         solve only on every 10th frame).
+    pinch_restart_mm : float
+        When a pinch pair at more than half its weight is still this far (mm) from its
+        pad-to-pad target, the solution is caught in a posture from which no step closes
+        it (joints pinned at their limits; on an Allegro it held a pinch 21 mm open): the
+        pinch alone is closed from there, the frame solved again from that posture, and
+        the cheaper solution kept (with the same "grows, or every 10th frame" rule).
     polish_smooth, polish_iterations : float, int
         After the solve, up to ``polish_iterations`` more with smoothness ``polish_smooth``
         (mm/rad) from the solution: the strong smoothness chose the posture, the polish
@@ -88,6 +96,7 @@ class TipOptions:
     coupling: float = 100.0
     iterations: int = 6
     restart_mm: float = 10.0
+    pinch_restart_mm: float = 1.5
     polish_smooth: float = 20.0
     polish_iterations: int = 3
     max_step: float = 0.2
@@ -196,6 +205,7 @@ class TipSolver:
         #: Configuration of the last frame solved (rad, ``(nq,)``); ``None`` before the first.
         self.q: FloatArray | None = None
         self._last = np.inf
+        self._last_pinch = np.inf
         self._frame = 0
 
     def solve(
@@ -258,7 +268,12 @@ class TipSolver:
                     )
                     iters[t] += it2
                     if cost2 < cost:
-                        q, worst = q2, worst2
+                        q, cost, worst = q2, cost2, worst2
+                if self.pairs.size:
+                    q, cost, worst, it4 = self._close_pinch(
+                        q, cost, worst, q_prev, qp, tgt, w, pw, pv, self._frame + t
+                    )
+                    iters[t] += it4
                 if o.polish_smooth < o.smooth:
                     # Polish in the basin chosen: the strong smoothness picked the posture
                     # (no flips), a weak one removes its lag behind a moving target.
@@ -272,6 +287,47 @@ class TipSolver:
         self.q = q
         self._frame += n
         return TipResult(out, secs, iters)
+
+    def _close_pinch(
+        self,
+        q: FloatArray,
+        cost: float,
+        worst: float,
+        q_prev: FloatArray,
+        prior: FloatArray | None,
+        tgt: FloatArray,
+        w: FloatArray,
+        pw: FloatArray,
+        pv: FloatArray,
+        frame: int,
+    ) -> tuple[FloatArray, float, float, int]:
+        """The frame's solution, or a cheaper one when a pinch stayed open
+        (``pinch_restart_mm``): ``(q, cost, worst, iterations spent)``.
+
+        From a posture caught with a pinch open (the digits pinned at limits on the far
+        side of it), a Gauss-Newton step that also keeps the fingertips near their targets
+        cannot close it. Closing the pinch alone (fingertip weights 0, a weak pull to this
+        frame's posture) leaves that basin; the whole cost from there decides.
+        """
+        o, pairs = self.options, self.pairs
+        engaged = pw >= 0.5 * o.pinch
+        if not engaged.any():
+            self._last_pinch = 0.0
+            return q, cost, worst, 0
+        p, _ = self.problem.kinematics(q)
+        off = np.linalg.norm(p[pairs[:, 0]] - p[pairs[:, 1]] - pv, axis=1)
+        off = float(np.max(off[engaged]))
+        again = off > self._last_pinch + 0.5 or frame % 10 == 0
+        self._last_pinch = off
+        if off <= o.pinch_restart_mm or not again:
+            return q, cost, worst, 0
+        q1, _, it1, _ = self._gauss_newton(
+            q, q, prior, tgt, np.zeros_like(w), pw, pv, 1.0, 2 * o.iterations
+        )
+        q2, cost2, it2, worst2 = self._gauss_newton(q1, q_prev, prior, tgt, w, pw, pv)
+        if cost2 < cost:
+            return q2, cost2, worst2, it1 + it2
+        return q, cost, worst, it1 + it2
 
     def _gauss_newton(
         self,
