@@ -183,7 +183,7 @@ def fit(
     for w in caught:
         notice("warning", str(w.message))
     if model.warnings:
-        notice("warning", f"{len(model.warnings)} warning(s) stored in the model file (--force)")
+        notice("warning", f"{len(model.warnings)} warning(s) stored in the model file")
     path = save_model(model, target)
     if not quiet:
         out.print(quality_table(model))
