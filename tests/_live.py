@@ -160,6 +160,31 @@ def max_age_ms(output: str) -> float:
     return float(re.search(r"age at send max ([0-9.]+) ms", output).group(1))
 
 
+def robot_lane_over(model, rec: Recording, frames: np.ndarray) -> np.ndarray:
+    """The person's angles the robot lane sends for exactly ``frames`` of ``rec``, in
+    order, handed over one at a time (nothing skipped).
+
+    The robot lane's live filter sees only the frames it computes, so a frame it solved
+    depends on which frames came before it -- on the machine's load. A stream that sent
+    ``frames`` (and computed no other: none stale after its compute) sent these values,
+    whatever the load; `fingerfit angles` (the whole recording) is only near them.
+
+    Returns
+    -------
+    ndarray, shape (len(frames), k)
+        The LSL angles rows (deg), the channels of :func:`channels_of`.
+    """
+    from fingerfit.live.sources import Block
+    from fingerfit.live.stream import Streamer
+
+    lsl = FakeLsl()
+    streamer = Streamer(model, lsl=lsl, max_age=3600.0)
+    for i in frames:
+        one = rec.slice(slice(int(i), int(i) + 1))
+        streamer.process(Block(one, np.array([time.monotonic()])))
+    return np.vstack(lsl.angles)
+
+
 def sent_frames(
     stamps: np.ndarray,
     t_rec: np.ndarray,

@@ -7,7 +7,9 @@ weighted least squares (inverse kinematics), vectorised over frames
 (``docs/tracking.md``):
 
 * :mod:`.chains` -- the digits as chains of axes, posed for a batch of frames;
-* :mod:`.solver` -- Levenberg-Marquardt per frame, and the temporal prior over frames;
+* :mod:`.solver` -- the cost and Levenberg-Marquardt per frame;
+* :mod:`.smoother` -- the temporal prior over consecutive frames;
+* :mod:`.packed` -- every frame's normal matrix as its upper triangle;
 * :mod:`.weights` -- the cost's weights from the model's calibration statistics;
 * :mod:`.statistics` -- those statistics, measured when the model is fitted;
 * :mod:`.layout` -- which sensors determine which joints;

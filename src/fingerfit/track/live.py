@@ -18,7 +18,8 @@ from ..model import HandModel
 from ..session import HAND_SENSOR, Recording
 from ..transforms import FloatArray
 from .chains import ChainPose, Chains
-from .solver import RIDGE, Observed, _diagonal, gauss_newton_step, pairs, solve_frames
+from .packed import diagonal, pairs
+from .solver import RIDGE, Observed, gauss_newton_step, solve_frames
 from .weights import TrackOptions, chain_weights
 
 #: What a digit's values in a streamed frame come from (the ``<digit>.source`` channel).
@@ -149,7 +150,7 @@ class LiveTracker:
         if prior is None:  # no frame before (the first, or after a silence): from afar
             sol = solve_frames(chains, self.weights, obs, q0)
             q, info = sol.q, sol.hessian
-            info[:, _diagonal(chains.L)] += RIDGE
+            info[:, diagonal(chains.L)] += RIDGE
         else:
             # From the previous frame's solution when its pose is at hand (every chain was
             # solved there), else from this frame's direct angles and the previous ones.

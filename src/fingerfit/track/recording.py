@@ -22,7 +22,8 @@ from ..session import HAND_SENSOR, PoseSeries, Recording
 from ..transforms import FloatArray
 from .chains import Chains
 from .layout import DigitLayout, check_layout
-from .solver import Observed, Weights, observe, smooth, solve_frames, uncertainty
+from .smoother import smooth
+from .solver import Observed, Weights, observe, solve_frames, uncertainty
 from .statistics import chain_angles
 from .weights import TrackOptions, chain_weights
 

@@ -18,22 +18,27 @@ for a chordal residual ``J^T J`` is ``w_r a_k·a_l`` (the axes where the chain p
 and ``J^T r`` is ``w_r a_k·vee(E - E^T)/2`` with ``E = R R̂^T``. Position columns are
 ``a_k × (p̂ - c_k)`` (plus the migration term). Everything runs over frames and chains at
 once, frames last; a normal matrix is kept as its upper triangle, ``P = L (L + 1) / 2``
-rows. :func:`solve_frames` runs Levenberg-Marquardt on every frame on its own (optionally
-with a prior toward a given angle: the live filter); :func:`smooth` adds the temporal prior
-between consecutive frames, whose normal equations are block tridiagonal, solved per chain
-as one symmetric banded system.
+rows (:mod:`.packed`). :func:`solve_frames` runs Levenberg-Marquardt on every frame on its
+own (optionally with a prior toward a given angle: the live filter);
+:func:`.smoother.smooth` adds the temporal prior between consecutive frames.
 """
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solveh_banded
 
 from ..transforms import FloatArray
 from .chains import ChainPose, Chains, matmul_rows, matvec_rows
+from .packed import (
+    cholesky_packed,
+    diagonal,
+    gram_rows,
+    packed_matvec,
+    solve_cholesky,
+    solve_packed,
+)
 
 #: Added to the diagonal of every frame's normal matrix (1/rad^2): makes an undetermined
 #: angle stay where it is (data terms are 1e3-1e6 per rad^2).
@@ -42,7 +47,6 @@ RIDGE = 1e-6
 BLOCK = 2048
 #: Largest step of one angle in one iteration (rad).
 MAX_STEP = 0.5
-DEBUG = False
 
 
 @dataclass(frozen=True)
@@ -157,12 +161,6 @@ def observe(
     return Observed(pos, rot, present)
 
 
-@functools.cache
-def pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column of each entry of an ``n x n`` upper triangle, row by row."""
-    return np.triu_indices(n)
-
-
 @dataclass(frozen=True)
 class Terms:
     """The sensors' part of the normal equations at ``q`` (frames last).
@@ -267,26 +265,6 @@ def data_terms(
     return Terms(hessian, gradient, cost, rms)
 
 
-#: Frames up to which small-batch code paths (one ``matmul`` or ``solve`` over views)
-#: are faster than loops over a matrix's entries written over whole rows of frames.
-SMALL = 16
-
-
-def gram_rows(j: FloatArray) -> FloatArray:
-    """``J J^T`` of every frame's ``(L, k)`` matrix, ``j (D, L, k, m)``, as its upper triangle
-    ``(D, P, m)`` (:func:`pairs` order)."""
-    n_chain, L, _, m = j.shape
-    rows, cols = pairs(L)
-    if m <= SMALL:
-        f = j.transpose(0, 3, 1, 2)  # (D, m, L, k)
-        full = f @ f.transpose(0, 1, 3, 2)  # (D, m, L, L)
-        return full[..., rows, cols].transpose(0, 2, 1)
-    out = np.empty((n_chain, rows.size, m))
-    for p, (r, c) in enumerate(zip(rows, cols, strict=True)):
-        np.einsum("dkm,dkm->dm", j[:, r], j[:, c], out=out[:, p])
-    return out
-
-
 def bound_terms(weights: Weights, q: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The soft bounds at ``q (D, L, m)``: diagonal of the normal matrix ``(D, L, m)``,
     right-hand side ``(D, L, m)`` and cost ``(D, m)``."""
@@ -299,61 +277,6 @@ def bound_terms(weights: Weights, q: FloatArray) -> tuple[FloatArray, FloatArray
 def wrap(q: FloatArray) -> FloatArray:
     """Angles ``q`` (rad) in ``[-pi, pi)``: the same rotations, no turn counted twice."""
     return (q + np.pi) % (2 * np.pi) - np.pi
-
-
-def cholesky_packed(h: FloatArray) -> dict[tuple[int, int], FloatArray]:
-    """The upper Cholesky factor ``U`` (``H = U^T U``) of symmetric positive definite
-    matrices given as their upper triangle ``(..., P, m)`` (:func:`pairs` order), written
-    over whole rows of frames: ``(i, j) -> (..., m)`` for ``j >= i``."""
-    P = h.shape[-2]
-    L = round((np.sqrt(8 * P + 1) - 1) / 2)
-    idx = {(int(r), int(c)): i for i, (r, c) in enumerate(zip(*pairs(L), strict=True))}
-    u: dict[tuple[int, int], FloatArray] = {}
-    for i in range(L):
-        acc = h[..., idx[i, i], :].copy()
-        for k in range(i):
-            acc -= u[k, i] * u[k, i]
-        root = np.sqrt(np.maximum(acc, 1e-300))
-        u[i, i] = root
-        for j in range(i + 1, L):
-            acc = h[..., idx[i, j], :].copy()
-            for k in range(i):
-                acc -= u[k, i] * u[k, j]
-            u[i, j] = acc / root
-    return u
-
-
-def solve_cholesky(u: dict[tuple[int, int], FloatArray], g: FloatArray) -> FloatArray:
-    """``H^-1 g`` from :func:`cholesky_packed`'s factor and ``g (..., L, m)``."""
-    L = g.shape[-2]
-    y: list[FloatArray] = []  # U^T y = g
-    for i in range(L):
-        acc = g[..., i, :].copy()
-        for k in range(i):
-            acc -= u[k, i] * y[k]
-        y.append(acc / u[i, i])
-    x: list[FloatArray] = [y[0]] * L  # U x = y
-    for i in reversed(range(L)):
-        acc = y[i].copy()
-        for k in range(i + 1, L):
-            acc -= u[i, k] * x[k]
-        x[i] = acc / u[i, i]
-    return np.stack(x, axis=-2)
-
-
-def solve_packed(h: FloatArray, g: FloatArray) -> FloatArray:
-    """``H^-1 g`` for symmetric positive definite ``H`` given as its upper triangle
-    ``(..., P, m)`` (:func:`pairs` order), ``g (..., L, m)``."""
-    L, m = g.shape[-2], g.shape[-1]
-    if m <= SMALL:
-        rows, cols = pairs(L)
-        full = np.empty((*h.shape[:-2], m, L, L))
-        packed = np.swapaxes(h, -1, -2)  # (..., m, P)
-        full[..., rows, cols] = packed
-        full[..., cols, rows] = packed
-        x = np.linalg.solve(full, np.swapaxes(g, -1, -2)[..., None])  # (..., m, L, 1)
-        return np.swapaxes(x[..., 0], -1, -2)
-    return solve_cholesky(cholesky_packed(h), g)
 
 
 @dataclass(frozen=True)
@@ -378,13 +301,6 @@ class Solution:
     hessian: FloatArray
     iterations: int
     cost: FloatArray | None = None
-
-
-@functools.cache
-def _diagonal(L: int) -> np.ndarray:
-    """Rows of the diagonal in the packed upper triangle."""
-    rows, cols = pairs(L)
-    return np.flatnonzero(rows == cols)
 
 
 def gauss_newton_step(
@@ -422,7 +338,7 @@ def gauss_newton_step(
         The largest change of an angle (rad).
     """
     pad = (~chains.active)[..., None]
-    diag = _diagonal(chains.L)
+    diag = diagonal(chains.L)
     t = data_terms(chains, weights, obs, q, pose)
     bd, bg, _ = bound_terms(weights, q)
     h = t.hessian
@@ -437,24 +353,10 @@ def gauss_newton_step(
     return wrap(q + step), h, float(np.abs(step).max(initial=0.0))
 
 
-def packed_matvec(h: FloatArray, x: FloatArray) -> FloatArray:
-    """``H x`` for symmetric ``H`` given as its upper triangle ``(..., P, m)`` and
-    ``x (..., L, m)``."""
-    L = x.shape[-2]
-    rows, cols = pairs(L)
-    full = np.zeros((*h.shape[:-2], L, L, h.shape[-1]))
-    full[..., rows, cols, :] = h
-    full[..., cols, rows, :] = h
-    return (full * x[..., None, :, :]).sum(axis=-2)
-
-
 #: A frame has converged when its step would lower its cost by less than this (the cost is
 #: a chi-square: a sensor's standard deviation is 1): the step is below a thousandth of
 #: what the frame's sensors determine.
 DECREMENT = 1e-6
-#: The same for :func:`smooth`, per frame on average (a hundredth: the smoother runs on
-#: every frame, from starts already solved frame by frame or interpolated between them).
-SMOOTH_DECREMENT = 1e-4
 
 
 def solve_frames(
@@ -493,7 +395,7 @@ def solve_frames(
         ``iterations``: of the slowest frame.
     """
     pad = (~chains.active)[..., None]
-    diag = _diagonal(chains.L)
+    diag = diagonal(chains.L)
 
     def evaluate(x: FloatArray, cols: np.ndarray | slice) -> tuple:
         sub = obs if isinstance(cols, slice) else obs.take(cols)
@@ -542,122 +444,6 @@ def solve_frames(
     return Solution(q, rms, data_h, it, cost)
 
 
-def smooth(
-    chains: Chains,
-    weights: Weights,
-    obs: Observed,
-    time: FloatArray,
-    linked: np.ndarray,
-    q0: FloatArray,
-    anchor: tuple[FloatArray, float] | None = None,
-    *,
-    max_iter: int = 4,
-    decrement: float = SMOOTH_DECREMENT,
-) -> Solution:
-    """The angles of consecutive frames together, with the temporal prior between them.
-
-    ``sum_t cost_t(q_t) + sum_k ((q_{t,k} - q_{t-1,k}) / (v_k (time_t - time_{t-1})))^2``
-    over the linked pairs: Gauss-Newton whose normal equations are block tridiagonal (one
-    ``L x L`` block per frame), solved per chain as a symmetric banded system, with a
-    chain's step halved while its total cost grows.
-
-    Parameters
-    ----------
-    chains, weights, obs
-        As :func:`solve_frames` (``m`` frames).
-    time : ndarray, shape (m,)
-        Seconds.
-    linked : ndarray of bool, shape (m,)
-        Whether frame ``t`` is linked to frame ``t - 1`` (``linked[0]`` is ignored).
-    q0 : ndarray, shape (D, L, m)
-        Start (rad).
-    anchor : (ndarray, float), optional
-        ``(q (D, L) rad, time s)``: the frame before these (already solved; a live
-        stream's previous batch), linked to the first frame by the same prior; NaN
-        angles are not linked.
-    max_iter : int
-    decrement : float
-        Stop when every chain's step would lower its cost by less than this per frame
-        (chi-square units).
-
-    Returns
-    -------
-    Solution
-    """
-    n_chain, L, m = q0.shape
-    pad = (~chains.active)[..., None]
-    diag = _diagonal(L)
-    rows, cols = pairs(L)
-    dt = np.maximum(np.diff(time), 1e-6)
-    with np.errstate(divide="ignore", over="ignore"):
-        link = 1.0 / (weights.speed[..., None] * dt) ** 2  # (D, L, m - 1)
-    link = np.where(linked[1:] & ~pad, link, 0.0)
-    first = np.zeros((n_chain, L))  # the anchor's weight on the first frame
-    qa = np.zeros((n_chain, L))
-    if anchor is not None:
-        qa = np.nan_to_num(anchor[0])
-        with np.errstate(divide="ignore", over="ignore"):
-            w0 = 1.0 / (weights.speed * max(float(time[0]) - anchor[1], 1e-6)) ** 2
-        first = np.where(np.isfinite(anchor[0]) & chains.active, np.nan_to_num(w0, posinf=0.0), 0.0)
-    band = np.zeros((n_chain, L + 1, m * L))  # upper band storage: row L + r - c, column t L + c
-
-    def evaluate(
-        x: FloatArray,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-        """Normal matrix (the sensors' part with ``added`` on its diagonal), right-hand
-        side, each chain's cost, the residual and ``added`` at ``x``."""
-        t = data_terms(chains, weights, obs, x)
-        bd, bg, bc = bound_terms(weights, x)
-        h = t.hessian
-        added = bd + RIDGE + pad
-        added[:, :, 0] += first
-        h[:, diag] += added
-        g = t.gradient + bg
-        diff = x[..., 1:] - x[..., :-1]  # (D, L, m - 1)
-        pull = link * diff
-        g[..., 1:] -= pull
-        g[..., :-1] += pull
-        g[..., 0] += first * (qa - x[..., 0])
-        g *= ~pad
-        cost = (t.cost + bc).sum(axis=-1) + (link * diff * diff).sum(axis=(1, 2))  # (D,)
-        cost += (first * (x[..., 0] - qa) ** 2).sum(axis=1)
-        return h, g, cost, t.rms_mm, added
-
-    q = np.where(pad, 0.0, q0)
-    h, g, cost, rms, added = evaluate(q)
-    it = 0
-    for it in range(1, max_iter + 1):  # noqa: B007
-        band[:] = 0.0
-        for p, (r, c) in enumerate(zip(rows, cols, strict=True)):
-            band[:, L + r - c, c::L] = h[:, p]
-        band[:, L, : (m - 1) * L] += link.transpose(0, 2, 1).reshape(n_chain, -1)
-        band[:, L, L:] += link.transpose(0, 2, 1).reshape(n_chain, -1)
-        band[:, 0, L:] = -link.transpose(0, 2, 1).reshape(n_chain, -1)
-        rhs = g.transpose(0, 2, 1).reshape(n_chain, -1)
-        step = np.stack(
-            [solveh_banded(band[d], rhs[d], check_finite=False) for d in range(n_chain)]
-        )
-        step = step.reshape(n_chain, m, L).transpose(0, 2, 1)
-        if ((step * g).sum(axis=(1, 2)) < decrement * m).all():
-            break
-        np.clip(step, -MAX_STEP, MAX_STEP, out=step)
-        alpha = np.ones(n_chain)
-        for _ in range(6):
-            trial = wrap(q + step * alpha[:, None, None])
-            h2, g2, cost2, rms2, added2 = evaluate(trial)
-            ok = cost2 <= cost * (1.0 + 1e-12) + 1e-12
-            if ok.all():
-                break
-            alpha = np.where(ok, alpha, alpha / 2.0)
-        keep = ok[:, None, None]
-        q = np.where(keep, trial, q)
-        h, g, added = np.where(keep, h2, h), np.where(keep, g2, g), np.where(keep, added2, added)
-        rms = np.where(ok[:, None], rms2, rms)
-        cost = np.where(ok, cost2, cost)
-    h[:, diag] -= added  # the sensors' part alone, for the uncertainty
-    return Solution(q, rms, h, it)
-
-
 def uncertainty(chains: Chains, hessian: FloatArray) -> FloatArray:
     """Standard deviation of every angle from the sensors of its frame alone.
 
@@ -677,7 +463,7 @@ def uncertainty(chains: Chains, hessian: FloatArray) -> FloatArray:
     L = chains.L
     pad = (~chains.active)[..., None]
     h = hessian.copy()
-    h[:, _diagonal(L)] += RIDGE + pad
+    h[:, diagonal(L)] += RIDGE + pad
     u = cholesky_packed(h)
     var = np.empty((*h.shape[:1], L, h.shape[-1]))
     for k in range(L):
