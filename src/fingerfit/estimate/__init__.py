@@ -11,10 +11,24 @@
   :mod:`.joint_checks`, :mod:`.joint_estimators`, :mod:`.bootstrap`, :mod:`.joint_result`.
 """
 
-from .fit import FitError, FitOptions, fit_session
-from .joint import JointFit, JointQuality, fit_joint, hinge_axis, joint_centre, two_axis
-from .saddle import SaddleFit, fit_saddle
+from typing import TYPE_CHECKING
 
+from .._lazy import lazy_exports
+
+_EXPORTS = {
+    "FitError": ".fit",
+    "FitOptions": ".fit",
+    "fit_session": ".fit",
+    "JointFit": ".joint",
+    "JointQuality": ".joint",
+    "fit_joint": ".joint",
+    "hinge_axis": ".joint",
+    "joint_centre": ".joint",
+    "two_axis": ".joint",
+    "SaddleFit": ".saddle",
+    "fit_saddle": ".saddle",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 __all__ = [
     "FitError",
     "FitOptions",
@@ -28,3 +42,8 @@ __all__ = [
     "joint_centre",
     "two_axis",
 ]
+
+if TYPE_CHECKING:
+    from .fit import FitError, FitOptions, fit_session
+    from .joint import JointFit, JointQuality, fit_joint, hinge_axis, joint_centre, two_axis
+    from .saddle import SaddleFit, fit_saddle

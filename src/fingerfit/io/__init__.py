@@ -9,15 +9,43 @@
   Liberty/Patriot ASCII and binary, wide CSV logs, C3D markers and 6-DOF channels);
 * :mod:`.hygiene` -- repeated samples, gaps, jumps (:mod:`.jumps`) and unit checks;
   :mod:`.rigid` -- segment poses from marker clusters.
+
+The names below are imported on first use (:mod:`fingerfit._lazy`): reading a pose file
+does not import the C3D reader's SciPy.
 """
 
-from .c3d import read_c3d, read_c3d_segments
-from .liberty import read_liberty_ascii, read_liberty_binary
-from .posecsv import read_pose_csv
-from .posewrite import write_pose_csv
-from .sessiondir import load_session, save_session
-from .widecsv import read_wide_csv
+from typing import TYPE_CHECKING
 
-__all__ = ["load_session", "read_pose_csv", "save_session", "write_pose_csv"]
-__all__ += ["read_c3d", "read_c3d_segments", "read_liberty_ascii", "read_liberty_binary"]
-__all__ += ["read_wide_csv"]
+from .._lazy import lazy_exports
+
+_EXPORTS = {
+    "read_c3d": ".c3d",
+    "read_c3d_segments": ".c3d",
+    "read_liberty_ascii": ".liberty",
+    "read_liberty_binary": ".liberty",
+    "read_pose_csv": ".posecsv",
+    "write_pose_csv": ".posewrite",
+    "load_session": ".sessiondir",
+    "save_session": ".sessiondir",
+    "read_wide_csv": ".widecsv",
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__ = [
+    "load_session",
+    "read_c3d",
+    "read_c3d_segments",
+    "read_liberty_ascii",
+    "read_liberty_binary",
+    "read_pose_csv",
+    "read_wide_csv",
+    "save_session",
+    "write_pose_csv",
+]
+
+if TYPE_CHECKING:
+    from .c3d import read_c3d, read_c3d_segments
+    from .liberty import read_liberty_ascii, read_liberty_binary
+    from .posecsv import read_pose_csv
+    from .posewrite import write_pose_csv
+    from .sessiondir import load_session, save_session
+    from .widecsv import read_wide_csv

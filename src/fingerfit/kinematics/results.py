@@ -57,14 +57,27 @@ def kinematics_table(kin: Kinematics, units: str = "mm") -> pd.DataFrame:
     for models with pads, ``<digit>.pad.x|y|z`` (``units``); the orthogonal variant's
     columns carry the prefix ``orthogonal.``."""
     scale = UNITS_TO_MM[units]
-    cols: dict[str, FloatArray] = {"time": kin.time}
+    names = ["time"]
     for v, fingers in kin.motions.items():
         prefix = "" if v == "user_axis" else f"{v}."
         for f, m in fingers.items():
-            for j, a in m.angles.items():
-                cols[f"{prefix}{f}.{j}"] = np.degrees(a)
+            names += [f"{prefix}{f}.{j}" for j in m.angles]
             for point, xyz in (("tip", m.tip), ("pad", m.pad)):
                 if xyz is not None:
-                    for i, c in enumerate("xyz"):
-                        cols[f"{prefix}{f}.{point}.{c}"] = xyz[:, i] / scale
-    return pd.DataFrame(cols)
+                    names += [f"{prefix}{f}.{point}.{c}" for c in "xyz"]
+    # One (columns, frames) array filled column by column: the frame wraps it as its one
+    # block, without stacking the columns again (a third of the table's time at 500,000
+    # frames).
+    values = np.empty((len(names), len(kin.time)))
+    values[0] = kin.time
+    k = 1
+    for fingers in kin.motions.values():
+        for m in fingers.values():
+            for a in m.angles.values():
+                np.degrees(a, out=values[k])
+                k += 1
+            for xyz in (m.tip, m.pad):
+                if xyz is not None:
+                    np.divide(xyz.T, scale, out=values[k : k + 3])
+                    k += 3
+    return pd.DataFrame(values.T, columns=names, copy=False)
