@@ -62,26 +62,6 @@ from .values import (
     source_codes,
 )
 
-__all__ = [
-    "DEFAULT_MAX_AGE_MS",
-    "DEFAULT_SILENCE_MS",
-    "SILENCE_POLICIES",
-    "FrameValues",
-    "StatusLine",
-    "Streamer",
-    "Summary",
-    "block_values",
-    "channels_of",
-    "check_max_age",
-    "check_silence",
-    "empty_recording",
-    "frames_valid",
-    "hold",
-    "model_sensors",
-    "robot_joint_units",
-    "run",
-]
-
 #: Seconds between status-line updates.
 STATUS_PERIOD = 0.5
 #: Default ``--silence-ms`` (ms): the watchdog fires after this long without a frame.
@@ -329,7 +309,8 @@ def _run(
             rt.close()
 
 
-#: Names of this module and those it gathers from :mod:`.values` and :mod:`.datalane`
+#: Names of this module and those it gathers from :mod:`.streamer`, :mod:`.values` and
+#: :mod:`.datalane`
 #: (importable from here as before they moved).
 __all__ = [
     "DATA_PERIOD",
