@@ -72,6 +72,44 @@ def test_the_probe_sees_a_command_import_numpy(tmp_path) -> None:
     assert "numpy" in found["heavy"] and (tmp_path / "sim" / "S01" / "session.toml").is_file()
 
 
+def test_angles_of_a_complete_recording_imports_no_scipy(tmp_path) -> None:
+    """``angles`` on a recording with every sensor reads, computes and writes with NumPy,
+    pandas and Arrow alone: SciPy (the fit's signal and stats, the C3D reader, rotations
+    by scipy, the tracking smoother) costs 0.5-1 s of imports it does not need
+    (docs/performance.md, *angles from Parquet and CSV*)."""
+    import warnings
+
+    from fingerfit.estimate import fit_session
+    from fingerfit.io import write_pose_csv
+    from fingerfit.model import save_model
+
+    from .conftest import subject
+
+    sim = subject("realistic", 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = save_model(fit_session(sim.session), tmp_path / "model.json")
+    out = {}
+    for ext in ("csv", "parquet"):
+        rec = write_pose_csv(tmp_path / f"test.{ext}", sim.session.test[0])
+        args = ["angles", str(model), str(rec), "-o", str(tmp_path / f"angles.{ext}"), "-q"]
+        res = subprocess.run(
+            [sys.executable, "-c", _PROBE.format(args=args, heavy=HEAVY)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        out[ext] = json.loads(res.stdout.strip().splitlines()[-1])
+        assert out[ext]["code"] in (0, None), res.stderr
+        assert (tmp_path / f"angles.{ext}").is_file()
+    for ext, found in out.items():
+        assert "numpy" in found["heavy"] and "pandas" in found["heavy"], (ext, found)
+        assert not {"scipy", "ezc3d", "matplotlib", "statsmodels"} & set(found["heavy"]), (
+            ext,
+            found,
+        )
+
+
 def test_signature_names_mirror_the_real_ones() -> None:
     from fingerfit.cli import _names
     from fingerfit.estimate import FitOptions

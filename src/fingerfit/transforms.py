@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 FloatArray = NDArray[np.float64]
 
@@ -496,5 +495,7 @@ def rotation_vector(matrix: FloatArray) -> FloatArray:
     out = np.full((m.shape[0], 3), np.nan)
     ok = np.isfinite(m).all(axis=(1, 2))
     if ok.any():
+        from scipy.spatial.transform import Rotation  # on use: importing it takes 0.2-0.3 s
+
         out[ok] = Rotation.from_matrix(m[ok]).as_rotvec()
     return out
