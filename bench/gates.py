@@ -29,9 +29,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
-import datetime
 import json
-import platform
 import sys
 import time
 import warnings
@@ -43,7 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import CONDITIONS
 from pool import run_tasks
-from revision import run_at_revision
+from revision import run_at_revision, run_meta
 
 from fingerfit.errors import FingerfitError
 from fingerfit.estimate import FitOptions, fit_session
@@ -265,14 +263,7 @@ def main() -> None:
             ap.error(f"unknown condition '{c}'")
     t0 = time.perf_counter()
     summary = summarise(run(args, chosen), chosen)
-    meta = {
-        "date": datetime.date.today().isoformat(),
-        "command": ("python bench/gates.py " + " ".join(sys.argv[1:])).strip(),
-        "subjects": args.subjects,
-        "seconds": time.perf_counter() - t0,
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-    }
+    meta = run_meta("gates.py", time.perf_counter() - t0, subjects=args.subjects)
     before = run_before(args.before, args) if args.before else None
     if before is not None:
         meta["before"] = {"revision": args.before, "summary": before}

@@ -27,9 +27,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
-import datetime
 import json
-import platform
 import sys
 import time
 import warnings
@@ -42,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from accuracy import CONDITIONS
 from pool import run_tasks
-from revision import run_at_revision
+from revision import run_at_revision, run_meta
 
 from fingerfit.errors import FingerfitError
 from fingerfit.estimate import fit_session
@@ -249,13 +247,7 @@ def main() -> None:
     t0 = time.perf_counter()
     results = run(args, chosen)
     summary = summarise(results)
-    meta = {
-        "date": datetime.date.today().isoformat(),
-        "command": ("python bench/pinch_worlds.py " + " ".join(sys.argv[1:])).strip(),
-        "seconds": time.perf_counter() - t0,
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-    }
+    meta = run_meta("pinch_worlds.py", time.perf_counter() - t0)
     before = run_before(args.before, args) if args.before else None
     if before is not None:
         meta["before"] = {"revision": args.before, "summary": before}

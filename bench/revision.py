@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import datetime
 import json
 import os
+import platform
 import subprocess
 import sys
 import tempfile
@@ -28,3 +30,18 @@ def run_at_revision(rev: str, script: str, args: list[str]) -> dict:
         cmd = [sys.executable, script, *args, "--json", str(out)]
         subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL)
         return json.loads(out.read_text())
+
+
+def run_meta(script: str, seconds: float, **extra: object) -> dict:
+    """A benchmark run's ``meta``: date, the command as run (``python bench/<script> ...``),
+    its seconds, Python's and NumPy's versions, and ``extra``."""
+    import numpy as np
+
+    return {
+        "date": datetime.date.today().isoformat(),
+        "command": (f"python bench/{script} " + " ".join(sys.argv[1:])).strip(),
+        **extra,
+        "seconds": seconds,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+    }
