@@ -33,7 +33,6 @@ robot's ``hold`` or ``release`` policy, :meth:`.streamer.Streamer.silence`).
 from __future__ import annotations
 
 import contextlib
-import math
 import signal
 import sys
 import threading
@@ -44,7 +43,7 @@ import numpy as np
 
 from ..errors import FingerfitError
 from .datalane import DATA_PERIOD, DataLane
-from .streamer import DEFAULT_MAX_AGE_MS, SILENCE_POLICIES, Streamer, check_max_age
+from .streamer import DEFAULT_MAX_AGE_MS, SILENCE_POLICIES, Streamer, check_max_age, positive_ms
 from .values import (
     Channels,
     FrameValues,
@@ -107,9 +106,7 @@ class StatusLine:
 
 def check_silence(ms: float) -> float:
     """``--silence-ms`` in ms -> s; a clear error unless a positive number."""
-    if not (math.isfinite(ms) and ms > 0):
-        raise FingerfitError(f"must be a positive number of ms, not {ms:g}", field="--silence-ms")
-    return ms / 1e3
+    return positive_ms(ms, "--silence-ms")
 
 
 @contextlib.contextmanager

@@ -360,8 +360,14 @@ class Streamer:
             raise errors[0]
 
 
+def positive_ms(ms: float, field: str) -> float:
+    """A duration option in ms -> s; a clear error naming ``field`` unless a positive
+    number."""
+    if not (math.isfinite(ms) and ms > 0):
+        raise FingerfitError(f"must be a positive number of ms, not {ms:g}", field=field)
+    return ms / 1e3
+
+
 def check_max_age(ms: float) -> float:
     """``--max-age`` in ms -> s; a clear error unless a positive number."""
-    if not (math.isfinite(ms) and ms > 0):
-        raise FingerfitError(f"must be a positive number of ms, not {ms:g}", field="--max-age")
-    return ms / 1e3
+    return positive_ms(ms, "--max-age")
