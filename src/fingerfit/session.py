@@ -181,12 +181,17 @@ class Recording:
         Per sensor name.
     notes : list[str]
         Counts of anything repaired or treated as missing while reading.
+    markers : dict[str, ndarray]
+        Per marker label, its positions ``(n_frames, 3)`` in tracker (lab) coordinates,
+        mm; NaN where the marker was not seen. Empty for a 6-DOF recording. Which
+        segment carries which marker is the session's ``marker_map``.
     """
 
     name: str
     time: FloatArray
     poses: dict[str, PoseSeries]
     notes: list[str] = field(default_factory=list)
+    markers: dict[str, FloatArray] = field(default_factory=dict)
 
     @property
     def n_frames(self) -> int:
@@ -213,6 +218,7 @@ class Recording:
             self.time[index],
             {k: v.take(index) for k, v in self.poses.items()},
             list(self.notes),
+            {k: v[index] for k, v in self.markers.items()},
         )
 
 
@@ -222,7 +228,8 @@ def concat_recordings(recordings: list[Recording]) -> Recording:
     Parameters
     ----------
     recordings : list of Recording
-        Non-empty; every one with the sensors of the first (mm, tracker frame).
+        Non-empty; every one with the sensors and markers of the first (mm, tracker
+        frame).
 
     Returns
     -------
@@ -239,7 +246,10 @@ def concat_recordings(recordings: list[Recording]) -> Recording:
         )
         for k in recordings[0].poses
     }
-    return Recording(recordings[0].name, np.concatenate([r.time for r in recordings]), poses)
+    markers = {k: np.concatenate([r.markers[k] for r in recordings]) for k in recordings[0].markers}
+    return Recording(
+        recordings[0].name, np.concatenate([r.time for r in recordings]), poses, markers=markers
+    )
 
 
 @dataclass(frozen=True)
@@ -288,6 +298,10 @@ class Session:
     files : tuple of Path
         Every file the session was read from (``session.toml``, recordings, landmarks,
         events); no command may write onto one of them.
+    marker_map : dict[str, tuple of str]
+        For a marker session: per segment (``hand``, ``index.proximal``, ... the sensor
+        names), the labels of the skin markers it carries, in the recordings'
+        ``markers``. Empty for a 6-DOF session.
     """
 
     subject: str
@@ -303,6 +317,7 @@ class Session:
     events: list[TargetEvent] = field(default_factory=list)
     path: Path | None = None
     files: tuple[Path, ...] = ()
+    marker_map: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
     def recordings(self) -> list[Recording]:
         """Every recording: reference, grasp, targets, test."""
