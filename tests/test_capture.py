@@ -355,7 +355,7 @@ def test_ctrl_c_while_recording_keeps_what_was_recorded(simulated, tmp_path, mon
 
     sub, folder = simulated
     rec = read_pose_csv(folder / "grasp.csv", units=sub.session.units)
-    monkeypatch.setattr(cli, "_open_source", lambda spec, plan, stations: _Replay(rec, after))
+    monkeypatch.setattr(cli, "open_source", lambda spec, **kw: _Replay(rec, after))
     r = _new_capture(sub, folder, tmp_path, "P09")
     new = tmp_path / "P09"
     if after == 0:  # before any frame: nothing left, and why

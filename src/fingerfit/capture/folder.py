@@ -244,9 +244,58 @@ def write_capture(plan: CapturePlan, recording: Recording) -> Path:
     with tempfile.TemporaryDirectory() as tmp:
         data = write_pose_csv(Path(tmp) / plan.name, recording, units=plan.units).read_bytes()
     toml = plan.folder / SESSION_FILE
-    files = {**plan.copies, plan.target: data, toml: _toml_text(plan)}
+    files = {
+        **plan.copies,
+        plan.target: data,
+        toml: session_toml_text(plan.meta, plan.folder, plan.name),
+    }
     write_files(files, overwrite=True)  # every target checked by plan_capture
     return toml
+
+
+def read_folder(
+    folder: Path,
+    *,
+    subject: str | None = None,
+    hand: str | None = None,
+    units: str | None = None,
+    rate: float | None = None,
+    fingers: list[str] | None = None,
+    need_reference: bool = True,
+) -> tuple[dict, bool, Recording | None]:
+    """A session folder's ``session.toml`` (or, without one, the options that start it,
+    ``subject`` needed) checked against the options, and its reference recording.
+
+    Returns
+    -------
+    meta : dict
+        ``session.toml``'s content (``fingers`` set to the session's digits when the
+        reference is read).
+    new : bool
+        The folder has no ``session.toml``.
+    reference : Recording or None
+        The reference recording (mm); None when ``need_reference`` is False and the
+        folder has none.
+
+    Raises
+    ------
+    FingerfitError
+        As :func:`plan_capture`: the option, file or field at fault.
+    """
+    from ..io import read_pose_csv
+
+    meta, new = _session_meta(folder, subject, hand, units, rate, fingers)
+    ref_path = folder / str(meta["recordings"]["reference"])
+    if not ref_path.is_file():
+        if need_reference:
+            raise FingerfitError(
+                "no reference recording: record it first (fingerfit capture --protocol reference)",
+                path=ref_path,
+            )
+        return meta, new, None
+    reference = read_pose_csv(ref_path, units=meta["units"], rate_hz=meta["rate_hz"])
+    meta["fingers"] = _digits(meta, reference, ref_path, new)
+    return meta, new, reference
 
 
 def _listed(meta: dict) -> list[str]:
@@ -343,17 +392,17 @@ def _digits(meta: dict, reference: Recording, path: Path, new: bool) -> list[str
     return digits
 
 
-def _toml_text(plan: CapturePlan) -> str:
-    """``session.toml`` with the recording listed under ``grasp``."""
-    meta = plan.meta
+def session_toml_text(meta: dict, folder: Path, listed_name: str | None = None) -> str:
+    """``session.toml`` of ``meta`` (as :func:`read_folder` gives it), with
+    ``listed_name`` added to the ``grasp`` list."""
     recs = dict(meta["recordings"])
     listed = _listed(meta)
-    if plan.name not in listed:
-        listed.append(plan.name)
+    if listed_name is not None and listed_name not in listed:
+        listed.append(listed_name)
     recs[RECORDING_LIST] = listed
     lines = [
         f"format = {json.dumps(meta.get('format', 'fingerfit.session/1'))}",
-        f"subject = {json.dumps(meta.get('subject', plan.folder.name))}",
+        f"subject = {json.dumps(meta.get('subject', folder.name))}",
         f"hand = {json.dumps(meta.get('hand', NEW_SESSION['hand']))}",
         f"units = {json.dumps(meta['units'])}",
         f"rate_hz = {float(meta['rate_hz'])!r}",
@@ -361,7 +410,7 @@ def _toml_text(plan: CapturePlan) -> str:
         "",
         "[recordings]",
     ]
-    for key in ("reference", "grasp", "targets", "test", "events"):
+    for key in ("reference", RECORDING_LIST, "targets", "test", "events"):
         if key in recs:
             lines.append(f"{key} = {json.dumps(recs[key])}")
     return "\n".join(lines) + "\n"

@@ -12,9 +12,12 @@ from ..errors import FingerfitError, shown
 from .app import Quiet, app, console, notice, out, say, user_errors
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from rich.table import Table
 
     from ..capture import CapturePlan, JointEvidence
+    from ..session import Recording
 
 PROTOCOLS = ("grasp", "thumb")  # fingerfit.capture.PROTOCOLS (without importing NumPy)
 
@@ -164,12 +167,21 @@ def _capture(
 
     plan = plan_capture(
         folder, protocol, name, subject=subject, hand=hand, units=units, rate=rate,
-        fingers=digits, reference=reference, landmarks=landmarks, inputs=_source_files(spec),
+        fingers=digits, reference=reference, landmarks=landmarks, inputs=source_files(spec),
         overwrite=overwrite,
     )  # fmt: skip
     need = thresholds()
     acc = Accumulator(plan.name, plan.sensors)
-    the_source = _open_source(spec, plan, stations)
+    from ..capture import check_sensors
+
+    the_source = open_source(
+        spec,
+        units=plan.units,
+        rate_hz=plan.rate_hz,
+        sensors=plan.sensors,
+        stations=stations,
+        check=lambda rec, path: check_sensors(rec, plan, path),
+    )
     live = child = failure = None
     interrupted = False
     try:
@@ -272,7 +284,7 @@ def _capture(
         notice("note", f"{plan.folder / 'landmarks.csv'} is missing: the fit needs it")
 
 
-def _source_files(spec: str) -> tuple[Path, ...]:
+def source_files(spec: str) -> tuple[Path, ...]:
     """The files a source reads (a replayed recording), never to be written onto."""
     from ..live import sources as src
 
@@ -281,29 +293,36 @@ def _source_files(spec: str) -> tuple[Path, ...]:
     return ()
 
 
-def _open_source(spec: str, plan: CapturePlan, stations: str | None):
-    """The source of ``--source``; a replayed recording is read and checked first (it
-    must have every sensor of the session's digits)."""
-    from ..capture import check_sensors
+def open_source(
+    spec: str,
+    *,
+    units: str,
+    rate_hz: float,
+    sensors: list[str],
+    stations: str | None,
+    check: Callable[[Recording, Path], None] | None = None,
+):
+    """The source of ``--source`` for ``sensors``; a replayed recording is read (in the
+    session's ``units``) and given to ``check`` first (which raises when it lacks what
+    the protocol needs)."""
     from ..io import read_pose_csv
     from ..live import sources as src
 
     kind = src.split_spec(spec)[0]
     if kind == "replay":
         path, speed = src.parse_replay(spec)
-        rec = read_pose_csv(path, units=plan.units, rate_hz=plan.rate_hz)
-        check_sensors(rec, plan, path)
+        rec = read_pose_csv(path, units=units, rate_hz=rate_hz)
+        if check is not None:
+            check(rec, path)
         return src.ReplaySource(rec, speed)
     if kind == "liberty":
         port, baud = src.parse_liberty(spec)
         mapping = (
-            src.parse_stations(stations, plan.sensors)
-            if stations
-            else src.default_stations(plan.sensors)
+            src.parse_stations(stations, sensors) if stations else src.default_stations(sensors)
         )
-        return src.LibertySource(port, baud, mapping, plan.rate_hz)
+        return src.LibertySource(port, baud, mapping, rate_hz)
     if kind == "lsl":
-        return src.LslSource(src.split_spec(spec)[1], plan.sensors)
+        return src.LslSource(src.split_spec(spec)[1], sensors)
     raise FingerfitError(
         f"unknown source '{shown(spec)}': replay:FILE, liberty:PORT or lsl:NAME", field="--source"
     )

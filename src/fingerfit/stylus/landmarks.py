@@ -11,8 +11,8 @@ posture (``docs/lab.md``, *Landmarks*).
   posture by that sensor's mean pose in the reference recording.
 * **A take**: the stylus tip still for :data:`WINDOW_S` -- the window's spread (RMS
   distance of its points from their mean, its white tracker noise taken out: see
-  :func:`window_spread`) at most :data:`MAX_SPREAD_MM` --, or the window ending at a key
-  press, refused when its spread is over that. The take is the window's mean. The next
+  :func:`window_spread`) at most :data:`STILL_MM` --, or the window ending at a key
+  press, refused as shaky when its spread is over :data:`MAX_SPREAD_MM`. The take is the window's mean. The next
   take of the same landmark waits until the tip has been lifted :data:`LIFT_MM` away.
 * **The landmark**: the mean of its takes (default :data:`TAKES`); its spread is the RMS
   distance of the takes from that mean, its uncertainty the standard error
@@ -30,8 +30,13 @@ from ..transforms import FloatArray
 
 #: Seconds of stillness that make a take, and the window a key press averages.
 WINDOW_S = 0.5
-#: The largest spread (mm) a take's window may have.
+#: The largest spread (mm) a take's window may have (a key press's window over it is
+#: refused as shaky).
 MAX_SPREAD_MM = 0.5
+#: The spread (mm) under which the stylus counts as held still (the still trigger):
+#: tighter than :data:`MAX_SPREAD_MM`, so that the window leaves out the end of the
+#: approach, whose slow last millimetre would pull the take towards where it came from.
+STILL_MM = 0.2
 #: How far (mm) the tip must leave a take before the next take of the landmark.
 LIFT_MM = 10.0
 #: Placements of each landmark, averaged.
@@ -131,13 +136,16 @@ def next_take(
     *,
     start: int = 0,
     lifted_from: FloatArray | None = None,
+    lift_points: FloatArray | None = None,
     window_s: float = WINDOW_S,
-    max_spread_mm: float = MAX_SPREAD_MM,
+    max_spread_mm: float = STILL_MM,
     lift_mm: float = LIFT_MM,
 ) -> tuple[int, int] | None:
     """The first still window of the tip ``points`` ``(n, 3)`` (mm, the landmark's
     segment frame) ending at or after frame ``start``, after the tip has left
-    ``lifted_from`` ``(3,)`` (the previous take) by ``lift_mm``.
+    ``lifted_from`` ``(3,)`` (the previous take) by ``lift_mm``: measured on
+    ``lift_points`` ``(n, 3)`` (the same frames in the frame ``lifted_from`` is in, e.g.
+    the tracker's; default ``points``).
 
     Returns
     -------
@@ -148,7 +156,8 @@ def next_take(
     n = points.shape[0]
     begin = start
     if lifted_from is not None:
-        away = np.linalg.norm(points[start:] - lifted_from, axis=1) > lift_mm
+        lp = points if lift_points is None else lift_points
+        away = np.linalg.norm(lp[start:] - lifted_from, axis=1) > lift_mm
         hit = np.flatnonzero(away)
         if hit.size == 0:
             return None
