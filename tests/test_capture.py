@@ -409,9 +409,9 @@ def test_ctrl_c_after_recording_keeps_it_and_says_the_evidence_is_missing(
     sub, folder = simulated
     real_write, real_evidence = capture_folder.write_capture, cap.evidence
 
-    def write_interrupted(plan, rec):
+    def write_interrupted(plan, rec, extra=None):
         os.kill(os.getpid(), signal.SIGINT)  # held: the files are written first
-        return real_write(plan, rec)
+        return real_write(plan, rec, extra)
 
     def evidence(session, digits, options=None, *, second=True):
         if second:  # the final evidence: Ctrl-C lands in it

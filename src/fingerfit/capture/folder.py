@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import tempfile
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from ..digits import DIGIT_NAMES
 from ..errors import FingerfitError, shown
 from ..io.sessiondir import EVENTS_FILE, LANDMARKS_FILE, SESSION_FILE
 from ..session import UNITS_TO_MM, Recording, Session, check_subject_id, digit_sensors
-from .protocols import RECORDING_LIST, next_recording, shown_digits
+from .protocols import HOLD_PROTOCOLS, RECORDING_LIST, next_recording, shown_digits
 
 #: Defaults of a new session (``fingerfit capture`` without ``session.toml``).
 NEW_SESSION = {"hand": "left", "units": "mm", "rate_hz": 240.0}
@@ -153,6 +154,9 @@ def plan_capture(
     copies = {folder / f: p for f, p in sources.items() if p is not None}
     copies = {t: p for t, p in copies.items() if not (t.exists() and t.samefile(p))}
     targets = [folder / name, toml, *copies]
+    if protocol in HOLD_PROTOCOLS:
+        targets.append(folder / EVENTS_FILE)
+        check_target(folder / EVENTS_FILE)
     refuse_writing_inputs(targets, [*inputs, *given])
     check_target(folder / name, overwrite=overwrite)
     check_target(toml)  # read-only found now, not after the recording
@@ -228,10 +232,12 @@ def check_sensors(recording: Recording, plan: CapturePlan, path: Path | str) -> 
             )
 
 
-def write_capture(plan: CapturePlan, recording: Recording) -> Path:
+def write_capture(
+    plan: CapturePlan, recording: Recording, extra: dict[Path, bytes] | None = None
+) -> Path:
     """Write the recording (in the session's units and the format of its name), the
-    copies of ``--reference`` and ``--landmarks`` and ``session.toml`` listing the
-    recording: all of them or none.
+    copies of ``--reference`` and ``--landmarks``, ``extra`` files (a pinch recording's
+    ``events.csv``) and ``session.toml`` listing the recording: all of them or none.
 
     Returns
     -------
@@ -241,16 +247,26 @@ def write_capture(plan: CapturePlan, recording: Recording) -> Path:
     from ..io.atomic import write_files
     from ..io.posewrite import write_pose_csv
 
-    with tempfile.TemporaryDirectory() as tmp:
-        data = write_pose_csv(Path(tmp) / plan.name, recording, units=plan.units).read_bytes()
+    data = rendered(plan.name, lambda p: write_pose_csv(p, recording, units=plan.units))
     toml = plan.folder / SESSION_FILE
     files = {
         **plan.copies,
+        **(extra or {}),
         plan.target: data,
         toml: session_toml_text(plan.meta, plan.folder, plan.name),
     }
     write_files(files, overwrite=True)  # every target checked by plan_capture
     return toml
+
+
+def rendered(name: str, write: Callable[[Path], object]) -> bytes:
+    """The bytes a file writer writes for a file called ``name`` (written in a temporary
+    folder), to be written with others all or none
+    (:func:`fingerfit.io.atomic.write_files`)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / name
+        write(path)
+        return path.read_bytes()
 
 
 def read_folder(
