@@ -148,16 +148,25 @@ def subject_study(condition: str, seed: int) -> dict:
     true_tip = np.asarray(st.truth["tip_offset_mm"])
     out: dict = {}
     p = st.pivot.poses["stylus"]
-    fit = fit_pivot(p.position, p.rotation)
+    try:
+        fit = fit_pivot(p.position, p.rotation)
+    except FingerfitError:  # refused: the landmarks are taken with the true tip below
+        fit = None
     out["pivot"] = {
-        "tip_error_mm": float(np.linalg.norm(fit.tip_offset_mm - true_tip)),
-        "pivot_error_mm": float(np.linalg.norm(fit.pivot_mm - np.asarray(st.truth["pivot_mm"]))),
-        "tip_ci_mm": fit.tip_ci_mm,
-        "rms_mm": fit.rms_mm,
+        "refused": fit is None,
+        "tip_error_mm": None
+        if fit is None
+        else float(np.linalg.norm(fit.tip_offset_mm - true_tip)),
+        "pivot_error_mm": None
+        if fit is None
+        else float(np.linalg.norm(fit.pivot_mm - np.asarray(st.truth["pivot_mm"]))),
+        "tip_ci_mm": None if fit is None else fit.tip_ci_mm,
+        "rms_mm": None if fit is None else fit.rms_mm,
     }
+    calibrated = true_tip if fit is None else fit.tip_offset_mm
     placed = session.landmarks  # the mean of the placements (simulate/stylus.py)
     anatomy = _anatomical(sim)
-    for label, tip in (("true stylus", true_tip), ("calibrated stylus", fit.tip_offset_mm)):
+    for label, tip in (("true stylus", true_tip), ("calibrated stylus", calibrated)):
         points, sds, taker = _landmarks(sim, tip)
         err = [float(np.linalg.norm(points[k] - placed[k])) for k in points]
         out[f"landmarks, {label}"] = {
@@ -218,6 +227,7 @@ def summarise(rows: list[dict]) -> dict:
     three = np.concatenate([r["tips vs anatomy"]["three_takes_mm"] for r in rows])
     return {
         "subjects": len(rows),
+        "own pivots refused": sum(r["pivot"]["refused"] for r in rows),
         "pivot tip error (mm)": worst("pivot", "tip_error_mm"),
         "pivot tip CI (mm)": worst("pivot", "tip_ci_mm"),
         "pivot error (mm)": worst("pivot", "pivot_error_mm"),

@@ -14,6 +14,10 @@ stretch of at least :data:`MIN_HOLD_S` in which
   (:func:`fingerfit.stylus.landmarks.window_spread`), so the approach and the release
   are left out.
 
+The first and last half-window of each such stretch are left out too: the touch's onset
+and release (the pulps compressing, rolling into place) are where a real contact is least
+like the fixed contact point the pad fit assumes, and the window cannot place them closer.
+
 Without pad landmarks nothing is found: the nail-edge tips of touching pads are 12-18 mm
 apart, no closer than some pads that do not touch, so a tip cannot tell a touch.
 """
@@ -87,7 +91,9 @@ def find_holds(
         rel = p0 - point(d)
         hold = (np.linalg.norm(rel, axis=1) <= TOUCH_MM) & _still(rel, k)
         edges = np.flatnonzero(np.diff(np.concatenate([[0], hold.astype(np.int8), [0]])))
+        trim = k // 2
         for a, b in edges.reshape(-1, 2):
+            a, b = a + trim, b - trim
             if b - a >= shortest:
                 t = recording.time
                 events.append(TargetEvent(recording.name, first, d, float(t[a]), float(t[b - 1])))
