@@ -71,8 +71,9 @@ def test_reference_landmarks_match_the_simulators_and_a_step_can_be_repeated(lab
     source = f"replay:{folder / 'stylus_landmarks.csv'}@1000"
     stylus = root / "stylus.json"
     args = ["--protocol", "landmarks", "--stylus", stylus, "--source", source, "--pads"]
-    r = _run(new, *args, "--targets", _targets(sim))
+    r = _run(new, *args, "--targets", _targets(sim), "--view-save", root / "landmarks.rrd")
     assert r.exit_code == 0, r.output
+    assert (root / "landmarks.rrd").stat().st_size > 10_000  # the tip, takes and landmarks
     assert "place the stylus on thumb.cmc" in r.output
     got, sd = read_landmark_table(new / "landmarks.csv")
     want = sim.session.landmarks

@@ -179,6 +179,9 @@ def capture(
     if protocol in STEPS:
         from . import capture_steps as steps
 
+        if protocol == "reference" and (view or view_save is not None):
+            raise FingerfitError("the reference protocol has no view", field="--view")
+        check_view(view, view_save, None)
         with Interrupts():
             try:
                 if protocol == "reference":
@@ -191,7 +194,7 @@ def capture(
                     steps.capture_landmarks(
                         session_dir, source, stylus=stylus, takes=takes, pads=pads,
                         targets=_names(targets), only=_names(only) or None, trigger=trigger,
-                        stations=stations, overwrite=overwrite,
+                        stations=stations, overwrite=overwrite, view=view, view_save=view_save,
                     )  # fmt: skip
             except KeyboardInterrupt:
                 raise FingerfitError(

@@ -148,9 +148,12 @@ def capture_landmarks(
     trigger: str,
     stations: str | None,
     overwrite: bool,
+    view: bool = False,
+    view_save: Path | None = None,
 ) -> None:
     """Digitise the session's landmarks with the stylus into ``landmarks.csv``
-    (:mod:`fingerfit.capture.landmarks`)."""
+    (:mod:`fingerfit.capture.landmarks`); with ``view`` or ``view_save``, shown in the 3D
+    view as well (:class:`fingerfit.view.landmarks.LandmarkView`)."""
     from ..capture import Accumulator
     from ..capture.folder import read_folder, rendered
     from ..capture.landmarks import LandmarkTaker
@@ -159,7 +162,7 @@ def capture_landmarks(
     from ..io.sessiondir import LANDMARKS_FILE, read_landmark_table, write_landmarks
     from ..session import is_landmark_name
     from ..stylus import read_stylus
-    from ..stylus.landmarks import landmark_names, landmark_segment
+    from ..stylus.landmarks import landmark_names, landmark_segment, tip_points
     from .capture import open_source, source_files
 
     if stylus is None:
@@ -214,37 +217,66 @@ def capture_landmarks(
                 )
 
     rate_hz = float(meta["rate_hz"])
+    means = {
+        s: reference.poses[s].mean() for s in reference.poses if reference.poses[s].valid.any()
+    }
+    missing_ref = [s for s in segments if s not in means]
+    if missing_ref:
+        raise FingerfitError(
+            f"the reference recording has no samples of '{missing_ref[0]}', which carries a landmark",
+            path=folder / str(meta["recordings"]["reference"]),
+        )
     source = open_source(
         spec, units=meta["units"], rate_hz=rate_hz, sensors=sensors, stations=stations, check=check
     )
+    viewer = None
+    if view or view_save is not None:
+        from ..view.landmarks import LandmarkView
+
+        viewer = LandmarkView(view_save, means)
     taker = LandmarkTaker(names, cal, rate_hz, takes=takes, still=trigger == "still")
     pressed = _enter_presses() if trigger == "enter" else None
     acc = Accumulator(raw.name, sensors)
     say("{}", taker.prompt())
     interrupted = False
+
+    def show(lines: list[str]) -> None:
+        for line in lines:
+            say("{}", line)
+        while viewer is not None and len(logged) < len(taker.done):
+            lm = taker.done[len(logged)]
+            viewer.landmark(lm.name, lm.at_reference(means), lm.sd_mm)
+            logged.append(lm.name)
+
+    logged: list[str] = []
     try:
         for block in source.blocks():
             if block is not None:
                 acc.add(block.recording)
-                for line in taker.add(block.recording):
-                    say("{}", line)
+                if viewer is not None and cal.sensor in block.recording.poses:
+                    p = block.recording.poses[cal.sensor]
+                    viewer.tip(
+                        block.recording.time,
+                        tip_points(p.position, p.rotation, cal.tip_offset_mm, None),
+                    )
+                show(taker.add(block.recording))
             if pressed is not None and pressed.is_set():
                 pressed.clear()
-                for line in taker.press():
-                    say("{}", line)
+                show(taker.press())
             if taker.finished:
                 break
     except KeyboardInterrupt:
         interrupted = True
     finally:
         source.close()
+        if viewer is not None:
+            viewer.close(bool(taker.done))
     if not taker.done:
         raise FingerfitError(
             f"{'interrupted' if interrupted else 'the source ended'} before a landmark was "
             "taken; no file written",
             field="--source",
         )
-    means = {s: reference.poses[s].mean() for s in segments}
     points, sds = taker.result(means)
     merged = {**{k: v for k, v in have[0].items() if k not in points}, **points}
     merged_sd = {**{k: v for k, v in have[1].items() if k not in points}, **sds}
