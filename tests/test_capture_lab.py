@@ -196,9 +196,10 @@ def test_pinch_holds_cover_the_simulators_events_and_no_key_pinch(lab):
         found = find_holds(rec, pads, s.rate_hz)
         truth = [e for e in s.events if e.recording == name]
         assert len(found) == len(truth)  # the key pinches of pinch.csv are not holds
-        for e in truth:
+        for e in truth:  # each event inside a hold found, to a frame or two
             assert any(
-                f.target == e.target and f.start <= e.start and f.end >= e.end for f in found
+                f.target == e.target and f.start <= e.start + 0.02 and f.end >= e.end - 0.02
+                for f in found
             )
     # The pads fitted to the holds found are those fitted to the simulator's events.
     found = [

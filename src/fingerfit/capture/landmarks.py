@@ -20,6 +20,7 @@ from ..session import Recording
 from ..stylus.file import StylusCalibration
 from ..stylus.landmarks import (
     MAX_SPREAD_MM,
+    PARTS,
     TAKES,
     WINDOW_S,
     Landmark,
@@ -162,7 +163,9 @@ class LandmarkTaker:
         name = self.current
         assert name is not None
         segment = landmark_segment(name)
-        point = np.nanmean(local, axis=0)
+        # The window's first part holds the end of the approach (the tip still slowing):
+        # the take is the mean of the rest.
+        point = np.nanmean(local[local.shape[0] // PARTS :], axis=0)
         spread = window_spread(local)
         self._takes.append(point)
         self._spreads.append(spread)

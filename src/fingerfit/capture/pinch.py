@@ -11,7 +11,7 @@ stretch of at least :data:`MIN_HOLD_S` in which
 * they are still relative to each other: the spread of their difference over
   :data:`STILL_WINDOW_S` around each frame is at most
   :data:`fingerfit.stylus.landmarks.STILL_MM`, white tracker noise taken out
-  (:func:`fingerfit.stylus.landmarks.window_spread`), so the approach and the release
+  (:func:`fingerfit.stylus.landmarks.window_spreads`), so the approach and the release
   are left out.
 
 The first and last half-window of each such stretch are left out too: the touch's onset
@@ -41,9 +41,9 @@ STILL_WINDOW_S = 0.25
 def _still(rel: FloatArray, k: int) -> np.ndarray:
     """Frames ``(n,)`` whose centred window of ``k`` frames of ``rel (n, 3)`` has a spread
     at most :data:`STILL_MM` (running sums, as :func:`fingerfit.stylus.landmarks.next_take`)."""
-    from ..stylus.landmarks import _window_spreads
+    from ..stylus.landmarks import window_spreads
 
-    spreads = _window_spreads(rel, k)  # the window ending at each frame
+    spreads = window_spreads(rel, k)  # the window ending at each frame
     shift = k // 2
     centred = np.full(rel.shape[0], np.nan)
     centred[: rel.shape[0] - shift] = spreads[shift:]

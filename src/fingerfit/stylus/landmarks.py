@@ -9,9 +9,9 @@ posture (``docs/lab.md``, *Landmarks*).
   frame). A take is the stylus tip expressed in that segment's sensor frame, so the hand
   may rest anywhere while the landmarks are taken: each is carried to the reference
   posture by that sensor's mean pose in the reference recording.
-* **A take**: the stylus tip still for :data:`WINDOW_S` -- the window's spread (RMS
-  distance of its points from their mean, its white tracker noise taken out: see
-  :func:`window_spread`) at most :data:`STILL_MM` --, or the window ending at a key
+* **A take**: the stylus tip still for :data:`WINDOW_S` -- the window's spread (how far
+  its tip wanders, the tracker's white noise left out: see
+  :func:`window_spreads`) at most :data:`STILL_MM` --, or the window ending at a key
   press, refused as shaky when its spread is over :data:`MAX_SPREAD_MM`. The take is the window's mean. The next
   take of the same landmark waits until the tip has been lifted :data:`LIFT_MM` away.
 * **The landmark**: the mean of its takes (default :data:`TAKES`); its spread is the RMS
@@ -39,6 +39,8 @@ MAX_SPREAD_MM = 0.5
 STILL_MM = 0.2
 #: How far (mm) the tip must leave a take before the next take of the landmark.
 LIFT_MM = 10.0
+#: The parts a window is cut into to measure its spread (:func:`window_spreads`).
+PARTS = 5
 #: Placements of each landmark, averaged.
 TAKES = 3
 
@@ -91,40 +93,46 @@ def tip_points(
 
 
 def window_spread(points: FloatArray) -> float:
-    """A window's spread (mm): the RMS distance of ``points`` ``(n, 3)`` from their mean,
-    less the tracker's white noise (estimated from successive differences, whose mean
-    square is twice its variance), so that a noisier tracker does not read as a shaking
-    hand. NaN with fewer than 3 complete points."""
+    """A window's spread (mm): how far the tip wanders in ``points`` ``(n, 3)``, white
+    tracker noise left out (:func:`window_spreads` over the whole window; missing points
+    dropped). NaN with fewer than :data:`PARTS` complete points."""
     ok = np.isfinite(points).all(axis=1)
     p = points[ok]
-    if p.shape[0] < 3:
+    if p.shape[0] < PARTS:
         return float("nan")
-    total = float(((p - p.mean(axis=0)) ** 2).sum(axis=1).mean())
-    noise = float((np.diff(p, axis=0) ** 2).sum(axis=1).mean() / 2.0)
-    return float(np.sqrt(max(total - noise, 0.0)))
+    return float(window_spreads(p, p.shape[0])[-1])
 
 
-def _window_spreads(points: FloatArray, k: int) -> FloatArray:
-    """:func:`window_spread` of every window of ``k`` frames ending at each frame
-    ``(n,)`` (NaN before the first full window or where a point is missing): running sums."""
+def window_spreads(points: FloatArray, k: int) -> FloatArray:
+    """The spread (mm) of every window of ``k`` frames of ``points`` ``(n, 3)``, ending
+    at each frame ``(n,)``: NaN before the first full window or where a point is missing.
+
+    A window is cut into :data:`PARTS` equal parts; the spread is the RMS distance of the
+    parts' means from their mean, less what the tracker's white noise leaves in them
+    (its variance from the successive differences, whose mean square is twice it, over
+    the frames of a part): slow wandering and drift count, noise does not, whatever the
+    tracker's noise. Running sums: no loop over frames.
+    """
     n = points.shape[0]
     out = np.full(n, np.nan)
-    if n < k or k < 3:
+    length = k // PARTS
+    if length < 2 or n < PARTS * length:
         return out
+    k = PARTS * length
     ok = np.isfinite(points).all(axis=1)
     p = np.where(ok[:, None], points, 0.0)
     c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(p, axis=0)])
-    c2 = np.concatenate([[0.0], np.cumsum((p * p).sum(axis=1))])
     d = np.zeros(n)
     d[1:] = (np.diff(p, axis=0) ** 2).sum(axis=1)
     cd = np.concatenate([[0.0], np.cumsum(d)])
     cok = np.concatenate([[0], np.cumsum(~ok)])
     end = np.arange(k, n + 1)
-    s1 = c1[end] - c1[end - k]
-    s2 = c2[end] - c2[end - k]
-    total = s2 / k - (s1 * s1).sum(axis=1) / (k * k)
-    noise = (cd[end] - cd[end - k + 1]) / (k - 1) / 2.0
-    spread = np.sqrt(np.maximum(total - noise, 0.0))
+    means = np.stack(
+        [(c1[end - j * length] - c1[end - (j + 1) * length]) / length for j in range(PARTS)]
+    )  # (parts, windows, 3)
+    total = ((means - means.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0)
+    noise = (cd[end] - cd[end - k + 1]) / (k - 1) / 2.0  # per frame, 3-D
+    spread = np.sqrt(np.maximum(total - noise / length * (PARTS - 1) / PARTS, 0.0))
     spread[(cok[end] - cok[end - k]) > 0] = np.nan
     out[k - 1 :] = spread
     return out
@@ -162,7 +170,7 @@ def next_take(
         if hit.size == 0:
             return None
         begin = start + int(hit[0])
-    spreads = _window_spreads(points, k)
+    spreads = window_spreads(points, k)
     still = np.flatnonzero(spreads[begin + k - 1 :] <= max_spread_mm) if n >= begin + k else []
     if len(still) == 0:
         return None
