@@ -62,7 +62,7 @@ def capture_reference(
     from ..io.posewrite import write_pose_csv
     from ..io.sessiondir import SESSION_FILE
     from ..session import digit_sensors
-    from .capture import open_source, source_files
+    from .capture_source import open_source, source_files
 
     meta, new, _ = read_folder(
         folder, subject=subject, hand=hand, units=units, rate=rate, fingers=digits,
@@ -163,7 +163,7 @@ def capture_landmarks(
     from ..session import is_landmark_name
     from ..stylus import read_stylus
     from ..stylus.landmarks import landmark_names, landmark_segment, tip_points
-    from .capture import open_source, source_files
+    from .capture_source import open_source, source_files
 
     if stylus is None:
         raise FingerfitError(
