@@ -2,11 +2,14 @@
 
 Layout (see ``docs/formats.md``)::
 
-    session.toml      format, subject, hand, units, rate_hz, fingers, [recordings]
+    session.toml      format, subject, hand, units, rate_hz, fingers, [markers,] [recordings]
     reference.csv     static recording at the stretched reference posture
     landmarks.csv     name,x,y,z (stylus points at the reference posture)
     grasp*.csv ...    pose recordings (canonical pose CSV)
     events.csv        optional: recording,finger,target,start,end
+
+A marker session (``markers = "markers.toml"``) holds marker recordings (``.trc``,
+``.tsv``, ``.c3d``) instead, and its landmarks are optional (:mod:`.markers.session`).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import difflib
 import io
 import json
 import math
+import os
 import re
 import tomllib
 from pathlib import Path, PurePosixPath, PureWindowsPath
@@ -39,6 +43,10 @@ from ..session import (
 from ..transforms import FloatArray
 from .atomic import atomic_write
 from .hygiene import MAX_RATE_HZ, implausible_message, implausible_rows
+from .markers import read_marker_recording
+from .markers.markermap import MAP_FILE, read_marker_map, write_marker_map
+from .markers.session import check_marker_session, check_recording_kind, trc_named
+from .opensim import write_markers
 from .posecsv import check_field_counts, read_pose_csv
 from .posewrite import write_pose_csv
 
@@ -49,7 +57,7 @@ EVENTS_HEADER = ("recording", "finger", "target", "start", "end")
 
 
 #: Keys of ``session.toml``: top level and ``[recordings]``.
-TOP_KEYS = ("format", "subject", "hand", "units", "rate_hz", "fingers", "recordings")
+TOP_KEYS = ("format", "subject", "hand", "units", "rate_hz", "fingers", "markers", "recordings")
 RECORDING_KEYS = ("reference", "grasp", "targets", "test", "events")
 
 
@@ -425,20 +433,35 @@ def load_session(
         )
     target_names = _file_list(recs.get("targets", []), meta_path, "recordings.targets")
     test_names = _file_list(recs.get("test", []), meta_path, "recordings.test")
+    map_file = None
+    if "markers" in meta:
+        map_file = session_file(directory, meta["markers"], meta_path, "markers")
     ref_file = file(ref_name, "reference")
     grasp_files = [file(n, "grasp") for n in grasp_names]
     target_files = [file(n, "targets") for n in target_names]
     test_files = [file(n, "test") for n in test_names]
+    for key, files in (
+        ("reference", [ref_file]),
+        ("grasp", grasp_files),
+        ("targets", target_files),
+        ("test", test_files),
+    ):
+        for f in files:
+            check_recording_kind(f, map_file is not None, meta_path, f"recordings.{key}")
     events_file = None
     if "events" in recs:
         events_file = file(_require(recs, "events", str, meta_path, "recordings."), "events")
-    landmarks_file = session_file(directory, LANDMARKS_FILE, meta_path, LANDMARKS_FILE)
+    landmarks_file: Path | None = None
+    if map_file is None or os.path.lexists(directory / LANDMARKS_FILE):  # optional with markers
+        landmarks_file = session_file(directory, LANDMARKS_FILE, meta_path, LANDMARKS_FILE)
 
     known = {r.name: r for r in parsed.recordings()} if parsed is not None else {}
 
     def load(f: Path) -> Recording:
         if f.name in known:
             return known[f.name]
+        if map_file is not None:
+            return read_marker_recording(f)  # in the units the file states
         return read_pose_csv(f, units=units, rate_hz=rate)
 
     reference = load(ref_file)
@@ -446,10 +469,11 @@ def load_session(
     targets = [load(f) for f in target_files]
     test = [load(f) for f in test_files] if test else []
     if parsed is not None:
-        landmarks, events = parsed.landmarks, parsed.events
+        landmarks, events, marker_map = parsed.landmarks, parsed.events, parsed.marker_map
     else:
-        landmarks = read_landmarks(landmarks_file, units)
+        landmarks = read_landmarks(landmarks_file, units) if landmarks_file is not None else {}
         events = read_events(events_file) if events_file is not None else []
+        marker_map = read_marker_map(map_file) if map_file is not None else {}
     recordings = [reference, *grasp, *targets, *test]
     events = match_event_recordings(events, [r.name for r in recordings])
     session = Session(
@@ -471,18 +495,25 @@ def load_session(
             *grasp_files,
             *target_files,
             *test_files,
-            landmarks_file,
+            *([landmarks_file] if landmarks_file is not None else []),
             *([events_file] if events_file is not None else []),
+            *([map_file] if map_file is not None else []),
         ),
+        marker_map=marker_map,
     )
-    _check_complete(session)
+    _check_complete(session, map_file)
     return session
 
 
-def _check_complete(session: Session) -> None:
-    """Every listed finger has its sensors in the reference and grasp recordings and its landmarks."""
+def _check_complete(session: Session, map_file: Path | None = None) -> None:
+    """Every listed finger has its sensors in the reference and grasp recordings and its
+    landmarks; in a marker session (``map_file``), the map's segments take the place of
+    the sensors (:func:`~fingerfit.io.markers.session.check_marker_session`) and no
+    landmark is required."""
     assert session.path is not None
-    for finger in session.fingers:
+    if map_file is not None:
+        check_marker_session(session, map_file)
+    for finger in session.fingers if map_file is None else ():
         needed = digit_sensors(finger)
         for rec in [session.reference, *session.grasp]:
             for s in needed:
@@ -529,7 +560,8 @@ def _toml_list(names: list[str]) -> str:
 def write_session_toml(session: Session, directory: str | Path) -> Path:
     """Write ``session.toml`` naming the session's recordings (files are not written).
 
-    ``events = "events.csv"`` is listed when the session has events.
+    ``events = "events.csv"`` is listed when the session has events, ``markers =
+    "markers.toml"`` when it has a marker map.
     """
     lines = [
         f'format = "{FORMAT}"',
@@ -538,6 +570,7 @@ def write_session_toml(session: Session, directory: str | Path) -> Path:
         f'units = "{session.units}"',
         f"rate_hz = {float(session.rate_hz)!r}",
         f"fingers = {_toml_list(session.fingers)}",
+        *([f'markers = "{MAP_FILE}"'] if session.marker_map else []),
         "",
         "[recordings]",
         f"reference = {json.dumps(session.reference.name)}",
@@ -561,7 +594,9 @@ def save_session(session: Session, directory: str | Path) -> Path:
     Parameters
     ----------
     session : Session
-        Arrays in mm; files are written in ``session.units``.
+        Arrays in mm; files are written in ``session.units``. A marker session's
+        recordings are written as TRC (``<stem>.trc``), with its map (``markers.toml``)
+        and, when it has landmarks, ``landmarks.csv``.
     directory : str or Path
         Created if needed; existing files of the same names are replaced.
 
@@ -572,9 +607,16 @@ def save_session(session: Session, directory: str | Path) -> Path:
     """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    for rec in session.recordings():
-        write_pose_csv(directory / rec.name, rec, units=session.units)
-    write_landmarks(directory / LANDMARKS_FILE, session.landmarks, session.units)
+    if session.marker_map:
+        session = trc_named(session)
+        for rec in session.recordings():
+            write_markers(directory / rec.name, rec, units=session.units)
+        write_marker_map(directory / MAP_FILE, session.marker_map)
+    else:
+        for rec in session.recordings():
+            write_pose_csv(directory / rec.name, rec, units=session.units)
+    if session.landmarks or not session.marker_map:
+        write_landmarks(directory / LANDMARKS_FILE, session.landmarks, session.units)
     if session.events:
         write_events(directory / EVENTS_FILE, session.events)
     write_session_toml(session, directory)
