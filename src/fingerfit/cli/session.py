@@ -65,6 +65,7 @@ def session(
     from ..io.atomic import staged_directory
     from ..io.markers import is_marker_file, read_marker_recording
     from ..io.markers.markermap import MAP_FILE, read_marker_map
+    from ..io.markers.session import check_marker_session
     from ..io.sessiondir import (
         EVENTS_FILE,
         LANDMARKS_FILE,
@@ -129,11 +130,13 @@ def session(
         for rec in s.recordings():
             for note in rec.notes:
                 notice("note", f"{rec.name}: {note}")
+        sources = [reference, *grasp, *(targets or []), *(test or [])]
+        if markers is not None:  # checked against the files given, named in messages
+            check_marker_session(s, markers, {p.name: p for p in sources})
         # Copy the checked files byte for byte, write session.toml, validate the whole
         # session, and only then let the directory appear (errors name OUT_DIR, not the
         # staging folder).
         bar.update(task, description="writing and checking the session")
-        sources = [reference, *grasp, *(targets or []), *(test or [])]
         with staged_directory(out_dir) as tmp:
             for src in sources:
                 shutil.copyfile(src, tmp / src.name)

@@ -120,14 +120,13 @@ def check_marker_units(markers: dict[str, np.ndarray], path: Path | None = None)
         if p.size and (r := float(np.median(row_norms(p)))) > WORKSPACE_MM:
             raise FingerfitError(
                 f"marker '{label}' is {r / 1000:.4g} m from the origin (median): implausible, "
-                "are the units right (--units)?",
+                "are the units the file states right?",
                 path=path,
                 field="units",
             )
     if len(labels) < 2:
         return
-    with np.errstate(all="ignore"):
-        nearest = np.nanmin(median_pair_distances(pts), axis=1)
+    nearest = np.fmin.reduce(median_pair_distances(pts), axis=1)  # NaN only if never paired
     nearest = nearest[np.isfinite(nearest)]
     if not nearest.size:
         return
@@ -136,7 +135,7 @@ def check_marker_units(markers: dict[str, np.ndarray], path: Path | None = None)
     if not lo <= spacing <= hi:
         raise FingerfitError(
             f"markers lie {spacing:.4g} mm from their nearest neighbour (median over markers "
-            f"and frames; a hand's markers: {lo:g}-{hi:g} mm): are the units right (--units)?",
+            f"and frames; a hand's markers: {lo:g}-{hi:g} mm): are the units the file states right?",
             path=path,
             field="units",
         )

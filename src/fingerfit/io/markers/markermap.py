@@ -20,7 +20,7 @@ import difflib
 import json
 import re
 import tomllib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -153,7 +153,7 @@ def check_marker_map(
     path: Path,
     *,
     sampled: Sequence[Recording] = (),
-    folder: Path | None = None,
+    files: Mapping[str, Path] | None = None,
 ) -> None:
     """Check a marker map against a session's digits and recordings.
 
@@ -170,8 +170,8 @@ def check_marker_map(
     sampled : sequence of Recording
         The recordings in which every mapped marker must have been seen at least once
         (the reference and the grasp recordings).
-    folder : Path, optional
-        The folder the recordings are in, for messages.
+    files : mapping of str to Path, optional
+        The file of each recording (by its name), for messages.
 
     Raises
     ------
@@ -198,7 +198,11 @@ def check_marker_map(
                 path=path,
                 field="markers",
             )
-    where = (lambda r: r.name) if folder is None else (lambda r: folder / r.name)
+    files = files or {}
+
+    def where(rec: Recording) -> Path:
+        return files.get(rec.name, Path(rec.name))
+
     for rec in recordings:
         for segment, labels in marker_map.items():
             for label in labels:
@@ -252,7 +256,7 @@ def check_hand_span(
     if not lo <= span <= hi:
         raise FingerfitError(
             f"the mapped markers span {span:.4g} mm (the farthest two, median over frames; a "
-            f"hand's markers: {lo:g}-{hi:g} mm): are the units right (--units)?",
+            f"hand's markers: {lo:g}-{hi:g} mm): are the units the file states right?",
             path=path,
             field="units",
         )

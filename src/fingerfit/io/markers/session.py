@@ -10,6 +10,7 @@ completeness check, and ``landmarks.csv`` is optional. See ``docs/formats.md``.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -54,16 +55,21 @@ def frame_rate(recording: Recording) -> float:
     return float(1.0 / np.median(steps)) if steps.size else float("nan")
 
 
-def check_marker_session(session: Session, map_path: Path) -> None:
+def check_marker_session(
+    session: Session, map_path: Path, files: Mapping[str, Path] | None = None
+) -> None:
     """A marker session's completeness: the map against the digits and the recordings,
     and every recording at the session's rate.
 
     Parameters
     ----------
     session : Session
-        With ``marker_map`` and ``path``.
+        With ``marker_map``.
     map_path : Path
         The map's file, for messages.
+    files : mapping of str to Path, optional
+        The file of each recording by its name, for messages (default: in
+        ``session.path``).
 
     Raises
     ------
@@ -71,13 +77,15 @@ def check_marker_session(session: Session, map_path: Path) -> None:
         One line: see :func:`~fingerfit.io.markers.markermap.check_marker_map`; a
         recording whose frame rate is not ``rate_hz`` (naming the recording).
     """
-    assert session.path is not None
+    if files is None:
+        folder = session.path if session.path is not None else Path()
+        files = {r.name: folder / r.name for r in session.recordings()}
     for rec in session.recordings():
         rate = frame_rate(rec)
         if np.isfinite(rate) and abs(rate / session.rate_hz - 1.0) > RATE_TOLERANCE:
             raise FingerfitError(
                 f"frame rate {rate:.6g} Hz, not the session's rate_hz {session.rate_hz:g}",
-                path=session.path / rec.name,
+                path=files.get(rec.name, rec.name),
             )
     check_marker_map(
         session.marker_map,
@@ -85,7 +93,7 @@ def check_marker_session(session: Session, map_path: Path) -> None:
         session.recordings(),
         map_path,
         sampled=[session.reference, *session.grasp],
-        folder=session.path,
+        files=files,
     )
 
 
