@@ -182,7 +182,7 @@ def test_a_unit_mistake_is_refused(tmp_path) -> None:
     pts = hand_points()
     # Metres declared as millimetres: markers 0.03-0.06 mm apart.
     msg = refused(write(tmp_path, "m.trc", trc_text(pts / 1000)), "field 'units'")
-    assert "nearest neighbour" in msg and "2-300 mm" in msg
+    assert "marker spacing 0.03 mm" in msg and "2-300 mm" in msg
     # Millimetres declared as metres: 300 m from the origin.
     refused(write(tmp_path, "k.trc", trc_text(pts, units="m")), "field 'units'", "from the origin")
     # The same file with the right units passes.

@@ -188,7 +188,7 @@ def test_unseen_markers_units_and_rates_are_refused(tmp_path) -> None:
         session_args(tmp_path, "b", **cm),
         "reference.trc",
         "field 'units'",
-        "the mapped markers span 6.403 mm",
+        "span of the mapped markers 6.403 mm",
         "the units the file states",
     )
     args = session_args(tmp_path, "c")

@@ -21,8 +21,6 @@ import io
 import json
 import math
 import os
-import re
-import tomllib
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
 import numpy as np
@@ -49,6 +47,7 @@ from .markers.session import check_marker_session, check_recording_kind, trc_nam
 from .opensim import write_markers
 from .posecsv import check_field_counts, read_pose_csv
 from .posewrite import write_pose_csv
+from .textfile import read_bytes, read_toml
 
 SESSION_FILE = "session.toml"
 LANDMARKS_FILE = "landmarks.csv"
@@ -166,12 +165,7 @@ def _read_small_csv(path: Path, header: tuple[str, ...]) -> pd.DataFrame:
 
     Returns the table as strings; row ``i`` is file line ``i + 2``.
     """
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise FingerfitError("file not found", path=path) from None
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    raw = read_bytes(path)
     first = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
     cols = tuple(h.strip() for h in first.split(","))
     if cols != header:
@@ -362,19 +356,7 @@ def load_session(
     if not meta_path.is_file():
         raise FingerfitError(f"not a session directory (no {SESSION_FILE})", path=directory)
     session_file(directory, SESSION_FILE, meta_path, SESSION_FILE)
-    try:
-        text = meta_path.read_bytes().decode("utf-8")
-        meta = tomllib.loads(text)
-    except UnicodeDecodeError as exc:
-        raise FingerfitError(f"not UTF-8 text (byte {exc.start})", path=meta_path) from None
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=meta_path) from None
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"at line (\d+)", str(exc))
-        line = int(found.group(1)) if found else None
-        raise FingerfitError(
-            f"invalid TOML ({str(exc).split(' (at')[0]})", path=meta_path, line=line
-        ) from None
+    meta = read_toml(meta_path)
     _check_keys(meta, TOP_KEYS, meta_path, SESSION_FILE)
     fmt = _require(meta, "format", str, meta_path)
     if fmt != FORMAT:

@@ -128,14 +128,42 @@ def check_marker_units(markers: dict[str, np.ndarray], path: Path | None = None)
         return
     nearest = np.fmin.reduce(median_pair_distances(pts), axis=1)  # NaN only if never paired
     nearest = nearest[np.isfinite(nearest)]
-    if not nearest.size:
-        return
-    spacing = float(np.median(nearest))
-    lo, hi = MARKER_SPACING_MM
-    if not lo <= spacing <= hi:
+    if nearest.size:
+        check_marker_length(
+            float(np.median(nearest)),
+            MARKER_SPACING_MM,
+            "marker spacing",
+            "each marker's median distance to its nearest neighbour, median over markers",
+            path,
+        )
+
+
+def check_marker_length(
+    value: float, bounds: tuple[float, float], what: str, how: str, path: str | Path | None
+) -> None:
+    """Refuse a length of a hand's markers outside ``bounds`` as a unit mistake.
+
+    Parameters
+    ----------
+    value : float
+        The length (mm).
+    bounds : (float, float)
+        Plausible range (mm).
+    what, how : str
+        The length's name and how it was measured, for the message.
+    path : str or Path, optional
+
+    Raises
+    ------
+    FingerfitError
+        ``field 'units'``: ``<what> <value> mm (<how>; a hand's markers: lo-hi mm): are
+        the units the file states right?``
+    """
+    lo, hi = bounds
+    if not lo <= value <= hi:
         raise FingerfitError(
-            f"markers lie {spacing:.4g} mm from their nearest neighbour (median over markers "
-            f"and frames; a hand's markers: {lo:g}-{hi:g} mm): are the units the file states right?",
+            f"{what} {value:.4g} mm ({how}; a hand's markers: {lo:g}-{hi:g} mm): are the "
+            "units the file states right?",
             path=path,
             field="units",
         )

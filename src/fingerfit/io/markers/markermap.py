@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import difflib
 import json
-import re
-import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -29,7 +27,8 @@ from ...digits import DIGIT_NAMES, DIGITS, HAND_SENSOR
 from ...errors import FingerfitError, shown
 from ...session import Recording
 from ..atomic import atomic_write
-from .frames import median_pair_distances, sample_frames
+from ..textfile import read_toml
+from .frames import check_marker_length, median_pair_distances, sample_frames
 
 #: The map's file name in a session folder.
 MAP_FILE = "markers.toml"
@@ -77,21 +76,7 @@ def read_marker_map(path: str | Path) -> dict[str, tuple[str, ...]]:
         fewer than :data:`MIN_HAND_MARKERS` on it.
     """
     path = Path(path)
-    try:
-        meta = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except FileNotFoundError:
-        raise FingerfitError("file not found", path=path) from None
-    except UnicodeDecodeError as exc:
-        raise FingerfitError(f"not UTF-8 text (byte {exc.start})", path=path) from None
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"at line (\d+)", str(exc))
-        raise FingerfitError(
-            f"invalid TOML ({str(exc).split(' (at')[0]})",
-            path=path,
-            line=int(found.group(1)) if found else None,
-        ) from None
+    meta = read_toml(path)
     for key in meta:
         if key not in _TOP_KEYS:
             raise FingerfitError(
@@ -251,15 +236,13 @@ def check_hand_span(
         d = median_pair_distances(pts)
     if not np.isfinite(d).any():
         return
-    span = float(np.nanmax(d))
-    lo, hi = HAND_SPAN_MM
-    if not lo <= span <= hi:
-        raise FingerfitError(
-            f"the mapped markers span {span:.4g} mm (the farthest two, median over frames; a "
-            f"hand's markers: {lo:g}-{hi:g} mm): are the units the file states right?",
-            path=path,
-            field="units",
-        )
+    check_marker_length(
+        float(np.nanmax(d)),
+        HAND_SPAN_MM,
+        "span of the mapped markers",
+        "the farthest two, median over frames",
+        path,
+    )
 
 
 def write_marker_map(path: str | Path, marker_map: dict[str, tuple[str, ...]]) -> Path:

@@ -33,20 +33,16 @@ def check_recording_kind(f: Path, markers: bool, meta_path: Path, field: str) ->
     FingerfitError
         Naming ``meta_path`` and ``field``.
     """
-    if markers and not is_marker_file(f):
-        raise FingerfitError(
-            f"'{shown(f.name)}' is not a marker recording ({', '.join(MARKER_SUFFIXES)}): "
-            "a session with a marker map holds marker recordings only",
-            path=meta_path,
-            field=field,
+    if markers == is_marker_file(f):
+        return
+    if markers:
+        why = (
+            f"is not a marker recording ({', '.join(MARKER_SUFFIXES)}): a session with a "
+            "marker map holds marker recordings only"
         )
-    if not markers and is_marker_file(f):
-        raise FingerfitError(
-            f"'{shown(f.name)}' is a marker recording: name the marker map too "
-            '(markers = "markers.toml"; --markers)',
-            path=meta_path,
-            field=field,
-        )
+    else:
+        why = 'is a marker recording: name the marker map too (markers = "markers.toml"; --markers)'
+    raise FingerfitError(f"'{shown(f.name)}' {why}", path=meta_path, field=field)
 
 
 def frame_rate(recording: Recording) -> float:

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from ...errors import FingerfitError, shown
+from ..textfile import read_text
 
 #: Cells read as a missing sample (case-insensitive, after stripping blanks).
 MISSING_CELLS = ("", "nan")
@@ -26,17 +27,7 @@ def read_lines(path: Path) -> list[str]:
     FingerfitError
         The file cannot be read, or is not UTF-8 text (naming the line).
     """
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise FingerfitError("file not found", path=path) from None
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise FingerfitError(f"not UTF-8 text (byte {exc.start})", path=path, line=line) from None
+    text = read_text(path)
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()
