@@ -46,7 +46,7 @@ def marker_scale(stated: str, units: str | None, path: Path, field: str) -> floa
         return UNITS_TO_MM[units]
     if stated not in UNITS_TO_MM:
         raise FingerfitError(
-            f"unknown units '{shown(stated)}' (use {', '.join(UNITS_TO_MM)}, or give --units)",
+            f"unknown units '{shown(stated)}' (use {', '.join(UNITS_TO_MM)})",
             path=path,
             field=field,
         )
