@@ -301,3 +301,24 @@ def test_opensim_reads_a_marker_recording_written(tmp_path) -> None:
     col = table.getDependentColumn("thumb_tip")
     got = np.array([[col[i].get(k) for k in range(3)] for i in range(table.getNumRows())])
     np.testing.assert_array_equal(got, rec.markers["thumb_tip"])  # NaN where unseen
+
+
+def test_the_fast_and_the_exact_parser_give_the_same_numbers() -> None:
+    from fingerfit.io.markers.text import _plain_block, data_block, data_cells, numbers, read_lines
+
+    lines = read_lines(EXCERPT)
+    columns = [f"k{i}" for i in range(2 + 3 * 13)]
+    fast = _plain_block(lines[12:], columns)
+    assert fast is not None  # plain: Arrow parsed it ('nan' gaps included)
+    cells, rows = data_cells(lines, 12, len(columns), EXCERPT)
+    exact = numbers(cells, rows, columns, EXCERPT)
+    np.testing.assert_array_equal(fast, exact)  # NaN where the other has NaN, bits alike
+    values, lines_ = data_block(lines, 12, columns, EXCERPT)
+    np.testing.assert_array_equal(lines_, rows)
+    assert rows[0] == 13 and rows[-1] == 312
+    # Not plain (a blank line inside the data): the exact parser, the same numbers.
+    assert _plain_block([*lines[12:20], "", *lines[20:]], columns) is None
+    odd = [*lines[:20], "", *lines[20:]]
+    values, lines_ = data_block(odd, 12, columns, EXCERPT)
+    np.testing.assert_array_equal(values, exact)
+    assert lines_[8] == 22

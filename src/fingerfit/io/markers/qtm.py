@@ -24,7 +24,7 @@ from ...errors import FingerfitError, shown
 from ...session import Recording
 from ..hygiene import MAX_RATE_HZ
 from .frames import check_labels, marker_recording
-from .text import data_cells, numbers, read_lines, split_cells
+from .text import data_block, read_lines, split_cells
 from .trc import marker_scale
 
 #: QTM's export unit.
@@ -141,7 +141,7 @@ def read_qtm_tsv(path: str | Path, *, units: str | None = None) -> Recording:
             path=path,
             line=header + 1,
         )
-    cells, rows = data_cells(lines, header + 1, len(columns), path)
+    values, rows = data_block(lines, header + 1, columns, path)
     n_frames = number("NO_OF_FRAMES")
     if n_frames != rows.size:
         raise FingerfitError(
@@ -150,7 +150,6 @@ def read_qtm_tsv(path: str | Path, *, units: str | None = None) -> Recording:
             line=meta["NO_OF_FRAMES"][0],
             field="NO_OF_FRAMES",
         )
-    values = numbers(cells, rows, columns, path)
     xyz = values[:, 2:].reshape(-1, len(labels), 3)
     scale = marker_scale(QTM_UNITS, units, path, "units")
     return marker_recording(

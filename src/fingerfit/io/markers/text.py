@@ -1,8 +1,11 @@
-"""The text of a marker file: its lines split into tab-separated cells, and a block of
-cells decoded as numbers with the line and column of any bad one named.
+"""The text of a marker file: its lines split into tab-separated cells, and its data
+lines decoded as numbers with the line and column of any bad one named.
 
 Shared by the TRC and the Qualisys TSV readers; both are tab-separated text with a few
-header lines and one frame per line.
+header lines and one frame per line. :func:`data_block` parses plain data with Arrow
+(:func:`fingerfit.io.fastcsv.block_parser`) and anything else with the exact,
+line-numbered parser (:func:`data_cells`, :func:`numbers`), which decides and names
+every problem; both give the same numbers.
 """
 
 from __future__ import annotations
@@ -17,6 +20,65 @@ from ..textfile import read_text
 
 #: Cells read as a missing sample (case-insensitive, after stripping blanks).
 MISSING_CELLS = ("", "nan")
+#: The same as spelled in files, for the fast path (any other spelling takes the exact one).
+_MISSING_SPELLED = ("", "nan", "NaN", "NAN", "Nan")
+
+
+def data_block(
+    lines: list[str], first: int, columns: list[str], path: Path
+) -> tuple[np.ndarray, np.ndarray]:
+    """The data lines from index ``first`` on as numbers.
+
+    Parameters
+    ----------
+    lines : list of str
+        The file's lines (:func:`read_lines`).
+    first : int
+        Index of the first data line (blank lines before it are skipped).
+    columns : list of str
+        Each field's name, for messages; every line has this many fields (a trailing
+        empty one allowed).
+    path : Path
+
+    Returns
+    -------
+    values : ndarray, shape (n, len(columns))
+        Floats; a missing cell (:data:`MISSING_CELLS`) NaN.
+    line_numbers : ndarray of int, shape (n,)
+        1-based file line of each row.
+
+    Raises
+    ------
+    FingerfitError
+        See :func:`data_cells` and :func:`numbers`.
+    """
+    while first < len(lines) and not lines[first].strip():
+        first += 1
+    fast = _plain_block(lines[first:], columns)
+    if fast is not None:
+        return fast, np.arange(first + 1, first + 1 + fast.shape[0])
+    cells, rows = data_cells(lines, first, len(columns), path)
+    return numbers(cells, rows, columns, path), rows
+
+
+def _plain_block(body: list[str], columns: list[str]) -> np.ndarray | None:
+    """Plain data lines parsed by Arrow, or None when the exact parser must judge them
+    (an empty line, a field count that differs, a cell Arrow does not take as a number,
+    a NaN or infinity spelled otherwise)."""
+    from ..fastcsv import NotPlain, block_parser
+
+    if not body:
+        return None
+    names = [f"c{i}" for i in range(len(columns))]
+    try:
+        n_rows, cols = block_parser(names, delimiter="\t", missing=_MISSING_SPELLED)(
+            "\n".join(body).encode("utf-8")
+        )
+    except NotPlain:
+        return None
+    if n_rows != len(body):  # Arrow skipped an empty line
+        return None
+    return np.column_stack([cols[n] for n in names])
 
 
 def read_lines(path: Path) -> list[str]:

@@ -22,7 +22,7 @@ from ...errors import FingerfitError, shown
 from ...session import UNITS_TO_MM, Recording
 from ..hygiene import MAX_RATE_HZ
 from .frames import check_labels, marker_recording
-from .text import data_cells, numbers, read_lines, split_cells
+from .text import data_block, read_lines, split_cells
 
 #: Header lines before the data (the data may follow a blank line).
 HEADER_LINES = 5
@@ -144,7 +144,7 @@ def read_trc(path: str | Path, *, units: str | None = None) -> Recording:
             line=5,
         )
     columns = ["Frame#", "Time", *(f"{lb} {a}" for lb in labels for a in "XYZ")]
-    cells, rows = data_cells(lines, HEADER_LINES, len(columns), path)
+    values_, rows = data_block(lines, HEADER_LINES, columns, path)
     if rows.size != n_frames:
         raise FingerfitError(
             f"NumFrames is {n_frames} but the file holds {rows.size} frames",
@@ -152,6 +152,5 @@ def read_trc(path: str | Path, *, units: str | None = None) -> Recording:
             line=3,
             field="NumFrames",
         )
-    values_ = numbers(cells, rows, columns, path)
     xyz = values_[:, 2:].reshape(-1, n_markers, 3)
     return marker_recording(path, values_[:, 1], rows, labels, xyz, scale_to_mm=scale, rate_hz=rate)
