@@ -355,7 +355,7 @@ def test_ctrl_c_while_recording_keeps_what_was_recorded(simulated, tmp_path, mon
 
     sub, folder = simulated
     rec = read_pose_csv(folder / "grasp.csv", units=sub.session.units)
-    monkeypatch.setattr(cli, "_open_source", lambda spec, plan, stations: _Replay(rec, after))
+    monkeypatch.setattr(cli, "open_source", lambda spec, **kw: _Replay(rec, after))
     r = _new_capture(sub, folder, tmp_path, "P09")
     new = tmp_path / "P09"
     if after == 0:  # before any frame: nothing left, and why
@@ -409,9 +409,9 @@ def test_ctrl_c_after_recording_keeps_it_and_says_the_evidence_is_missing(
     sub, folder = simulated
     real_write, real_evidence = capture_folder.write_capture, cap.evidence
 
-    def write_interrupted(plan, rec):
+    def write_interrupted(plan, rec, extra=None):
         os.kill(os.getpid(), signal.SIGINT)  # held: the files are written first
-        return real_write(plan, rec)
+        return real_write(plan, rec, extra)
 
     def evidence(session, digits, options=None, *, second=True):
         if second:  # the final evidence: Ctrl-C lands in it

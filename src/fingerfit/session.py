@@ -303,6 +303,9 @@ class Session:
         For a marker session: per segment (``hand``, ``index.proximal``, ... the sensor
         names), the labels of the skin markers it carries, in the recordings'
         ``markers``. Empty for a 6-DOF session.
+    landmark_sd : dict[str, float]
+        Landmark name -> the digitised point's uncertainty (mm, the standard error of its
+        stylus takes: ``landmarks.csv``'s ``sd``); landmarks without one are absent.
     """
 
     subject: str
@@ -319,6 +322,7 @@ class Session:
     path: Path | None = None
     files: tuple[Path, ...] = ()
     marker_map: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    landmark_sd: dict[str, float] = field(default_factory=dict)
 
     def recordings(self) -> list[Recording]:
         """Every recording: reference, grasp, targets, test."""

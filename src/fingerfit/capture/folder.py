@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import tempfile
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from ..digits import DIGIT_NAMES
 from ..errors import FingerfitError, shown
 from ..io.sessiondir import EVENTS_FILE, LANDMARKS_FILE, SESSION_FILE
 from ..session import UNITS_TO_MM, Recording, Session, check_subject_id, digit_sensors
-from .protocols import RECORDING_LIST, next_recording, shown_digits
+from .protocols import HOLD_PROTOCOLS, RECORDING_LIST, next_recording, shown_digits
 
 #: Defaults of a new session (``fingerfit capture`` without ``session.toml``).
 NEW_SESSION = {"hand": "left", "units": "mm", "rate_hz": 240.0}
@@ -153,6 +154,9 @@ def plan_capture(
     copies = {folder / f: p for f, p in sources.items() if p is not None}
     copies = {t: p for t, p in copies.items() if not (t.exists() and t.samefile(p))}
     targets = [folder / name, toml, *copies]
+    if protocol in HOLD_PROTOCOLS:
+        targets.append(folder / EVENTS_FILE)
+        check_target(folder / EVENTS_FILE)
     refuse_writing_inputs(targets, [*inputs, *given])
     check_target(folder / name, overwrite=overwrite)
     check_target(toml)  # read-only found now, not after the recording
@@ -228,10 +232,12 @@ def check_sensors(recording: Recording, plan: CapturePlan, path: Path | str) -> 
             )
 
 
-def write_capture(plan: CapturePlan, recording: Recording) -> Path:
+def write_capture(
+    plan: CapturePlan, recording: Recording, extra: dict[Path, bytes] | None = None
+) -> Path:
     """Write the recording (in the session's units and the format of its name), the
-    copies of ``--reference`` and ``--landmarks`` and ``session.toml`` listing the
-    recording: all of them or none.
+    copies of ``--reference`` and ``--landmarks``, ``extra`` files (a pinch recording's
+    ``events.csv``) and ``session.toml`` listing the recording: all of them or none.
 
     Returns
     -------
@@ -241,12 +247,71 @@ def write_capture(plan: CapturePlan, recording: Recording) -> Path:
     from ..io.atomic import write_files
     from ..io.posewrite import write_pose_csv
 
-    with tempfile.TemporaryDirectory() as tmp:
-        data = write_pose_csv(Path(tmp) / plan.name, recording, units=plan.units).read_bytes()
+    data = rendered(plan.name, lambda p: write_pose_csv(p, recording, units=plan.units))
     toml = plan.folder / SESSION_FILE
-    files = {**plan.copies, plan.target: data, toml: _toml_text(plan)}
+    files = {
+        **plan.copies,
+        **(extra or {}),
+        plan.target: data,
+        toml: session_toml_text(plan.meta, plan.folder, plan.name),
+    }
     write_files(files, overwrite=True)  # every target checked by plan_capture
     return toml
+
+
+def rendered(name: str, write: Callable[[Path], object]) -> bytes:
+    """The bytes a file writer writes for a file called ``name`` (written in a temporary
+    folder), to be written with others all or none
+    (:func:`fingerfit.io.atomic.write_files`)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / name
+        write(path)
+        return path.read_bytes()
+
+
+def read_folder(
+    folder: Path,
+    *,
+    subject: str | None = None,
+    hand: str | None = None,
+    units: str | None = None,
+    rate: float | None = None,
+    fingers: list[str] | None = None,
+    need_reference: bool = True,
+) -> tuple[dict, bool, Recording | None]:
+    """A session folder's ``session.toml`` (or, without one, the options that start it,
+    ``subject`` needed) checked against the options, and its reference recording.
+
+    Returns
+    -------
+    meta : dict
+        ``session.toml``'s content (``fingers`` set to the session's digits when the
+        reference is read).
+    new : bool
+        The folder has no ``session.toml``.
+    reference : Recording or None
+        The reference recording (mm); None when ``need_reference`` is False and the
+        folder has none.
+
+    Raises
+    ------
+    FingerfitError
+        As :func:`plan_capture`: the option, file or field at fault.
+    """
+    from ..io import read_pose_csv
+
+    meta, new = _session_meta(folder, subject, hand, units, rate, fingers)
+    ref_path = folder / str(meta["recordings"]["reference"])
+    if not ref_path.is_file():
+        if need_reference:
+            raise FingerfitError(
+                "no reference recording: record it first (fingerfit capture --protocol reference)",
+                path=ref_path,
+            )
+        return meta, new, None
+    reference = read_pose_csv(ref_path, units=meta["units"], rate_hz=meta["rate_hz"])
+    meta["fingers"] = _digits(meta, reference, ref_path, new)
+    return meta, new, reference
 
 
 def _listed(meta: dict) -> list[str]:
@@ -343,17 +408,17 @@ def _digits(meta: dict, reference: Recording, path: Path, new: bool) -> list[str
     return digits
 
 
-def _toml_text(plan: CapturePlan) -> str:
-    """``session.toml`` with the recording listed under ``grasp``."""
-    meta = plan.meta
+def session_toml_text(meta: dict, folder: Path, listed_name: str | None = None) -> str:
+    """``session.toml`` of ``meta`` (as :func:`read_folder` gives it), with
+    ``listed_name`` added to the ``grasp`` list."""
     recs = dict(meta["recordings"])
     listed = _listed(meta)
-    if plan.name not in listed:
-        listed.append(plan.name)
+    if listed_name is not None and listed_name not in listed:
+        listed.append(listed_name)
     recs[RECORDING_LIST] = listed
     lines = [
         f"format = {json.dumps(meta.get('format', 'fingerfit.session/1'))}",
-        f"subject = {json.dumps(meta.get('subject', plan.folder.name))}",
+        f"subject = {json.dumps(meta.get('subject', folder.name))}",
         f"hand = {json.dumps(meta.get('hand', NEW_SESSION['hand']))}",
         f"units = {json.dumps(meta['units'])}",
         f"rate_hz = {float(meta['rate_hz'])!r}",
@@ -361,7 +426,7 @@ def _toml_text(plan: CapturePlan) -> str:
         "",
         "[recordings]",
     ]
-    for key in ("reference", "grasp", "targets", "test", "events"):
+    for key in ("reference", RECORDING_LIST, "targets", "test", "events"):
         if key in recs:
             lines.append(f"{key} = {json.dumps(recs[key])}")
     return "\n".join(lines) + "\n"

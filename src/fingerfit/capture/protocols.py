@@ -17,7 +17,13 @@ from ..errors import FingerfitError
 PROTOCOLS: dict[str, tuple[tuple[str, ...] | None, tuple[str, ...]]] = {
     "grasp": (None, ("grasp.csv",)),
     "thumb": (("thumb",), ("thumb_circumduction.csv", "thumb_opposition.csv")),
+    # The thumb's pad on each finger's in turn; the holds are marked in events.csv
+    # (:mod:`.pinch`).
+    "pinch": (("thumb",), ("pinch.csv",)),
 }
+#: The protocols whose recordings have pad-to-pad holds, marked in ``events.csv``
+#: (:mod:`.pinch`): opposition touches the thumb's pad to each finger's, pinches too.
+HOLD_PROTOCOLS = ("thumb", "pinch")
 #: The ``session.toml`` list every protocol's recording joins.
 RECORDING_LIST = "grasp"
 

@@ -11,6 +11,7 @@ from . import (  # noqa: F401  (registers the commands)
     simulate,
     stream,
     study,
+    stylus,
     view,
 )
 from .app import app, one_line_summaries, run

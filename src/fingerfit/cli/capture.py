@@ -12,11 +12,19 @@ from ..errors import FingerfitError, shown
 from .app import Quiet, app, console, notice, out, say, user_errors
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from rich.table import Table
 
     from ..capture import CapturePlan, JointEvidence
+    from ..session import Recording
 
-PROTOCOLS = ("grasp", "thumb")  # fingerfit.capture.PROTOCOLS (without importing NumPy)
+# fingerfit.capture.PROTOCOLS (without importing NumPy), and the steps that are not
+# calibration recordings (.capture_steps).
+PROTOCOLS = ("grasp", "thumb", "pinch")
+STEPS = ("reference", "landmarks")
+HOLD_PROTOCOLS = ("thumb", "pinch")  # fingerfit.capture.protocols.HOLD_PROTOCOLS
+TRIGGERS = ("still", "enter")
 
 
 @app.command()
@@ -36,7 +44,11 @@ def capture(
         ),
     ],
     protocol: Annotated[
-        str, typer.Option(help=f"The recording to take: {', '.join(PROTOCOLS)}.")
+        str,
+        typer.Option(
+            help=f"The step to take: {', '.join(STEPS + PROTOCOLS)} (docs/lab.md: in the lab's "
+            "order, reference, landmarks, grasp, thumb, pinch)."
+        ),
     ] = "grasp",
     name: Annotated[
         str | None,
@@ -119,18 +131,76 @@ def capture(
             "the capture ends).",
         ),
     ] = None,
+    stylus: Annotated[
+        Path | None,
+        typer.Option(help="landmarks: the stylus file (fingerfit stylus).", show_default=False),
+    ] = None,
+    takes: Annotated[
+        int, typer.Option(min=1, max=20, help="landmarks: placements averaged per landmark.")
+    ] = 3,
+    pads: Annotated[
+        bool, typer.Option("--pads", help="landmarks: each digit's pad too (<digit>.pad).")
+    ] = False,
+    targets: Annotated[
+        str | None,
+        typer.Option(
+            help="landmarks: target labels to digitise too (target.<label>), e.g. t000,t020."
+        ),
+    ] = None,
+    only: Annotated[
+        str | None,
+        typer.Option(
+            help="landmarks: take only these again (names as in landmarks.csv); the others "
+            "in landmarks.csv are kept."
+        ),
+    ] = None,
+    trigger: Annotated[
+        str,
+        typer.Option(
+            help="landmarks: what takes a point: still (the stylus held still 0.5 s) or enter "
+            "(the Enter key: the 0.5 s before it)."
+        ),
+    ] = "still",
     quiet: Quiet = False,
 ) -> None:
-    """Record a protocol (grasp, thumb) into a session folder, showing per joint the
-    cycles, range of motion, axis confidence and second axis found so far (over every
-    calibration recording of the folder) and when each has enough for `fingerfit fit`."""
+    """Take a step of the lab's protocol into a session folder: the reference posture,
+    the stylus landmarks, or a calibration recording (grasp, thumb, pinch) showing per
+    joint the cycles, range of motion, axis confidence and second axis found so far and
+    when each has enough for `fingerfit fit`."""
     from ..processes import Interrupts
     from .app import parse_list
     from .stream import check_view
 
-    if protocol not in PROTOCOLS:
-        raise FingerfitError(f"must be one of {', '.join(PROTOCOLS)}", field="--protocol")
+    if protocol not in PROTOCOLS + STEPS:
+        raise FingerfitError(f"must be one of {', '.join(STEPS + PROTOCOLS)}", field="--protocol")
+    if trigger not in TRIGGERS:
+        raise FingerfitError(f"must be one of {', '.join(TRIGGERS)}", field="--trigger")
     digits = parse_list(fingers, ("thumb", "index", "middle", "ring", "little"), "--fingers")
+    if protocol in STEPS:
+        from . import capture_steps as steps
+
+        if protocol == "reference" and (view or view_save is not None):
+            raise FingerfitError("the reference protocol has no view", field="--view")
+        check_view(view, view_save, None)
+        with Interrupts():
+            try:
+                if protocol == "reference":
+                    steps.capture_reference(
+                        session_dir, source, duration=duration, subject=subject, hand=hand,
+                        units=units, rate=rate, digits=digits, stations=stations,
+                        overwrite=overwrite,
+                    )  # fmt: skip
+                else:
+                    steps.capture_landmarks(
+                        session_dir, source, stylus=stylus, takes=takes, pads=pads,
+                        targets=_names(targets), only=_names(only) or None, trigger=trigger,
+                        stations=stations, overwrite=overwrite, view=view, view_save=view_save,
+                    )  # fmt: skip
+            except KeyboardInterrupt:
+                raise FingerfitError(
+                    "interrupted before recording began: nothing written"
+                ) from None
+        return
     with Interrupts() as interrupts:
         try:  # once recording, a Ctrl-C is handled inside (it never leaves half a result)
             check_view(view, view_save, None)
@@ -164,12 +234,21 @@ def _capture(
 
     plan = plan_capture(
         folder, protocol, name, subject=subject, hand=hand, units=units, rate=rate,
-        fingers=digits, reference=reference, landmarks=landmarks, inputs=_source_files(spec),
+        fingers=digits, reference=reference, landmarks=landmarks, inputs=source_files(spec),
         overwrite=overwrite,
     )  # fmt: skip
     need = thresholds()
     acc = Accumulator(plan.name, plan.sensors)
-    the_source = _open_source(spec, plan, stations)
+    from ..capture import check_sensors
+
+    the_source = open_source(
+        spec,
+        units=plan.units,
+        rate_hz=plan.rate_hz,
+        sensors=plan.sensors,
+        stations=stations,
+        check=lambda rec, path: check_sensors(rec, plan, path),
+    )
     live = child = failure = None
     interrupted = False
     try:
@@ -223,7 +302,8 @@ def _capture(
             )
             raise FingerfitError(f"{why}; no file written", field="--source")
         _check_recorded(rec, plan)
-        toml = write_capture(plan, rec)
+        extra = _pinch_events(plan, rec) if protocol in HOLD_PROTOCOLS else None
+        toml = write_capture(plan, rec, extra)
         if failure is not None:
             raise FingerfitError(
                 f"{failure} -- the {rec.n_frames} frames recorded before it are kept in "
@@ -272,7 +352,12 @@ def _capture(
         notice("note", f"{plan.folder / 'landmarks.csv'} is missing: the fit needs it")
 
 
-def _source_files(spec: str) -> tuple[Path, ...]:
+def _names(text: str | None) -> list[str]:
+    """A comma-separated list of names (empty for None)."""
+    return [t.strip() for t in (text or "").split(",") if t.strip()]
+
+
+def source_files(spec: str) -> tuple[Path, ...]:
     """The files a source reads (a replayed recording), never to be written onto."""
     from ..live import sources as src
 
@@ -281,32 +366,69 @@ def _source_files(spec: str) -> tuple[Path, ...]:
     return ()
 
 
-def _open_source(spec: str, plan: CapturePlan, stations: str | None):
-    """The source of ``--source``; a replayed recording is read and checked first (it
-    must have every sensor of the session's digits)."""
-    from ..capture import check_sensors
+def open_source(
+    spec: str,
+    *,
+    units: str,
+    rate_hz: float,
+    sensors: list[str],
+    stations: str | None,
+    check: Callable[[Recording, Path], None] | None = None,
+):
+    """The source of ``--source`` for ``sensors``; a replayed recording is read (in the
+    session's ``units``) and given to ``check`` first (which raises when it lacks what
+    the protocol needs)."""
     from ..io import read_pose_csv
     from ..live import sources as src
 
     kind = src.split_spec(spec)[0]
     if kind == "replay":
         path, speed = src.parse_replay(spec)
-        rec = read_pose_csv(path, units=plan.units, rate_hz=plan.rate_hz)
-        check_sensors(rec, plan, path)
+        rec = read_pose_csv(path, units=units, rate_hz=rate_hz)
+        if check is not None:
+            check(rec, path)
         return src.ReplaySource(rec, speed)
     if kind == "liberty":
         port, baud = src.parse_liberty(spec)
         mapping = (
-            src.parse_stations(stations, plan.sensors)
-            if stations
-            else src.default_stations(plan.sensors)
+            src.parse_stations(stations, sensors) if stations else src.default_stations(sensors)
         )
-        return src.LibertySource(port, baud, mapping, plan.rate_hz)
+        return src.LibertySource(port, baud, mapping, rate_hz)
     if kind == "lsl":
-        return src.LslSource(src.split_spec(spec)[1], plan.sensors)
+        return src.LslSource(src.split_spec(spec)[1], sensors)
     raise FingerfitError(
         f"unknown source '{shown(spec)}': replay:FILE, liberty:PORT or lsl:NAME", field="--source"
     )
+
+
+def _pinch_events(plan: CapturePlan, rec: Recording) -> dict[Path, bytes] | None:
+    """``events.csv`` with the pinch recording's holds (the folder's other events kept,
+    this recording's earlier ones replaced), listed in ``session.toml``; None when the
+    folder has no pad landmarks to find them with (said)."""
+    from ..capture.folder import rendered
+    from ..capture.pinch import find_holds, pad_points
+    from ..io.sessiondir import EVENTS_FILE, read_events, write_events
+
+    pads = pad_points(plan.base.landmarks, plan.base.reference, plan.digits)
+    if "thumb" not in pads or len(pads) < 2:
+        if plan.protocol != "pinch":
+            return None
+        notice(
+            "warning",
+            "no holds marked: the pads are found from the <digit>.pad landmarks, which "
+            f"{plan.folder / 'landmarks.csv'} lacks (capture --protocol landmarks --pads)",
+        )
+        return None
+    found = find_holds(rec, pads, plan.rate_hz)
+    path = plan.folder / EVENTS_FILE
+    kept = [e for e in read_events(path) if e.recording != rec.name] if path.is_file() else []
+    plan.meta["recordings"]["events"] = EVENTS_FILE
+    by_digit = {d: sum(e.target == d for e in found) for d in pads if d != "thumb"}
+    say(
+        "pad-to-pad holds found: {}",
+        ", ".join(f"thumb-{d} {n}" for d, n in by_digit.items()) or "none",
+    )
+    return {path: rendered(EVENTS_FILE, lambda p: write_events(p, [*kept, *found]))}
 
 
 def _trimmed(rec, duration: float | None, rate_hz: float):

@@ -74,6 +74,15 @@ def simulate(
         float, typer.Option(min=0.0, help="Soft-tissue artefact scale (0 = rigid sensors).")
     ] = 1.0,
     stylus: Annotated[float, typer.Option(min=0.0, help="Stylus noise SD per axis (mm).")] = 0.3,
+    stylus_recordings: Annotated[
+        bool,
+        typer.Option(
+            "--stylus-recordings",
+            help="Also write stylus_pivot.csv (a pivot calibration) and stylus_landmarks.csv "
+            "(the stylus placed on every landmark, three times each) with their truth "
+            "(docs/lab.md); csv format only.",
+        ),
+    ] = False,
     tilt: Annotated[
         float, typer.Option(min=0.0, help="Axis obliquity scale (0 = axes perpendicular to bones).")
     ] = 1.0,
@@ -126,7 +135,16 @@ def simulate(
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise FingerfitError(f"names {', '.join(twice)} twice", field="--fingers")
-    kw = dict(fingers=names, hand=hand, rom_scale=rom, tilt_scale=tilt, world=world)
+    if stylus_recordings and fmt != SimFormat.csv:
+        raise FingerfitError("is for the csv format", field="--stylus-recordings")
+    kw = dict(
+        fingers=names,
+        hand=hand,
+        rom_scale=rom,
+        tilt_scale=tilt,
+        world=world,
+        stylus_recordings=stylus_recordings,
+    )
     if exact:
         config = SimConfig.exact(**kw)
     else:

@@ -477,7 +477,8 @@ def fit_finger(session: Session, finger: str, reference: dict, options: FitOptio
         last = digit.joints[-1]
         depth = float(np.linalg.norm(session.landmark(f"{finger}.{last}") - joints[last][2]))
         pad, source = estimated_pad(model, 2.0 * depth), "geometry"
-    return replace(model, pad=pad, pad_source=source)
+    tip_sd = session.landmark_sd.get(f"{finger}.tip")
+    return replace(model, pad=pad, pad_source=source, tip_sd_mm=tip_sd)
 
 
 def fit_session(session: Session, options: FitOptions | None = None) -> HandModel:

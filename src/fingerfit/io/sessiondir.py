@@ -40,8 +40,11 @@ from .posewrite import write_pose_csv
 from .sessiontables import EVENTS_FILE as EVENTS_FILE
 from .sessiontables import EVENTS_HEADER as EVENTS_HEADER
 from .sessiontables import LANDMARKS_FILE as LANDMARKS_FILE
+from .sessiontables import LANDMARKS_HEADER as LANDMARKS_HEADER
+from .sessiontables import LANDMARKS_SD_HEADER as LANDMARKS_SD_HEADER
 from .sessiontables import match_event_recordings as match_event_recordings
 from .sessiontables import read_events as read_events
+from .sessiontables import read_landmark_table as read_landmark_table
 from .sessiontables import read_landmarks as read_landmarks
 from .sessiontables import write_events as write_events
 from .sessiontables import write_landmarks as write_landmarks
@@ -287,8 +290,11 @@ def load_session(
     test = [load(f) for f in test_files] if test else []
     if parsed is not None:
         landmarks, events, marker_map = parsed.landmarks, parsed.events, parsed.marker_map
+        landmark_sd = parsed.landmark_sd
     else:
-        landmarks = read_landmarks(landmarks_file, units) if landmarks_file is not None else {}
+        landmarks, landmark_sd = (
+            read_landmark_table(landmarks_file, units) if landmarks_file is not None else ({}, {})
+        )
         events = read_events(events_file) if events_file is not None else []
         marker_map = read_marker_map(map_file) if map_file is not None else {}
     recordings = [reference, *grasp, *targets, *test]
@@ -305,6 +311,7 @@ def load_session(
         targets=targets,
         test=test,
         events=events,
+        landmark_sd=landmark_sd,
         path=directory,
         files=(
             meta_path,
@@ -433,7 +440,12 @@ def save_session(session: Session, directory: str | Path) -> Path:
         for rec in session.recordings():
             write_pose_csv(directory / rec.name, rec, units=session.units)
     if session.landmarks or not session.marker_map:
-        write_landmarks(directory / LANDMARKS_FILE, session.landmarks, session.units)
+        write_landmarks(
+            directory / LANDMARKS_FILE,
+            session.landmarks,
+            session.units,
+            session.landmark_sd or None,
+        )
     if session.events:
         write_events(directory / EVENTS_FILE, session.events)
     write_session_toml(session, directory)

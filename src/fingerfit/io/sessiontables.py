@@ -1,4 +1,4 @@
-"""The session's small tables: ``landmarks.csv`` (``name,x,y,z``) and ``events.csv``
+"""The session's small tables: ``landmarks.csv`` (``name,x,y,z[,sd]``) and ``events.csv``
 (``recording,finger,target,start,end``), read and written (``docs/formats.md``).
 """
 
@@ -25,6 +25,9 @@ from .textfile import read_bytes
 LANDMARKS_FILE = "landmarks.csv"
 EVENTS_FILE = "events.csv"
 EVENTS_HEADER = ("recording", "finger", "target", "start", "end")
+LANDMARKS_HEADER = ("name", "x", "y", "z")
+#: With each digitised point's uncertainty (``fingerfit capture --protocol landmarks``).
+LANDMARKS_SD_HEADER = ("name", "x", "y", "z", "sd")
 
 
 def _read_small_csv(path: Path, header: tuple[str, ...]) -> pd.DataFrame:
@@ -75,28 +78,41 @@ def _number(text: str, path: Path, line: int, field: str, what: str) -> float:
 
 
 def read_landmarks(path: str | Path, units: str = "mm") -> dict[str, np.ndarray]:
-    """Read a ``name,x,y,z`` landmarks CSV.
+    """Read a landmarks CSV: :func:`read_landmark_table`'s positions."""
+    return read_landmark_table(path, units)[0]
+
+
+def read_landmark_table(
+    path: str | Path, units: str = "mm"
+) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """Read a ``name,x,y,z`` landmarks CSV, or ``name,x,y,z,sd`` (the digitised points'
+    uncertainties, written by ``fingerfit capture --protocol landmarks``).
 
     Parameters
     ----------
     path : str or Path
     units : str
-        Units of ``x,y,z`` in the file.
+        Units of ``x,y,z`` (and ``sd``) in the file.
 
     Returns
     -------
-    dict[str, ndarray]
+    positions : dict[str, ndarray]
         Landmark name -> position ``(3,)`` in mm, tracker coordinates.
+    sd : dict[str, float]
+        Landmark name -> its uncertainty (mm, the standard error of its takes), for the
+        rows whose ``sd`` is given (an empty cell: not known).
 
     Raises
     ------
     FingerfitError
         Naming the file and line: header, field count, unknown or repeated name,
-        a coordinate that is not a finite number.
+        a coordinate that is not a finite number, a negative ``sd``.
     """
     path = Path(path)
-    df = _read_small_csv(path, ("name", "x", "y", "z"))
+    with_sd = _header(path) == LANDMARKS_SD_HEADER
+    df = _read_small_csv(path, LANDMARKS_SD_HEADER if with_sd else LANDMARKS_HEADER)
     out: dict[str, np.ndarray] = {}
+    sds: dict[str, float] = {}
     for i, row in enumerate(df.itertuples(index=False), start=2):
         name = str(row.name)
         if not is_landmark_name(name):
@@ -106,13 +122,29 @@ def read_landmarks(path: str | Path, units: str = "mm") -> dict[str, np.ndarray]
         if name in out:
             raise FingerfitError(f"landmark '{name}' given twice", path=path, line=i, field="name")
         xyz = np.array(
-            [_number(v, path, i, k, "coordinate") for k, v in zip("xyz", row[1:], strict=True)]
+            [_number(v, path, i, k, "coordinate") for k, v in zip("xyz", row[1:4], strict=True)]
         )
+        if with_sd and row[4] != "":
+            sd = _number(row[4], path, i, "sd", "sd")
+            if sd < 0:
+                raise FingerfitError("sd must not be negative", path=path, line=i, field="sd")
+            sds[name] = sd * UNITS_TO_MM[units]
         if implausible_rows(xyz[None], UNITS_TO_MM[units]).size:
             big = float(xyz[np.argmax(np.abs(xyz))]) * UNITS_TO_MM[units]
             raise FingerfitError(implausible_message(big), path=path, line=i)
         out[name] = xyz * UNITS_TO_MM[units]
-    return out
+    return out, sds
+
+
+def _header(path: Path) -> tuple[str, ...]:
+    """A small CSV's header fields (empty when unreadable: the reader says why)."""
+    try:
+        with path.open("rb") as fh:
+            first = fh.readline(4096)
+    except OSError:
+        return ()
+    text = first.decode("utf-8", "replace").strip().lstrip("\ufeff")
+    return tuple(h.strip() for h in text.split(","))
 
 
 def read_events(path: str | Path) -> list[TargetEvent]:
@@ -187,8 +219,13 @@ def match_event_recordings(events: list[TargetEvent], names: list[str]) -> list[
     return out
 
 
-def write_landmarks(path: str | Path, landmarks: dict[str, FloatArray], units: str = "mm") -> Path:
-    """Write ``name,x,y,z`` landmarks, atomically.
+def write_landmarks(
+    path: str | Path,
+    landmarks: dict[str, FloatArray],
+    units: str = "mm",
+    sd: dict[str, float] | None = None,
+) -> Path:
+    """Write ``name,x,y,z`` landmarks (``name,x,y,z,sd`` with ``sd``), atomically.
 
     Parameters
     ----------
@@ -197,10 +234,17 @@ def write_landmarks(path: str | Path, landmarks: dict[str, FloatArray], units: s
         Name -> position ``(3,)`` in mm, tracker coordinates.
     units : str
         Units of the written coordinates.
+    sd : dict[str, float], optional
+        Name -> uncertainty (mm); a landmark without one (or NaN) gets an empty cell.
     """
     scale = UNITS_TO_MM[units]
+    rows = [(k, *(v / scale)) for k, v in landmarks.items()]
+    if sd is not None:
+        rows = [
+            (*r, "" if not np.isfinite(sd.get(r[0], np.nan)) else sd[r[0]] / scale) for r in rows
+        ]
     lm = pd.DataFrame(
-        [(k, *(v / scale)) for k, v in landmarks.items()], columns=["name", "x", "y", "z"]
+        rows, columns=list(LANDMARKS_SD_HEADER if sd is not None else LANDMARKS_HEADER)
     )
     with atomic_write(path, newline="") as fh:
         lm.to_csv(fh, index=False, lineterminator="\n")

@@ -74,6 +74,7 @@ def model_to_dict(model: HandModel) -> dict[str, Any]:
             "axis_order": {j: [a.name for a in f.axes(j)] for j in f.second_axes},
             "tip": _v(f.tip),
             "tip_in_distal": _v(dr.T @ (f.tip - dp)),
+            **({"tip_sd_mm": float(f.tip_sd_mm)} if f.tip_sd_mm is not None else {}),
             **(
                 {"pad": _v(f.pad), "pad_in_distal": _v(dr.T @ (f.pad - dp))}
                 if f.pad is not None
@@ -438,6 +439,11 @@ def _load_digit(r: _Reader, fd: Any, fname: str, poses: dict) -> DigitModel:
     if source is not None and pad is None:
         raise r.err(f"{wf}.pad_source", "given without a pad")
     model = DigitModel(fname, joints, r.vec(fd, "tip", wf), lengths, frames, seconds, pad, source)
+    if "tip_sd_mm" in fd:
+        sd = r.number(fd["tip_sd_mm"], f"{wf}.tip_sd_mm")
+        if not (0 <= sd <= MAX_MODEL_MM):
+            raise r.err(f"{wf}.tip_sd_mm", "must be a non-negative number (mm)")
+        model = replace(model, tip_sd_mm=sd)
     order = fd.get("axis_order", {})
     chosen = {}
     for j in seconds:

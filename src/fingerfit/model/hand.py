@@ -170,6 +170,9 @@ class DigitModel:
         (:mod:`fingerfit.estimate.pads`), the digitised ``<digit>.pad`` landmark, or the
         pulp geometry of :func:`estimated_pad`; ``None`` in models written before the
         field existed.
+    tip_sd_mm : float, optional
+        The tip point's uncertainty (mm): the standard error of the stylus takes that
+        digitised it (``landmarks.csv``'s ``sd``); ``None`` when not known.
     """
 
     name: str
@@ -181,6 +184,7 @@ class DigitModel:
     pad: FloatArray | None = None
     pad_source: str | None = None
     axis_order: dict[str, str] = field(default_factory=dict)
+    tip_sd_mm: float | None = None
 
     @property
     def segments(self) -> tuple[str, str, str]:

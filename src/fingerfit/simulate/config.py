@@ -69,6 +69,10 @@ class SimConfig:
         place of the drawn one; the dorsal tilt and everything else are drawn as usual.
         ``None`` (default): the drawn obliquity, every output as without the field.
         Default world only; ``|value| < 60``.
+    stylus_recordings : bool
+        Also simulate the stylus: a pivot calibration recording and the stylus recording
+        of the session's landmarks (:mod:`.stylus`), from their own random stream (the
+        session is the same with or without them).
     """
 
     fingers: tuple[str, ...] = ("index",)
@@ -91,6 +95,7 @@ class SimConfig:
     test: bool = True
     world: str = "default"
     mp_axis_tilt_deg: float | None = None
+    stylus_recordings: bool = False
 
     def __post_init__(self) -> None:
         if self.world not in WORLDS:

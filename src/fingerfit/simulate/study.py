@@ -50,6 +50,8 @@ N_TARGETS = 7
 SENSOR_HEIGHT = np.array([7.5, 6.5, 5.0])  # dorsal height of phalanx sensors (mm)
 # Relative skin sliding under the phalanx sensors; the distal one sits on the nail.
 SENSOR_STA = np.array([1.0, 1.0, 0.3])
+#: The stylus recordings' own random stream (``np.random.default_rng([seed, STYLUS_STREAM])``).
+STYLUS_STREAM = 38
 
 
 def _hand_pose(rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
@@ -368,6 +370,18 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
             fm.angles["thumb"] = ct.thumb_free(trng, fm.time, config.abduction and not hinge_mcp)
         rec, truth.frames["test.csv"] = run(fm, "test.csv")
         test.append(rec)
+    stylus = None
+    if config.stylus_recordings:
+        stylus = _stylus_session(
+            np.random.default_rng([seed, STYLUS_STREAM]),
+            config,
+            landmarks,
+            digits,
+            flist,
+            hand_origin,
+            run,
+            tracker,
+        )
     session = Session(
         subject=subject,
         hand=config.hand,
@@ -381,7 +395,49 @@ def simulate_subject(config: SimConfig, seed: int, subject: str = "S01") -> Simu
         test=test,
         events=events,
     )
-    return SimulatedSubject(session, truth)
+    return SimulatedSubject(session, truth, stylus)
+
+
+def _stylus_session(
+    rng: np.random.Generator,
+    config: SimConfig,
+    landmarks: dict[str, FloatArray],
+    digits: list[str],
+    flist: list[str],
+    hand_origin: FloatArray,
+    run,
+    tracker: TrackerErrors,
+):
+    """The subject's stylus recordings (:mod:`.stylus`), from their own random stream
+    after every other recording (nothing else changes with them)."""
+    from ..stylus.landmarks import landmark_names
+    from .stylus import stylus_session
+
+    targets = tuple(k.removeprefix("target.") for k in landmarks if k.startswith("target."))
+    order = landmark_names(digits, pads=any(k.endswith(".pad") for k in landmarks), targets=targets)
+    # The SD of each landmark's mean: as the session's landmarks were drawn.
+    sd = {k: config.stylus_mm / (np.sqrt(5) if k.startswith("target.") else 1.0) for k in order}
+
+    def still(time, rotation, translation, name, noise):
+        m = mo.static(flist, config.rate_hz, 0.0)
+        m.time, m.hand_rotation, m.hand_translation = time, rotation, translation
+        zero = np.zeros_like(time)
+        m.angles = {f: dict.fromkeys(mo.ANGLE_KEYS, zero) for f in flist}
+        if "thumb" in digits:
+            m.angles["thumb"] = wh.static_angles(time.size)
+        return run(m, name, noise)[0]
+
+    return stylus_session(
+        rng,
+        landmarks=landmarks,
+        landmark_sd=sd,
+        order=order,
+        pivot_point=hand_origin + np.array([120.0, 40.0, -60.0]),
+        hand_origin=hand_origin,
+        rate_hz=config.rate_hz,
+        run=still,
+        apply_errors=tracker.apply,
+    )
 
 
 def write_subject(sim: SimulatedSubject, directory: str | Path) -> Path:
@@ -389,6 +445,12 @@ def write_subject(sim: SimulatedSubject, directory: str | Path) -> Path:
     directory = Path(directory)
     sim.session.path = directory
     save_session(sim.session, directory)
+    if sim.stylus is not None:
+        from ..io.posewrite import write_pose_csv
+        from .stylus import LANDMARKS_RECORDING, PIVOT_FILE
+
+        write_pose_csv(directory / PIVOT_FILE, sim.stylus.pivot)
+        write_pose_csv(directory / LANDMARKS_RECORDING, sim.stylus.landmarks)
     write_truth(sim, directory)
     return directory
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -69,8 +70,12 @@ class SubjectTruth:
 
 @dataclass
 class SimulatedSubject:
+    """A simulated session, its truth and, with ``SimConfig.stylus_recordings``, its
+    stylus recordings (:class:`fingerfit.simulate.stylus.StylusSession`)."""
+
     session: Session
     truth: SubjectTruth
+    stylus: Any = None
 
 
 def truth_document(sim: SimulatedSubject) -> dict:
@@ -126,6 +131,7 @@ def truth_document(sim: SimulatedSubject) -> dict:
         },
         "fingers": fingers,
         "contacts": truth.contacts,
+        **({"stylus": sim.stylus.truth} if sim.stylus is not None else {}),
     }
     if truth.myohand is not None:
         doc["myohand"] = truth.myohand.document()
