@@ -31,10 +31,10 @@ from ..hygiene import (
 
 #: Plausible spacing of markers (mm): the median, over the markers, of each marker's
 #: median distance to its nearest neighbour. Measured: 32.4 mm on the real Qualisys glove
-#: recording (``docs/formats.md``, 21 markers of a hand, arm, back and an object); skin
-#: markers on a phalanx sit 5-30 mm apart. Metres or inches read as millimetres fall
-#: below, millimetres read as metres far above; the marker map's hand span catches a
-#: factor of 10 (:data:`fingerfit.io.markers.markermap.HAND_SPAN_MM`).
+#: recording (``docs/formats.md``, 21 markers of a hand, arm, back and an object), 30 mm
+#: for the tests' hand. Metres or inches read as millimetres fall below, millimetres read
+#: as metres far above; the marker map's hand span catches a factor of 10
+#: (:data:`fingerfit.io.markers.markermap.HAND_SPAN_MM`).
 MARKER_SPACING_MM = (2.0, 300.0)
 #: Frames the unit check looks at, at most (evenly spaced over the recording).
 UNIT_CHECK_FRAMES = 1000

@@ -36,9 +36,10 @@ MAP_FILE = "markers.toml"
 MIN_HAND_MARKERS = 3
 #: Plausible span (mm) of a session's mapped markers: the largest median distance between
 #: two of them. Measured: 183 mm on the real Qualisys glove recording (hand plate to the
-#: middle fingertip); a hand plate and one proximal phalanx span 60 mm or more, a whole
-#: hand at most about 250 mm. Centimetres read as millimetres fall below, millimetres
-#: read as centimetres above.
+#: middle fingertip), 64 mm for the tests' hand plate with one proximal marker. The range
+#: is wide (a child's hand plate and one proximal marker to an adult's whole hand) and
+#: still catches a factor of 10: centimetres read as millimetres fall below it,
+#: millimetres read as centimetres above.
 HAND_SPAN_MM = (25.0, 400.0)
 _TOP_KEYS = ("markers",)
 #: Every segment a map may name.
