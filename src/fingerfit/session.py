@@ -291,13 +291,14 @@ class Session:
     grasp, targets, test : list[Recording]
     landmarks : dict[str, ndarray]
         Stylus-digitised points ``(3,)`` in tracker coordinates (mm), taken at the
-        reference posture.
+        reference posture. May be empty in a marker session (its ``landmarks.csv`` is
+        optional).
     events : list[TargetEvent]
     path : Path or None
         Directory the session was loaded from.
     files : tuple of Path
         Every file the session was read from (``session.toml``, recordings, landmarks,
-        events); no command may write onto one of them.
+        events, the marker map); no command may write onto one of them.
     marker_map : dict[str, tuple of str]
         For a marker session: per segment (``hand``, ``index.proximal``, ... the sensor
         names), the labels of the skin markers it carries, in the recordings'

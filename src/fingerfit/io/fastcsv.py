@@ -168,12 +168,13 @@ def block_parser(
     text: Sequence[str] = (),
     use: Sequence[str] | None = None,
     delimiter: str = ",",
+    missing: Sequence[str] = ("",),
 ) -> Callable[[object], tuple[int, dict]]:
     """A function parsing one block of lines (bytes-like) into ``(n_rows, columns)``.
 
-    Columns as in :func:`csv_batches`; empty lines are skipped; raises :class:`NotPlain`
-    for a parse error, a NaN or infinity written out in a float column, or a control
-    character in a text column.
+    Columns as in :func:`csv_batches`; empty lines are skipped; a field spelled as one of
+    ``missing`` is NaN; raises :class:`NotPlain` for a parse error, any other NaN or an
+    infinity written out in a float column, or a control character in a text column.
     """
     pa, pacsv = _arrow()
     wanted = list(names) if use is None else list(use)
@@ -185,7 +186,7 @@ def block_parser(
     convert_opts = pacsv.ConvertOptions(
         column_types=types,
         include_columns=wanted,
-        null_values=[""],
+        null_values=list(missing),
         strings_can_be_null=False,
         quoted_strings_can_be_null=False,
     )

@@ -2,27 +2,22 @@
 
 Layout (see ``docs/formats.md``)::
 
-    session.toml      format, subject, hand, units, rate_hz, fingers, [recordings]
+    session.toml      format, subject, hand, units, rate_hz, fingers, [markers,] [recordings]
     reference.csv     static recording at the stretched reference posture
     landmarks.csv     name,x,y,z (stylus points at the reference posture)
     grasp*.csv ...    pose recordings (canonical pose CSV)
     events.csv        optional: recording,finger,target,start,end
+
+A marker session (``markers = "markers.toml"``) holds marker recordings (``.trc``,
+``.tsv``, ``.c3d``) instead, and its landmarks are optional (:mod:`.markers.session`).
 """
 
 from __future__ import annotations
 
-import csv
-import dataclasses
 import difflib
-import io
 import json
-import math
-import re
-import tomllib
+import os
 from pathlib import Path, PurePosixPath, PureWindowsPath
-
-import numpy as np
-import pandas as pd
 
 from ..digits import DIGIT_NAMES, DIGITS
 from ..errors import FingerfitError, shown
@@ -31,28 +26,35 @@ from ..session import (
     UNITS_TO_MM,
     Recording,
     Session,
-    TargetEvent,
     check_subject_id,
     digit_sensors,
-    is_landmark_name,
 )
-from ..transforms import FloatArray
 from .atomic import atomic_write
-from .hygiene import MAX_RATE_HZ, implausible_message, implausible_rows
-from .posecsv import check_field_counts, read_pose_csv
+from .hygiene import MAX_RATE_HZ
+from .markers import read_marker_recording
+from .markers.markermap import MAP_FILE, read_marker_map, write_marker_map
+from .markers.session import check_marker_session, check_recording_kind, trc_named
+from .opensim import write_markers
+from .posecsv import read_pose_csv
 from .posewrite import write_pose_csv
+from .sessiontables import EVENTS_FILE as EVENTS_FILE
+from .sessiontables import EVENTS_HEADER as EVENTS_HEADER
+from .sessiontables import LANDMARKS_FILE as LANDMARKS_FILE
+from .sessiontables import LANDMARKS_HEADER as LANDMARKS_HEADER
+from .sessiontables import LANDMARKS_SD_HEADER as LANDMARKS_SD_HEADER
+from .sessiontables import match_event_recordings as match_event_recordings
+from .sessiontables import read_events as read_events
+from .sessiontables import read_landmark_table as read_landmark_table
+from .sessiontables import read_landmarks as read_landmarks
+from .sessiontables import write_events as write_events
+from .sessiontables import write_landmarks as write_landmarks
+from .textfile import read_toml
 
 SESSION_FILE = "session.toml"
-LANDMARKS_FILE = "landmarks.csv"
-EVENTS_FILE = "events.csv"
-EVENTS_HEADER = ("recording", "finger", "target", "start", "end")
-LANDMARKS_HEADER = ("name", "x", "y", "z")
-#: With each digitised point's uncertainty (``fingerfit capture --protocol landmarks``).
-LANDMARKS_SD_HEADER = ("name", "x", "y", "z", "sd")
 
 
 #: Keys of ``session.toml``: top level and ``[recordings]``.
-TOP_KEYS = ("format", "subject", "hand", "units", "rate_hz", "fingers", "recordings")
+TOP_KEYS = ("format", "subject", "hand", "units", "rate_hz", "fingers", "markers", "recordings")
 RECORDING_KEYS = ("reference", "grasp", "targets", "test", "events")
 
 
@@ -156,200 +158,6 @@ def session_file(directory: Path, name: object, meta_path: Path, field: str) -> 
     return f
 
 
-def _read_small_csv(path: Path, header: tuple[str, ...]) -> pd.DataFrame:
-    """A small text table with an exact header; every line has ``len(header)`` fields.
-
-    Returns the table as strings; row ``i`` is file line ``i + 2``.
-    """
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise FingerfitError("file not found", path=path) from None
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
-    first = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
-    cols = tuple(h.strip() for h in first.split(","))
-    if cols != header:
-        raise FingerfitError(
-            f"header must be '{','.join(header)}', found '{shown(first, 80)}'", path=path, line=1
-        )
-    n = check_field_counts(raw, path, len(header))
-    if n == 0:
-        return pd.DataFrame(columns=list(header), dtype=str)
-    df = pd.read_csv(
-        io.BytesIO(raw),
-        dtype=str,
-        keep_default_na=False,
-        quoting=csv.QUOTE_NONE,
-        encoding="utf-8",
-        skip_blank_lines=True,
-    )
-    df.columns = list(header)
-    return df.apply(lambda c: c.str.strip())
-
-
-def _number(text: str, path: Path, line: int, field: str, what: str) -> float:
-    """A finite number from a field's text, else an error naming the line and field."""
-    try:
-        if "_" in text:
-            raise ValueError
-        v = float(text)
-    except ValueError:
-        raise FingerfitError(
-            f"{what} must be a number, not '{shown(text)}'", path=path, line=line, field=field
-        ) from None
-    if not math.isfinite(v):
-        raise FingerfitError(
-            f"{what} must be a finite number, not '{shown(text)}'",
-            path=path,
-            line=line,
-            field=field,
-        )
-    return v
-
-
-def read_landmarks(path: str | Path, units: str = "mm") -> dict[str, np.ndarray]:
-    """Read a landmarks CSV: :func:`read_landmark_table`'s positions."""
-    return read_landmark_table(path, units)[0]
-
-
-def read_landmark_table(
-    path: str | Path, units: str = "mm"
-) -> tuple[dict[str, np.ndarray], dict[str, float]]:
-    """Read a ``name,x,y,z`` landmarks CSV, or ``name,x,y,z,sd`` (the digitised points'
-    uncertainties, written by ``fingerfit capture --protocol landmarks``).
-
-    Parameters
-    ----------
-    path : str or Path
-    units : str
-        Units of ``x,y,z`` (and ``sd``) in the file.
-
-    Returns
-    -------
-    positions : dict[str, ndarray]
-        Landmark name -> position ``(3,)`` in mm, tracker coordinates.
-    sd : dict[str, float]
-        Landmark name -> its uncertainty (mm, the standard error of its takes), for the
-        rows whose ``sd`` is given (an empty cell: not known).
-
-    Raises
-    ------
-    FingerfitError
-        Naming the file and line: header, field count, unknown or repeated name,
-        a coordinate that is not a finite number, a negative ``sd``.
-    """
-    path = Path(path)
-    with_sd = _header(path) == LANDMARKS_SD_HEADER
-    df = _read_small_csv(path, LANDMARKS_SD_HEADER if with_sd else LANDMARKS_HEADER)
-    out: dict[str, np.ndarray] = {}
-    sds: dict[str, float] = {}
-    for i, row in enumerate(df.itertuples(index=False), start=2):
-        name = str(row.name)
-        if not is_landmark_name(name):
-            raise FingerfitError(
-                f"unknown landmark name '{shown(name)}'", path=path, line=i, field="name"
-            )
-        if name in out:
-            raise FingerfitError(f"landmark '{name}' given twice", path=path, line=i, field="name")
-        xyz = np.array(
-            [_number(v, path, i, k, "coordinate") for k, v in zip("xyz", row[1:4], strict=True)]
-        )
-        if with_sd and row[4] != "":
-            sd = _number(row[4], path, i, "sd", "sd")
-            if sd < 0:
-                raise FingerfitError("sd must not be negative", path=path, line=i, field="sd")
-            sds[name] = sd * UNITS_TO_MM[units]
-        if implausible_rows(xyz[None], UNITS_TO_MM[units]).size:
-            big = float(xyz[np.argmax(np.abs(xyz))]) * UNITS_TO_MM[units]
-            raise FingerfitError(implausible_message(big), path=path, line=i)
-        out[name] = xyz * UNITS_TO_MM[units]
-    return out, sds
-
-
-def _header(path: Path) -> tuple[str, ...]:
-    """A small CSV's header fields (empty when unreadable: the reader says why)."""
-    try:
-        with path.open("rb") as fh:
-            first = fh.readline(4096)
-    except OSError:
-        return ()
-    text = first.decode("utf-8", "replace").strip().lstrip("\ufeff")
-    return tuple(h.strip() for h in text.split(","))
-
-
-def read_events(path: str | Path) -> list[TargetEvent]:
-    """Read ``recording,finger,target,start,end`` touch events.
-
-    Parameters
-    ----------
-    path : str or Path
-
-    Returns
-    -------
-    list of TargetEvent
-        ``start`` and ``end`` in seconds (finite, ``start < end``).
-
-    Raises
-    ------
-    FingerfitError
-        Naming the file and line: header, field count, a time that is not a finite
-        number, ``end <= start``, an unknown finger.
-    """
-    path = Path(path)
-    df = _read_small_csv(path, EVENTS_HEADER)
-    events = []
-    for i, row in enumerate(df.itertuples(index=False), start=2):
-        start = _number(row.start, path, i, "start", "start and end (s)")
-        end = _number(row.end, path, i, "end", "start and end (s)")
-        if not end > start:
-            raise FingerfitError(
-                f"need start < end, got {start:g} and {end:g} s", path=path, line=i
-            )
-        if row.finger not in DIGIT_NAMES:
-            raise FingerfitError(
-                f"unknown digit '{shown(row.finger)}' (expected one of {', '.join(DIGIT_NAMES)})",
-                path=path,
-                line=i,
-                field="finger",
-            )
-        if row.target == row.finger:
-            raise FingerfitError(
-                f"digit '{row.finger}' cannot pinch itself", path=path, line=i, field="target"
-            )
-        events.append(TargetEvent(row.recording, row.finger, row.target, start, end))
-    return events
-
-
-def match_event_recordings(events: list[TargetEvent], names: list[str]) -> list[TargetEvent]:
-    """Events naming a recording by another extension, renamed to the session's file.
-
-    An event's ``recording`` that is no recording's name but has the stem of exactly
-    one (``targets.csv`` for a session converted to ``targets.parquet``) names that
-    recording; any other name is left for the session's check to refuse.
-
-    Parameters
-    ----------
-    events : list of TargetEvent
-    names : list of str
-        The file names of the session's recordings.
-
-    Returns
-    -------
-    list of TargetEvent
-    """
-    stems: dict[str, list[str]] = {}
-    for n in names:
-        stems.setdefault(Path(n).stem, []).append(n)
-    out = []
-    for ev in events:
-        found = stems.get(Path(ev.recording).stem, [])
-        if ev.recording not in names and len(found) == 1:
-            ev = dataclasses.replace(ev, recording=found[0])
-        out.append(ev)
-    return out
-
-
 def load_session(
     directory: str | Path, *, parsed: Session | None = None, test: bool = True
 ) -> Session:
@@ -386,19 +194,7 @@ def load_session(
     if not meta_path.is_file():
         raise FingerfitError(f"not a session directory (no {SESSION_FILE})", path=directory)
     session_file(directory, SESSION_FILE, meta_path, SESSION_FILE)
-    try:
-        text = meta_path.read_bytes().decode("utf-8")
-        meta = tomllib.loads(text)
-    except UnicodeDecodeError as exc:
-        raise FingerfitError(f"not UTF-8 text (byte {exc.start})", path=meta_path) from None
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=meta_path) from None
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"at line (\d+)", str(exc))
-        line = int(found.group(1)) if found else None
-        raise FingerfitError(
-            f"invalid TOML ({str(exc).split(' (at')[0]})", path=meta_path, line=line
-        ) from None
+    meta = read_toml(meta_path)
     _check_keys(meta, TOP_KEYS, meta_path, SESSION_FILE)
     fmt = _require(meta, "format", str, meta_path)
     if fmt != FORMAT:
@@ -457,20 +253,35 @@ def load_session(
         )
     target_names = _file_list(recs.get("targets", []), meta_path, "recordings.targets")
     test_names = _file_list(recs.get("test", []), meta_path, "recordings.test")
+    map_file = None
+    if "markers" in meta:
+        map_file = session_file(directory, meta["markers"], meta_path, "markers")
     ref_file = file(ref_name, "reference")
     grasp_files = [file(n, "grasp") for n in grasp_names]
     target_files = [file(n, "targets") for n in target_names]
     test_files = [file(n, "test") for n in test_names]
+    for key, files in (
+        ("reference", [ref_file]),
+        ("grasp", grasp_files),
+        ("targets", target_files),
+        ("test", test_files),
+    ):
+        for f in files:
+            check_recording_kind(f, map_file is not None, meta_path, f"recordings.{key}")
     events_file = None
     if "events" in recs:
         events_file = file(_require(recs, "events", str, meta_path, "recordings."), "events")
-    landmarks_file = session_file(directory, LANDMARKS_FILE, meta_path, LANDMARKS_FILE)
+    landmarks_file: Path | None = None
+    if map_file is None or os.path.lexists(directory / LANDMARKS_FILE):  # optional with markers
+        landmarks_file = session_file(directory, LANDMARKS_FILE, meta_path, LANDMARKS_FILE)
 
     known = {r.name: r for r in parsed.recordings()} if parsed is not None else {}
 
     def load(f: Path) -> Recording:
         if f.name in known:
             return known[f.name]
+        if map_file is not None:
+            return read_marker_recording(f)  # in the units the file states
         return read_pose_csv(f, units=units, rate_hz=rate)
 
     reference = load(ref_file)
@@ -478,11 +289,14 @@ def load_session(
     targets = [load(f) for f in target_files]
     test = [load(f) for f in test_files] if test else []
     if parsed is not None:
-        landmarks, events = parsed.landmarks, parsed.events
+        landmarks, events, marker_map = parsed.landmarks, parsed.events, parsed.marker_map
         landmark_sd = parsed.landmark_sd
     else:
-        landmarks, landmark_sd = read_landmark_table(landmarks_file, units)
+        landmarks, landmark_sd = (
+            read_landmark_table(landmarks_file, units) if landmarks_file is not None else ({}, {})
+        )
         events = read_events(events_file) if events_file is not None else []
+        marker_map = read_marker_map(map_file) if map_file is not None else {}
     recordings = [reference, *grasp, *targets, *test]
     events = match_event_recordings(events, [r.name for r in recordings])
     session = Session(
@@ -505,18 +319,25 @@ def load_session(
             *grasp_files,
             *target_files,
             *test_files,
-            landmarks_file,
+            *([landmarks_file] if landmarks_file is not None else []),
             *([events_file] if events_file is not None else []),
+            *([map_file] if map_file is not None else []),
         ),
+        marker_map=marker_map,
     )
-    _check_complete(session)
+    _check_complete(session, map_file)
     return session
 
 
-def _check_complete(session: Session) -> None:
-    """Every listed finger has its sensors in the reference and grasp recordings and its landmarks."""
+def _check_complete(session: Session, map_file: Path | None = None) -> None:
+    """Every listed finger has its sensors in the reference and grasp recordings and its
+    landmarks; in a marker session (``map_file``), the map's segments take the place of
+    the sensors (:func:`~fingerfit.io.markers.session.check_marker_session`) and no
+    landmark is required."""
     assert session.path is not None
-    for finger in session.fingers:
+    if map_file is not None:
+        check_marker_session(session, map_file)
+    for finger in session.fingers if map_file is None else ():
         needed = digit_sensors(finger)
         for rec in [session.reference, *session.grasp]:
             for s in needed:
@@ -563,7 +384,8 @@ def _toml_list(names: list[str]) -> str:
 def write_session_toml(session: Session, directory: str | Path) -> Path:
     """Write ``session.toml`` naming the session's recordings (files are not written).
 
-    ``events = "events.csv"`` is listed when the session has events.
+    ``events = "events.csv"`` is listed when the session has events, ``markers =
+    "markers.toml"`` when it has a marker map.
     """
     lines = [
         f'format = "{FORMAT}"',
@@ -572,6 +394,7 @@ def write_session_toml(session: Session, directory: str | Path) -> Path:
         f'units = "{session.units}"',
         f"rate_hz = {float(session.rate_hz)!r}",
         f"fingers = {_toml_list(session.fingers)}",
+        *([f'markers = "{MAP_FILE}"'] if session.marker_map else []),
         "",
         "[recordings]",
         f"reference = {json.dumps(session.reference.name)}",
@@ -595,7 +418,9 @@ def save_session(session: Session, directory: str | Path) -> Path:
     Parameters
     ----------
     session : Session
-        Arrays in mm; files are written in ``session.units``.
+        Arrays in mm; files are written in ``session.units``. A marker session's
+        recordings are written as TRC (``<stem>.trc``), with its map (``markers.toml``)
+        and, when it has landmarks, ``landmarks.csv``.
     directory : str or Path
         Created if needed; existing files of the same names are replaced.
 
@@ -606,55 +431,22 @@ def save_session(session: Session, directory: str | Path) -> Path:
     """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    for rec in session.recordings():
-        write_pose_csv(directory / rec.name, rec, units=session.units)
-    write_landmarks(
-        directory / LANDMARKS_FILE,
-        session.landmarks,
-        session.units,
-        session.landmark_sd or None,
-    )
+    if session.marker_map:
+        session = trc_named(session)
+        for rec in session.recordings():
+            write_markers(directory / rec.name, rec, units=session.units)
+        write_marker_map(directory / MAP_FILE, session.marker_map)
+    else:
+        for rec in session.recordings():
+            write_pose_csv(directory / rec.name, rec, units=session.units)
+    if session.landmarks or not session.marker_map:
+        write_landmarks(
+            directory / LANDMARKS_FILE,
+            session.landmarks,
+            session.units,
+            session.landmark_sd or None,
+        )
     if session.events:
         write_events(directory / EVENTS_FILE, session.events)
     write_session_toml(session, directory)
     return directory
-
-
-def write_landmarks(
-    path: str | Path,
-    landmarks: dict[str, FloatArray],
-    units: str = "mm",
-    sd: dict[str, float] | None = None,
-) -> Path:
-    """Write ``name,x,y,z`` landmarks (``name,x,y,z,sd`` with ``sd``), atomically.
-
-    Parameters
-    ----------
-    path : str or Path
-    landmarks : dict[str, ndarray]
-        Name -> position ``(3,)`` in mm, tracker coordinates.
-    units : str
-        Units of the written coordinates.
-    sd : dict[str, float], optional
-        Name -> uncertainty (mm); a landmark without one (or NaN) gets an empty cell.
-    """
-    scale = UNITS_TO_MM[units]
-    rows = [(k, *(v / scale)) for k, v in landmarks.items()]
-    if sd is not None:
-        rows = [
-            (*r, "" if not np.isfinite(sd.get(r[0], np.nan)) else sd[r[0]] / scale) for r in rows
-        ]
-    lm = pd.DataFrame(
-        rows, columns=list(LANDMARKS_SD_HEADER if sd is not None else LANDMARKS_HEADER)
-    )
-    with atomic_write(path, newline="") as fh:
-        lm.to_csv(fh, index=False, lineterminator="\n")
-    return Path(path)
-
-
-def write_events(path: str | Path, events: list[TargetEvent]) -> Path:
-    """Write ``recording,finger,target,start,end`` touch events (s), atomically."""
-    ev = pd.DataFrame([e.__dict__ for e in events], columns=list(EVENTS_HEADER))
-    with atomic_write(path, newline="") as fh:
-        ev.to_csv(fh, index=False, lineterminator="\n")
-    return Path(path)
