@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fingerfit.capture.landmarks import LandmarkTaker
-from fingerfit.capture.pinch import find_holds, pad_points
+from fingerfit.capture.pinch import find_holds, marked_holds, pad_points
 from fingerfit.cli import app
 from fingerfit.estimate import fit_session
 from fingerfit.io.posewrite import write_pose_csv
@@ -247,3 +247,18 @@ def test_landmark_order_is_the_files():
     assert landmark_names(["index"], pads=True, targets=("a",)) == [
         "index.mp", "index.pip", "index.dip", "index.tip", "index.pad", "target.a",
     ]  # fmt: skip
+
+
+def test_key_marked_holds_name_the_finger_nearest_the_thumb(lab):
+    sim, _, _ = lab
+    s = sim.session
+    rec = s.recording("pinch.csv")
+    truth = [e for e in s.events if e.recording == "pinch.csv"]
+    presses = [t for e in truth for t in (e.start, e.end)]
+    for kind in ("pad", "tip"):  # the pads, or without them the tips
+        points = pad_points(s.landmarks, s.reference, list(DIGITS), kind)
+        found, unpaired = marked_holds(rec, [*presses, 30.0], points)
+        assert unpaired == 1
+        assert [(e.target, e.start, e.end) for e in found] == [
+            (e.target, e.start, e.end) for e in truth
+        ]

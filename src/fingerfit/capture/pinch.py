@@ -19,7 +19,9 @@ and release (the pulps compressing, rolling into place) are where a real contact
 like the fixed contact point the pad fit assumes, and the window cannot place them closer.
 
 Without pad landmarks nothing is found: the nail-edge tips of touching pads are 12-18 mm
-apart, no closer than some pads that do not touch, so a tip cannot tell a touch.
+apart, no closer than some pads that do not touch, so a tip cannot tell a touch. Holds
+can be marked by a key instead (:func:`marked_holds`: a press at the start and one at the
+end of each hold, the finger being the one nearest the thumb).
 """
 
 from __future__ import annotations
@@ -101,19 +103,59 @@ def find_holds(
 
 
 def pad_points(
-    landmarks: dict[str, FloatArray], reference: Recording, digits: list[str]
+    landmarks: dict[str, FloatArray], reference: Recording, digits: list[str], kind: str = "pad"
 ) -> dict[str, FloatArray]:
     """Each digit's pad point ``(3,)`` in its distal sensor's frame (mm): its ``<digit>.pad``
-    landmark carried from the reference posture by the sensor's mean reference pose.
-    Digits without a pad landmark are left out."""
+    landmark (``kind``: or another landmark of the distal phalanx, ``tip``) carried from
+    the reference posture by the sensor's mean reference pose. Digits without that
+    landmark are left out."""
     from ..digits import DIGITS
 
     out = {}
     for d in digits:
-        pad = landmarks.get(f"{d}.pad")
+        pad = landmarks.get(f"{d}.{kind}")
         sensor = DIGITS[d].sensors()[-1]
         if pad is None or sensor not in reference.poses:
             continue
         pos, rot = reference.poses[sensor].mean()
         out[d] = rot.T @ (pad - pos)
     return out
+
+
+def marked_holds(
+    recording: Recording,
+    presses: list[float],
+    points: dict[str, FloatArray],
+    *,
+    first: str = "thumb",
+) -> tuple[list[TargetEvent], int]:
+    """Holds marked by key presses: each pair of presses (start, end; s, the recording's
+    time) is a hold of digit ``first`` with the digit whose point (``points``: digit ->
+    ``(3,)`` in its distal sensor's frame, mm: the pad landmarks, else the tips) is
+    nearest ``first``'s over the pair's frames.
+
+    Returns
+    -------
+    events : list of TargetEvent
+    unpaired : int
+        A last press without its end (1) or none (0).
+    """
+    from ..digits import DIGITS
+
+    def point(d: str) -> FloatArray:
+        pose = recording.poses[DIGITS[d].sensors()[-1]]
+        return np.einsum("nij,j->ni", pose.rotation, points[d]) + pose.position
+
+    others = [d for d in points if d != first]
+    if first not in points or not others:
+        return [], len(presses) % 2
+    p0 = point(first)
+    dist = {d: np.linalg.norm(p0 - point(d), axis=1) for d in others}
+    events = []
+    for a, b in zip(presses[0::2], presses[1::2], strict=False):
+        inside = (recording.time >= a) & (recording.time <= b)
+        if not inside.any():
+            continue
+        near = min(others, key=lambda d: float(np.nanmedian(dist[d][inside])))
+        events.append(TargetEvent(recording.name, first, near, float(a), float(b)))
+    return events, len(presses) % 2

@@ -13,6 +13,8 @@ from .app import Quiet, app, console, notice, out, say, user_errors
 from .capture_source import open_source, source_files
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
+
     from rich.table import Table
 
     from ..capture import CapturePlan, JointEvidence
@@ -157,7 +159,8 @@ def capture(
         str,
         typer.Option(
             help="landmarks: what takes a point: still (the stylus held still 0.5 s) or enter "
-            "(the Enter key: the 0.5 s before it)."
+            "(the Enter key: the 0.5 s before it). thumb, pinch: still (holds found from the "
+            "pads) or enter (a press at each hold's start and end)."
         ),
     ] = "still",
     quiet: Quiet = False,
@@ -206,7 +209,7 @@ def capture(
             _capture(
                 session_dir, source, protocol, name, duration, until_enough, subject, hand,
                 units, rate, digits, reference, landmarks, stations, overwrite, view,
-                view_save, quiet, interrupts,
+                view_save, quiet, interrupts, trigger,
             )  # fmt: skip
         except KeyboardInterrupt:
             raise FingerfitError("interrupted before recording began: nothing written") from None
@@ -214,7 +217,7 @@ def capture(
 
 def _capture(
     folder, spec, protocol, name, duration, until_enough, subject, hand, units, rate, digits,
-    reference, landmarks, stations, overwrite, view, view_save, quiet, interrupts,
+    reference, landmarks, stations, overwrite, view, view_save, quiet, interrupts, trigger,
 ) -> None:  # fmt: skip
     """Check everything, open the source, record, write, then the final evidence. Ctrl-C
     before the recording leaves nothing; during it, stops it and keeps what was recorded;
@@ -238,6 +241,8 @@ def _capture(
     )  # fmt: skip
     need = thresholds()
     acc = Accumulator(plan.name, plan.sensors)
+    # --trigger enter: the holds of a thumb or pinch recording marked by the Enter key.
+    presses: list[float] | None = [] if trigger == "enter" and protocol in HOLD_PROTOCOLS else None
     from ..capture import check_sensors
 
     the_source = open_source(
@@ -275,9 +280,12 @@ def _capture(
             if live is not None:
                 live.update(_table(rows, need, frames, plan.rate_hz))
 
+        blocks = the_source.blocks()
+        if presses is not None:
+            blocks = _marking(blocks, presses)
         interrupted = record(
-            the_source.blocks(), acc, child, plan.rate_hz, duration=duration,
-            until_enough=until_enough, show=show,
+            blocks, acc, child, plan.rate_hz, duration=duration, until_enough=until_enough,
+            show=show,
         )  # fmt: skip
     except KeyboardInterrupt:  # before the loop began: nothing recorded
         interrupted = True
@@ -301,7 +309,7 @@ def _capture(
             )
             raise FingerfitError(f"{why}; no file written", field="--source")
         _check_recorded(rec, plan)
-        extra = _pinch_events(plan, rec) if protocol in HOLD_PROTOCOLS else None
+        extra = _pinch_events(plan, rec, presses) if protocol in HOLD_PROTOCOLS else None
         toml = write_capture(plan, rec, extra)
         if failure is not None:
             raise FingerfitError(
@@ -356,15 +364,43 @@ def _names(text: str | None) -> list[str]:
     return [t.strip() for t in (text or "").split(",") if t.strip()]
 
 
-def _pinch_events(plan: CapturePlan, rec: Recording) -> dict[Path, bytes] | None:
-    """``events.csv`` with the pinch recording's holds (the folder's other events kept,
-    this recording's earlier ones replaced), listed in ``session.toml``; None when the
-    folder has no pad landmarks to find them with (said)."""
-    from ..capture.folder import rendered
-    from ..capture.pinch import find_holds, pad_points
-    from ..io.sessiondir import EVENTS_FILE, read_events, write_events
+def _marking(blocks: Iterator, presses: list[float]) -> Iterator:
+    """The source's blocks, each Enter press noted in ``presses`` as the time (s) of the
+    last frame received before it."""
+    from .capture_steps import enter_presses
+
+    pressed = enter_presses()
+    last = None
+    for block in blocks:
+        if block is not None and block.recording.n_frames:
+            last = float(block.recording.time[-1])
+        if pressed.is_set() and last is not None:
+            pressed.clear()
+            presses.append(last)
+            say("hold {} at {} s", "start" if len(presses) % 2 else "end", f"{last:.2f}")
+        yield block
+
+
+def _pinch_events(
+    plan: CapturePlan, rec: Recording, presses: list[float] | None = None
+) -> dict[Path, bytes] | None:
+    """``events.csv`` with the pinch recording's holds -- found from the pads, or marked
+    by ``presses`` (``--trigger enter``) -- (the folder's other events kept, this
+    recording's earlier ones replaced), listed in ``session.toml``; None when the folder
+    has no pad landmarks to find them with (said)."""
+    from ..capture.pinch import find_holds, marked_holds, pad_points
 
     pads = pad_points(plan.base.landmarks, plan.base.reference, plan.digits)
+    if presses is not None:
+        points = (
+            pads
+            if "thumb" in pads and len(pads) > 1
+            else pad_points(plan.base.landmarks, plan.base.reference, plan.digits, "tip")
+        )
+        found, unpaired = marked_holds(rec, presses, points)
+        if unpaired:
+            notice("warning", "the last Enter press had no end: that hold is left out")
+        return _events_file(plan, rec, found, set(points) - {"thumb"})
     if "thumb" not in pads or len(pads) < 2:
         if plan.protocol != "pinch":
             return None
@@ -374,11 +410,20 @@ def _pinch_events(plan: CapturePlan, rec: Recording) -> dict[Path, bytes] | None
             f"{plan.folder / 'landmarks.csv'} lacks (capture --protocol landmarks --pads)",
         )
         return None
-    found = find_holds(rec, pads, plan.rate_hz)
+    return _events_file(plan, rec, find_holds(rec, pads, plan.rate_hz), set(pads) - {"thumb"})
+
+
+def _events_file(
+    plan: CapturePlan, rec: Recording, found: list, fingers: set[str]
+) -> dict[Path, bytes]:
+    """``events.csv``'s new content with ``found`` for ``rec`` (said per finger)."""
+    from ..capture.folder import rendered
+    from ..io.sessiondir import EVENTS_FILE, read_events, write_events
+
     path = plan.folder / EVENTS_FILE
     kept = [e for e in read_events(path) if e.recording != rec.name] if path.is_file() else []
     plan.meta["recordings"]["events"] = EVENTS_FILE
-    by_digit = {d: sum(e.target == d for e in found) for d in pads if d != "thumb"}
+    by_digit = {d: sum(e.target == d for e in found) for d in plan.digits if d in fingers}
     say(
         "pad-to-pad holds found: {}",
         ", ".join(f"thumb-{d} {n}" for d, n in by_digit.items()) or "none",

@@ -113,7 +113,7 @@ def capture_reference(
     )  # fmt: skip
 
 
-def _enter_presses() -> threading.Event:
+def enter_presses() -> threading.Event:
     """An event set each time Enter is pressed on the terminal (a daemon thread)."""
     import sys
 
@@ -235,7 +235,7 @@ def capture_landmarks(
 
         viewer = LandmarkView(view_save, means)
     taker = LandmarkTaker(names, cal, rate_hz, takes=takes, still=trigger == "still")
-    pressed = _enter_presses() if trigger == "enter" else None
+    pressed = enter_presses() if trigger == "enter" else None
     acc = Accumulator(raw.name, sensors)
     say("{}", taker.prompt())
     interrupted = False
