@@ -160,7 +160,7 @@ def capture_landmarks(
     from ..io.atomic import check_target, refuse_writing_inputs, write_files
     from ..io.posewrite import write_pose_csv
     from ..io.sessiondir import LANDMARKS_FILE, read_landmark_table, write_landmarks
-    from ..session import is_landmark_name
+    from ..session import digit_sensors, is_landmark_name
     from ..stylus import read_stylus
     from ..stylus.landmarks import landmark_names, landmark_segment, tip_points
     from .capture_source import open_source, source_files
@@ -207,10 +207,13 @@ def capture_landmarks(
         if only is not None:
             have = read_landmark_table(lm_path, meta["units"])
     segments = sorted({s for n in names if (s := landmark_segment(n)) is not None})
-    sensors = list(dict.fromkeys([*segments, cal.sensor]))
+    # Every sensor of the session, then the stylus: a Liberty's default stations are the
+    # other protocols' with the stylus on the next one.
+    session_sensors = [s for d in digits for s in digit_sensors(d)]
+    sensors = list(dict.fromkeys([*session_sensors, cal.sensor]))
 
     def check(rec, path) -> None:
-        for s in sensors:
+        for s in [*segments, cal.sensor]:
             if s not in rec.poses or not rec.poses[s].valid.any():
                 raise FingerfitError(
                     f"no samples for sensor '{s}', which the landmarks need", path=path
