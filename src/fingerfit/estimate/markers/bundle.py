@@ -1,0 +1,347 @@
+"""Bundle adjustment of one digit from its skin markers.
+
+The unknowns are the digit's **lines** (each axis's direction and a point of it, the chain
+of :mod:`fingerfit.track.chains`: a finger's MP with one or two axes, PIP, DIP; the thumb's
+CMC two axes, MCP one or two, IP), each **marker's place** ``u_i`` on its segment at the
+reference posture, and every frame's **angles** ``q_t``. Marker ``i`` on segment ``s`` is
+predicted at ``A_s(q_t) u_i`` (the chain's motion of that segment, :meth:`Chains.pose`)
+and measured at ``y_i(t)`` (the hand's motion removed, :mod:`.observe`); the reference
+recording pins the angles' zero: there ``y_i = u_i`` (its mean, weighted by its frame
+count). The cost is ``sum |y_i(t) - A_s(q_t) u_i|^2`` (mm^2, every marker seen in every
+frame, isotropic noise).
+
+Levenberg-Marquardt on the block structure: each frame's angles form a block of ``L``
+unknowns coupled only to the global ones; the normal equations are reduced to the global
+unknowns by the Schur complement, all frames at once (batched ``L x L`` inverses), and the
+frames' steps follow by back-substitution. The Jacobian of a marker in its frame's angles
+is analytic (``a_k x (p - c_k)`` with the axes where the chain puts them), in its place
+``u_i`` the segment's rotation, in the lines central differences of the chain's pose.
+A direction moves in the plane perpendicular to it (2 unknowns) and a point of a line
+perpendicular to the line (2 unknowns; along the line it is no unknown).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...track.chains import Chains, matvec_rows
+from ...transforms import FloatArray, orthonormal_basis, unit
+from .observe import DigitMarkers
+
+#: Central-difference step of a line's unknowns (rad, mm).
+STEP = 1e-5
+#: Added to each frame's angle block (1/rad^2 in mm^2): an angle no marker of the frame
+#: determines stays where it is.
+RIDGE = 1e-9
+
+
+@dataclass
+class Lines:
+    """A chain's lines (tracker coordinates at the reference posture).
+
+    Attributes
+    ----------
+    axis : ndarray, shape (L, 3)
+        Unit directions, proximal first.
+    centre : ndarray, shape (L, 3)
+        A point of each line (mm).
+    """
+
+    axis: FloatArray
+    centre: FloatArray
+
+    def copy(self) -> Lines:
+        return Lines(self.axis.copy(), self.centre.copy())
+
+    def moved(self, step: FloatArray) -> Lines:
+        """The lines moved by ``step (4 L,)``: per level two direction and two point
+        unknowns in the plane perpendicular to the axis (rad, mm)."""
+        axis, centre = self.axis.copy(), self.centre.copy()
+        for k in range(axis.shape[0]):
+            b = orthonormal_basis(axis[k])[:2]  # (2, 3)
+            axis[k] = unit(axis[k] + step[4 * k : 4 * k + 2] @ b)
+            centre[k] = centre[k] + step[4 * k + 2 : 4 * k + 4] @ b
+        return Lines(axis, centre)
+
+
+@dataclass(frozen=True)
+class Structure:
+    """What moves what: ``depth (S,)`` axes moving each segment (segment ``s`` moves with
+    the first ``depth[s]`` axes)."""
+
+    depth: np.ndarray
+
+    @property
+    def levels(self) -> int:
+        return int(self.depth[-1])
+
+
+def predict(
+    structure: Structure, lines: Lines, segment: np.ndarray, u: FloatArray, q: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Markers where the chain puts them.
+
+    Parameters
+    ----------
+    structure : Structure
+    lines : Lines
+    segment : ndarray of int, shape (M,)
+    u : ndarray, shape (M, 3)
+        Marker places at the reference posture (mm).
+    q : ndarray, shape (L, n)
+        Angles (rad).
+
+    Returns
+    -------
+    p : ndarray, shape (M, 3, n)
+        Predicted markers (mm).
+    rotation : ndarray, shape (M, 3, 3, n)
+        Each marker's segment rotation.
+    axes, centres : ndarray, shape (L, 3, n)
+        Each line where the proximal axes put it.
+    """
+    chains = Chains.from_lines(lines.axis[None], lines.centre[None], structure.depth[None])
+    pose = chains.pose(q[None])
+    level = structure.depth[segment]
+    rot = pose.rotation[0, level]  # (M, 3, 3, n)
+    p = matvec_rows(rot, u[..., None]) + pose.translation[0, level]
+    return p, rot, pose.axes[0], pose.centres[0]
+
+
+@dataclass
+class Normal:
+    """The normal equations at a point, frames first.
+
+    Attributes
+    ----------
+    qq : ndarray, shape (n, L, L)
+    qg : ndarray, shape (n, L, G)
+    gg : ndarray, shape (G, G)
+    bq : ndarray, shape (n, L)
+    bg : ndarray, shape (G,)
+        ``J^T r`` (``r`` measured minus predicted).
+    cost : float
+    count : int
+        Scalar observations (3 per seen marker, reference means included).
+    """
+
+    qq: FloatArray
+    qg: FloatArray
+    gg: FloatArray
+    bq: FloatArray
+    bg: FloatArray
+    cost: float
+    count: int
+
+
+def residual(
+    data: DigitMarkers, structure: Structure, lines: Lines, u: FloatArray, q: FloatArray
+) -> tuple[FloatArray, float]:
+    """Residuals ``(M, 3, n)`` (measured minus predicted, 0 where unseen, mm) and the cost
+    (mm^2, the reference term included)."""
+    p, *_ = predict(structure, lines, data.segment, u, q)
+    r = (data.position - p) * data.present[:, None]
+    ref = _reference_residual(data, u)
+    return r, float((r * r).sum() + (ref * ref).sum())
+
+
+def _reference_residual(data: DigitMarkers, u: FloatArray) -> FloatArray:
+    """``sqrt(n_ref) (ybar - u)`` of each marker ``(M, 3)`` (0 where never seen)."""
+    ok = data.reference_count > 0
+    ref = np.where(ok[:, None], data.reference - u, 0.0)
+    return ref * np.sqrt(data.reference_count)[:, None]
+
+
+def normal_equations(
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    free: np.ndarray,
+) -> tuple[Normal, FloatArray, FloatArray]:
+    """The normal equations of every frame and of the global unknowns.
+
+    Parameters
+    ----------
+    free : ndarray of bool, shape (4 L + 3 M,)
+        Global unknowns that move (lines first, then the markers' places).
+
+    Returns
+    -------
+    normal : Normal
+        Over the free global unknowns ``G``.
+    jq : ndarray, shape (n, 3 M, L)
+    jg : ndarray, shape (n, 3 M, G)
+        The Jacobians (rows of unseen markers 0), for the covariance's scores.
+    """
+    M, L, n = len(data.labels), structure.levels, data.frames
+    p, rot, axes, centres = predict(structure, lines, data.segment, u, q)
+    seen = data.present[:, None]  # (M, 1, n)
+    r = (data.position - p) * seen
+    # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
+    d = p[:, None] - centres[None]  # (M, L, 3, n)
+    a = np.broadcast_to(axes[None], d.shape)
+    jq = np.cross(a, d, axis=2)  # (M, L, 3, n)
+    jq *= (np.arange(L)[None, :] < structure.depth[data.segment][:, None])[..., None, None]
+    jq = jq.transpose(3, 0, 2, 1).reshape(n, 3 * M, L)
+    cols = []
+    for j in range(4 * L):  # the lines: central differences of the chain
+        e = np.zeros(4 * L)
+        e[j] = STEP
+        hi, *_ = predict(structure, lines.moved(e), data.segment, u, q)
+        lo, *_ = predict(structure, lines.moved(-e), data.segment, u, q)
+        cols.append((hi - lo) / (2 * STEP))
+    jl = np.stack(cols, axis=-1)  # (M, 3, n, 4 L)
+    jl = jl.transpose(2, 0, 1, 3).reshape(n, 3 * M, 4 * L)
+    ju = np.zeros((n, M, 3, M, 3))
+    ju[:, np.arange(M), :, np.arange(M), :] = rot.transpose(0, 3, 1, 2)
+    jg = np.concatenate([jl, ju.reshape(n, 3 * M, 3 * M)], axis=2)
+    mask = np.repeat(data.present.T, 3, axis=1)[..., None]  # (n, 3 M, 1)
+    jq *= mask
+    jg = jg[..., free] * mask
+    rr = r.transpose(2, 0, 1).reshape(n, 3 * M)
+    qq = np.einsum("nrl,nrk->nlk", jq, jq)
+    qg = np.einsum("nrl,nrg->nlg", jq, jg)
+    flat = jg.reshape(-1, jg.shape[-1])
+    gg = flat.T @ flat
+    bq = np.einsum("nrl,nr->nl", jq, rr)
+    bg = flat.T @ rr.reshape(-1)
+    ref = _reference_residual(data, u)
+    uw = np.zeros(4 * L + 3 * M)
+    uw[4 * L :] = np.repeat(data.reference_count, 3)
+    uw = uw[free]
+    gg[np.diag_indices_from(gg)] += uw
+    ref_b = np.concatenate(
+        [np.zeros(4 * L), (ref * np.sqrt(data.reference_count)[:, None]).ravel()]
+    )
+    bg += ref_b[free]
+    cost = float((r * r).sum() + (ref * ref).sum())
+    count = int(3 * data.present.sum() + 3 * (data.reference_count > 0).sum())
+    return Normal(qq, qg, gg, bq, bg, cost, count), jq, jg
+
+
+def schur_step(nq: Normal, lam: float) -> tuple[FloatArray, FloatArray]:
+    """The damped step ``(dq (n, L), dg (G,))`` of the normal equations: the frames'
+    blocks eliminated by the Schur complement, then back-substituted."""
+    qq = nq.qq.copy()
+    diag = np.einsum("nll->nl", qq)
+    diag *= 1.0 + lam
+    diag += RIDGE
+    w = np.linalg.inv(qq)  # (n, L, L)
+    wqg = w @ nq.qg  # (n, L, G)
+    s = nq.gg.copy()
+    s[np.diag_indices_from(s)] *= 1.0 + lam
+    s -= np.einsum("nlg,nlh->gh", nq.qg, wqg)
+    b = nq.bg - np.einsum("nlg,nl->g", wqg, nq.bq)
+    dg = np.linalg.solve(s + 1e-12 * np.eye(s.shape[0]), b)
+    dq = np.einsum("nlk,nk->nl", w, nq.bq) - wqg @ dg
+    return dq, dg
+
+
+def reduced(nq: Normal) -> tuple[FloatArray, FloatArray]:
+    """The Schur complement ``S (G, G)`` of the undamped normal equations (the global
+    unknowns' information, the frames' angles eliminated) and ``W Q_qg (n, L, G)``."""
+    qq = nq.qq.copy()
+    np.einsum("nll->nl", qq)[...] += RIDGE
+    wqg = np.linalg.solve(qq, nq.qg)
+    s = nq.gg - np.einsum("nlg,nlh->gh", nq.qg, wqg)
+    return s, wqg
+
+
+@dataclass
+class BundleResult:
+    """A converged bundle adjustment of one digit.
+
+    Attributes
+    ----------
+    lines : Lines
+    u : ndarray, shape (M, 3)
+        Marker places at the reference posture (mm).
+    q : ndarray, shape (L, n)
+        Angles of every frame (rad).
+    cost : float
+        Sum of squared residuals (mm^2).
+    rms_mm : float
+        RMS residual per coordinate (mm).
+    iterations : int
+    normal : Normal
+        At the solution.
+    free : ndarray of bool, shape (4 L + 3 M,)
+    """
+
+    lines: Lines
+    u: FloatArray
+    q: FloatArray
+    cost: float
+    rms_mm: float
+    iterations: int
+    normal: Normal
+    free: np.ndarray
+
+
+def adjust(
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    *,
+    free: np.ndarray | None = None,
+    max_iter: int = 100,
+    tol: float = 1e-12,
+) -> BundleResult:
+    """Levenberg-Marquardt over the lines, the markers' places and every frame's angles.
+
+    Parameters
+    ----------
+    data : DigitMarkers
+    structure : Structure
+    lines : Lines
+        Start (tracker coordinates at the reference posture, mm).
+    u : ndarray, shape (M, 3)
+        Start of the markers' places (mm).
+    q : ndarray, shape (L, n)
+        Start of the angles (rad).
+    free : ndarray of bool, shape (4 L + 3 M,), optional
+        Global unknowns that move (default all).
+    max_iter : int
+    tol : float
+        Converged when an accepted step lowers the cost by less than ``tol`` of it.
+
+    Returns
+    -------
+    BundleResult
+    """
+    L, M = structure.levels, len(data.labels)
+    free = np.ones(4 * L + 3 * M, dtype=bool) if free is None else free
+    lines, u, q = lines.copy(), u.copy(), q.copy()
+    nq, *_ = normal_equations(data, structure, lines, u, q, free)
+    lam = 1e-4
+    it = 0
+    for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
+        done = False
+        for _ in range(12):
+            dq, dg = schur_step(nq, lam)
+            step = np.zeros(4 * L + 3 * M)
+            step[free] = dg
+            trial_lines = lines.moved(step[: 4 * L])
+            trial_u = u + step[4 * L :].reshape(M, 3)
+            trial_q = q + dq.T
+            _, cost = residual(data, structure, trial_lines, trial_u, trial_q)
+            if cost <= nq.cost:
+                gain = nq.cost - cost
+                lines, u, q = trial_lines, trial_u, trial_q
+                nq, *_ = normal_equations(data, structure, lines, u, q, free)
+                lam = max(lam / 3.0, 1e-9)
+                done = gain <= tol * max(cost, 1e-300)
+                break
+            lam *= 4.0
+        else:
+            done = True  # no step lowers the cost
+        if done:
+            break
+    rms = float(np.sqrt(nq.cost / max(nq.count, 1)))
+    return BundleResult(lines, u, q, nq.cost, rms, it, nq, free)
