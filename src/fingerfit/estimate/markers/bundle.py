@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from ...track.chains import Chains, matvec_rows
 from ...transforms import FloatArray, orthonormal_basis, unit
@@ -112,14 +113,15 @@ def predict(
 
 @dataclass
 class Normal:
-    """The normal equations at a point, frames first.
+    """The normal equations at a point, frames first (``K = L + 6`` unknowns per frame:
+    the angles, then the hand's rotation and translation).
 
     Attributes
     ----------
-    qq : ndarray, shape (n, L, L)
-    qg : ndarray, shape (n, L, G)
+    qq : ndarray, shape (n, K, K)
+    qg : ndarray, shape (n, K, G)
     gg : ndarray, shape (G, G)
-    bq : ndarray, shape (n, L)
+    bq : ndarray, shape (n, K)
     bg : ndarray, shape (G,)
         ``J^T r`` (``r`` measured minus predicted).
     cost : float
@@ -136,15 +138,62 @@ class Normal:
     count: int
 
 
+@dataclass
+class HandFrames:
+    """Each frame's correction of the hand's frame (the rigid fit of its markers): a
+    marker carried back to ``y`` is at ``C (y - h) + h - d`` (``h`` the hand shape's
+    centroid).
+
+    Attributes
+    ----------
+    rotation : ndarray, shape (n, 3, 3)
+    offset : ndarray, shape (n, 3)
+        mm.
+    """
+
+    rotation: FloatArray
+    offset: FloatArray
+
+    @classmethod
+    def identity(cls, n: int) -> HandFrames:
+        return cls(np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3)))
+
+    def apply(self, points: FloatArray, pivot: FloatArray) -> FloatArray:
+        """``points (K, 3, n)`` corrected (mm)."""
+        x = points - pivot[:, None]
+        out = np.einsum("nij,kjn->kin", self.rotation, x)
+        return out + (pivot[:, None] - self.offset.T)[None]
+
+    def moved(self, omega: FloatArray, tau: FloatArray) -> HandFrames:
+        """After a step ``omega (n, 3)`` rad, ``tau (n, 3)`` mm: ``y' = Rot(-omega) y - tau``
+        about the pivot."""
+        back = Rotation.from_rotvec(-omega).as_matrix()
+        return HandFrames(back @ self.rotation, np.einsum("nij,nj->ni", back, self.offset) + tau)
+
+
+def _observed(data: DigitMarkers, hand: HandFrames) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The digit's and the hand's markers with the hand frames' correction, and the
+    pivot ``(3,)``."""
+    pivot = data.hand_shape.mean(axis=0)
+    return hand.apply(data.position, pivot), hand.apply(data.hand, pivot), pivot
+
+
 def residual(
-    data: DigitMarkers, structure: Structure, lines: Lines, u: FloatArray, q: FloatArray
-) -> tuple[FloatArray, float]:
-    """Residuals ``(M, 3, n)`` (measured minus predicted, 0 where unseen, mm) and the cost
-    (mm^2, the reference term included)."""
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    hand: HandFrames,
+) -> float:
+    """The cost (mm^2): the digit's markers, the hand's markers about their shape and
+    the reference term."""
+    y, yh, _ = _observed(data, hand)
     p, *_ = predict(structure, lines, data.segment, u, q)
-    r = (data.position - p) * data.present[:, None]
+    r = (y - p) * data.present[:, None]
+    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
     ref = _reference_residual(data, u)
-    return r, float((r * r).sum() + (ref * ref).sum())
+    return float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum())
 
 
 def _reference_residual(data: DigitMarkers, u: FloatArray) -> FloatArray:
@@ -154,14 +203,29 @@ def _reference_residual(data: DigitMarkers, u: FloatArray) -> FloatArray:
     return ref * np.sqrt(data.reference_count)[:, None]
 
 
+def _frame_columns(points: FloatArray, pivot: FloatArray) -> FloatArray:
+    """``d p / d (omega, tau)`` of carried-back points ``(K, 3, n)``: ``(n, K, 3, 6)``
+    (``J = -d y / d x``: ``-[y - h]x`` and ``I``)."""
+    d = (points - pivot[:, None]).transpose(2, 0, 1)  # (n, K, 3)
+    out = np.zeros((*d.shape, 6))
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    # -[d]x = [[0, z, -y], [-z, 0, x], [y, -x, 0]]
+    out[..., 0, 1], out[..., 0, 2] = z, -y
+    out[..., 1, 0], out[..., 1, 2] = -z, x
+    out[..., 2, 0], out[..., 2, 1] = y, -x
+    out[..., 0, 3] = out[..., 1, 4] = out[..., 2, 5] = 1.0
+    return out
+
+
 def normal_equations(
     data: DigitMarkers,
     structure: Structure,
     lines: Lines,
     u: FloatArray,
     q: FloatArray,
+    hand: HandFrames,
     free: np.ndarray,
-) -> tuple[Normal, FloatArray, FloatArray]:
+) -> tuple[Normal, FloatArray]:
     """The normal equations of every frame and of the global unknowns.
 
     Parameters
@@ -173,20 +237,25 @@ def normal_equations(
     -------
     normal : Normal
         Over the free global unknowns ``G``.
-    jq : ndarray, shape (n, 3 M, L)
-    jg : ndarray, shape (n, 3 M, G)
-        The Jacobians (rows of unseen markers 0), for the covariance's scores.
+    scores : ndarray, shape (n, K + G)
+        Each frame's ``J^T r`` (frame unknowns, then the global ones), for the
+        covariance's clusters.
     """
     M, L, n = len(data.labels), structure.levels, data.frames
+    H = data.hand.shape[0]
+    y, yh, pivot = _observed(data, hand)
     p, rot, axes, centres = predict(structure, lines, data.segment, u, q)
-    seen = data.present[:, None]  # (M, 1, n)
-    r = (data.position - p) * seen
+    r = (y - p) * data.present[:, None]
+    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
     # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
     d = p[:, None] - centres[None]  # (M, L, 3, n)
     a = np.broadcast_to(axes[None], d.shape)
     jq = np.cross(a, d, axis=2)  # (M, L, 3, n)
     jq *= (np.arange(L)[None, :] < structure.depth[data.segment][:, None])[..., None, None]
-    jq = jq.transpose(3, 0, 2, 1).reshape(n, 3 * M, L)
+    jq = jq.transpose(3, 0, 2, 1)  # (n, M, 3, L)
+    jf = np.concatenate([jq, _frame_columns(y, pivot)], axis=3).reshape(n, 3 * M, L + 6)
+    jh = np.zeros((n, H, 3, L + 6))
+    jh[..., L:] = _frame_columns(yh, pivot)
     cols = []
     for j in range(4 * L):  # the lines: central differences of the chain
         e = np.zeros(4 * L)
@@ -200,15 +269,19 @@ def normal_equations(
     ju[:, np.arange(M), :, np.arange(M), :] = rot.transpose(0, 3, 1, 2)
     jg = np.concatenate([jl, ju.reshape(n, 3 * M, 3 * M)], axis=2)
     mask = np.repeat(data.present.T, 3, axis=1)[..., None]  # (n, 3 M, 1)
-    jq *= mask
+    jf *= mask
     jg = jg[..., free] * mask
+    jh *= data.hand_present.T[:, :, None, None]
+    jh = jh.reshape(n, 3 * H, L + 6)
     rr = r.transpose(2, 0, 1).reshape(n, 3 * M)
-    qq = np.einsum("nrl,nrk->nlk", jq, jq)
-    qg = np.einsum("nrl,nrg->nlg", jq, jg)
+    rrh = rh.transpose(2, 0, 1).reshape(n, 3 * H)
+    qq = np.einsum("nrl,nrk->nlk", jf, jf) + np.einsum("nrl,nrk->nlk", jh, jh)
+    qg = np.einsum("nrl,nrg->nlg", jf, jg)
     flat = jg.reshape(-1, jg.shape[-1])
     gg = flat.T @ flat
-    bq = np.einsum("nrl,nr->nl", jq, rr)
-    bg = flat.T @ rr.reshape(-1)
+    bq = np.einsum("nrl,nr->nl", jf, rr) + np.einsum("nrl,nr->nl", jh, rrh)
+    sg = np.einsum("nrg,nr->ng", jg, rr)
+    bg = sg.sum(axis=0)
     ref = _reference_residual(data, u)
     uw = np.zeros(4 * L + 3 * M)
     uw[4 * L :] = np.repeat(data.reference_count, 3)
@@ -218,13 +291,14 @@ def normal_equations(
         [np.zeros(4 * L), (ref * np.sqrt(data.reference_count)[:, None]).ravel()]
     )
     bg += ref_b[free]
-    cost = float((r * r).sum() + (ref * ref).sum())
-    count = int(3 * data.present.sum() + 3 * (data.reference_count > 0).sum())
-    return Normal(qq, qg, gg, bq, bg, cost, count), jq, jg
+    cost = float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum())
+    count = 3 * int(data.present.sum() + data.hand_present.sum() + (data.reference_count > 0).sum())
+    normal = Normal(qq, qg, gg, bq, bg, cost, count)
+    return normal, np.concatenate([bq, sg], axis=1)
 
 
 def schur_step(nq: Normal, lam: float) -> tuple[FloatArray, FloatArray]:
-    """The damped step ``(dq (n, L), dg (G,))`` of the normal equations: the frames'
+    """The damped step ``(dq (n, K), dg (G,))`` of the normal equations: the frames'
     blocks eliminated by the Schur complement, then back-substituted."""
     qq = nq.qq.copy()
     diag = np.einsum("nll->nl", qq)
@@ -243,7 +317,7 @@ def schur_step(nq: Normal, lam: float) -> tuple[FloatArray, FloatArray]:
 
 def reduced(nq: Normal) -> tuple[FloatArray, FloatArray]:
     """The Schur complement ``S (G, G)`` of the undamped normal equations (the global
-    unknowns' information, the frames' angles eliminated) and ``W Q_qg (n, L, G)``."""
+    unknowns' information, the frames' unknowns eliminated) and ``W Q_qg (n, K, G)``."""
     qq = nq.qq.copy()
     np.einsum("nll->nl", qq)[...] += RIDGE
     wqg = np.linalg.solve(qq, nq.qg)
@@ -262,6 +336,8 @@ class BundleResult:
         Marker places at the reference posture (mm).
     q : ndarray, shape (L, n)
         Angles of every frame (rad).
+    hand : HandFrames
+        Each frame's correction of the hand's frame.
     cost : float
         Sum of squared residuals (mm^2).
     rms_mm : float
@@ -275,6 +351,7 @@ class BundleResult:
     lines: Lines
     u: FloatArray
     q: FloatArray
+    hand: HandFrames
     cost: float
     rms_mm: float
     iterations: int
@@ -289,11 +366,13 @@ def adjust(
     u: FloatArray,
     q: FloatArray,
     *,
+    hand: HandFrames | None = None,
     free: np.ndarray | None = None,
     max_iter: int = 100,
     tol: float = 1e-12,
 ) -> BundleResult:
-    """Levenberg-Marquardt over the lines, the markers' places and every frame's angles.
+    """Levenberg-Marquardt over the lines, the markers' places, every frame's angles and
+    every frame's hand frame.
 
     Parameters
     ----------
@@ -305,6 +384,8 @@ def adjust(
         Start of the markers' places (mm).
     q : ndarray, shape (L, n)
         Start of the angles (rad).
+    hand : HandFrames, optional
+        Start of the hand frames' correction (default none: the rigid fit's).
     free : ndarray of bool, shape (4 L + 3 M,), optional
         Global unknowns that move (default all).
     max_iter : int
@@ -317,8 +398,9 @@ def adjust(
     """
     L, M = structure.levels, len(data.labels)
     free = np.ones(4 * L + 3 * M, dtype=bool) if free is None else free
+    hand = HandFrames.identity(data.frames) if hand is None else hand
     lines, u, q = lines.copy(), u.copy(), q.copy()
-    nq, *_ = normal_equations(data, structure, lines, u, q, free)
+    nq, _ = normal_equations(data, structure, lines, u, q, hand, free)
     lam = 1e-4
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
@@ -327,14 +409,17 @@ def adjust(
             dq, dg = schur_step(nq, lam)
             step = np.zeros(4 * L + 3 * M)
             step[free] = dg
-            trial_lines = lines.moved(step[: 4 * L])
-            trial_u = u + step[4 * L :].reshape(M, 3)
-            trial_q = q + dq.T
-            _, cost = residual(data, structure, trial_lines, trial_u, trial_q)
+            trial = (
+                lines.moved(step[: 4 * L]),
+                u + step[4 * L :].reshape(M, 3),
+                q + dq[:, :L].T,
+                hand.moved(dq[:, L : L + 3], dq[:, L + 3 :]),
+            )
+            cost = residual(data, structure, *trial)
             if cost <= nq.cost:
                 gain = nq.cost - cost
-                lines, u, q = trial_lines, trial_u, trial_q
-                nq, *_ = normal_equations(data, structure, lines, u, q, free)
+                lines, u, q, hand = trial
+                nq, _ = normal_equations(data, structure, lines, u, q, hand, free)
                 lam = max(lam / 3.0, 1e-9)
                 done = gain <= tol * max(cost, 1e-300)
                 break
@@ -344,4 +429,19 @@ def adjust(
         if done:
             break
     rms = float(np.sqrt(nq.cost / max(nq.count, 1)))
-    return BundleResult(lines, u, q, nq.cost, rms, it, nq, free)
+    return BundleResult(lines, u, q, hand, nq.cost, rms, it, nq, free)
+
+
+def line_covariance(result: BundleResult) -> FloatArray:
+    """The covariance ``(L, 4, 4)`` of each line's unknowns (two direction, rad, and two
+    point, mm, in the plane perpendicular to the axis: :meth:`Lines.moved`):
+    ``sigma^2 S^-1`` with ``S`` the Schur complement of the frames' unknowns in the
+    undamped normal matrix and ``sigma^2`` the residual variance per coordinate."""
+    s, _ = reduced(result.normal)
+    n, k = result.normal.qq.shape[:2]
+    dof = max(result.normal.count - n * k - s.shape[0], 1)
+    full = np.full((result.free.size, result.free.size), np.nan)
+    idx = np.flatnonzero(result.free)
+    full[np.ix_(idx, idx)] = result.cost / dof * np.linalg.inv(s)
+    L = result.lines.axis.shape[0]
+    return np.stack([full[4 * k : 4 * k + 4, 4 * k : 4 * k + 4] for k in range(L)])

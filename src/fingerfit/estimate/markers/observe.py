@@ -41,6 +41,11 @@ class DigitMarkers:
     position : ndarray, shape (M, 3, n)
         The markers in the moving frames, the hand's motion removed; 0 where not seen.
     present : ndarray of bool, shape (M, n)
+    hand : ndarray, shape (H, 3, n)
+        The hand's markers carried back the same way (0 where not seen).
+    hand_present : ndarray of bool, shape (H, n)
+    hand_shape : ndarray, shape (H, 3)
+        Their places at the reference posture (:func:`hand_shape`).
     """
 
     digit: str
@@ -50,6 +55,9 @@ class DigitMarkers:
     reference_count: np.ndarray
     position: FloatArray
     present: np.ndarray
+    hand: FloatArray
+    hand_present: np.ndarray
+    hand_shape: FloatArray
 
     @property
     def frames(self) -> int:
@@ -98,7 +106,7 @@ def hand_shape(session: Session) -> FloatArray:
 def carry_back(
     session: Session, recordings: list[Recording], shape: FloatArray
 ) -> tuple[dict[str, FloatArray], int]:
-    """Every non-hand marker of ``recordings`` (concatenated) in the hand's frame.
+    """Every marker of ``recordings`` (concatenated) in the hand's frame.
 
     Parameters
     ----------
@@ -111,7 +119,7 @@ def carry_back(
     -------
     markers : dict[str, ndarray]
         Label -> ``(n, 3)`` mm, tracker coordinates at the reference posture; NaN where
-        the marker or the hand's frame is missing.
+        the marker or the hand's frame is missing (the hand's markers too).
     lost : int
         Frames without a hand frame.
     """
@@ -123,8 +131,6 @@ def carry_back(
         fit = fit_cluster(pts, shape)
         lost += int(np.isnan(fit.translation[:, 0]).sum())
         for label, x in rec.markers.items():
-            if label in hand:
-                continue
             y = np.einsum("nji,nj->ni", fit.rotation, x - fit.translation)
             out.setdefault(label, []).append(y)
     return {k: np.concatenate(v) for k, v in out.items()}, lost
@@ -144,15 +150,26 @@ def digit_markers(
     seen = np.isfinite(ref).all(axis=2)
     with np.errstate(invalid="ignore"):
         mean = np.nanmean(ref, axis=1)
-    pos = np.stack([moving[k] for k in labels])  # (M, n, 3)
-    present = np.isfinite(pos).all(axis=2)
-    pos = np.where(present[..., None], pos, 0.0).transpose(0, 2, 1)
+    pos, present = _frames_last([moving[k] for k in labels])
+    hand, hand_present = _frames_last([moving[k] for k in session.marker_map[HAND_SENSOR]])
     return DigitMarkers(
         digit,
         labels,
         np.array(segment, dtype=np.intp),
         mean,
         seen.sum(axis=1),
-        np.ascontiguousarray(pos),
+        pos,
         present,
+        hand,
+        hand_present,
+        hand_shape(session),
     )
+
+
+def _frames_last(tracks: list[FloatArray]) -> tuple[FloatArray, np.ndarray]:
+    """Tracks ``(n, 3)`` stacked frames last ``(K, 3, n)`` (0 where NaN) and where seen
+    ``(K, n)``."""
+    pos = np.stack(tracks)
+    present = np.isfinite(pos).all(axis=2)
+    pos = np.where(present[..., None], pos, 0.0).transpose(0, 2, 1)
+    return np.ascontiguousarray(pos), present

@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 
 from ...transforms import FloatArray, unit
-from .bundle import BundleResult, Lines, Structure, adjust, predict
+from .bundle import BundleResult, HandFrames, Lines, Structure, adjust, predict
 from .observe import DigitMarkers
 
 
@@ -114,10 +114,13 @@ def staged_start(
     q = np.zeros((L, n))
     u = np.where(np.isfinite(data.reference), data.reference, 0.0)
     result = None
+    hand = HandFrames.identity(n)
+    pivot = data.hand_shape.mean(axis=0)
     for j, level in enumerate(first_levels):
         levels = int(structure.depth[j])
         child = np.flatnonzero(data.segment == j)
-        tracks = np.where(data.present[child, None], data.position[child], np.nan)
+        tracks = hand.apply(data.position[child], pivot)
+        tracks = np.where(data.present[child, None], tracks, np.nan)
         if j > 0:  # the child markers in the parent segment's frame at its reference pose
             sub = Structure(structure.depth[:j])
             lines = Lines(axis[: sub.levels], centre[: sub.levels])
@@ -128,12 +131,12 @@ def staged_start(
         usable = [t[np.isfinite(t).all(axis=1)] for t in tracks]
         a, c = circle_axis([t for t in usable if len(t) > 3])
         ang = np.stack([turn_about(t, u[i], a, c) for t, i in zip(tracks, child, strict=True)])
-        with np.errstate(invalid="ignore"):
-            theta = np.nanmean(ang, axis=0)
+        seen = np.isfinite(ang)
+        theta = np.where(seen, ang, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
         big = np.abs(theta) >= np.nanpercentile(np.abs(theta), 90)
         if np.nanmean(theta[big]) < 0:
             a, theta = -a, -theta
-        axis[level], centre[level], q[level] = a, c, np.nan_to_num(theta)
+        axis[level], centre[level], q[level] = a, c, theta
         if j in second:
             bone = unit(u[child].mean(axis=0) - c)
             axis[second[j]] = unit(np.cross(bone, a))
@@ -146,9 +149,10 @@ def staged_start(
             Lines(axis[:levels], centre[:levels]),
             u[: len(part.labels)],
             q[:levels],
+            hand=hand,
             tol=1e-8 if j < len(first_levels) - 1 else 1e-12,
         )
         axis[:levels], centre[:levels] = result.lines.axis, result.lines.centre
-        u[: len(part.labels)], q[:levels] = result.u, result.q
+        u[: len(part.labels)], q[:levels], hand = result.u, result.q, result.hand
     assert result is not None
     return result
