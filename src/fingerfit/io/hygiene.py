@@ -292,11 +292,12 @@ def place_on_grid(
     return grid, idx
 
 
-def frames_missing_note(n_missing: int) -> list[str]:
-    """The note for frames missing for every sensor (empty when none)."""
+def frames_missing_note(n_missing: int, what: str = "sensor") -> list[str]:
+    """The note for frames missing for every sensor (or ``what``: ``marker``; empty when
+    none)."""
     if n_missing <= 0:
         return []
-    return [f"{n_missing} frames missing for every sensor (kept as NaN rows)"]
+    return [f"{n_missing} frames missing for every {what} (kept as NaN rows)"]
 
 
 def sensor_missing_notes(recording: Recording) -> list[str]:
@@ -307,10 +308,11 @@ def sensor_missing_notes(recording: Recording) -> list[str]:
     return out
 
 
-def missing_note(sensor: str, missing: int, n_frames: int) -> list[str]:
-    """The note of :func:`sensor_missing_notes` for one sensor (none when nothing is
-    missing), for a reader that counted the frames it left empty."""
-    return [f"sensor '{sensor}': {missing} of {n_frames} frames missing"] if missing else []
+def missing_note(sensor: str, missing: int, n_frames: int, what: str = "sensor") -> list[str]:
+    """The note of :func:`sensor_missing_notes` for one sensor (or ``what``: a
+    ``marker``; none when nothing is missing), for a reader that counted the frames it
+    left empty."""
+    return [f"{what} '{sensor}': {missing} of {n_frames} frames missing"] if missing else []
 
 
 def fill_gaps(recording: Recording, max_gap: int) -> Recording:

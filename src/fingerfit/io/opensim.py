@@ -1,5 +1,6 @@
 """OpenSim's text tables: a motion (``.mot``), a recording's orientations (``.sto``) and
-its sensor origins as markers (``.trc``), written atomically.
+its markers (``.trc``: a marker recording's markers, or a 6-DOF one's sensor origins),
+written atomically.
 
 OpenSim works in metres and radians, its motions in degrees (``inDegrees=yes``), its
 orientation tables in quaternions ``w,x,y,z`` (one cell per sensor, its four numbers
@@ -20,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..session import Recording
+from ..session import UNITS_TO_MM, Recording
 from ..transforms import quat_wxyz_columns
 from .atomic import atomic_write
 
@@ -119,40 +120,49 @@ def write_orientations(path: str | Path, recording: Recording) -> Path:
     return _write(Path(path), header, table)
 
 
-def write_markers(path: str | Path, recording: Recording) -> Path:
-    """Write a recording's sensor origins as OpenSim markers (``.trc``, metres).
+def write_markers(path: str | Path, recording: Recording, *, units: str = "m") -> Path:
+    """Write a recording's markers as OpenSim's marker trajectories (``.trc``).
 
     Parameters
     ----------
     path : str or Path
     recording : Recording
-        Positions in mm, tracker frame.
+        A marker recording (its ``markers``, label -> ``(n_frames, 3)`` mm) or a 6-DOF
+        one (its sensor origins, ``(n_frames, 3)`` mm); tracker frame.
+    units : str
+        The file's ``Units`` (``mm``, ``cm``, ``m``, ``in``); OpenSim's is ``m``.
 
     Returns
     -------
     Path
-        One marker per sensor, named :func:`frame_name` (the exported model has a marker
-        of that name at each sensor's origin); ``Units`` ``m``, tracker frame;
-        ``DataRate`` the median frame rate (Hz).
+        One marker per label of a marker recording, or per sensor, named
+        :func:`frame_name` (the exported model has a marker of that name at each
+        sensor's origin); tracker frame; ``DataRate`` the median frame rate (Hz); a
+        missing sample ``NaN``. :func:`fingerfit.io.markers.read_marker_recording`
+        reads it back.
 
     Raises
     ------
     FingerfitError
         When ``path`` cannot be written (nothing is left behind).
     """
+    if recording.markers:
+        points = recording.markers
+    else:
+        points = {frame_name(s): p.position for s, p in recording.poses.items()}
+    scale = UNITS_TO_MM[units]
     rate = _rate_hz(recording.time)
     n = recording.n_frames
-    names = [frame_name(s) for s in recording.sensors]
+    names = list(points)
     cols = {"frame": pd.Series(np.arange(1, n + 1).astype(str)), "time": _text(recording.time)}
-    for s, name in zip(recording.sensors, names, strict=True):
-        p = recording.poses[s].position / 1000.0
+    for name, xyz in points.items():
         for k, axis in enumerate("XYZ"):
-            cols[f"{name}.{axis}"] = _text(p[:, k])
+            cols[f"{name}.{axis}"] = _text(xyz[:, k] / scale)
     header = (
         f"PathFileType\t4\t(X/Y/Z)\t{Path(path).name}\n"
         "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\t"
         "OrigDataStartFrame\tOrigNumFrames\n"
-        f"{rate:.10g}\t{rate:.10g}\t{n}\t{len(names)}\tm\t{rate:.10g}\t1\t{n}\n"
+        f"{rate:.10g}\t{rate:.10g}\t{n}\t{len(names)}\t{units}\t{rate:.10g}\t1\t{n}\n"
         "Frame#\tTime\t" + "\t\t\t".join(names) + "\t\t\n"
         "\t\t" + "\t".join(f"X{i}\tY{i}\tZ{i}" for i in range(1, len(names) + 1)) + "\n\n"
     )

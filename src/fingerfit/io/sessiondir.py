@@ -2,11 +2,14 @@
 
 Layout (see ``docs/formats.md``)::
 
-    session.toml      format, subject, hand, units, rate_hz, fingers, [recordings]
+    session.toml      format, subject, hand, units, rate_hz, fingers, [markers,] [recordings]
     reference.csv     static recording at the stretched reference posture
     landmarks.csv     name,x,y,z (stylus points at the reference posture)
     grasp*.csv ...    pose recordings (canonical pose CSV)
     events.csv        optional: recording,finger,target,start,end
+
+A marker session (``markers = "markers.toml"``) holds marker recordings (``.trc``,
+``.tsv``, ``.c3d``) instead, and its landmarks are optional (:mod:`.markers.session`).
 """
 
 from __future__ import annotations
@@ -17,8 +20,7 @@ import difflib
 import io
 import json
 import math
-import re
-import tomllib
+import os
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
 import numpy as np
@@ -39,8 +41,13 @@ from ..session import (
 from ..transforms import FloatArray
 from .atomic import atomic_write
 from .hygiene import MAX_RATE_HZ, implausible_message, implausible_rows
+from .markers import read_marker_recording
+from .markers.markermap import MAP_FILE, read_marker_map, write_marker_map
+from .markers.session import check_marker_session, check_recording_kind, trc_named
+from .opensim import write_markers
 from .posecsv import check_field_counts, read_pose_csv
 from .posewrite import write_pose_csv
+from .textfile import read_bytes, read_toml
 
 SESSION_FILE = "session.toml"
 LANDMARKS_FILE = "landmarks.csv"
@@ -49,7 +56,7 @@ EVENTS_HEADER = ("recording", "finger", "target", "start", "end")
 
 
 #: Keys of ``session.toml``: top level and ``[recordings]``.
-TOP_KEYS = ("format", "subject", "hand", "units", "rate_hz", "fingers", "recordings")
+TOP_KEYS = ("format", "subject", "hand", "units", "rate_hz", "fingers", "markers", "recordings")
 RECORDING_KEYS = ("reference", "grasp", "targets", "test", "events")
 
 
@@ -158,12 +165,7 @@ def _read_small_csv(path: Path, header: tuple[str, ...]) -> pd.DataFrame:
 
     Returns the table as strings; row ``i`` is file line ``i + 2``.
     """
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise FingerfitError("file not found", path=path) from None
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=path) from None
+    raw = read_bytes(path)
     first = raw.split(b"\n", 1)[0].decode("utf-8", "replace").strip().lstrip("\ufeff")
     cols = tuple(h.strip() for h in first.split(","))
     if cols != header:
@@ -354,19 +356,7 @@ def load_session(
     if not meta_path.is_file():
         raise FingerfitError(f"not a session directory (no {SESSION_FILE})", path=directory)
     session_file(directory, SESSION_FILE, meta_path, SESSION_FILE)
-    try:
-        text = meta_path.read_bytes().decode("utf-8")
-        meta = tomllib.loads(text)
-    except UnicodeDecodeError as exc:
-        raise FingerfitError(f"not UTF-8 text (byte {exc.start})", path=meta_path) from None
-    except OSError as exc:
-        raise FingerfitError(f"cannot read: {exc.strerror}", path=meta_path) from None
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"at line (\d+)", str(exc))
-        line = int(found.group(1)) if found else None
-        raise FingerfitError(
-            f"invalid TOML ({str(exc).split(' (at')[0]})", path=meta_path, line=line
-        ) from None
+    meta = read_toml(meta_path)
     _check_keys(meta, TOP_KEYS, meta_path, SESSION_FILE)
     fmt = _require(meta, "format", str, meta_path)
     if fmt != FORMAT:
@@ -425,20 +415,35 @@ def load_session(
         )
     target_names = _file_list(recs.get("targets", []), meta_path, "recordings.targets")
     test_names = _file_list(recs.get("test", []), meta_path, "recordings.test")
+    map_file = None
+    if "markers" in meta:
+        map_file = session_file(directory, meta["markers"], meta_path, "markers")
     ref_file = file(ref_name, "reference")
     grasp_files = [file(n, "grasp") for n in grasp_names]
     target_files = [file(n, "targets") for n in target_names]
     test_files = [file(n, "test") for n in test_names]
+    for key, files in (
+        ("reference", [ref_file]),
+        ("grasp", grasp_files),
+        ("targets", target_files),
+        ("test", test_files),
+    ):
+        for f in files:
+            check_recording_kind(f, map_file is not None, meta_path, f"recordings.{key}")
     events_file = None
     if "events" in recs:
         events_file = file(_require(recs, "events", str, meta_path, "recordings."), "events")
-    landmarks_file = session_file(directory, LANDMARKS_FILE, meta_path, LANDMARKS_FILE)
+    landmarks_file: Path | None = None
+    if map_file is None or os.path.lexists(directory / LANDMARKS_FILE):  # optional with markers
+        landmarks_file = session_file(directory, LANDMARKS_FILE, meta_path, LANDMARKS_FILE)
 
     known = {r.name: r for r in parsed.recordings()} if parsed is not None else {}
 
     def load(f: Path) -> Recording:
         if f.name in known:
             return known[f.name]
+        if map_file is not None:
+            return read_marker_recording(f)  # in the units the file states
         return read_pose_csv(f, units=units, rate_hz=rate)
 
     reference = load(ref_file)
@@ -446,10 +451,11 @@ def load_session(
     targets = [load(f) for f in target_files]
     test = [load(f) for f in test_files] if test else []
     if parsed is not None:
-        landmarks, events = parsed.landmarks, parsed.events
+        landmarks, events, marker_map = parsed.landmarks, parsed.events, parsed.marker_map
     else:
-        landmarks = read_landmarks(landmarks_file, units)
+        landmarks = read_landmarks(landmarks_file, units) if landmarks_file is not None else {}
         events = read_events(events_file) if events_file is not None else []
+        marker_map = read_marker_map(map_file) if map_file is not None else {}
     recordings = [reference, *grasp, *targets, *test]
     events = match_event_recordings(events, [r.name for r in recordings])
     session = Session(
@@ -471,18 +477,25 @@ def load_session(
             *grasp_files,
             *target_files,
             *test_files,
-            landmarks_file,
+            *([landmarks_file] if landmarks_file is not None else []),
             *([events_file] if events_file is not None else []),
+            *([map_file] if map_file is not None else []),
         ),
+        marker_map=marker_map,
     )
-    _check_complete(session)
+    _check_complete(session, map_file)
     return session
 
 
-def _check_complete(session: Session) -> None:
-    """Every listed finger has its sensors in the reference and grasp recordings and its landmarks."""
+def _check_complete(session: Session, map_file: Path | None = None) -> None:
+    """Every listed finger has its sensors in the reference and grasp recordings and its
+    landmarks; in a marker session (``map_file``), the map's segments take the place of
+    the sensors (:func:`~fingerfit.io.markers.session.check_marker_session`) and no
+    landmark is required."""
     assert session.path is not None
-    for finger in session.fingers:
+    if map_file is not None:
+        check_marker_session(session, map_file)
+    for finger in session.fingers if map_file is None else ():
         needed = digit_sensors(finger)
         for rec in [session.reference, *session.grasp]:
             for s in needed:
@@ -529,7 +542,8 @@ def _toml_list(names: list[str]) -> str:
 def write_session_toml(session: Session, directory: str | Path) -> Path:
     """Write ``session.toml`` naming the session's recordings (files are not written).
 
-    ``events = "events.csv"`` is listed when the session has events.
+    ``events = "events.csv"`` is listed when the session has events, ``markers =
+    "markers.toml"`` when it has a marker map.
     """
     lines = [
         f'format = "{FORMAT}"',
@@ -538,6 +552,7 @@ def write_session_toml(session: Session, directory: str | Path) -> Path:
         f'units = "{session.units}"',
         f"rate_hz = {float(session.rate_hz)!r}",
         f"fingers = {_toml_list(session.fingers)}",
+        *([f'markers = "{MAP_FILE}"'] if session.marker_map else []),
         "",
         "[recordings]",
         f"reference = {json.dumps(session.reference.name)}",
@@ -561,7 +576,9 @@ def save_session(session: Session, directory: str | Path) -> Path:
     Parameters
     ----------
     session : Session
-        Arrays in mm; files are written in ``session.units``.
+        Arrays in mm; files are written in ``session.units``. A marker session's
+        recordings are written as TRC (``<stem>.trc``), with its map (``markers.toml``)
+        and, when it has landmarks, ``landmarks.csv``.
     directory : str or Path
         Created if needed; existing files of the same names are replaced.
 
@@ -572,9 +589,16 @@ def save_session(session: Session, directory: str | Path) -> Path:
     """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    for rec in session.recordings():
-        write_pose_csv(directory / rec.name, rec, units=session.units)
-    write_landmarks(directory / LANDMARKS_FILE, session.landmarks, session.units)
+    if session.marker_map:
+        session = trc_named(session)
+        for rec in session.recordings():
+            write_markers(directory / rec.name, rec, units=session.units)
+        write_marker_map(directory / MAP_FILE, session.marker_map)
+    else:
+        for rec in session.recordings():
+            write_pose_csv(directory / rec.name, rec, units=session.units)
+    if session.landmarks or not session.marker_map:
+        write_landmarks(directory / LANDMARKS_FILE, session.landmarks, session.units)
     if session.events:
         write_events(directory / EVENTS_FILE, session.events)
     write_session_toml(session, directory)
