@@ -7,11 +7,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fingerfit.errors import FingerfitError
-from fingerfit.estimate.markers.bundle import Structure, line_covariance
+from fingerfit.estimate.markers.bundle import (
+    Lines,
+    Structure,
+    line_columns,
+    line_covariance,
+    predict,
+)
 from fingerfit.estimate.markers.observe import (
     carry_back,
-    check_marker_map,
     digit_markers,
     hand_shape,
 )
@@ -87,14 +91,17 @@ def test_noisy_markers_within_bounds_and_covariance():
     assert np.all(sd > 0) and sd[2].max() > sd[1].max()  # one distal marker: the DIP weakest
 
 
-def test_bad_maps_are_refused(exact):
-    s = exact.session
-    few = replace(s, marker_map={**s.marker_map, "hand": s.marker_map["hand"][:2]})
-    with pytest.raises(FingerfitError, match="hand needs 3 or more markers"):
-        check_marker_map(few)
-    none = replace(s, marker_map={k: v for k, v in s.marker_map.items() if k != "index.middle"})
-    with pytest.raises(FingerfitError, match=r"'index\.middle' has no marker"):
-        check_marker_map(none)
-    unknown = replace(s, marker_map={**s.marker_map, "index.distal": ("NOPE",)})
-    with pytest.raises(FingerfitError, match="marker 'NOPE'"):
-        check_marker_map(unknown)
+def test_line_jacobian_is_the_chains_derivative():
+    """The analytic columns of the lines against central differences of the chain."""
+    rng = np.random.default_rng(0)
+    st = Structure(np.array([2, 3, 4]))
+    axis = rng.normal(size=(4, 3))
+    lines = Lines(axis / np.linalg.norm(axis, axis=1)[:, None], 20 * rng.normal(size=(4, 3)))
+    seg, u, q = np.array([0, 0, 1, 1, 2]), 30 * rng.normal(size=(5, 3)), rng.normal(size=(4, 7))
+    p, _, axes, centres, prox = predict(st, lines, seg, u, q, levels=True)
+    analytic = line_columns(st, lines, seg, p, q, prox, axes, centres)
+    for j in range(16):
+        e = np.zeros(16)
+        e[j] = 1e-6
+        hi, lo = (predict(st, lines.moved(x), seg, u, q)[0] for x in (e, -e))
+        np.testing.assert_allclose(analytic[..., j], (hi - lo) / 2e-6, atol=1e-6)

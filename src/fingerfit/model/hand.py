@@ -274,6 +274,11 @@ class HandModel:
         Each sensor's spread about the model and each angle's range in the calibration
         recordings (``"tracking"`` in the file), which tracking with fewer sensors needs
         (:mod:`fingerfit.track`); ``None`` in files written before it existed.
+    markers : dict[str, tuple[str, ndarray]]
+        A model fitted from skin markers (:mod:`fingerfit.estimate.markers`): marker
+        label -> (its segment's sensor name, ``hand`` or ``<digit>.<segment>``; its place
+        ``(3,)`` at the reference posture, mm, tracker coordinates). Empty for a model
+        fitted from 6-DOF sensors.
     """
 
     subject: str
@@ -287,6 +292,7 @@ class HandModel:
     warnings: tuple[str, ...] = ()
     pinch_contacts: tuple[PinchContact, ...] = ()
     tracking: TrackingStats | None = None
+    markers: dict[str, tuple[str, FloatArray]] = field(default_factory=dict)
 
     def pinch_contact(self, a: str, b: str) -> PinchContact | None:
         """The :class:`PinchContact` of digits ``a`` and ``b`` (either order), or None."""

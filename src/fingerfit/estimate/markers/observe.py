@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...digits import DIGITS, HAND_SENSOR
-from ...errors import FingerfitError
 from ...io.rigid import fit_cluster
 from ...session import Recording, Session, sensor_name
 from ...transforms import FloatArray
@@ -62,37 +61,6 @@ class DigitMarkers:
     @property
     def frames(self) -> int:
         return int(self.present.shape[1])
-
-
-def check_marker_map(session: Session) -> None:
-    """Refuse a marker map the fit cannot use, in one line naming the segment or marker.
-
-    Raises
-    ------
-    FingerfitError
-        No ``hand`` entry or fewer than three hand markers; a digit of the session
-        without markers on some segment; a label absent from the recordings.
-    """
-    where = None if session.path is None else session.path / "session.toml"
-    hand = session.marker_map.get(HAND_SENSOR, ())
-    if len(hand) < 3:
-        raise FingerfitError(
-            f"markers: the hand needs 3 or more markers for its frame, has {len(hand)}",
-            path=where,
-        )
-    for d in session.fingers:
-        for s in DIGITS[d].segments:
-            if not session.marker_map.get(sensor_name(d, s)):
-                raise FingerfitError(
-                    f"markers: segment '{sensor_name(d, s)}' has no marker", path=where
-                )
-    seen = set(session.reference.markers)
-    for labels in session.marker_map.values():
-        for label in labels:
-            if label not in seen:
-                raise FingerfitError(
-                    f"markers: marker '{label}' is not in {session.reference.name}", path=where
-                )
 
 
 def hand_shape(session: Session) -> FloatArray:

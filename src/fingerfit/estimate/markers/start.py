@@ -150,7 +150,8 @@ def staged_start(
             u[: len(part.labels)],
             q[:levels],
             hand=hand,
-            tol=1e-8 if j < len(first_levels) - 1 else 1e-12,
+            max_iter=10 if j < len(first_levels) - 1 else 100,
+            tol=1e-6 if j < len(first_levels) - 1 else 1e-12,
         )
         axis[:levels], centre[:levels] = result.lines.axis, result.lines.centre
         u[: len(part.labels)], q[:levels], hand = result.u, result.q, result.hand

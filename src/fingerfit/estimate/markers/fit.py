@@ -1,0 +1,312 @@
+"""A marker session fitted into the individual hand model, digit by digit.
+
+Each digit's chain (:func:`chain_layout`) is started and adjusted by :mod:`.start` and
+:mod:`.bundle` on the reference and calibration (grasp) recordings. A finger's MP gets a
+second (ab/adduction) axis when the markers determine it (``mp_axes="auto"``: its
+direction's standard deviation at most :data:`SECOND_AXIS_SD_DEG`; else a hinge, said in
+one line). A line whose direction or point the markers leave undetermined (the
+covariance's standard deviation above :data:`UNDETERMINED_SD_DEG` /
+:data:`UNDETERMINED_SD_MM`, or no information at all) is held at its start and said in
+one line naming the joint. The result is the usual :class:`~fingerfit.model.HandModel`
+(``method`` ``markers``) plus each marker's place (:attr:`HandModel.markers`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...digits import DIGITS, HAND_SENSOR, second_axis
+from ...errors import FingerfitError
+from ...io.rigid import technical_frame
+from ...model import HandModel, JointModel, JointQuality, assemble_digit
+from ...session import Session, joint_sensors, sensor_name
+from ...transforms import FloatArray
+from .bundle import BundleResult, Structure, adjust, line_covariance
+from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
+from .start import staged_start
+
+#: A finger's MP keeps its second axis when its direction's SD is at most this (deg).
+SECOND_AXIS_SD_DEG = 5.0
+#: A line's direction with a larger SD (deg), or its point with a larger SD (mm), is not
+#: determined by the markers.
+UNDETERMINED_SD_DEG = 20.0
+UNDETERMINED_SD_MM = 20.0
+#: Chi-square 95 % quantile with two degrees of freedom: an axis direction's (or a
+#: line point's) 95 % region is ``x^T C^-1 x <= CHI2_95``.
+CHI2_95 = 5.991
+
+
+@dataclass(frozen=True)
+class ChainLayout:
+    """A digit's chain for the marker fit.
+
+    Attributes
+    ----------
+    names : list of str
+        Each level's axis name, proximal first (``mp_abduction``, ``mp``, ``pip``, ...).
+    structure : Structure
+    first : list of int
+        The level of each joint's flexion axis.
+    second : dict[int, int]
+        Joint index -> the level of its second axis.
+    """
+
+    names: list[str]
+    structure: Structure
+    first: list[int]
+    second: dict[int, int]
+
+
+def chain_layout(digit: str, two_axis: bool) -> ChainLayout:
+    """The chain of ``digit``: a finger's MP a hinge or two axes (ab/adduction proximal,
+    :mod:`fingerfit.digits`); the thumb's CMC two axes (flexion proximal), MCP and IP
+    hinges."""
+    if digit == "thumb":
+        return ChainLayout(
+            ["cmc", "cmc_abduction", "mcp", "ip"], Structure(np.array([2, 3, 4])), [0, 2, 3], {0: 1}
+        )
+    if two_axis:
+        return ChainLayout(
+            ["mp_abduction", "mp", "pip", "dip"], Structure(np.array([2, 3, 4])), [1, 2, 3], {0: 0}
+        )
+    return ChainLayout(["mp", "pip", "dip"], Structure(np.array([1, 2, 3])), [0, 1, 2], {})
+
+
+@dataclass
+class DigitFit:
+    """One digit's marker fit.
+
+    Attributes
+    ----------
+    digit : str
+    layout : ChainLayout
+    data : DigitMarkers
+    result : BundleResult
+    covariance : ndarray, shape (L, 4, 4)
+        Each line's two direction (rad) and two point (mm) unknowns
+        (:func:`.bundle.line_covariance`; ``inf`` where undetermined).
+    notes : list of str
+        One line per parameter held or choice made.
+    """
+
+    digit: str
+    layout: ChainLayout
+    data: DigitMarkers
+    result: BundleResult
+    covariance: FloatArray
+    notes: list[str] = field(default_factory=list)
+
+    def axis_sd_deg(self, level: int) -> float:
+        """The largest SD of the direction of ``level`` (deg)."""
+        return math.degrees(math.sqrt(np.linalg.eigvalsh(self.covariance[level, :2, :2])[-1]))
+
+    def centre_sd_mm(self, level: int) -> float:
+        """The largest SD of the point of ``level`` across its line (mm)."""
+        return math.sqrt(np.linalg.eigvalsh(self.covariance[level, 2:, 2:])[-1])
+
+    def axis_ci_deg(self, level: int) -> float:
+        """The 95 % half-angle of the direction of ``level`` (deg): the largest angle of its
+        95 % region."""
+        return math.sqrt(CHI2_95) * self.axis_sd_deg(level)
+
+
+def _undetermined(fit: DigitFit) -> np.ndarray:
+    """Global unknowns (``4 L + 3 M``) the markers do not determine: every unknown of a
+    line whose direction or point exceeds the limits."""
+    bad = np.zeros(fit.result.free.size, dtype=bool)
+    for k, name in enumerate(fit.layout.names):
+        if not np.isfinite(fit.covariance[k]).all():
+            continue  # held already
+        if fit.axis_sd_deg(k) > UNDETERMINED_SD_DEG or fit.centre_sd_mm(k) > UNDETERMINED_SD_MM:
+            bad[4 * k : 4 * k + 4] = True
+            fit.notes.append(
+                f"{fit.digit} {name}: not determined by the markers "
+                f"(axis SD {fit.axis_sd_deg(k):.3g} deg, point SD {fit.centre_sd_mm(k):.3g} mm); "
+                "held at its start"
+            )
+    return bad
+
+
+def fit_digit(data: DigitMarkers, digit: str, two_axis: bool) -> DigitFit:
+    """Start, adjust and check one digit's chain (:func:`chain_layout`)."""
+    layout = chain_layout(digit, two_axis)
+    result = staged_start(data, layout.structure, layout.first, layout.second)
+    fit = DigitFit(digit, layout, data, result, line_covariance(result))
+    bad = _undetermined(fit)
+    if bad.any():
+        result = adjust(
+            data, layout.structure, result.lines, result.u, result.q, hand=result.hand, free=~bad
+        )
+        fit.result, fit.covariance = result, line_covariance(result)
+    return fit
+
+
+def fit_finger(data: DigitMarkers, digit: str, mp_axes: str) -> DigitFit:
+    """A finger with its MP a hinge, two axes, or (``auto``) two axes when the markers
+    determine the second one."""
+    if mp_axes == "hinge":
+        return fit_digit(data, digit, False)
+    two = fit_digit(data, digit, True)
+    if mp_axes == "two" or two.axis_sd_deg(0) <= SECOND_AXIS_SD_DEG:
+        two.notes.append(
+            f"{digit} mp: two axes (the ab/adduction axis's SD {two.axis_sd_deg(0):.2g} deg)"
+        )
+        return two
+    hinge = fit_digit(data, digit, False)
+    hinge.notes.append(
+        f"{digit} mp: a hinge (the markers leave a second axis's direction SD "
+        f"{two.axis_sd_deg(0):.2g} deg, above {SECOND_AXIS_SD_DEG:g})"
+    )
+    return hinge
+
+
+@dataclass
+class MarkerFit:
+    """A marker session's fit.
+
+    Attributes
+    ----------
+    model : HandModel
+    digits : dict[str, DigitFit]
+    notes : list of str
+        Every digit's notes, and the frames without a hand frame.
+    """
+
+    model: HandModel
+    digits: dict[str, DigitFit]
+    notes: list[str]
+
+
+def fit_marker_session(session: Session, *, mp_axes: str = "hinge") -> MarkerFit:
+    """Fit the individual hand model of a marker session.
+
+    Parameters
+    ----------
+    session : Session
+        With a ``marker_map`` (checked when it was loaded: the hand 3 or more markers,
+        every segment of every digit one or more) and marker recordings: the reference
+        (the angles' zero) and the grasp recordings are fitted.
+    mp_axes : {"auto", "hinge", "two"}
+        A finger's MP: two axes when the markers determine the second, a hinge, or two.
+
+    Returns
+    -------
+    MarkerFit
+        The model (tracker coordinates at the reference posture, mm): joint lines,
+        tips (the ``<digit>.tip`` landmark, else the digit's most distal marker, said in
+        a note), segment frames, each marker's place; ``reference_poses`` the hand
+        markers' technical frame and, per segment, its markers' centroid with the
+        segment's frame.
+    """
+    if not session.marker_map:
+        raise FingerfitError("not a marker session (no marker map)", path=session.path)
+    if mp_axes not in ("auto", "hinge", "two"):
+        raise FingerfitError(f"must be auto, hinge or two, not {mp_axes!r}", field="--mp-axes")
+    shape = hand_shape(session)
+    moving, lost = carry_back(session, session.grasp, shape)
+    reference, lost_ref = carry_back(session, [session.reference], shape)
+    notes = []
+    if lost or lost_ref:
+        notes.append(f"{lost + lost_ref} frames without 3 hand markers left out")
+    fits = {}
+    for d in session.fingers:
+        data = digit_markers(session, d, moving, reference)
+        fits[d] = fit_digit(data, d, True) if d == "thumb" else fit_finger(data, d, mp_axes)
+        notes += fits[d].notes
+    model = _model(session, shape, fits, notes)
+    return MarkerFit(model, fits, notes)
+
+
+def _centre_on_line(axis: FloatArray, point: FloatArray, near: FloatArray) -> FloatArray:
+    """The point of the line ``(point, axis)`` nearest ``near`` (mm)."""
+    return point + ((near - point) @ axis) * axis
+
+
+def _model(
+    session: Session, shape: FloatArray, fits: dict[str, DigitFit], notes: list
+) -> HandModel:
+    """The HandModel of the digits' fits."""
+    rot, origin = technical_frame(shape)
+    poses: dict[str, tuple[FloatArray, FloatArray]] = {HAND_SENSOR: (origin, rot)}
+    markers = {
+        label: (HAND_SENSOR, p)
+        for label, p in zip(session.marker_map[HAND_SENSOR], shape, strict=True)
+    }
+    digits = {}
+    for d, fit in fits.items():
+        r, data, names = fit.result, fit.data, fit.layout.names
+        sensors = joint_sensors(d)
+        joints, seconds = {}, {}
+        for j, joint in enumerate(DIGITS[d].joints):
+            level = fit.layout.first[j]
+            near = r.u[data.segment == j].mean(axis=0)
+            centre = _centre_on_line(r.lines.axis[level], r.lines.centre[level], near)
+            quality = _quality(fit, level)
+            joints[joint] = (*sensors[joint], centre, r.lines.axis[level], quality)
+            if j in fit.layout.second:
+                k = fit.layout.second[j]
+                c2 = _centre_on_line(r.lines.axis[k], r.lines.centre[k], near)
+                a2 = r.lines.axis[k]
+                seconds[joint] = JointModel(
+                    second_axis(joint), *sensors[joint], c2, a2, a2, _quality(fit, k)
+                )
+        tip_name = f"{d}.tip"
+        if tip_name in session.landmarks:
+            tip = session.landmarks[tip_name]
+        else:
+            last = np.flatnonzero(data.segment == 2)
+            far = last[
+                np.argmax(np.linalg.norm(r.u[last] - joints[DIGITS[d].joints[2]][2], axis=1))
+            ]
+            tip = r.u[far]
+            notes.append(
+                f"{d} tip: not determined by the markers (no {tip_name} landmark): "
+                f"marker {data.labels[far]} taken as the tip"
+            )
+        dm = assemble_digit(d, joints, tip, seconds)
+        if d != "thumb" and seconds:
+            assert names[0] == "mp_abduction"  # abduction proximal: the finger's own order
+        digits[d] = dm
+        for s, seg in enumerate(DIGITS[d].segments):
+            name = sensor_name(d, seg)
+            poses[name] = (r.u[data.segment == s].mean(axis=0), dm.frames[seg].rotation)
+        markers |= {
+            label: (sensor_name(d, DIGITS[d].segments[s]), r.u[i])
+            for i, (label, s) in enumerate(zip(data.labels, data.segment, strict=True))
+        }
+    ordered = {d: digits[d] for d in DIGITS if d in digits}
+    return HandModel(
+        subject=session.subject,
+        hand=session.hand,
+        session_units=session.units,
+        method="markers",
+        reference_poses=poses,
+        fingers=ordered,
+        angle_method="swing_twist",
+        warnings=tuple(notes),
+        markers=markers,
+    )
+
+
+def _quality(fit: DigitFit, level: int) -> JointQuality:
+    """What the fit says of one line: its range of motion, the residual, the 95 %
+    half-angle of its direction."""
+    q = fit.result.q[level]
+    rom = math.degrees(float(np.ptp(q))) if q.size else 0.0
+    ci = fit.axis_ci_deg(level)
+    return JointQuality(
+        cycles=0,
+        rom_deg=[rom],
+        centre_distance_mm=[],
+        conditioning=[],
+        spread_mm=0.0,
+        residual_mm=[fit.result.rms_mm],
+        notes=[f"marker bundle adjustment: axis SD {fit.axis_sd_deg(level):.3g} deg"],
+        axis_ci_deg=ci if math.isfinite(ci) else None,
+    )
+
+
+__all__ = ["DigitFit", "MarkerFit", "chain_layout", "fit_marker_session"]
