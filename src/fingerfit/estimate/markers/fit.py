@@ -2,9 +2,8 @@
 
 Each digit's chain (:func:`chain_layout`) is started and adjusted by :mod:`.start` and
 :mod:`.bundle` on the reference and calibration (grasp) recordings. A finger's MP gets a
-second (ab/adduction) axis when the markers determine it (``mp_axes="auto"``: its
-direction's standard deviation at most :data:`SECOND_AXIS_SD_DEG`; else a hinge, said in
-one line). A line whose direction or point the markers leave undetermined (the
+second (ab/adduction) axis when the markers call for it (``mp_axes="auto"``,
+:func:`fit_finger`; else a hinge, said in one line). A line whose direction or point the markers leave undetermined (the
 covariance's standard deviation above :data:`UNDETERMINED_SD_DEG` /
 :data:`UNDETERMINED_SD_MM`, or no information at all) is held at its start and said in
 one line naming the joint. The result is the usual :class:`~fingerfit.model.HandModel`
@@ -23,13 +22,14 @@ from ...errors import FingerfitError
 from ...io.rigid import technical_frame
 from ...model import HandModel, JointModel, JointQuality, assemble_digit
 from ...session import Session, joint_sensors, sensor_name
-from ...transforms import FloatArray
-from .bundle import BundleResult, Structure, adjust, line_covariance
+from ...transforms import FloatArray, unit
+from .bundle import BundleResult, Lines, Structure, adjust, line_covariance
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import staged_start
 
-#: A finger's MP keeps its second axis when its direction's SD is at most this (deg).
-SECOND_AXIS_SD_DEG = 5.0
+#: A finger's MP keeps its second axis when it lowers the cost by more than this many
+#: standard deviations of what its unknowns absorb of the noise (:func:`fit_finger`).
+SECOND_AXIS_Z = 5.0
 #: A line's direction with a larger SD (deg), or its point with a larger SD (mm), is not
 #: determined by the markers.
 UNDETERMINED_SD_DEG = 20.0
@@ -130,10 +130,25 @@ def _undetermined(fit: DigitFit) -> np.ndarray:
     return bad
 
 
-def fit_digit(data: DigitMarkers, digit: str, two_axis: bool) -> DigitFit:
-    """Start, adjust and check one digit's chain (:func:`chain_layout`)."""
+def fit_digit(
+    data: DigitMarkers, digit: str, two_axis: bool, start: BundleResult | None = None
+) -> DigitFit:
+    """Start, adjust and check one digit's chain (:func:`chain_layout`): from the staged
+    start, or (a finger's two-axis MP) from its hinge fit ``start`` with the second axis
+    added, perpendicular to the flexion axis and the proximal phalanx, at angle 0."""
     layout = chain_layout(digit, two_axis)
-    result = staged_start(data, layout.structure, layout.first, layout.second)
+    if start is None:
+        result = staged_start(data, layout.structure, layout.first, layout.second)
+    else:
+        lines = start.lines
+        near = start.u[data.segment == 0].mean(axis=0)
+        bone = unit(near - lines.centre[0])
+        ab = Lines(
+            np.vstack([unit(np.cross(bone, lines.axis[0])), lines.axis]),
+            np.vstack([lines.centre[0], lines.centre]),
+        )
+        q = np.vstack([np.zeros((1, data.frames)), start.q])
+        result = adjust(data, layout.structure, ab, start.u, q, hand=start.hand)
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
@@ -145,20 +160,30 @@ def fit_digit(data: DigitMarkers, digit: str, two_axis: bool) -> DigitFit:
 
 
 def fit_finger(data: DigitMarkers, digit: str, mp_axes: str) -> DigitFit:
-    """A finger with its MP a hinge, two axes, or (``auto``) two axes when the markers
-    determine the second one."""
-    if mp_axes == "hinge":
-        return fit_digit(data, digit, False)
-    two = fit_digit(data, digit, True)
-    if mp_axes == "two" or two.axis_sd_deg(0) <= SECOND_AXIS_SD_DEG:
-        two.notes.append(
-            f"{digit} mp: two axes (the ab/adduction axis's SD {two.axis_sd_deg(0):.2g} deg)"
-        )
-        return two
+    """A finger with its MP a hinge, two axes, or (``auto``) two axes when the second
+    explains the markers beyond what its per-frame angle absorbs of the noise.
+
+    The two-axis fit starts from the hinge's. Its ``n + 4`` more unknowns (an angle per
+    frame, the line) lower the cost by about ``(n + 4) sigma^2`` on noise alone (a
+    chi-square with that many degrees of freedom); ``auto`` keeps the second axis when the
+    drop exceeds that by more than :data:`SECOND_AXIS_Z` of its standard deviations
+    ``sqrt(2 (n + 4))``, ``sigma^2`` the two-axis fit's residual variance.
+    """
     hinge = fit_digit(data, digit, False)
+    if mp_axes == "hinge":
+        return hinge
+    two = fit_digit(data, digit, True, start=hinge.result)
+    extra = data.frames + 4
+    n, k = two.result.normal.qq.shape[:2]
+    dof = max(two.result.normal.count - n * k - two.result.normal.gg.shape[0], 1)
+    sigma2 = two.result.cost / dof
+    z = ((hinge.result.cost - two.result.cost) / sigma2 - extra) / math.sqrt(2 * extra)
+    if mp_axes == "two" or z > SECOND_AXIS_Z:
+        two.notes.append(f"{digit} mp: two axes (the second lowers the cost by {z:.3g} SD)")
+        return two
     hinge.notes.append(
-        f"{digit} mp: a hinge (the markers leave a second axis's direction SD "
-        f"{two.axis_sd_deg(0):.2g} deg, above {SECOND_AXIS_SD_DEG:g})"
+        f"{digit} mp: a hinge (a second axis lowers the cost by {z:.3g} SD, "
+        f"not above {SECOND_AXIS_Z:g})"
     )
     return hinge
 
@@ -180,7 +205,7 @@ class MarkerFit:
     notes: list[str]
 
 
-def fit_marker_session(session: Session, *, mp_axes: str = "hinge") -> MarkerFit:
+def fit_marker_session(session: Session, *, mp_axes: str = "auto") -> MarkerFit:
     """Fit the individual hand model of a marker session.
 
     Parameters
