@@ -173,6 +173,13 @@ def fit(
         for note in (n for r in s.recordings() for n in r.notes):
             notice("note", note)
         n_fingers = len(names or s.fingers)
+        if s.marker_map:
+            model = _fit_markers(s, names, bar, task)
+            path = save_model(model, target)
+            if not quiet:
+                out.print(quality_table(model))
+            say("model written to [bold]{}[/]", path)
+            return
         bar.update(task, advance=1, description=f"fitting {n_fingers} digit(s) ({method})")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -188,6 +195,23 @@ def fit(
     if not quiet:
         out.print(quality_table(model))
     say("model written to [bold]{}[/]", path)
+
+
+def _fit_markers(session, names: list[str] | None, bar, task):
+    """The marker fit of a marker session (:mod:`fingerfit.estimate.markers`), its notes
+    shown one per line."""
+    import dataclasses
+
+    from ..estimate.markers.fit import fit_marker_session
+
+    if names:
+        session = dataclasses.replace(session, fingers=[d for d in session.fingers if d in names])
+    bar.update(task, advance=1, description=f"fitting {len(session.fingers)} digit(s) (markers)")
+    result = fit_marker_session(session)
+    bar.advance(task)
+    for note in result.notes:
+        notice("note", note)
+    return result.model
 
 
 @app.command()

@@ -25,15 +25,19 @@ distal phalanx; the thumb's metacarpal, proximal and distal):
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from ..digits import DIGITS, HAND_SENSOR
 from ..errors import FingerfitError
+from ..io.atomic import atomic_write
+from ..io.sessiondir import save_session
 from ..session import Recording, Session, sensor_name
 from ..transforms import FloatArray, unit
-from .truth import SimulatedSubject
+from .truth import SimulatedSubject, write_truth
 from .truthmodel import truth_model
 
 #: Marker layouts: per layout, the hand's marker count and, per segment (proximal to
@@ -269,6 +273,38 @@ def simulate_markers(
     return MarkerSimulation(session, truth, sim)
 
 
+def marker_truth_document(truth: MarkerTruth) -> dict:
+    """``markers_truth.json``: each marker's segment, place at the reference posture (mm,
+    tracker coordinates) and skin slide (mm/rad), the layout and the camera noise."""
+    return {
+        "format": "fingerfit.markers_truth/1",
+        "layout": truth.layout,
+        "noise_mm": truth.noise_mm,
+        "frame": "tracker coordinates at the reference posture (mm)",
+        "markers": {
+            label: {
+                "segment": truth.segment[label],
+                "position": [float(x) for x in truth.position[label]],
+                "slide_mm_per_rad": [float(x) for x in truth.slide[label]],
+            }
+            for label in truth.segment
+        },
+    }
+
+
+def write_marker_subject(ms: MarkerSimulation, directory: str | Path) -> Path:
+    """Write the marker session folder (TRC recordings, ``markers.toml``, landmarks,
+    events), the subject's ``truth.json`` and ``truth/<recording>.csv``, and
+    ``markers_truth.json`` (:func:`marker_truth_document`)."""
+    directory = Path(directory)
+    ms.session.path = directory
+    save_session(ms.session, directory)
+    write_truth(ms.sim, directory)
+    with atomic_write(directory / "markers_truth.json") as fh:
+        json.dump(marker_truth_document(ms.markers), fh, indent=1)
+    return directory
+
+
 __all__ = [
     "LAYOUTS",
     "MarkerSimulation",
@@ -276,4 +312,5 @@ __all__ = [
     "marker_label",
     "marker_positions",
     "simulate_markers",
+    "write_marker_subject",
 ]
