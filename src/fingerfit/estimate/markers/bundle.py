@@ -324,7 +324,7 @@ def normal_equations(
     jft, jht, jgt = jf.transpose(0, 2, 1), jh.transpose(0, 2, 1), jg.transpose(0, 2, 1)
     qq = jft @ jf + jht @ jh
     qg = jft @ jg
-    flat = jg.reshape(-1, jg.shape[-1])
+    flat = jg.reshape(n * jg.shape[1], jg.shape[-1])
     gg = flat.T @ flat
     bq = (jft @ rr[..., None] + jht @ rrh[..., None])[..., 0]
     sg = (jgt @ rr[..., None])[..., 0]
@@ -355,9 +355,9 @@ def schur_step(nq: Normal, lam: float) -> tuple[FloatArray, FloatArray]:
     wqg = w @ nq.qg  # (n, L, G)
     s = nq.gg.copy()
     s[np.diag_indices_from(s)] *= 1.0 + lam
-    G = s.shape[0]
-    s -= nq.qg.reshape(-1, G).T @ wqg.reshape(-1, G)
-    b = nq.bg - wqg.reshape(-1, G).T @ nq.bq.reshape(-1)
+    G, nk = s.shape[0], nq.bq.size
+    s -= nq.qg.reshape(nk, G).T @ wqg.reshape(nk, G)
+    b = nq.bg - wqg.reshape(nk, G).T @ nq.bq.reshape(nk)
     dg = np.linalg.solve(s + 1e-12 * np.eye(s.shape[0]), b)
     dq = (w @ nq.bq[..., None])[..., 0] - wqg @ dg
     return dq, dg
@@ -369,8 +369,8 @@ def reduced(nq: Normal) -> tuple[FloatArray, FloatArray]:
     qq = nq.qq.copy()
     np.einsum("nll->nl", qq)[...] += RIDGE
     wqg = np.linalg.solve(qq, nq.qg)
-    G = nq.gg.shape[0]
-    s = nq.gg - nq.qg.reshape(-1, G).T @ wqg.reshape(-1, G)
+    G, nk = nq.gg.shape[0], nq.bq.size
+    s = nq.gg - nq.qg.reshape(nk, G).T @ wqg.reshape(nk, G)
     return s, wqg
 
 
