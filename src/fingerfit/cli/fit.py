@@ -214,6 +214,35 @@ def _fit_markers(session, names: list[str] | None, bar, task):
     return result.model
 
 
+def _marker_angles(model, recording: Path, output: Path, quiet: bool) -> None:
+    """``fingerfit angles`` of a marker recording with a model fitted from markers."""
+    from ..errors import FingerfitError
+    from ..estimate.markers.angles import angles_table, marker_angles
+    from ..io.atomic import atomic_write
+    from ..io.markers import is_marker_file, read_marker_recording
+
+    if not (model.markers and is_marker_file(recording)):
+        raise FingerfitError(
+            "a marker recording needs a model fitted from markers, and a model fitted "
+            "from markers a marker recording (.trc, .tsv, .c3d)",
+            path=recording,
+        )
+    rec = read_marker_recording(recording)
+    for note in rec.notes if not quiet else []:
+        notice("note", note)
+    result = marker_angles(model, rec)
+    table = angles_table(rec.time, result)
+    with atomic_write(output, newline="") as fh:
+        table.to_csv(fh, index=False, lineterminator="\n")
+    rms = ", ".join(f"{d} {a.rms_mm:.2f} mm" for d, a in result.items())
+    say(
+        "{} frames -> {} (angles deg, fingertips mm, tracker frame); marker residual {}",
+        rec.n_frames,
+        output,
+        rms,
+    )
+
+
 @app.command()
 @user_errors
 def angles(
@@ -305,6 +334,11 @@ def angles(
             raise typer.BadParameter(
                 f"the model has no '{d}' (has: {', '.join(model.fingers)})", param_hint="--fingers"
             )
+    from ..io.markers import is_marker_file
+
+    if model.markers or is_marker_file(recording):
+        _marker_angles(model, recording, output, quiet)
+        return
     chosen = None if sensors is None else [x.strip() for x in sensors.split(",") if x.strip()]
     rec = read_checked_recording(model, recording, units, rate, force, chosen)
     with progress(quiet) as bar:

@@ -156,3 +156,17 @@ def _tip(
     x = np.einsum("nij,nj->ni", hand.rotation, y) + hand.translation
     x[~seen] = np.nan
     return x
+
+
+def angles_table(time: FloatArray, result: dict[str, DigitAngles]):
+    """The angles table of a marker recording: ``time`` (s), ``<digit>.<angle>`` (deg),
+    ``<digit>.tip.x|y|z`` (mm, tracker coordinates) per frame, empty where not solved."""
+    import pandas as pd
+
+    cols: dict[str, FloatArray] = {"time": time}
+    for d, a in result.items():
+        for k, name in enumerate(a.names):
+            cols[f"{d}.{name}"] = np.degrees(a.angles[:, k])
+        for k, axis in enumerate("xyz"):
+            cols[f"{d}.tip.{axis}"] = a.tip[:, k]
+    return pd.DataFrame(cols)
