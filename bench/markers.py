@@ -19,7 +19,7 @@ fit_marker_session`). Scored against the truth:
   fit of the same simulated motion (``fingerfit fit``'s default, the same subject's
   sensors, ``bench/accuracy.py``'s fingertip error): the ratio of the means;
 * **floor**: the same bundle adjustment started from the true parameters (lines in the
-  fit's chain, marker places, every frame's angles) on the same markers.
+  fit's chain, marker places and slides, every frame's angles) on the same markers.
 
 ``--speed`` adds the time of a marker fit of 10,000 grasp frames of one finger and of the
 four fingers.
@@ -99,7 +99,11 @@ def _floor(fit: DigitFit, sim, ms) -> dict:
     u = np.array([ms.markers.position[k] for k in fit.data.labels])
     frames = [sim.truth.frames[r.name]["angles"][FINGER] for r in sim.session.grasp]
     q = np.stack([np.concatenate([f[n] for f in frames]) for n in layout.names])
-    result = adjust(fit.data, layout.structure, lines, u, q)
+    slide = None
+    if fit.result.slide is not None:  # the true slides where the fit estimates them
+        slide = np.array([ms.markers.slide[k] for k in fit.data.labels])
+        slide[~fit.result.free[-slide.size :].reshape(slide.shape)] = 0.0
+    result = adjust(fit.data, layout.structure, lines, u, q, slide=slide, free=fit.result.free)
     floor = DigitFit(FINGER, layout, fit.data, result, line_covariance(result))
     return _axis_errors(floor, result.lines, truth)
 

@@ -133,17 +133,20 @@ def _markers_doc(model: HandModel) -> dict[str, Any]:
     """The ``markers`` entry: each skin marker's segment and place (tracker coordinates
     at the reference posture, and in its segment's frame)."""
     out = {}
-    for label, (segment, position) in model.markers.items():
+    for label, (segment, position, slide) in model.markers.items():
         p, r = model.reference_poses[segment]
         out[label] = {
             "segment": segment,
             "position": _v(position),
             "in_segment": _v(r.T @ (position - p)),
+            "slide_mm_per_rad": _v(slide),
         }
     return out
 
 
-def _markers(r: _Reader, doc: dict[str, Any], poses: dict) -> dict[str, tuple[str, FloatArray]]:
+def _markers(
+    r: _Reader, doc: dict[str, Any], poses: dict
+) -> dict[str, tuple[str, FloatArray, FloatArray]]:
     """The optional ``markers`` entry (a model from 6-DOF sensors: none)."""
     if "markers" not in doc:
         return {}
@@ -154,7 +157,7 @@ def _markers(r: _Reader, doc: dict[str, Any], poses: dict) -> dict[str, tuple[st
     for label, m in mdoc.items():
         w = f"markers.{label}"
         segment = r.str_(m, "segment", w, tuple(poses))
-        out[label] = (segment, r.vec(m, "position", w))
+        out[label] = (segment, r.vec(m, "position", w), r.vec(m, "slide_mm_per_rad", w))
     return out
 
 

@@ -49,7 +49,7 @@ class DigitAngles:
 def _session_of(model: HandModel, recording: Recording) -> Session:
     """A one-recording marker session with the model's map (for :mod:`.observe`)."""
     mapping: dict[str, list[str]] = {}
-    for label, (segment, _) in model.markers.items():
+    for label, (segment, *_) in model.markers.items():
         mapping.setdefault(segment, []).append(label)
     missing = [k for k in model.markers if k not in recording.markers]
     if missing:
@@ -86,24 +86,26 @@ def marker_angles(model: HandModel, recording: Recording) -> dict[str, DigitAngl
     if not model.markers:
         raise FingerfitError("the model has no markers: fit it from a marker session")
     session = _session_of(model, recording)
-    shape = np.array([p for _, (s, p) in model.markers.items() if s == HAND_SENSOR])
+    shape = np.array([p for _, (s, p, _) in model.markers.items() if s == HAND_SENSOR])
     moving, _ = carry_back(session, [recording], shape)
     labels = session.marker_map[HAND_SENSOR]
     hand = fit_cluster(np.stack([recording.markers[k] for k in labels], axis=1), shape)
-    places = {label: p[None] for label, (_, p) in model.markers.items()}
+    places = {label: p[None] for label, (_, p, _) in model.markers.items()}
     hand_ok = np.isfinite(next(iter(moving.values()))).all(axis=1)
     out = {}
     for d, fm in model.fingers.items():
         data = digit_markers(session, d, moving, places)
         chain = fm.chain()
         depth = np.array([len(fm.chain(s + 1)) for s in range(3)])
-        structure = Structure(depth)
+        names = [j.name for j in chain]
+        first = [names.index(j) for j in DIGITS[d].joints]
+        structure = Structure(depth, np.array(first))
         lines = Lines(np.array([j.axis for j in chain]), np.array([j.center for j in chain]))
         u = np.array([model.markers[k][1] for k in data.labels])
-        names = [j.name for j in chain]
-        q = _start(data, structure, lines, u, [names.index(j) for j in DIGITS[d].joints])
-        free = np.zeros(4 * len(chain) + 3 * len(u), dtype=bool)
-        result = adjust(data, structure, lines, u, q, free=free, tol=1e-10)
+        slide = np.array([model.markers[k][2] for k in data.labels])
+        q = _start(data, structure, lines, u, first)
+        free = np.zeros(4 * len(chain) + 6 * len(u), dtype=bool)
+        result = adjust(data, structure, lines, u, q, slide=slide, free=free, tol=1e-10)
         seen = hand_ok & data.present.any(axis=0)
         angles = np.where(seen[None], result.q, np.nan).T
         tip = _tip(model, d, structure, lines, result, data, hand, seen)

@@ -35,6 +35,10 @@ from ...track.chains import Chains, matvec_rows
 from ...transforms import FloatArray, orthonormal_basis, unit
 from .observe import DigitMarkers
 
+#: SD of the prior on a marker's slide per radian of its joint (mm/rad): the slide is
+#: estimated, when asked, against this prior (a weak one: skin moves a few mm over a
+#: joint's range).
+SLIDE_PRIOR = 3.0
 #: Added to each frame's angle block (1/rad^2 in mm^2): an angle no marker of the frame
 #: determines stays where it is.
 RIDGE = 1e-9
@@ -72,9 +76,11 @@ class Lines:
 @dataclass(frozen=True)
 class Structure:
     """What moves what: ``depth (S,)`` axes moving each segment (segment ``s`` moves with
-    the first ``depth[s]`` axes)."""
+    the first ``depth[s]`` axes); ``flexion (S,)`` the level of each segment's proximal
+    flexion axis, whose angle its markers slide with (needed to estimate the slide)."""
 
     depth: np.ndarray
+    flexion: np.ndarray | None = None
 
     @property
     def levels(self) -> int:
@@ -97,8 +103,8 @@ def predict(
     structure : Structure
     lines : Lines
     segment : ndarray of int, shape (M,)
-    u : ndarray, shape (M, 3)
-        Marker places at the reference posture (mm).
+    u : ndarray, shape (M, 3) or (M, 3, n)
+        Marker places at the reference posture (mm), or every frame's (sliding).
     q : ndarray, shape (L, n)
         Angles (rad).
 
@@ -117,7 +123,7 @@ def predict(
     pose = chains.pose(q[None])
     level = structure.depth[segment]
     rot = pose.rotation[0, level]  # (M, 3, 3, n)
-    p = matvec_rows(rot, u[..., None]) + pose.translation[0, level]
+    p = matvec_rows(rot, u if u.ndim == 3 else u[..., None]) + pose.translation[0, level]
     if levels:
         return p, rot, pose.axes[0], pose.centres[0], pose.rotation[0, : structure.levels]
     return p, rot, pose.axes[0], pose.centres[0]
@@ -238,15 +244,30 @@ def residual(
     u: FloatArray,
     q: FloatArray,
     hand: HandFrames,
+    slide: FloatArray | None = None,
 ) -> float:
-    """The cost (mm^2): the digit's markers, the hand's markers about their shape and
-    the reference term."""
+    """The cost (mm^2): the digit's markers, the hand's markers about their shape, the
+    reference term and (with ``slide``) the slide's prior."""
     y, yh, _ = _observed(data, hand)
-    p, *_ = predict(structure, lines, data.segment, u, q)
+    p, *_ = predict(structure, lines, data.segment, places(structure, data, u, q, slide), q)
     r = (y - p) * data.present[:, None]
     rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
     ref = _reference_residual(data, u)
-    return float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum())
+    prior = 0.0 if slide is None else float((slide * slide).sum()) / SLIDE_PRIOR**2
+    return float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum()) + prior
+
+
+def places(
+    structure: Structure, data: DigitMarkers, u: FloatArray, q: FloatArray, slide: FloatArray | None
+) -> FloatArray:
+    """The markers' places ``(M, 3)``, or with ``slide (M, 3)`` (mm/rad) every frame's
+    ``u + slide theta`` ``(M, 3, n)``, ``theta`` the angle of the segment's proximal
+    flexion axis (rad)."""
+    if slide is None:
+        return u
+    assert structure.flexion is not None
+    theta = q[structure.flexion[data.segment]]  # (M, n)
+    return u[..., None] + slide[..., None] * theta[:, None, :]
 
 
 def _reference_residual(data: DigitMarkers, u: FloatArray) -> FloatArray:
@@ -278,13 +299,18 @@ def normal_equations(
     q: FloatArray,
     hand: HandFrames,
     free: np.ndarray,
+    slide: FloatArray | None = None,
 ) -> tuple[Normal, FloatArray]:
     """The normal equations of every frame and of the global unknowns.
 
     Parameters
     ----------
-    free : ndarray of bool, shape (4 L + 3 M,)
-        Global unknowns that move (lines first, then the markers' places).
+    free : ndarray of bool, shape (4 L + 3 M,) or, with ``slide``, (4 L + 6 M,)
+        Global unknowns that move (lines first, then the markers' places, then their
+        slides).
+    slide : ndarray, shape (M, 3), optional
+        Each marker's slide (mm/rad, :func:`places`): then unknowns too, with the prior
+        of :data:`SLIDE_PRIOR`.
 
     Returns
     -------
@@ -297,7 +323,8 @@ def normal_equations(
     M, L, n = len(data.labels), structure.levels, data.frames
     H = data.hand.shape[0]
     y, yh, pivot = _observed(data, hand)
-    p, rot, axes, centres, prox = predict(structure, lines, data.segment, u, q, levels=True)
+    ut = places(structure, data, u, q, slide)
+    p, rot, axes, centres, prox = predict(structure, lines, data.segment, ut, q, levels=True)
     r = (y - p) * data.present[:, None]
     rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
     # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
@@ -305,6 +332,8 @@ def normal_equations(
     a = np.broadcast_to(axes[None], d.shape)
     jq = np.cross(a, d, axis=2)  # (M, L, 3, n)
     jq *= (np.arange(L)[None, :] < structure.depth[data.segment][:, None])[..., None, None]
+    if slide is not None:  # the slide moves with the angle it follows
+        jq[np.arange(M), structure.flexion[data.segment]] += matvec_rows(rot, slide[..., None])
     jq = jq.transpose(3, 0, 2, 1)  # (n, M, 3, L)
     jf = np.concatenate([jq, _frame_columns(y, pivot)], axis=3).reshape(n, 3 * M, L + 6)
     jh = np.zeros((n, H, 3, L + 6))
@@ -313,7 +342,11 @@ def normal_equations(
     jl = jl.transpose(2, 0, 1, 3).reshape(n, 3 * M, 4 * L)
     ju = np.zeros((n, M, 3, M, 3))
     ju[:, np.arange(M), :, np.arange(M), :] = rot.transpose(0, 3, 1, 2)
-    jg = np.concatenate([jl, ju.reshape(n, 3 * M, 3 * M)], axis=2)
+    blocks = [jl, ju.reshape(n, 3 * M, 3 * M)]
+    if slide is not None:
+        theta = q[structure.flexion[data.segment]].T  # (n, M)
+        blocks.append((ju * theta[:, :, None, None, None]).reshape(n, 3 * M, 3 * M))
+    jg = np.concatenate(blocks, axis=2)
     mask = np.repeat(data.present.T, 3, axis=1)[..., None]  # (n, 3 M, 1)
     jf *= mask
     jg = jg[..., free] * mask
@@ -330,15 +363,19 @@ def normal_equations(
     sg = (jgt @ rr[..., None])[..., 0]
     bg = sg.sum(axis=0)
     ref = _reference_residual(data, u)
-    uw = np.zeros(4 * L + 3 * M)
-    uw[4 * L :] = np.repeat(data.reference_count, 3)
-    uw = uw[free]
-    gg[np.diag_indices_from(gg)] += uw
-    ref_b = np.concatenate(
-        [np.zeros(4 * L), (ref * np.sqrt(data.reference_count)[:, None]).ravel()]
-    )
+    G = 4 * L + 3 * M * (1 if slide is None else 2)
+    uw = np.zeros(G)
+    uw[4 * L : 4 * L + 3 * M] = np.repeat(data.reference_count, 3)
+    ref_b = np.zeros(G)
+    ref_b[4 * L : 4 * L + 3 * M] = (ref * np.sqrt(data.reference_count)[:, None]).ravel()
+    prior = 0.0
+    if slide is not None:
+        uw[4 * L + 3 * M :] = 1.0 / SLIDE_PRIOR**2
+        ref_b[4 * L + 3 * M :] = -slide.ravel() / SLIDE_PRIOR**2
+        prior = float((slide * slide).sum()) / SLIDE_PRIOR**2
+    gg[np.diag_indices_from(gg)] += uw[free]
     bg += ref_b[free]
-    cost = float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum())
+    cost = float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum()) + prior
     count = 3 * int(data.present.sum() + data.hand_present.sum() + (data.reference_count > 0).sum())
     normal = Normal(qq, qg, gg, bq, bg, cost, count)
     return normal, np.concatenate([bq, sg], axis=1)
@@ -387,6 +424,8 @@ class BundleResult:
         Angles of every frame (rad).
     hand : HandFrames
         Each frame's correction of the hand's frame.
+    slide : ndarray, shape (M, 3) or None
+        Each marker's slide (mm/rad), when estimated.
     cost : float
         Sum of squared residuals (mm^2).
     rms_mm : float
@@ -401,6 +440,7 @@ class BundleResult:
     u: FloatArray
     q: FloatArray
     hand: HandFrames
+    slide: FloatArray | None
     cost: float
     rms_mm: float
     iterations: int
@@ -416,6 +456,7 @@ def adjust(
     q: FloatArray,
     *,
     hand: HandFrames | None = None,
+    slide: FloatArray | None = None,
     free: np.ndarray | None = None,
     max_iter: int = 100,
     tol: float = 1e-12,
@@ -435,7 +476,9 @@ def adjust(
         Start of the angles (rad).
     hand : HandFrames, optional
         Start of the hand frames' correction (default none: the rigid fit's).
-    free : ndarray of bool, shape (4 L + 3 M,), optional
+    slide : ndarray, shape (M, 3), optional
+        Start of the markers' slides (mm/rad): estimated too (:func:`places`).
+    free : ndarray of bool, shape (4 L + 3 M,) or with ``slide`` (4 L + 6 M,), optional
         Global unknowns that move (default all).
     max_iter : int
     tol : float
@@ -446,29 +489,31 @@ def adjust(
     BundleResult
     """
     L, M = structure.levels, len(data.labels)
-    free = np.ones(4 * L + 3 * M, dtype=bool) if free is None else free
+    G = 4 * L + 3 * M * (1 if slide is None else 2)
+    free = np.ones(G, dtype=bool) if free is None else free
     hand = HandFrames.identity(data.frames) if hand is None else hand
     lines, u, q = lines.copy(), u.copy(), q.copy()
-    nq, _ = normal_equations(data, structure, lines, u, q, hand, free)
+    nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide)
     lam = 1e-4
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
         done = False
         for _ in range(12):
             dq, dg = schur_step(nq, lam)
-            step = np.zeros(4 * L + 3 * M)
+            step = np.zeros(G)
             step[free] = dg
             trial = (
                 lines.moved(step[: 4 * L]),
-                u + step[4 * L :].reshape(M, 3),
+                u + step[4 * L : 4 * L + 3 * M].reshape(M, 3),
                 q + dq[:, :L].T,
                 hand.moved(dq[:, L : L + 3], dq[:, L + 3 :]),
+                None if slide is None else slide + step[4 * L + 3 * M :].reshape(M, 3),
             )
             cost = residual(data, structure, *trial)
             if cost <= nq.cost:
                 gain = nq.cost - cost
-                lines, u, q, hand = trial
-                nq, _ = normal_equations(data, structure, lines, u, q, hand, free)
+                lines, u, q, hand, slide = trial
+                nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide)
                 lam = max(lam / 3.0, 1e-9)
                 done = gain <= tol * max(cost, 1e-300)
                 break
@@ -478,7 +523,7 @@ def adjust(
         if done:
             break
     rms = float(np.sqrt(nq.cost / max(nq.count, 1)))
-    return BundleResult(lines, u, q, hand, nq.cost, rms, it, nq, free)
+    return BundleResult(lines, u, q, hand, slide, nq.cost, rms, it, nq, free)
 
 
 def line_covariance(result: BundleResult) -> FloatArray:

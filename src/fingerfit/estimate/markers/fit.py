@@ -34,6 +34,11 @@ SECOND_AXIS_Z = 5.0
 #: determined by the markers.
 UNDETERMINED_SD_DEG = 20.0
 UNDETERMINED_SD_MM = 20.0
+#: The adjustments after the staged start stop after this many iterations, or when an
+#: iteration lowers the cost by less than this fraction of it (``1e-10`` of a cost of
+#: ``1e4`` mm^2 is ``1e-6`` mm^2: nothing the figures show).
+MAX_ITER = 60
+TOL = 1e-10
 #: Chi-square 95 % quantile with two degrees of freedom: an axis direction's (or a
 #: line point's) 95 % region is ``x^T C^-1 x <= CHI2_95``.
 CHI2_95 = 5.991
@@ -66,13 +71,21 @@ def chain_layout(digit: str, two_axis: bool) -> ChainLayout:
     hinges."""
     if digit == "thumb":
         return ChainLayout(
-            ["cmc", "cmc_abduction", "mcp", "ip"], Structure(np.array([2, 3, 4])), [0, 2, 3], {0: 1}
+            ["cmc", "cmc_abduction", "mcp", "ip"],
+            Structure(np.array([2, 3, 4]), np.array([0, 2, 3])),
+            [0, 2, 3],
+            {0: 1},
         )
     if two_axis:
         return ChainLayout(
-            ["mp_abduction", "mp", "pip", "dip"], Structure(np.array([2, 3, 4])), [1, 2, 3], {0: 0}
+            ["mp_abduction", "mp", "pip", "dip"],
+            Structure(np.array([2, 3, 4]), np.array([1, 2, 3])),
+            [1, 2, 3],
+            {0: 0},
         )
-    return ChainLayout(["mp", "pip", "dip"], Structure(np.array([1, 2, 3])), [0, 1, 2], {})
+    return ChainLayout(
+        ["mp", "pip", "dip"], Structure(np.array([1, 2, 3]), np.array([0, 1, 2])), [0, 1, 2], {}
+    )
 
 
 @dataclass
@@ -130,8 +143,23 @@ def _undetermined(fit: DigitFit) -> np.ndarray:
     return bad
 
 
+def slide_free(data: DigitMarkers, levels: int) -> np.ndarray:
+    """The global unknowns (``4 L + 6 M``) of a fit with slides: every one, but the slide
+    of a marker alone on its segment (its slide cannot be told from the joint's angle:
+    held at 0)."""
+    M = len(data.labels)
+    alone = np.bincount(data.segment, minlength=3)[data.segment] == 1
+    free = np.ones(4 * levels + 6 * M, dtype=bool)
+    free[4 * levels + 3 * M :] = ~np.repeat(alone, 3)
+    return free
+
+
 def fit_digit(
-    data: DigitMarkers, digit: str, two_axis: bool, start: BundleResult | None = None
+    data: DigitMarkers,
+    digit: str,
+    two_axis: bool,
+    start: BundleResult | None = None,
+    slide: bool = True,
 ) -> DigitFit:
     """Start, adjust and check one digit's chain (:func:`chain_layout`): from the staged
     start, or (a finger's two-axis MP) from its hinge fit ``start`` with the second axis
@@ -139,6 +167,20 @@ def fit_digit(
     layout = chain_layout(digit, two_axis)
     if start is None:
         result = staged_start(data, layout.structure, layout.first, layout.second)
+        if slide:
+            zero = np.zeros((len(data.labels), 3))
+            result = adjust(
+                data,
+                layout.structure,
+                result.lines,
+                result.u,
+                result.q,
+                hand=result.hand,
+                slide=zero,
+                free=slide_free(data, layout.structure.levels),
+                max_iter=MAX_ITER,
+                tol=TOL,
+            )
     else:
         lines = start.lines
         near = start.u[data.segment == 0].mean(axis=0)
@@ -148,18 +190,37 @@ def fit_digit(
             np.vstack([lines.centre[0], lines.centre]),
         )
         q = np.vstack([np.zeros((1, data.frames)), start.q])
-        result = adjust(data, layout.structure, ab, start.u, q, hand=start.hand)
+        free = None if start.slide is None else slide_free(data, layout.structure.levels)
+        result = adjust(
+            data,
+            layout.structure,
+            ab,
+            start.u,
+            q,
+            hand=start.hand,
+            slide=start.slide,
+            free=free,
+            max_iter=MAX_ITER,
+            tol=TOL,
+        )
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
         result = adjust(
-            data, layout.structure, result.lines, result.u, result.q, hand=result.hand, free=~bad
+            data,
+            layout.structure,
+            result.lines,
+            result.u,
+            result.q,
+            hand=result.hand,
+            slide=result.slide,
+            free=result.free & ~bad,
         )
         fit.result, fit.covariance = result, line_covariance(result)
     return fit
 
 
-def fit_finger(data: DigitMarkers, digit: str, mp_axes: str) -> DigitFit:
+def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True) -> DigitFit:
     """A finger with its MP a hinge, two axes, or (``auto``) two axes when the second
     explains the markers beyond what its per-frame angle absorbs of the noise.
 
@@ -169,10 +230,10 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str) -> DigitFit:
     drop exceeds that by more than :data:`SECOND_AXIS_Z` of its standard deviations
     ``sqrt(2 (n + 4))``, ``sigma^2`` the two-axis fit's residual variance.
     """
-    hinge = fit_digit(data, digit, False)
+    hinge = fit_digit(data, digit, False, slide=slide)
     if mp_axes == "hinge":
         return hinge
-    two = fit_digit(data, digit, True, start=hinge.result)
+    two = fit_digit(data, digit, True, start=hinge.result, slide=slide)
     extra = data.frames + 4
     n, k = two.result.normal.qq.shape[:2]
     dof = max(two.result.normal.count - n * k - two.result.normal.gg.shape[0], 1)
@@ -205,7 +266,7 @@ class MarkerFit:
     notes: list[str]
 
 
-def fit_marker_session(session: Session, *, mp_axes: str = "auto") -> MarkerFit:
+def fit_marker_session(session: Session, *, mp_axes: str = "auto", slide: bool = True) -> MarkerFit:
     """Fit the individual hand model of a marker session.
 
     Parameters
@@ -216,6 +277,9 @@ def fit_marker_session(session: Session, *, mp_axes: str = "auto") -> MarkerFit:
         (the angles' zero) and the grasp recordings are fitted.
     mp_axes : {"auto", "hinge", "two"}
         A finger's MP: two axes when the markers determine the second, a hinge, or two.
+    slide : bool
+        Estimate each marker's skin slide with the joint below it
+        (:func:`.bundle.places`, against the prior :data:`.bundle.SLIDE_PRIOR`).
 
     Returns
     -------
@@ -239,7 +303,11 @@ def fit_marker_session(session: Session, *, mp_axes: str = "auto") -> MarkerFit:
     fits = {}
     for d in session.fingers:
         data = digit_markers(session, d, moving, reference)
-        fits[d] = fit_digit(data, d, True) if d == "thumb" else fit_finger(data, d, mp_axes)
+        fits[d] = (
+            fit_digit(data, d, True, slide=slide)
+            if d == "thumb"
+            else fit_finger(data, d, mp_axes, slide)
+        )
         notes += fits[d].notes
     model = _model(session, shape, fits, notes)
     return MarkerFit(model, fits, notes)
@@ -257,7 +325,7 @@ def _model(
     rot, origin = technical_frame(shape)
     poses: dict[str, tuple[FloatArray, FloatArray]] = {HAND_SENSOR: (origin, rot)}
     markers = {
-        label: (HAND_SENSOR, p)
+        label: (HAND_SENSOR, p, np.zeros(3))
         for label, p in zip(session.marker_map[HAND_SENSOR], shape, strict=True)
     }
     digits = {}
@@ -298,8 +366,9 @@ def _model(
         for s, seg in enumerate(DIGITS[d].segments):
             name = sensor_name(d, seg)
             poses[name] = (r.u[data.segment == s].mean(axis=0), dm.frames[seg].rotation)
+        slides = np.zeros_like(r.u) if r.slide is None else r.slide
         markers |= {
-            label: (sensor_name(d, DIGITS[d].segments[s]), r.u[i])
+            label: (sensor_name(d, DIGITS[d].segments[s]), r.u[i], slides[i])
             for i, (label, s) in enumerate(zip(data.labels, data.segment, strict=True))
         }
     ordered = {d: digits[d] for d in DIGITS if d in digits}
