@@ -80,6 +80,7 @@ def simulate(
     rom: Annotated[
         float, typer.Option(min=0.05, max=1.3, help="Grasp range-of-motion scale.")
     ] = 1.0,
+    cycles: Annotated[int, typer.Option(min=2, help="Grasp cycles of the calibration.")] = 10,
     rolling: Annotated[
         bool, typer.Option(help="Centre of rotation migrating with flexion.")
     ] = True,
@@ -136,7 +137,7 @@ def simulate(
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise FingerfitError(f"names {', '.join(twice)} twice", field="--fingers")
-    kw = dict(fingers=names, hand=hand, rom_scale=rom, tilt_scale=tilt, world=world)
+    kw = dict(fingers=names, hand=hand, rom_scale=rom, tilt_scale=tilt, world=world, cycles=cycles)
     if exact:
         config = SimConfig.exact(**kw)
     else:
