@@ -108,11 +108,13 @@ def _floor(fit: DigitFit, sim, ms) -> dict:
     return _axis_errors(floor, result.lines, truth)
 
 
-def run_subject(cond: str, layout: str, sim, sixdof_tip: float, seed: int) -> dict:
+def run_subject(
+    cond: str, layout: str, sim, sixdof_tip: float, seed: int, slide: bool = False
+) -> dict:
     """One subject in one layout: the fit, its errors, the floor, the tip ratio."""
     ms = simulate_markers(sim, layout, seed=seed)
     t0 = time.perf_counter()
-    fit = fit_marker_session(ms.session)
+    fit = fit_marker_session(ms.session, slide=slide)
     seconds = time.perf_counter() - t0
     digit = fit.digits[FINGER]
     truth = truth_model(sim)
@@ -196,6 +198,7 @@ def main() -> None:
     parser.add_argument("--conditions", default=DEFAULT_CONDITIONS)
     parser.add_argument("--layouts", default="todorov,phalanx")
     parser.add_argument("--speed", action="store_true")
+    parser.add_argument("--slide", action="store_true", help="estimate the markers' slide")
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     conditions = args.conditions.split(",")
@@ -210,7 +213,7 @@ def main() -> None:
             model = fit_session(sim.session, FitOptions())
             sixdof = float(np.nanmean(tip_errors(sim, model)))
             for k, layout in enumerate(args.layouts.split(",")):
-                r = run_subject(cond, layout, sim, sixdof, seed=k + 1)
+                r = run_subject(cond, layout, sim, sixdof, seed=k + 1, slide=args.slide)
                 rows.append(r)
                 f = r["fit"]
                 print(

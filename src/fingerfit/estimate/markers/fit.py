@@ -266,7 +266,9 @@ class MarkerFit:
     notes: list[str]
 
 
-def fit_marker_session(session: Session, *, mp_axes: str = "auto", slide: bool = True) -> MarkerFit:
+def fit_marker_session(
+    session: Session, *, mp_axes: str = "auto", slide: bool = False
+) -> MarkerFit:
     """Fit the individual hand model of a marker session.
 
     Parameters
@@ -279,7 +281,9 @@ def fit_marker_session(session: Session, *, mp_axes: str = "auto", slide: bool =
         A finger's MP: two axes when the markers determine the second, a hinge, or two.
     slide : bool
         Estimate each marker's skin slide with the joint below it
-        (:func:`.bundle.places`, against the prior :data:`.bundle.SLIDE_PRIOR`).
+        (:func:`.bundle.places`, against the prior :data:`.bundle.SLIDE_PRIOR`). Off by
+        default: the slide and the angle enter as a product, and the adjustment then
+        crawls (``docs/markers.md``, measured).
 
     Returns
     -------
