@@ -105,3 +105,27 @@ def test_line_jacobian_is_the_chains_derivative():
         e[j] = 1e-6
         hi, lo = (predict(st, lines.moved(x), seg, u, q)[0] for x in (e, -e))
         np.testing.assert_allclose(analytic[..., j], (hi - lo) / 2e-6, atol=1e-6)
+
+
+def test_model_file_and_angles_of_a_marker_recording(exact, tmp_path):
+    """The marker model round-trips through model.json, and the angles of a noise-free
+    recording are the true angles."""
+    from fingerfit.estimate.markers.angles import marker_angles
+    from fingerfit.estimate.markers.fit import fit_marker_session
+    from fingerfit.model import load_model, save_model
+
+    fit = fit_marker_session(exact.session, mp_axes="hinge")
+    model = load_model(save_model(fit.model, tmp_path / "model.json"))
+    assert model.method == "markers"
+    for label, (segment, place, slide) in fit.model.markers.items():
+        assert model.markers[label][0] == segment
+        np.testing.assert_allclose(model.markers[label][1], place, atol=1e-9)
+        np.testing.assert_allclose(model.markers[label][2], slide, atol=1e-9)
+    rec = exact.session.grasp[0]
+    got = marker_angles(model, rec)["index"]
+    true = exact.sim.truth.frames[rec.name]["angles"]["index"]
+    for k, j in enumerate(got.names):
+        np.testing.assert_allclose(got.angles[:, k], true[j], atol=1e-6)
+    tip = exact.sim.truth.frames[rec.name]["tip"]["index"]
+    # The model's tip is the stylus tip landmark: exact in the exact world.
+    np.testing.assert_allclose(got.tip, tip, atol=1e-5)

@@ -305,6 +305,16 @@ def fit_marker_session(
             "--fingers",
             path=session.path,
         )
+    for d in session.fingers:
+        for j, seg in enumerate(DIGITS[d].segments):
+            if not session.marker_map.get(sensor_name(d, seg)):
+                joints = DIGITS[d].joints
+                raise FingerfitError(
+                    f"{sensor_name(d, seg)} has no marker: the markers cannot split "
+                    f"{d} {joints[j]} from {joints[min(j + 1, 2)] if j < 2 else joints[1]} "
+                    "(each phalanx needs a marker; docs/markers.md)",
+                    path=None if session.path is None else session.path / "markers.toml",
+                )
     shape = hand_shape(session)
     moving, lost = carry_back(session, session.grasp, shape)
     reference, lost_ref = carry_back(session, [session.reference], shape)
