@@ -19,7 +19,7 @@ distal phalanx; the thumb's metacarpal, proximal and distal):
 
 - ``todorov``: hand 4, segments 2, 2, 1 (Todorov 2007);
 - ``phalanx``: hand 3, one marker per segment;
-- ``dfki``: hand 3, one marker on the second segment and one near the tip (a glove like
+- ``dfki``: hand 3, one marker on the first segment and one near the tip (the glove of
   ``dfki-ric/hand_embodiment``'s recording).
 """
 
@@ -46,7 +46,7 @@ from .truthmodel import truth_model
 LAYOUTS: dict[str, tuple[int, tuple[tuple[float, ...], ...]]] = {
     "todorov": (4, ((0.3, 0.7), (0.3, 0.7), (0.5,))),
     "phalanx": (3, ((0.5,), (0.5,), (0.5,))),
-    "dfki": (3, ((), (0.5,), (0.85,))),
+    "dfki": (3, ((0.5,), (), (0.85,))),
 }
 #: Marker centre height above the bone line, per segment (mm): skin plus a 3 mm marker.
 MARKER_HEIGHT = np.array([9.0, 8.0, 6.5])
