@@ -165,21 +165,29 @@ def fit_digit(
     start, or (a finger's two-axis MP) from its hinge fit ``start`` with the second axis
     added, perpendicular to the flexion axis and the proximal phalanx, at angle 0."""
     layout = chain_layout(digit, two_axis)
+
+    def again(
+        r: BundleResult, lines: Lines, q: FloatArray, free: np.ndarray | None
+    ) -> BundleResult:
+        return adjust(
+            data,
+            layout.structure,
+            lines,
+            r.u,
+            q,
+            hand=r.hand,
+            slide=r.slide,
+            free=free,
+            max_iter=MAX_ITER,
+            tol=TOL,
+        )
+
     if start is None:
         result = staged_start(data, layout.structure, layout.first, layout.second)
         if slide:
-            zero = np.zeros((len(data.labels), 3))
-            result = adjust(
-                data,
-                layout.structure,
-                result.lines,
-                result.u,
-                result.q,
-                hand=result.hand,
-                slide=zero,
-                free=slide_free(data, layout.structure.levels),
-                max_iter=MAX_ITER,
-                tol=TOL,
+            result.slide = np.zeros((len(data.labels), 3))
+            result = again(
+                result, result.lines, result.q, slide_free(data, layout.structure.levels)
             )
     else:
         lines = start.lines
@@ -191,31 +199,11 @@ def fit_digit(
         )
         q = np.vstack([np.zeros((1, data.frames)), start.q])
         free = None if start.slide is None else slide_free(data, layout.structure.levels)
-        result = adjust(
-            data,
-            layout.structure,
-            ab,
-            start.u,
-            q,
-            hand=start.hand,
-            slide=start.slide,
-            free=free,
-            max_iter=MAX_ITER,
-            tol=TOL,
-        )
+        result = again(start, ab, q, free)
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
-        result = adjust(
-            data,
-            layout.structure,
-            result.lines,
-            result.u,
-            result.q,
-            hand=result.hand,
-            slide=result.slide,
-            free=result.free & ~bad,
-        )
+        result = again(result, result.lines, result.q, result.free & ~bad)
         fit.result, fit.covariance = result, line_covariance(result)
     return fit
 
