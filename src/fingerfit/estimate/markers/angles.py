@@ -9,7 +9,7 @@ joint (:func:`.start.turn_about`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -94,7 +94,8 @@ def marker_angles(model: HandModel, recording: Recording) -> dict[str, DigitAngl
     hand_ok = np.isfinite(next(iter(moving.values()))).all(axis=1)
     out = {}
     for d, fm in model.fingers.items():
-        data = digit_markers(session, d, moving, places)
+        # The hand's shape is the model's (the recording's own mean is no reference).
+        data = replace(digit_markers(session, d, moving, places), hand_shape=shape)
         chain = fm.chain()
         depth = np.array([len(fm.chain(s + 1)) for s in range(3)])
         names = [j.name for j in chain]
