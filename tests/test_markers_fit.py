@@ -129,3 +129,18 @@ def test_model_file_and_angles_of_a_marker_recording(exact, tmp_path):
     tip = exact.sim.truth.frames[rec.name]["tip"]["index"]
     # The model's tip is the stylus tip landmark: exact in the exact world.
     np.testing.assert_allclose(got.tip, tip, atol=1e-5)
+
+
+def test_a_layout_that_cannot_split_two_joints_is_refused_in_one_line():
+    """The dfki glove's layout (no marker on the middle phalanx) cannot split the PIP
+    from the DIP: refused before anything is fitted, naming the segment; so is the thumb."""
+    from fingerfit.errors import FingerfitError
+    from fingerfit.estimate.markers.fit import fit_marker_session
+
+    sim = simulate_subject(SimConfig.exact(targets=False, test=False, cycles=2), 5)
+    ms = simulate_markers(sim, "dfki", seed=1, noise_mm=0.0)
+    with pytest.raises(FingerfitError, match=r"index\.middle has no marker.*pip from dip"):
+        fit_marker_session(ms.session)
+    thumb = replace(ms.session, fingers=["thumb", "index"])
+    with pytest.raises(FingerfitError, match="thumb: the marker fit does not fit the thumb"):
+        fit_marker_session(thumb)
