@@ -173,6 +173,13 @@ def fit(
         for note in (n for r in s.recordings() for n in r.notes):
             notice("note", note)
         n_fingers = len(names or s.fingers)
+        if s.marker_map:
+            model = _fit_markers(s, names, bar, task)
+            path = save_model(model, target)
+            if not quiet:
+                out.print(quality_table(model))
+            say("model written to [bold]{}[/]", path)
+            return
         bar.update(task, advance=1, description=f"fitting {n_fingers} digit(s) ({method})")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -188,6 +195,52 @@ def fit(
     if not quiet:
         out.print(quality_table(model))
     say("model written to [bold]{}[/]", path)
+
+
+def _fit_markers(session, names: list[str] | None, bar, task):
+    """The marker fit of a marker session (:mod:`fingerfit.estimate.markers`), its notes
+    shown one per line."""
+    import dataclasses
+
+    from ..estimate.markers.fit import fit_marker_session
+
+    if names:
+        session = dataclasses.replace(session, fingers=[d for d in session.fingers if d in names])
+    bar.update(task, advance=1, description=f"fitting {len(session.fingers)} digit(s) (markers)")
+    result = fit_marker_session(session)
+    bar.advance(task)
+    for note in result.notes:
+        notice("note", note)
+    return result.model
+
+
+def _marker_angles(model, recording: Path, output: Path, quiet: bool) -> None:
+    """``fingerfit angles`` of a marker recording with a model fitted from markers."""
+    from ..errors import FingerfitError
+    from ..estimate.markers.angles import angles_table, marker_angles
+    from ..io.atomic import atomic_write
+    from ..io.markers import is_marker_file, read_marker_recording
+
+    if not (model.markers and is_marker_file(recording)):
+        raise FingerfitError(
+            "a marker recording needs a model fitted from markers, and a model fitted "
+            "from markers a marker recording (.trc, .tsv, .c3d)",
+            path=recording,
+        )
+    rec = read_marker_recording(recording)
+    for note in rec.notes if not quiet else []:
+        notice("note", note)
+    result = marker_angles(model, rec)
+    table = angles_table(rec.time, result)
+    with atomic_write(output, newline="") as fh:
+        table.to_csv(fh, index=False, lineterminator="\n")
+    rms = ", ".join(f"{d} {a.rms_mm:.2f} mm" for d, a in result.items())
+    say(
+        "{} frames -> {} (angles deg, fingertips mm, tracker frame); marker residual {}",
+        rec.n_frames,
+        output,
+        rms,
+    )
 
 
 @app.command()
@@ -281,6 +334,11 @@ def angles(
             raise typer.BadParameter(
                 f"the model has no '{d}' (has: {', '.join(model.fingers)})", param_hint="--fingers"
             )
+    from ..io.markers import is_marker_file
+
+    if model.markers or is_marker_file(recording):
+        _marker_angles(model, recording, output, quiet)
+        return
     chosen = None if sensors is None else [x.strip() for x in sensors.split(",") if x.strip()]
     rec = read_checked_recording(model, recording, units, rate, force, chosen)
     with progress(quiet) as bar:

@@ -89,6 +89,7 @@ def simulate(
     rom: Annotated[
         float, typer.Option(min=0.05, max=1.3, help="Grasp range-of-motion scale.")
     ] = 1.0,
+    cycles: Annotated[int, typer.Option(min=2, help="Grasp cycles of the calibration.")] = 10,
     rolling: Annotated[
         bool, typer.Option(help="Centre of rotation migrating with flexion.")
     ] = True,
@@ -122,6 +123,16 @@ def simulate(
             "commands.sh) instead of refusing.",
         ),
     ] = False,
+    markers: Annotated[
+        str | None,
+        typer.Option(
+            help="Write marker sessions instead (TRC, markers.toml, markers_truth.json): skin "
+            "markers in the layout todorov, phalanx or dfki (docs/markers.md)."
+        ),
+    ] = None,
+    marker_noise: Annotated[
+        float, typer.Option(min=0.0, help="Camera noise of the markers, SD per axis (mm).")
+    ] = 0.3,
     quiet: Quiet = False,
 ) -> None:
     """Simulate sessions (reference, grasp, targets, free-motion test) with truth.json."""
@@ -137,12 +148,15 @@ def simulate(
         raise FingerfitError(f"names {', '.join(twice)} twice", field="--fingers")
     if stylus_recordings and fmt != SimFormat.csv:
         raise FingerfitError("is for the csv format", field="--stylus-recordings")
+    if stylus_recordings and markers is not None:
+        raise FingerfitError("is for 6-DOF sessions, not --markers", field="--stylus-recordings")
     kw = dict(
         fingers=names,
         hand=hand,
         rom_scale=rom,
         tilt_scale=tilt,
         world=world,
+        cycles=cycles,
         stylus_recordings=stylus_recordings,
     )
     if exact:
@@ -161,6 +175,13 @@ def simulate(
     # before anything is written.
     if out_dir.exists() and not out_dir.is_dir():
         raise FingerfitError("exists and is not a folder", path=out_dir)
+    if markers is not None:
+        from ..simulate.markers import LAYOUTS
+
+        if markers not in LAYOUTS:
+            raise FingerfitError(f"must be one of {', '.join(LAYOUTS)}", field="--markers")
+        if fmt is not SimFormat.csv:
+            raise FingerfitError("marker sessions are written as TRC", field="--format")
     if fmt is SimFormat.c3d:
         require_ezc3d()
     if fmt is not SimFormat.csv:
@@ -171,7 +192,12 @@ def simulate(
         cohort = simulate_cohort(config, subjects, seed)
         for sim in cohort:
             target = out_dir / sim.session.subject
-            if fmt is SimFormat.csv:
+            if markers is not None:
+                from ..simulate.markers import simulate_markers, write_marker_subject
+
+                ms = simulate_markers(sim, markers, seed=seed, noise_mm=marker_noise)
+                write_marker_subject(ms, target)
+            elif fmt is SimFormat.csv:
                 try:
                     write_subject(sim, target)
                 except OSError as exc:

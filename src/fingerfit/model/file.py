@@ -126,7 +126,40 @@ def model_to_dict(model: HandModel) -> dict[str, Any]:
             else {}
         ),
         **({"tracking": _tracking_doc(model.tracking)} if model.tracking is not None else {}),
+        **({"markers": _markers_doc(model)} if model.markers else {}),
     }
+
+
+def _markers_doc(model: HandModel) -> dict[str, Any]:
+    """The ``markers`` entry: each skin marker's segment and place (tracker coordinates
+    at the reference posture, and in its segment's frame)."""
+    out = {}
+    for label, (segment, position, slide) in model.markers.items():
+        p, r = model.reference_poses[segment]
+        out[label] = {
+            "segment": segment,
+            "position": _v(position),
+            "in_segment": _v(r.T @ (position - p)),
+            "slide_mm_per_rad": _v(slide),
+        }
+    return out
+
+
+def _markers(
+    r: _Reader, doc: dict[str, Any], poses: dict
+) -> dict[str, tuple[str, FloatArray, FloatArray]]:
+    """The optional ``markers`` entry (a model from 6-DOF sensors: none)."""
+    if "markers" not in doc:
+        return {}
+    mdoc = r.get(doc, "markers", "")
+    if not isinstance(mdoc, dict):
+        raise r.err("markers", "must be an object")
+    out = {}
+    for label, m in mdoc.items():
+        w = f"markers.{label}"
+        segment = r.str_(m, "segment", w, tuple(poses))
+        out[label] = (segment, r.vec(m, "position", w), r.vec(m, "slide_mm_per_rad", w))
+    return out
 
 
 def _tracking_doc(t: TrackingStats) -> dict[str, Any]:
@@ -394,6 +427,7 @@ def load_model(path: str | Path) -> HandModel:
         warnings=_warnings(r, doc),
         pinch_contacts=_pinch_contacts(r, doc, fingers),
         tracking=_tracking(r, doc, fingers, poses),
+        markers=_markers(r, doc, poses),
     )
 
 

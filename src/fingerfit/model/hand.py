@@ -278,6 +278,12 @@ class HandModel:
         Each sensor's spread about the model and each angle's range in the calibration
         recordings (``"tracking"`` in the file), which tracking with fewer sensors needs
         (:mod:`fingerfit.track`); ``None`` in files written before it existed.
+    markers : dict[str, tuple[str, ndarray, ndarray]]
+        A model fitted from skin markers (:mod:`fingerfit.estimate.markers`): marker
+        label -> (its segment's sensor name, ``hand`` or ``<digit>.<segment>``; its place
+        ``(3,)`` at the reference posture, mm, tracker coordinates; its skin slide
+        ``(3,)`` per radian of the segment's proximal flexion, mm/rad, 0 where not
+        estimated). Empty for a model fitted from 6-DOF sensors.
     """
 
     subject: str
@@ -291,6 +297,7 @@ class HandModel:
     warnings: tuple[str, ...] = ()
     pinch_contacts: tuple[PinchContact, ...] = ()
     tracking: TrackingStats | None = None
+    markers: dict[str, tuple[str, FloatArray, FloatArray]] = field(default_factory=dict)
 
     def pinch_contact(self, a: str, b: str) -> PinchContact | None:
         """The :class:`PinchContact` of digits ``a`` and ``b`` (either order), or None."""

@@ -93,6 +93,7 @@ def _run(
     zero = np.zeros_like(motion.time)
     p, r = sensor_poses(mounts[HAND_SENSOR], hand, (mean_mp, zero))
     truth["sensors"][HAND_SENSOR] = (p, r)
+    truth["motions"][HAND_SENSOR] = hand
     poses[HAND_SENSOR] = PoseSeries(*tracker.apply(rng, p, r))
     for f, anat in fingers.items():
         ang = motion.angles[f]

@@ -46,7 +46,8 @@ class SubjectTruth:
         Per recording: ``time`` ``(n,)``, ``angles[digit][key]`` ``(n,)`` rad,
         ``tip[digit]`` and ``pad[digit]`` (pulp centre) ``(n, 3)`` mm, ``sensors[name]``
         noise-free ``(position (n, 3), rotation (n, 3, 3))``, ``motions[name]`` the
-        segment motions ``(R (n, 3, 3), t (n, 3))`` relative to the reference posture.
+        segment motions ``(R (n, 3, 3), t (n, 3))`` relative to the reference posture
+        (``hand``: the hand's own, without its sensor's skin artefact).
     config : SimConfig
     thumb : ThumbAnatomy or None
         The thumb's true geometry (None without a thumb).

@@ -169,6 +169,54 @@ class Chains:
                 self.pad[i], self.has_pad[i] = fm.pad, True
             else:
                 self.pad[i] = fm.tip
+        self._set_lines(axis, centre, migration)
+        self.hand_position, self.hand_rotation = model.reference_poses[HAND_SENSOR]
+
+    @classmethod
+    def from_lines(
+        cls,
+        axis: FloatArray,
+        centre: FloatArray,
+        depth: np.ndarray,
+        points: FloatArray | None = None,
+    ) -> Chains:
+        """Bare chains from their lines, without a model (a fit that moves the lines).
+
+        Parameters
+        ----------
+        axis, centre : ndarray, shape (D, L, 3)
+            Each level's unit direction and a point of its line (mm, tracker coordinates
+            at the reference posture); fixed centres.
+        depth : ndarray of int, shape (D, S)
+            Axes moving each segment (:attr:`depth`).
+        points : ndarray, shape (D, S, 3), optional
+            A point of each segment (mm; :attr:`ChainPose.sensor_position` moves them);
+            default the origin.
+
+        Returns
+        -------
+        Chains
+            Enough for :meth:`pose` (no model, sensors, tips or variants).
+        """
+        self = cls.__new__(cls)
+        n_chain, L = axis.shape[:2]
+        self.L, self.depth = L, np.asarray(depth, dtype=np.intp)
+        self.levels = np.full(n_chain, L, dtype=np.intp)
+        self.active = np.ones((n_chain, L), dtype=bool)
+        self.sensor_position = (
+            np.zeros((n_chain, self.depth.shape[1], 3)) if points is None else np.asarray(points)
+        )
+        self._set_lines(np.asarray(axis, dtype=float), np.asarray(centre, dtype=float), None)
+        return self
+
+    def _set_lines(
+        self, axis: FloatArray, centre: FloatArray, migration: FloatArray | None
+    ) -> None:
+        """The lines' arrays :meth:`pose` uses (``axis``, ``centre``, ``migration``
+        ``(D, L, 3)``)."""
+        n_chain, L = axis.shape[:2]
+        if migration is None:
+            migration = np.zeros_like(axis)
         self.axis, self.centre = axis, centre
         self.migration = migration if np.any(migration) else None
         k = skew(axis.reshape(-1, 3)).reshape(n_chain, L, 3, 3)
@@ -183,7 +231,6 @@ class Chains:
         self.moves = np.arange(L)[None, :, None] < self.depth[:, None, :]  # (D, L, S)
         self._rows = np.arange(n_chain)[:, None]
         self._sensor_position = self.sensor_position[..., None]  # (D, S, 3, 1)
-        self.hand_position, self.hand_rotation = model.reference_poses[HAND_SENSOR]
 
     @property
     def size(self) -> int:

@@ -1,0 +1,241 @@
+"""Marker benchmark: the individual model from skin markers against the simulator's truth.
+
+Run with ``python bench/markers.py --json bench/markers.json``.
+
+For every condition of ``bench/accuracy.py`` chosen (``--conditions``) and every marker
+layout (``--layouts``), ``--subjects`` simulated subjects (index finger, the paper's
+protocol) get skin markers (:func:`fingerfit.simulate.markers.simulate_markers`, 0.3 mm
+camera noise, skin sliding with the joint below) and are fitted by the marker bundle
+adjustment from its data-driven start (:func:`fingerfit.estimate.markers.fit.
+fit_marker_session`). Scored against the truth:
+
+* **axis error** (deg) of the MP, PIP and DIP flexion axes (tracker coordinates at the
+  reference posture);
+* **covered**: whether the true axis lies within the fit's 95 % region of its direction
+  (``x^T C^-1 x <= 5.99``, ``C`` the covariance of :func:`~fingerfit.estimate.markers.
+  bundle.line_covariance`);
+* **tip error** (mm): the fingertip over the free-motion test recording, angles from the
+  markers (:func:`~fingerfit.estimate.markers.angles.marker_angles`), against the 6-DOF
+  fit of the same simulated motion (``fingerfit fit``'s default, the same subject's
+  sensors, ``bench/accuracy.py``'s fingertip error): the ratio of the means;
+* **floor**: the same bundle adjustment started from the true parameters (lines in the
+  fit's chain, marker places and slides, every frame's angles) on the same markers.
+
+``--speed`` adds the time of a marker fit of 10,000 grasp frames of one finger and of the
+four fingers.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from accuracy import CONDITIONS, tip_errors
+
+from fingerfit.estimate import FitOptions, fit_session
+from fingerfit.estimate.markers.angles import marker_angles
+from fingerfit.estimate.markers.bundle import Lines, adjust, line_covariance
+from fingerfit.estimate.markers.fit import (
+    CHI2_95,
+    DigitFit,
+    fit_marker_session,
+)
+from fingerfit.simulate.markers import simulate_markers
+from fingerfit.simulate.study import SimConfig, simulate_cohort
+from fingerfit.simulate.truthmodel import truth_model
+from fingerfit.transforms import orthonormal_basis
+
+FINGER = "index"
+JOINTS = ("mp", "pip", "dip")
+TARGETS_DEG = {"mp": 6.0, "pip": 1.5, "dip": 5.0}
+TIP_RATIO_TARGET = 2.0
+DEFAULT_CONDITIONS = "realistic,MyoHand world,MP ab/adduction off"
+
+
+def _axis_errors(fit: DigitFit, lines, truth) -> dict:
+    """Per flexion joint: angle to the true axis (deg) and whether the truth is inside the
+    95 % region of the fit's direction."""
+    out = {}
+    for j, joint in enumerate(JOINTS):
+        level = fit.layout.first[j]
+        a = lines.axis[level]
+        t = truth.fingers[FINGER].joints[joint].axis
+        err = float(np.degrees(np.arccos(np.clip(a @ t, -1.0, 1.0))))
+        b = orthonormal_basis(a)[:2]
+        x = b @ t
+        c = fit.covariance[level, :2, :2]
+        covered = bool(np.all(np.isfinite(c)) and x @ np.linalg.solve(c, x) <= CHI2_95)
+        out[joint] = {"axis_deg": err, "covered": covered}
+    return out
+
+
+def _floor(fit: DigitFit, sim, ms) -> dict:
+    """The adjustment started from the true parameters, in the fit's chain (a second MP
+    axis the truth lacks: the fit's own; MyoHand's flexion-first MP in the fit's
+    ab/adduction-first order)."""
+    truth = truth_model(sim)
+    layout = fit.layout
+    axis, centre = [], []
+    for k, n in enumerate(layout.names):
+        try:
+            jm = truth.axis(FINGER, n)
+            axis.append(jm.axis)
+            centre.append(jm.center)
+        except KeyError:
+            axis.append(fit.result.lines.axis[k])
+            centre.append(fit.result.lines.centre[k])
+    lines = Lines(np.array(axis), np.array(centre))
+    u = np.array([ms.markers.position[k] for k in fit.data.labels])
+    frames = [sim.truth.frames[r.name]["angles"][FINGER] for r in sim.session.grasp]
+    q = np.stack([np.concatenate([f[n] for f in frames]) for n in layout.names])
+    slide = None
+    if fit.result.slide is not None:  # the true slides where the fit estimates them
+        slide = np.array([ms.markers.slide[k] for k in fit.data.labels])
+        slide[~fit.result.free[-slide.size :].reshape(slide.shape)] = 0.0
+    result = adjust(fit.data, layout.structure, lines, u, q, slide=slide, free=fit.result.free)
+    floor = DigitFit(FINGER, layout, fit.data, result, line_covariance(result))
+    return _axis_errors(floor, result.lines, truth)
+
+
+def run_subject(
+    cond: str, layout: str, sim, sixdof_tip: float, seed: int, slide: bool = False
+) -> dict:
+    """One subject in one layout: the fit, its errors, the floor, the tip ratio."""
+    ms = simulate_markers(sim, layout, seed=seed)
+    t0 = time.perf_counter()
+    fit = fit_marker_session(ms.session, slide=slide)
+    seconds = time.perf_counter() - t0
+    digit = fit.digits[FINGER]
+    truth = truth_model(sim)
+    test = ms.session.test[0]
+    tip = marker_angles(fit.model, test)[FINGER].tip
+    true_tip = sim.truth.frames[sim.session.test[0].name]["tip"][FINGER]
+    tip_err = float(np.nanmean(np.linalg.norm(tip - true_tip, axis=1)))
+    return {
+        "condition": cond,
+        "layout": layout,
+        "subject": sim.session.subject,
+        "seconds": seconds,
+        "frames": int(digit.data.frames),
+        "mp_axes": len(digit.layout.names) - 2,
+        "rms_mm": digit.result.rms_mm,
+        "notes": fit.notes,
+        "fit": _axis_errors(digit, digit.result.lines, truth),
+        "floor": _floor(digit, sim, ms),
+        "tip_mm": tip_err,
+        "sixdof_tip_mm": sixdof_tip,
+        "tip_ratio": tip_err / sixdof_tip,
+    }
+
+
+def summarise(rows: list[dict]) -> dict:
+    """Per condition and layout: mean and largest axis errors, coverage, tip ratio."""
+    out: dict = {}
+    for r in rows:
+        out.setdefault(r["condition"], {}).setdefault(r["layout"], []).append(r)
+    summary: dict = {}
+    for cond, layouts in out.items():
+        for layout, vals in layouts.items():
+            s = {
+                "subjects": len(vals),
+                "seconds_mean": float(np.mean([v["seconds"] for v in vals])),
+            }
+            for j in JOINTS:
+                fit = [v["fit"][j]["axis_deg"] for v in vals]
+                floor = [v["floor"][j]["axis_deg"] for v in vals]
+                s[j] = {
+                    "axis_deg_mean": float(np.mean(fit)),
+                    "axis_deg_max": float(np.max(fit)),
+                    "floor_deg_mean": float(np.mean(floor)),
+                    "floor_deg_max": float(np.max(floor)),
+                    "covered": float(np.mean([v["fit"][j]["covered"] for v in vals])),
+                    "target_deg": TARGETS_DEG[j],
+                    "met": bool(np.max(fit) <= TARGETS_DEG[j]),
+                }
+            s["tip_mm_mean"] = float(np.mean([v["tip_mm"] for v in vals]))
+            s["sixdof_tip_mm_mean"] = float(np.mean([v["sixdof_tip_mm"] for v in vals]))
+            s["tip_ratio"] = s["tip_mm_mean"] / s["sixdof_tip_mm_mean"]
+            s["tip_ratio_met"] = s["tip_ratio"] <= TIP_RATIO_TARGET
+            summary[f"{cond} / {layout}"] = s
+    return summary
+
+
+def speed(frames: int = 10_000) -> dict:
+    """Seconds of a marker fit of ``frames`` grasp frames: one finger, four fingers."""
+    out = {}
+    cycles = int(np.ceil(frames / 500))
+    for label, fingers in (
+        ("one finger", ("index",)),
+        ("four fingers", ("index", "middle", "ring", "little")),
+    ):
+        sim = simulate_cohort(
+            SimConfig(fingers=fingers, cycles=cycles, targets=False, test=False), 1, 5
+        )[0]
+        ms = simulate_markers(sim, "todorov", seed=1)
+        n = sum(r.n_frames for r in ms.session.grasp)
+        t0 = time.perf_counter()
+        fit_marker_session(ms.session)
+        out[label] = {"frames": n, "seconds": time.perf_counter() - t0}
+        print(f"speed {label}: {n} frames, {out[label]['seconds']:.1f} s", flush=True)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--subjects", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--conditions", default=DEFAULT_CONDITIONS)
+    parser.add_argument("--layouts", default="todorov,phalanx")
+    parser.add_argument("--speed", action="store_true")
+    parser.add_argument("--slide", action="store_true", help="estimate the markers' slide")
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args()
+    conditions = args.conditions.split(",")
+    for c in conditions:
+        if c not in CONDITIONS:
+            parser.error(f"unknown condition {c!r}; one of {', '.join(CONDITIONS)}")
+    rows = []
+    t0 = time.perf_counter()
+    for cond in conditions:
+        config = SimConfig(**{"fingers": (FINGER,), **CONDITIONS[cond]})
+        for sim in simulate_cohort(config, args.subjects, args.seed):
+            model = fit_session(sim.session, FitOptions())
+            sixdof = float(np.nanmean(tip_errors(sim, model)))
+            for k, layout in enumerate(args.layouts.split(",")):
+                r = run_subject(cond, layout, sim, sixdof, seed=k + 1, slide=args.slide)
+                rows.append(r)
+                f = r["fit"]
+                print(
+                    f"{cond} / {layout} {r['subject']}: axis deg mp {f['mp']['axis_deg']:.2f} "
+                    f"pip {f['pip']['axis_deg']:.2f} dip {f['dip']['axis_deg']:.2f}; floor "
+                    + " ".join(f"{j} {r['floor'][j]['axis_deg']:.2f}" for j in JOINTS)
+                    + f"; tip {r['tip_mm']:.2f} mm vs 6-DOF {sixdof:.2f} ({r['seconds']:.0f} s)",
+                    flush=True,
+                )
+    doc = {
+        "command": "python bench/markers.py " + " ".join(sys.argv[1:]),
+        "subjects": args.subjects,
+        "seconds": time.perf_counter() - t0,
+        "summary": summarise(rows),
+        "rows": rows,
+    }
+    if args.speed:
+        doc["speed"] = speed()
+    print(json.dumps(doc["summary"], indent=1))
+    if args.json:
+        args.json.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,411 @@
+"""A marker session fitted into the individual hand model, digit by digit.
+
+Each digit's chain (:func:`chain_layout`) is started and adjusted by :mod:`.start` and
+:mod:`.bundle` on the reference and calibration (grasp) recordings. A finger's MP gets a
+second (ab/adduction) axis when the markers call for it (``mp_axes="auto"``,
+:func:`fit_finger`; else a hinge, said in one line). A line whose direction or point the markers leave undetermined (the
+covariance's standard deviation above :data:`UNDETERMINED_SD_DEG` /
+:data:`UNDETERMINED_SD_MM`, or no information at all) is held at its start and said in
+one line naming the joint. The result is the usual :class:`~fingerfit.model.HandModel`
+(``method`` ``markers``) plus each marker's place (:attr:`HandModel.markers`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...digits import DIGITS, HAND_SENSOR, second_axis
+from ...errors import FingerfitError
+from ...io.rigid import technical_frame
+from ...model import HandModel, JointModel, JointQuality, assemble_digit
+from ...session import Session, joint_sensors, sensor_name
+from ...transforms import FloatArray, unit
+from .bundle import BundleResult, Lines, Structure, adjust, line_covariance
+from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
+from .start import staged_start
+
+#: A finger's MP keeps its second axis when it lowers the cost by more than this many
+#: standard deviations of what its unknowns absorb of the noise (:func:`fit_finger`).
+SECOND_AXIS_Z = 5.0
+#: A line's direction with a larger SD (deg), or its point with a larger SD (mm), is not
+#: determined by the markers.
+UNDETERMINED_SD_DEG = 20.0
+UNDETERMINED_SD_MM = 20.0
+#: The adjustments after the staged start stop after this many iterations, or when an
+#: iteration lowers the cost by less than this fraction of it (``1e-10`` of a cost of
+#: ``1e4`` mm^2 is ``1e-6`` mm^2: nothing the figures show).
+MAX_ITER = 60
+TOL = 1e-10
+#: Chi-square 95 % quantile with two degrees of freedom: an axis direction's (or a
+#: line point's) 95 % region is ``x^T C^-1 x <= CHI2_95``.
+CHI2_95 = 5.991
+
+
+@dataclass(frozen=True)
+class ChainLayout:
+    """A digit's chain for the marker fit.
+
+    Attributes
+    ----------
+    names : list of str
+        Each level's axis name, proximal first (``mp_abduction``, ``mp``, ``pip``, ...).
+    structure : Structure
+    first : list of int
+        The level of each joint's flexion axis.
+    second : dict[int, int]
+        Joint index -> the level of its second axis.
+    """
+
+    names: list[str]
+    structure: Structure
+    first: list[int]
+    second: dict[int, int]
+
+
+def chain_layout(digit: str, two_axis: bool) -> ChainLayout:
+    """The chain of ``digit``: a finger's MP a hinge or two axes (ab/adduction proximal,
+    :mod:`fingerfit.digits`); the thumb's CMC two axes (flexion proximal), MCP and IP
+    hinges."""
+    if digit == "thumb":
+        return ChainLayout(
+            ["cmc", "cmc_abduction", "mcp", "ip"],
+            Structure(np.array([2, 3, 4]), np.array([0, 2, 3])),
+            [0, 2, 3],
+            {0: 1},
+        )
+    if two_axis:
+        return ChainLayout(
+            ["mp_abduction", "mp", "pip", "dip"],
+            Structure(np.array([2, 3, 4]), np.array([1, 2, 3])),
+            [1, 2, 3],
+            {0: 0},
+        )
+    return ChainLayout(
+        ["mp", "pip", "dip"], Structure(np.array([1, 2, 3]), np.array([0, 1, 2])), [0, 1, 2], {}
+    )
+
+
+@dataclass
+class DigitFit:
+    """One digit's marker fit.
+
+    Attributes
+    ----------
+    digit : str
+    layout : ChainLayout
+    data : DigitMarkers
+    result : BundleResult
+    covariance : ndarray, shape (L, 4, 4)
+        Each line's two direction (rad) and two point (mm) unknowns
+        (:func:`.bundle.line_covariance`; ``inf`` where undetermined).
+    notes : list of str
+        One line per parameter held or choice made.
+    """
+
+    digit: str
+    layout: ChainLayout
+    data: DigitMarkers
+    result: BundleResult
+    covariance: FloatArray
+    notes: list[str] = field(default_factory=list)
+
+    def axis_sd_deg(self, level: int) -> float:
+        """The largest SD of the direction of ``level`` (deg)."""
+        return math.degrees(math.sqrt(np.linalg.eigvalsh(self.covariance[level, :2, :2])[-1]))
+
+    def centre_sd_mm(self, level: int) -> float:
+        """The largest SD of the point of ``level`` across its line (mm)."""
+        return math.sqrt(np.linalg.eigvalsh(self.covariance[level, 2:, 2:])[-1])
+
+    def axis_ci_deg(self, level: int) -> float:
+        """The 95 % half-angle of the direction of ``level`` (deg): the largest angle of its
+        95 % region."""
+        return math.sqrt(CHI2_95) * self.axis_sd_deg(level)
+
+
+def _undetermined(fit: DigitFit) -> np.ndarray:
+    """Global unknowns (``4 L + 3 M``) the markers do not determine: every unknown of a
+    line whose direction or point exceeds the limits."""
+    bad = np.zeros(fit.result.free.size, dtype=bool)
+    for k, name in enumerate(fit.layout.names):
+        if not np.isfinite(fit.covariance[k]).all():
+            continue  # held already
+        if fit.axis_sd_deg(k) > UNDETERMINED_SD_DEG or fit.centre_sd_mm(k) > UNDETERMINED_SD_MM:
+            bad[4 * k : 4 * k + 4] = True
+            fit.notes.append(
+                f"{fit.digit} {name}: not determined by the markers "
+                f"(axis SD {fit.axis_sd_deg(k):.3g} deg, point SD {fit.centre_sd_mm(k):.3g} mm); "
+                "held at its start"
+            )
+    return bad
+
+
+def slide_free(data: DigitMarkers, levels: int) -> np.ndarray:
+    """The global unknowns (``4 L + 6 M``) of a fit with slides: every one, but the slide
+    of a marker alone on its segment (its slide cannot be told from the joint's angle:
+    held at 0)."""
+    M = len(data.labels)
+    alone = np.bincount(data.segment, minlength=3)[data.segment] == 1
+    free = np.ones(4 * levels + 6 * M, dtype=bool)
+    free[4 * levels + 3 * M :] = ~np.repeat(alone, 3)
+    return free
+
+
+def fit_digit(
+    data: DigitMarkers,
+    digit: str,
+    two_axis: bool,
+    start: BundleResult | None = None,
+    slide: bool = True,
+) -> DigitFit:
+    """Start, adjust and check one digit's chain (:func:`chain_layout`): from the staged
+    start, or (a finger's two-axis MP) from its hinge fit ``start`` with the second axis
+    added, perpendicular to the flexion axis and the proximal phalanx, at angle 0."""
+    layout = chain_layout(digit, two_axis)
+
+    def again(
+        r: BundleResult, lines: Lines, q: FloatArray, free: np.ndarray | None
+    ) -> BundleResult:
+        return adjust(
+            data,
+            layout.structure,
+            lines,
+            r.u,
+            q,
+            hand=r.hand,
+            slide=r.slide,
+            free=free,
+            max_iter=MAX_ITER,
+            tol=TOL,
+        )
+
+    if start is None:
+        result = staged_start(data, layout.structure, layout.first, layout.second)
+        if slide:
+            result.slide = np.zeros((len(data.labels), 3))
+            result = again(
+                result, result.lines, result.q, slide_free(data, layout.structure.levels)
+            )
+    else:
+        lines = start.lines
+        near = start.u[data.segment == 0].mean(axis=0)
+        bone = unit(near - lines.centre[0])
+        ab = Lines(
+            np.vstack([unit(np.cross(bone, lines.axis[0])), lines.axis]),
+            np.vstack([lines.centre[0], lines.centre]),
+        )
+        q = np.vstack([np.zeros((1, data.frames)), start.q])
+        free = None if start.slide is None else slide_free(data, layout.structure.levels)
+        result = again(start, ab, q, free)
+    fit = DigitFit(digit, layout, data, result, line_covariance(result))
+    bad = _undetermined(fit)
+    if bad.any():
+        result = again(result, result.lines, result.q, result.free & ~bad)
+        fit.result, fit.covariance = result, line_covariance(result)
+    return fit
+
+
+def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True) -> DigitFit:
+    """A finger with its MP a hinge, two axes, or (``auto``) two axes when the second
+    explains the markers beyond what its per-frame angle absorbs of the noise.
+
+    The two-axis fit starts from the hinge's. Its ``n + 4`` more unknowns (an angle per
+    frame, the line) lower the cost by about ``(n + 4) sigma^2`` on noise alone (a
+    chi-square with that many degrees of freedom); ``auto`` keeps the second axis when the
+    drop exceeds that by more than :data:`SECOND_AXIS_Z` of its standard deviations
+    ``sqrt(2 (n + 4))``, ``sigma^2`` the two-axis fit's residual variance.
+    """
+    hinge = fit_digit(data, digit, False, slide=slide)
+    if mp_axes == "hinge":
+        return hinge
+    two = fit_digit(data, digit, True, start=hinge.result, slide=slide)
+    extra = data.frames + 4
+    n, k = two.result.normal.qq.shape[:2]
+    dof = max(two.result.normal.count - n * k - two.result.normal.gg.shape[0], 1)
+    sigma2 = two.result.cost / dof
+    z = ((hinge.result.cost - two.result.cost) / sigma2 - extra) / math.sqrt(2 * extra)
+    if mp_axes == "two" or z > SECOND_AXIS_Z:
+        two.notes.append(f"{digit} mp: two axes (the second lowers the cost by {z:.3g} SD)")
+        return two
+    hinge.notes.append(
+        f"{digit} mp: a hinge (a second axis lowers the cost by {z:.3g} SD, "
+        f"not above {SECOND_AXIS_Z:g})"
+    )
+    return hinge
+
+
+@dataclass
+class MarkerFit:
+    """A marker session's fit.
+
+    Attributes
+    ----------
+    model : HandModel
+    digits : dict[str, DigitFit]
+    notes : list of str
+        Every digit's notes, and the frames without a hand frame.
+    """
+
+    model: HandModel
+    digits: dict[str, DigitFit]
+    notes: list[str]
+
+
+def fit_marker_session(
+    session: Session, *, mp_axes: str = "auto", slide: bool = False
+) -> MarkerFit:
+    """Fit the individual hand model of a marker session.
+
+    Parameters
+    ----------
+    session : Session
+        With a ``marker_map`` (checked when it was loaded: the hand 3 or more markers,
+        every segment of every digit one or more) and marker recordings: the reference
+        (the angles' zero) and the grasp recordings are fitted.
+    mp_axes : {"auto", "hinge", "two"}
+        A finger's MP: two axes when the markers determine the second, a hinge, or two.
+    slide : bool
+        Estimate each marker's skin slide with the joint below it
+        (:func:`.bundle.places`, against the prior :data:`.bundle.SLIDE_PRIOR`). Off by
+        default: the slide and the angle enter as a product, and the adjustment then
+        crawls (``docs/markers.md``, measured).
+
+    Returns
+    -------
+    MarkerFit
+        The model (tracker coordinates at the reference posture, mm): joint lines,
+        tips (the ``<digit>.tip`` landmark, else the digit's most distal marker, said in
+        a note), segment frames, each marker's place; ``reference_poses`` the hand
+        markers' technical frame and, per segment, its markers' centroid with the
+        segment's frame.
+    """
+    if not session.marker_map:
+        raise FingerfitError("not a marker session (no marker map)", path=session.path)
+    if mp_axes not in ("auto", "hinge", "two"):
+        raise FingerfitError(f"must be auto, hinge or two, not {mp_axes!r}", field="--mp-axes")
+    if "thumb" in session.fingers:
+        raise FingerfitError(
+            "thumb: the marker fit does not fit the thumb yet (its CMC's two axes are not "
+            "found from the markers' arcs: 56-86 deg off in simulation); leave it out with "
+            "--fingers",
+            path=session.path,
+        )
+    for d in session.fingers:
+        for j, seg in enumerate(DIGITS[d].segments):
+            if not session.marker_map.get(sensor_name(d, seg)):
+                joints = DIGITS[d].joints
+                raise FingerfitError(
+                    f"{sensor_name(d, seg)} has no marker: the markers cannot split "
+                    f"{d} {joints[j]} from {joints[min(j + 1, 2)] if j < 2 else joints[1]} "
+                    "(each phalanx needs a marker; docs/markers.md)",
+                    path=None if session.path is None else session.path / "markers.toml",
+                )
+    shape = hand_shape(session)
+    moving, lost = carry_back(session, session.grasp, shape)
+    reference, lost_ref = carry_back(session, [session.reference], shape)
+    notes = []
+    if lost or lost_ref:
+        notes.append(f"{lost + lost_ref} frames without 3 hand markers left out")
+    fits = {}
+    for d in session.fingers:
+        data = digit_markers(session, d, moving, reference)
+        fits[d] = fit_finger(data, d, mp_axes, slide)
+        notes += fits[d].notes
+    model = _model(session, shape, fits, notes)
+    return MarkerFit(model, fits, notes)
+
+
+def _centre_on_line(axis: FloatArray, point: FloatArray, near: FloatArray) -> FloatArray:
+    """The point of the line ``(point, axis)`` nearest ``near`` (mm)."""
+    return point + ((near - point) @ axis) * axis
+
+
+def _model(
+    session: Session, shape: FloatArray, fits: dict[str, DigitFit], notes: list
+) -> HandModel:
+    """The HandModel of the digits' fits."""
+    rot, origin = technical_frame(shape)
+    poses: dict[str, tuple[FloatArray, FloatArray]] = {HAND_SENSOR: (origin, rot)}
+    markers = {
+        label: (HAND_SENSOR, p, np.zeros(3))
+        for label, p in zip(session.marker_map[HAND_SENSOR], shape, strict=True)
+    }
+    digits = {}
+    for d, fit in fits.items():
+        r, data, names = fit.result, fit.data, fit.layout.names
+        sensors = joint_sensors(d)
+        joints, seconds = {}, {}
+        for j, joint in enumerate(DIGITS[d].joints):
+            level = fit.layout.first[j]
+            near = r.u[data.segment == j].mean(axis=0)
+            centre = _centre_on_line(r.lines.axis[level], r.lines.centre[level], near)
+            quality = _quality(fit, level)
+            joints[joint] = (*sensors[joint], centre, r.lines.axis[level], quality)
+            if j in fit.layout.second:
+                k = fit.layout.second[j]
+                c2 = _centre_on_line(r.lines.axis[k], r.lines.centre[k], near)
+                a2 = r.lines.axis[k]
+                seconds[joint] = JointModel(
+                    second_axis(joint), *sensors[joint], c2, a2, a2, _quality(fit, k)
+                )
+        tip_name = f"{d}.tip"
+        if tip_name in session.landmarks:
+            tip = session.landmarks[tip_name]
+        else:
+            last = np.flatnonzero(data.segment == 2)
+            far = last[
+                np.argmax(np.linalg.norm(r.u[last] - joints[DIGITS[d].joints[2]][2], axis=1))
+            ]
+            tip = r.u[far]
+            notes.append(
+                f"{d} tip: not determined by the markers (no {tip_name} landmark): "
+                f"marker {data.labels[far]} taken as the tip"
+            )
+        dm = assemble_digit(d, joints, tip, seconds)
+        if d != "thumb" and seconds:
+            assert names[0] == "mp_abduction"  # abduction proximal: the finger's own order
+        digits[d] = dm
+        for s, seg in enumerate(DIGITS[d].segments):
+            name = sensor_name(d, seg)
+            poses[name] = (r.u[data.segment == s].mean(axis=0), dm.frames[seg].rotation)
+        slides = np.zeros_like(r.u) if r.slide is None else r.slide
+        markers |= {
+            label: (sensor_name(d, DIGITS[d].segments[s]), r.u[i], slides[i])
+            for i, (label, s) in enumerate(zip(data.labels, data.segment, strict=True))
+        }
+    ordered = {d: digits[d] for d in DIGITS if d in digits}
+    return HandModel(
+        subject=session.subject,
+        hand=session.hand,
+        session_units=session.units,
+        method="markers",
+        reference_poses=poses,
+        fingers=ordered,
+        angle_method="swing_twist",
+        warnings=tuple(notes),
+        markers=markers,
+    )
+
+
+def _quality(fit: DigitFit, level: int) -> JointQuality:
+    """What the fit says of one line: its range of motion, the residual, the 95 %
+    half-angle of its direction."""
+    q = fit.result.q[level]
+    rom = math.degrees(float(np.ptp(q))) if q.size else 0.0
+    ci = fit.axis_ci_deg(level)
+    return JointQuality(
+        cycles=0,
+        rom_deg=[rom],
+        centre_distance_mm=[],
+        conditioning=[],
+        spread_mm=0.0,
+        residual_mm=[fit.result.rms_mm],
+        notes=[f"marker bundle adjustment: axis SD {fit.axis_sd_deg(level):.3g} deg"],
+        axis_ci_deg=ci if math.isfinite(ci) else None,
+    )
+
+
+__all__ = ["DigitFit", "MarkerFit", "chain_layout", "fit_marker_session"]
