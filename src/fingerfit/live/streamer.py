@@ -273,6 +273,11 @@ class Streamer:
         else:
             kin = kinematics_of(self.model, rec, self.variants)
         source = None
+        if self.markers and not valid:  # the marker IK solves with the markers seen
+            codes = source_codes(
+                present[None], self.sensors, self.model, self.channels.digits, True
+            )
+            source = dict(zip(self.channels.digits, codes[0].tolist(), strict=True))
         if self.tracker is not None:
             if valid:
                 self.tracker.remember(kin, float(rec.time[0]))
