@@ -4,7 +4,6 @@ an LSL stream of marker positions, the robot lane frame by frame, and the refusa
 from __future__ import annotations
 
 import functools
-import os
 import subprocess
 import sys
 import tempfile
@@ -28,7 +27,7 @@ from fingerfit.session import Recording
 from fingerfit.simulate.markers import simulate_markers, write_marker_subject
 from fingerfit.simulate.study import SimConfig, simulate_subject
 
-from ._live import HANG_S, FakeLsl, fitted, write_recording
+from ._live import HANG_S, FakeLsl, fitted, stream_from_outlet, write_recording
 
 FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
 #: How far a frame solved in a block of the stream may lie from `fingerfit angles`' solve
@@ -117,13 +116,11 @@ def test_robot_lane_frame_by_frame_and_a_gap() -> None:
     assert (s.received, s.sent, s.invalid, s.held) == (40, 40, 2, 1)
 
 
-pylsl = pytest.importorskip("pylsl")
-
-
 def test_lsl_stream_of_markers_equals_angles(tmp_path: Path) -> None:
     """An LSL stream of marker positions as the Qualisys LSL app sends them (type
     ``Mocap``, channels ``<marker>_X|_Y|_Z`` in meters), a marker unseen in some
     frames: the record equals the angles of the same frames."""
+    pytest.importorskip("pylsl")
     d, model_path = marker_subject()
     model = load_model(model_path)
     n = 120
@@ -131,35 +128,12 @@ def test_lsl_stream_of_markers_equals_angles(tmp_path: Path) -> None:
     markers = {k: v.copy() for k, v in rec.markers.items()}
     markers["IND3_1"][30:34] = np.nan
     rec = Recording(rec.name, rec.time - rec.time[0], {}, markers=markers)
-    name = f"ffmarkers{os.getpid()}"
     labels = [f"{k}_{c}" for k in markers for c in "XYZ"]
     data = np.hstack([markers[k] / 1000.0 for k in markers])
-    info = pylsl.StreamInfo(name, "Mocap", len(labels), 240.0, pylsl.cf_double64, name)
-    chans = info.desc().append_child("channels")
-    for lab in labels:
-        ch = chans.append_child("channel")
-        ch.append_child_value("label", lab)
-        ch.append_child_value("unit", "meters")
-    outlet = pylsl.StreamOutlet(info)
     record = tmp_path / "live.csv"
-    proc = subprocess.Popen(
-        [FINGERFIT, "stream", str(model_path), "--source", f"lsl:{name}", "--record",
-         str(record), "--duration", "2", "-q"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        assert outlet.wait_for_consumers(HANG_S), "the stream did not connect"
-        time.sleep(0.3)
-        t0 = pylsl.local_clock()
-        for i in range(0, n, 10):
-            outlet.push_chunk(data[i : i + 10], (t0 + rec.time[i : i + 10]).tolist())
-            time.sleep(0.01)
-        out, err = proc.communicate(timeout=HANG_S)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 0, out + err
+    units = ["meters"] * len(labels)
+    code, out, err = stream_from_outlet("Mocap", labels, units, data, rec.time, model_path, record)
+    assert code == 0, out + err
     assert "4 with a missing sensor: 4 solved by the model, 0 held" in out, out
     got = pd.read_csv(record)
     want = angles_table(rec.time, marker_angles(model, rec))

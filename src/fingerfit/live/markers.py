@@ -30,12 +30,13 @@ def is_marker_model(model: HandModel) -> bool:
 def model_markers(model: HandModel) -> list[str]:
     """The model's marker labels: the hand's first, then each digit's, in the model's
     order."""
-    hand = [k for k, (s, *_) in model.markers.items() if s == HAND_SENSOR]
+    hand = markers_of(model, HAND_SENSOR)
     return hand + [k for k in model.markers if k not in hand]
 
 
-def digit_markers(model: HandModel, digit: str) -> list[str]:
-    """The labels of ``digit``'s markers (on its segments ``<digit>.<segment>``)."""
+def markers_of(model: HandModel, digit: str) -> list[str]:
+    """The labels of ``digit``'s markers (on its segments ``<digit>.<segment>``; the
+    hand's with ``digit`` ``hand``)."""
     return [k for k, (s, *_) in model.markers.items() if s.split(".")[0] == digit]
 
 
@@ -48,33 +49,6 @@ def marker_presence(recording: Recording, labels: list[str]) -> np.ndarray:
         x = recording.markers.get(k)
         if x is not None:
             out[:, i] = np.isfinite(x).all(axis=1)
-    return out
-
-
-def marker_source_codes(
-    presence: np.ndarray, labels: list[str], model: HandModel, digits: list[str]
-) -> np.ndarray:
-    """What each digit's values in each frame come from, ``(n, n_digits)``, as
-    :func:`fingerfit.live.values.source_codes` for sensors: 0 every marker of the hand and
-    the digit seen; 1 solved from fewer (three or more hand markers and one of the
-    digit's); 2 held (the model cannot place the digit).
-
-    Parameters
-    ----------
-    presence : ndarray of bool, shape (n, M)
-        :func:`marker_presence` of ``labels``.
-    labels : list of str
-    model : HandModel
-    digits : list of str
-    """
-    col = {k: i for i, k in enumerate(labels)}
-    hand = presence[:, [col[k] for k, (s, *_) in model.markers.items() if s == HAND_SENSOR]]
-    out = np.zeros((presence.shape[0], len(digits)))
-    for j, d in enumerate(digits):
-        own = presence[:, [col[k] for k in digit_markers(model, d)]]
-        complete = hand.all(axis=1) & own.all(axis=1)
-        solvable = (hand.sum(axis=1) >= 3) & own.any(axis=1)
-        out[:, j] = np.where(complete, 0.0, np.where(solvable, 1.0, 2.0))
     return out
 
 

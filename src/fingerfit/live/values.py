@@ -14,7 +14,7 @@ from ..kinematics import Kinematics
 from ..model import HandModel
 from ..session import HAND_SENSOR, PoseSeries, Recording, concat_recordings
 from ..transforms import FloatArray
-from .markers import is_marker_model, marker_presence, marker_source_codes, model_markers
+from .markers import is_marker_model, marker_presence, markers_of, model_markers
 from .sources import Block
 
 
@@ -166,17 +166,22 @@ def source_codes(
     solves : bool
         Whether frames with a missing sensor are solved by the model (a model with
         calibration statistics); else they are held. A model fitted from markers
-        (``sensors`` its markers) always solves: :func:`.markers.marker_source_codes`.
+        (``sensors`` its markers) solves a digit with three hand markers and one of its
+        own seen.
     """
-    if is_marker_model(model):
-        return marker_source_codes(presence, sensors, model, digits)
     col = {s: i for i, s in enumerate(sensors)}
-    hand = presence[:, col[HAND_SENSOR]]
+    if is_marker_model(model):  # the hand's frame from any three of its markers
+        hand = presence[:, [col[k] for k in markers_of(model, HAND_SENSOR)]]
+        hand_all, hand_ok, solves = hand.all(axis=1), hand.sum(axis=1) >= 3, True
+        owns = {d: [col[k] for k in markers_of(model, d)] for d in digits}
+    else:
+        hand_all = hand_ok = presence[:, col[HAND_SENSOR]]
+        owns = {d: [col[jm.child] for jm in model.fingers[d].joints.values()] for d in digits}
     out = np.zeros((presence.shape[0], len(digits)))
     for k, d in enumerate(digits):
-        own = presence[:, [col[jm.child] for jm in model.fingers[d].joints.values()]]
-        complete = hand & own.all(axis=1)
-        solvable = hand & own.any(axis=1) & solves
+        own = presence[:, owns[d]]
+        complete = hand_all & own.all(axis=1)
+        solvable = hand_ok & own.any(axis=1) & solves
         out[:, k] = np.where(complete, 0.0, np.where(solvable, 1.0, 2.0))
     return out
 
