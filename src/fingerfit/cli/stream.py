@@ -196,7 +196,8 @@ def stream(
 ) -> None:
     """Stream joint angles and fingertips of a live or replayed hand (Ctrl-C to stop).
 
-    The values are those of `fingerfit angles` (same kinematics). A frame with a missing
+    The values are those of `fingerfit angles` (same kinematics; a model fitted from
+    markers streams a marker source: docs/markers.md). A frame with a missing
     sensor holds the last values and has valid = 0. With --retarget ROBOT, the robot's
     joints of `fingerfit retarget` go out too. LSL and DDS get the newest frame, never
     one older than --max-age; --record, --ros2-bag and --view get every frame.
