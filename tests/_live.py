@@ -313,3 +313,53 @@ class Logged:
 
     def close(self) -> None:
         self.source.close()
+
+
+def stream_from_outlet(
+    stream_type: str,
+    labels: list[str],
+    units: list[str],
+    data: np.ndarray,
+    times: np.ndarray,
+    model_path: Path,
+    record: Path,
+    channel_type: str | None = None,
+) -> tuple[int, str, str]:
+    """Publish ``data`` (n, channels) with ``times`` (s from 0) on an LSL outlet of type
+    ``stream_type`` (channel ``labels``, ``units``), 10 samples every 10 ms, to a
+    ``fingerfit stream MODEL --source lsl:NAME --record RECORD --duration 2`` subprocess
+    started first; its exit code, stdout and stderr."""
+    import os
+    import sys
+
+    import pylsl
+
+    name = f"ff{stream_type.lower()}{os.getpid()}"
+    info = pylsl.StreamInfo(name, stream_type, len(labels), 240.0, pylsl.cf_double64, name)
+    chans = info.desc().append_child("channels")
+    for lab, unit in zip(labels, units, strict=True):
+        ch = chans.append_child("channel")
+        ch.append_child_value("label", lab)
+        ch.append_child_value("unit", unit)
+        if channel_type is not None:
+            ch.append_child_value("type", channel_type)
+    outlet = pylsl.StreamOutlet(info)
+    fingerfit = str(Path(sys.executable).with_name("fingerfit"))
+    proc = subprocess.Popen(
+        [fingerfit, "stream", str(model_path), "--source", f"lsl:{name}", "--record",
+         str(record), "--duration", "2", "-q"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert outlet.wait_for_consumers(HANG_S), "the stream did not connect"
+        time.sleep(0.3)
+        t0 = pylsl.local_clock()
+        for i in range(0, data.shape[0], 10):  # 10 samples every 10 ms
+            outlet.push_chunk(data[i : i + 10], (t0 + times[i : i + 10]).tolist())
+            time.sleep(0.01)
+        out, err = proc.communicate(timeout=HANG_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return proc.returncode, out, err

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -17,16 +13,15 @@ from fingerfit.live.stream import model_sensors
 from fingerfit.model import load_model
 
 from ._live import (
-    HANG_S,
     angles_of,
     assert_close_where_solved,
     fitted,
     short_recording,
     solved_tolerance,
+    stream_from_outlet,
 )
 
 pylsl = pytest.importorskip("pylsl")
-FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
 N = 120
 
 
@@ -35,7 +30,6 @@ def test_lsl_source_equals_angles(tmp_path: Path) -> None:
     model = load_model(model_path)
     sensors = model_sensors(model)
     rec = short_recording(N, ((40, "index.middle"),))
-    name = f"ffmocap{os.getpid()}"
     labels, units, cols = [], [], []
     for s in sensors:  # positions in cm, quaternions w, x, y, z
         p = rec.poses[s]
@@ -46,33 +40,11 @@ def test_lsl_source_equals_angles(tmp_path: Path) -> None:
         units += ["centimeters"] * 3 + ["normalized"] * 4
         cols += [p.position / 10.0, q]
     data = np.hstack(cols)
-    info = pylsl.StreamInfo(name, "MoCap", len(labels), 240.0, pylsl.cf_double64, name)
-    chans = info.desc().append_child("channels")
-    for lab, unit in zip(labels, units, strict=True):
-        ch = chans.append_child("channel")
-        ch.append_child_value("label", lab)
-        ch.append_child_value("unit", unit)
-        ch.append_child_value("type", "PositionX")
-    outlet = pylsl.StreamOutlet(info)
     record = tmp_path / "live.csv"
-    proc = subprocess.Popen(
-        [FINGERFIT, "stream", str(model_path), "--source", f"lsl:{name}", "--record",
-         str(record), "--duration", "2", "-q"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        assert outlet.wait_for_consumers(HANG_S), "the stream did not connect"
-        time.sleep(0.3)
-        t0 = pylsl.local_clock()
-        for i in range(0, N, 10):  # 10 samples every 10 ms
-            outlet.push_chunk(data[i : i + 10], (t0 + rec.time[i : i + 10]).tolist())
-            time.sleep(0.01)
-        out, err = proc.communicate(timeout=HANG_S)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 0, out + err
+    code, out, err = stream_from_outlet(
+        "MoCap", labels, units, data, rec.time, model_path, record, "PositionX"
+    )
+    assert code == 0, out + err
     got = pd.read_csv(record)
     want, solved = angles_of(model, rec)
     assert list(got.columns) == list(want.columns) and len(got) == N

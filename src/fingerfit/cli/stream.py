@@ -30,8 +30,9 @@ def stream(
         str,
         typer.Option(
             "--source",
-            help="replay:FILE\\[@SPEED] (a pose CSV, SPEED times real time), "
-            "liberty:PORT\\[@BAUD] (a Polhemus Liberty) or lsl:NAME (an LSL MoCap stream).",
+            help="replay:FILE\\[@SPEED] (a pose CSV, SPEED times real time; with a model "
+            "fitted from markers a .trc/.tsv/.c3d), liberty:PORT\\[@BAUD] (a Polhemus "
+            "Liberty) or lsl:NAME (an LSL MoCap stream of poses, or of markers).",
         ),
     ],
     lsl: Annotated[
@@ -195,7 +196,8 @@ def stream(
 ) -> None:
     """Stream joint angles and fingertips of a live or replayed hand (Ctrl-C to stop).
 
-    The values are those of `fingerfit angles` (same kinematics). A frame with a missing
+    The values are those of `fingerfit angles` (same kinematics; a model fitted from
+    markers streams a marker source: docs/markers.md). A frame with a missing
     sensor holds the last values and has valid = 0. With --retarget ROBOT, the robot's
     joints of `fingerfit retarget` go out too. LSL and DDS get the newest frame, never
     one older than --max-age; --record, --ros2-bag and --view get every frame.
@@ -204,8 +206,9 @@ def stream(
 
     from ..errors import FingerfitError
     from ..io.atomic import check_target, refuse_writing_inputs
-    from ..kinematics import compute_kinematics
+    from ..io.markers import is_marker_file
     from ..live import sources as src
+    from ..live.markers import check_marker_source, is_marker_model, kinematics_of
     from ..live.outputs import BagOutput, LslOutput, RecordOutput, Ros2Output, dds_topic
     from ..live.stream import (
         SILENCE_POLICIES,
@@ -266,6 +269,17 @@ def stream(
     ):
         raise FingerfitError("exists; choose a new folder for the bag", path=ros2_bag)
     model = load_model(model_path)
+    markers = is_marker_model(model)
+    check_marker_stream(
+        model_path,
+        markers,
+        kind,
+        replay_path is not None and is_marker_file(replay_path),
+        retarget is not None,
+        view or view_save is not None,
+        tips_frame,
+    )
+    units_given = units
     units = units or model.session_units
     if units not in UNITS_TO_MM:
         raise typer.BadParameter(f"must be one of {', '.join(UNITS_TO_MM)}", param_hint="--units")
@@ -297,7 +311,18 @@ def stream(
 
     # The source first: a file that does not read, or a device that does not open, fails
     # before any output exists.
-    if kind == "replay":
+    if kind == "replay" and markers:
+        from ..io.markers import read_marker_recording
+
+        path, speed = src.parse_replay(source)
+        rec = read_marker_recording(path, units=units_given)
+        for note in rec.notes:
+            notice("note", note)
+        check_marker_source(model, set(rec.markers), str(path))
+        the_source = src.ReplaySource(rec, speed)
+        step = float(np.nanmedian(np.diff(rec.time))) if rec.n_frames > 1 else 0.0
+        nominal = float(speed * (rate or (1.0 / step if step > 0 else 0.0)))
+    elif kind == "replay":
         from .fit import read_checked_recording
 
         path, speed = src.parse_replay(source)
@@ -321,7 +346,12 @@ def stream(
             name,
             sensors,
             reconnect=reconnect_s,
-            check=lambda present: check_stream_layout(model, present, f"lsl:{name}"),
+            check=(
+                (lambda present: check_marker_source(model, present, f"lsl:{name}"))
+                if markers
+                else (lambda present: check_stream_layout(model, present, f"lsl:{name}"))
+            ),
+            markers=markers,
         )
         nominal = 0.0
 
@@ -334,7 +364,8 @@ def stream(
     threads_before = task_ids()  # the live outputs' threads: those started from here on
     try:
         lsl_out = ros_out = bag_out = rec_out = live_view = None
-        ch = channels_of(model, compute_kinematics(model, empty_recording(sensors), ("user_axis",)))
+        empty = empty_recording(sensors, markers)
+        ch = channels_of(model, kinematics_of(model, empty, ("user_axis",)))
         if lsl:
             robot_outlet = (
                 {
@@ -443,6 +474,46 @@ def stream(
     for p, what in ((record, "angles CSV"), (ros2_bag, "rosbag2"), (view_save, "view")):
         if p is not None:
             say("{} -> [bold]{}[/]", what, p)
+
+
+def check_marker_stream(
+    model_path: Path,
+    markers: bool,
+    kind: str,
+    marker_file: bool,
+    retarget: bool,
+    view: bool,
+    tips_frame: str,
+) -> None:
+    """Refuse, in one line, a source of the other kind than the model (a model fitted from
+    markers streams marker positions, a 6-DOF model sensor poses) and what a marker model
+    does not stream yet (``--retarget``, ``--view``, fingertips in the hand frame)."""
+    from ..errors import FingerfitError
+
+    if not markers:
+        if marker_file:
+            raise FingerfitError(
+                "was fitted from 6-DOF sensors: it streams poses, not a marker recording "
+                "(fit a model from a marker session: docs/markers.md)",
+                path=model_path,
+            )
+        return
+    if kind == "liberty" or (kind == "replay" and not marker_file):
+        raise FingerfitError(
+            "was fitted from markers: it streams marker positions (--source "
+            "replay:X.trc|.tsv|.c3d or lsl:NAME, a MoCap stream of markers), not poses",
+            path=model_path,
+        )
+    for given, name in (
+        (retarget, "--retarget"),
+        (view, "--view"),
+        (tips_frame == "hand", "--tips-frame hand"),
+    ):
+        if given:
+            raise FingerfitError(
+                f"{name} is not built for a model fitted from markers yet (docs/markers.md)",
+                path=model_path,
+            )
 
 
 def check_view(view: bool, view_save: Path | None, record: Path | None) -> None:

@@ -6,6 +6,8 @@
   records, resynchronisation);
 * :mod:`.outputs` -- LSL outlets, a ROS 2 ``JointState`` publisher over DDS, a rosbag2
   writer and the angles CSV;
+* :mod:`.markers` -- a model fitted from skin markers: marker sources, each block's
+  angles by the bundle adjustment's inner step;
 * :mod:`.stream` -- the loop: source -> :func:`fingerfit.kinematics.compute_kinematics`
   (-> :class:`fingerfit.retarget.Retargeter` with ``--retarget ROBOT``) -> outputs, in two
   lanes (the live outputs latest-wins and never older than ``--max-age``; the files every

@@ -10,11 +10,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..kinematics import KinematicsPlan, compute_kinematics, kinematics_table
+from ..kinematics import KinematicsPlan, kinematics_table
 from ..model import HandModel
 from ..track.recording import last_frame, track_recording
 from ..track.report import tracking_columns
 from ..transforms import FloatArray
+from .markers import is_marker_model, kinematics_of
 from .outputs import BagOutput, RecordOutput
 from .sources import MAX_BLOCK, Block
 from .values import (
@@ -91,7 +92,9 @@ class DataLane:
         # Only the view: no kinematics here at all.
         self.computes = record is not None or bag is not None or self.retargeter is not None
         self.plan = (
-            KinematicsPlan(model, self.variants) if model.angle_method == "swing_twist" else None
+            KinematicsPlan(model, self.variants)
+            if model.angle_method == "swing_twist" and not is_marker_model(model)
+            else None
         )
         self.wall_offset = wall_offset
         self._queue: list[Block] = []
@@ -136,7 +139,8 @@ class DataLane:
                 if self.record is not None and not self.record.started:
                     # No frame at all: still a complete CSV (an empty recording's header).
                     variants = ("user_axis", "orthogonal")
-                    kin = compute_kinematics(self.model, empty_recording(self.sensors), variants)
+                    empty = empty_recording(self.sensors, is_marker_model(self.model))
+                    kin = kinematics_of(self.model, empty, variants)
                     self.record.push(self._table(kin, None))
         except BaseException as exc:  # handed to the loop, which raises it
             self.error, ok = exc, False
@@ -178,7 +182,7 @@ class DataLane:
         elif self.plan is not None and rec.n_frames:
             kin = self.plan.run(rec)
         else:
-            kin = compute_kinematics(self.model, rec, self.variants)
+            kin = kinematics_of(self.model, rec, self.variants)
         if kin is not None and rec.n_frames and self.solves:
             self._anchor = last_frame(kin)
         joints = robot = None

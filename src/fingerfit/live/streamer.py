@@ -15,12 +15,13 @@ from typing import Any
 import numpy as np
 
 from ..errors import FingerfitError
-from ..kinematics import KinematicsPlan, compute_kinematics
+from ..kinematics import KinematicsPlan
 from ..model import HandModel
 from ..session import HAND_SENSOR, PoseSeries, Recording
 from ..track.live import LiveTracker
 from ..transforms import FloatArray
 from .datalane import DataLane
+from .markers import is_marker_model, kinematics_of
 from .outputs import BagOutput, LslOutput, RecordOutput, Ros2Output
 from .sources import Block
 from .values import (
@@ -101,6 +102,12 @@ class Streamer:
     ) -> None:
         if tips_frame not in ("tracker", "hand"):
             raise FingerfitError("must be tracker or hand", field="--tips-frame")
+        markers = is_marker_model(model)
+        if markers and tips_frame == "hand":
+            raise FingerfitError(
+                "a model fitted from markers streams fingertips in the tracker frame only",
+                field="--tips-frame",
+            )
         check_max_age(1e3 * max_age)
         if on_silence not in SILENCE_POLICIES:
             raise FingerfitError(
@@ -113,6 +120,7 @@ class Streamer:
         self.max_age = max_age
         self.on_silence = on_silence
         self.sensors = model_sensors(model)
+        self.markers = markers
         self.live = lsl is not None or ros2 is not None
         variants = ["user_axis"]
         if retargeter is not None and retargeter.variant not in variants:
@@ -122,26 +130,30 @@ class Streamer:
         # Names from a probe of no frames; values are then taken by name from every
         # block, so the channel order is fixed for the whole stream.
         self.channels = channels or channels_of(
-            model, compute_kinematics(model, empty_recording(self.sensors), ("user_axis",))
+            model, kinematics_of(model, empty_recording(self.sensors, markers), ("user_axis",))
         )
         # The model's constants are prepared once (swing-twist models; the paper's
         # projection angles go through compute_kinematics on every block).
         self.plan = (
             KinematicsPlan(model, self.variants)
-            if model.angle_method == "swing_twist" and self.live
+            if model.angle_method == "swing_twist" and self.live and not markers
             else None
         )
         # Frames with a missing sensor: solved by the model, one at a time (a model without
         # calibration statistics cannot: those frames are held).
+        # (a model fitted from markers solves such frames in its own kinematics)
         self.tracker = (
-            LiveTracker(model, self.variants) if model.tracking is not None and self.live else None
+            LiveTracker(model, self.variants)
+            if model.tracking is not None and self.live and not markers
+            else None
         )
         self._nan: dict[int, PoseSeries] = {}
-        self._hand_index = self.sensors.index(HAND_SENSOR)
-        self._digit_sensors = [
-            np.array([self.sensors.index(jm.child) for jm in fm.joints.values()])
-            for fm in model.fingers.values()
-        ]
+        if self.tracker is not None:  # what _all_solved reads
+            self._hand_index = self.sensors.index(HAND_SENSOR)
+            self._digit_sensors = [
+                np.array([self.sensors.index(jm.child) for jm in fm.joints.values()])
+                for fm in model.fingers.values()
+            ]
         self.wall_offset = time.time() - time.monotonic()
         self.summary = Summary()
         # The robot lane's per-frame buffers, allocated once: the values of the frame
@@ -185,7 +197,8 @@ class Streamer:
         if n == 0:
             return
         s = self.summary
-        if any(x not in block.recording.poses for x in self.sensors):
+        have = block.recording.markers if self.markers else block.recording.poses
+        if any(x not in have for x in self.sensors):
             block = Block(self._complete(block.recording), block.arrival, block.lost)
         presence = sensor_presence(block.recording, self.sensors)
         valid = presence.all(axis=1)
@@ -221,8 +234,14 @@ class Streamer:
 
     def _complete(self, rec: Recording) -> Recording:
         """``rec`` with a pose series of NaN for each model sensor it lacks (a source that
-        never delivers one: the layout was checked before the stream started)."""
+        never delivers one: the layout was checked before the stream started); of a
+        marker model, NaN positions for each marker it lacks."""
         n = rec.n_frames
+        if self.markers:
+            markers = dict(rec.markers)
+            for x in self.sensors:
+                markers.setdefault(x, np.full((n, 3), np.nan))
+            return Recording(rec.name, rec.time, rec.poses, rec.notes, markers)
         nan = self._nan.get(n)
         if nan is None:
             nan = self._nan[n] = PoseSeries(np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan))
@@ -252,8 +271,13 @@ class Streamer:
         elif self.plan is not None:
             kin = self.plan.run(rec)
         else:
-            kin = compute_kinematics(self.model, rec, self.variants)
+            kin = kinematics_of(self.model, rec, self.variants)
         source = None
+        if self.markers and not valid:  # the marker IK solves with the markers seen
+            codes = source_codes(
+                present[None], self.sensors, self.model, self.channels.digits, True
+            )
+            source = dict(zip(self.channels.digits, codes[0].tolist(), strict=True))
         if self.tracker is not None:
             if valid:
                 self.tracker.remember(kin, float(rec.time[0]))

@@ -14,11 +14,15 @@ from ..kinematics import Kinematics
 from ..model import HandModel
 from ..session import HAND_SENSOR, PoseSeries, Recording, concat_recordings
 from ..transforms import FloatArray
+from .markers import is_marker_model, marker_presence, markers_of, model_markers
 from .sources import Block
 
 
 def model_sensors(model: HandModel) -> list[str]:
-    """Sensors the model's kinematics read: the hand sensor, then each digit's in joint order."""
+    """Sensors the model's kinematics read: the hand sensor, then each digit's in joint order;
+    for a model fitted from markers its markers (:func:`.markers.model_markers`)."""
+    if is_marker_model(model):
+        return model_markers(model)
     out = [HAND_SENSOR]
     for fm in model.fingers.values():
         for jm in fm.joints.values():
@@ -44,8 +48,11 @@ def robot_joint_units(robot: Any) -> list[str]:
     return ["meters" if slide else "radians" for slide in robot.slide]
 
 
-def empty_recording(sensors: list[str]) -> Recording:
-    """A recording of no frames with the given sensors (for column names)."""
+def empty_recording(sensors: list[str], markers: bool = False) -> Recording:
+    """A recording of no frames with the given sensors (for column names); ``markers``:
+    the names are markers (a marker recording)."""
+    if markers:
+        return Recording("", np.zeros(0), {}, markers={k: np.zeros((0, 3)) for k in sensors})
     return Recording(
         "", np.zeros(0), {k: PoseSeries(np.zeros((0, 3)), np.zeros((0, 3, 3))) for k in sensors}
     )
@@ -123,7 +130,10 @@ class Values:
 def sensor_presence(recording: Recording, sensors: list[str]) -> np.ndarray:
     """Whether each sensor of ``sensors`` is present in each frame, ``(n, S)`` bool: one
     ``isfinite`` over the sensors' poses side by side (a sensor the recording lacks is
-    absent in every frame)."""
+    absent in every frame); of a marker recording, each marker
+    (:func:`.markers.marker_presence`)."""
+    if recording.markers:
+        return marker_presence(recording, sensors)
     n = recording.n_frames
     poses = [recording.poses.get(s) for s in sensors]
     have = [p for p in poses if p is not None]
@@ -155,15 +165,23 @@ def source_codes(
     digits : list of str
     solves : bool
         Whether frames with a missing sensor are solved by the model (a model with
-        calibration statistics); else they are held.
+        calibration statistics); else they are held. A model fitted from markers
+        (``sensors`` its markers) solves a digit with three hand markers and one of its
+        own seen.
     """
     col = {s: i for i, s in enumerate(sensors)}
-    hand = presence[:, col[HAND_SENSOR]]
+    if is_marker_model(model):  # the hand's frame from any three of its markers
+        hand = presence[:, [col[k] for k in markers_of(model, HAND_SENSOR)]]
+        hand_all, hand_ok, solves = hand.all(axis=1), hand.sum(axis=1) >= 3, True
+        owns = {d: [col[k] for k in markers_of(model, d)] for d in digits}
+    else:
+        hand_all = hand_ok = presence[:, col[HAND_SENSOR]]
+        owns = {d: [col[jm.child] for jm in model.fingers[d].joints.values()] for d in digits}
     out = np.zeros((presence.shape[0], len(digits)))
     for k, d in enumerate(digits):
-        own = presence[:, [col[jm.child] for jm in model.fingers[d].joints.values()]]
-        complete = hand & own.all(axis=1)
-        solvable = hand & own.any(axis=1) & solves
+        own = presence[:, owns[d]]
+        complete = hand_all & own.all(axis=1)
+        solvable = hand_ok & own.any(axis=1) & solves
         out[:, k] = np.where(complete, 0.0, np.where(solvable, 1.0, 2.0))
     return out
 
@@ -184,7 +202,10 @@ def frames_valid(recording: Recording, sensors: list[str]) -> np.ndarray:
     Returns
     -------
     ndarray of bool, shape (n,)
+        Of a marker recording (``sensors`` its markers): every marker seen.
     """
+    if recording.markers:
+        return marker_presence(recording, sensors).all(axis=1)
     n = recording.n_frames
     poses = [recording.poses[s] for s in sensors]
     parts = [p.position.reshape(n, 3) for p in poses]

@@ -338,18 +338,20 @@ def normal_equations(
     jf = np.concatenate([jq, _frame_columns(y, pivot)], axis=3).reshape(n, 3 * M, L + 6)
     jh = np.zeros((n, H, 3, L + 6))
     jh[..., L:] = _frame_columns(yh, pivot)
-    jl = line_columns(structure, lines, data.segment, p, q, prox, axes, centres)  # (M, 3, n, 4 L)
-    jl = jl.transpose(2, 0, 1, 3).reshape(n, 3 * M, 4 * L)
-    ju = np.zeros((n, M, 3, M, 3))
-    ju[:, np.arange(M), :, np.arange(M), :] = rot.transpose(0, 3, 1, 2)
-    blocks = [jl, ju.reshape(n, 3 * M, 3 * M)]
-    if slide is not None:
-        theta = q[structure.flexion[data.segment]].T  # (n, M)
-        blocks.append((ju * theta[:, :, None, None, None]).reshape(n, 3 * M, 3 * M))
-    jg = np.concatenate(blocks, axis=2)
     mask = np.repeat(data.present.T, 3, axis=1)[..., None]  # (n, 3 M, 1)
     jf *= mask
-    jg = jg[..., free] * mask
+    if free.any():
+        jl = line_columns(structure, lines, data.segment, p, q, prox, axes, centres)
+        jl = jl.transpose(2, 0, 1, 3).reshape(n, 3 * M, 4 * L)  # from (M, 3, n, 4 L)
+        ju = np.zeros((n, M, 3, M, 3))
+        ju[:, np.arange(M), :, np.arange(M), :] = rot.transpose(0, 3, 1, 2)
+        blocks = [jl, ju.reshape(n, 3 * M, 3 * M)]
+        if slide is not None:
+            theta = q[structure.flexion[data.segment]].T  # (n, M)
+            blocks.append((ju * theta[:, :, None, None, None]).reshape(n, 3 * M, 3 * M))
+        jg = np.concatenate(blocks, axis=2)[..., free] * mask
+    else:  # the model held (the angles of a recording): no global column to build
+        jg = np.zeros((n, 3 * M, 0))
     jh *= data.hand_present.T[:, :, None, None]
     jh = jh.reshape(n, 3 * H, L + 6)
     rr = r.transpose(2, 0, 1).reshape(n, 3 * M)
@@ -491,6 +493,7 @@ def adjust(
     L, M = structure.levels, len(data.labels)
     G = 4 * L + 3 * M * (1 if slide is None else 2)
     free = np.ones(G, dtype=bool) if free is None else free
+    lines_free = bool(free[: 4 * L].any())
     hand = HandFrames.identity(data.frames) if hand is None else hand
     lines, u, q = lines.copy(), u.copy(), q.copy()
     nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide)
@@ -503,7 +506,7 @@ def adjust(
             step = np.zeros(G)
             step[free] = dg
             trial = (
-                lines.moved(step[: 4 * L]),
+                lines.moved(step[: 4 * L]) if lines_free else lines,
                 u + step[4 * L : 4 * L + 3 * M].reshape(M, 3),
                 q + dq[:, :L].T,
                 hand.moved(dq[:, L : L + 3], dq[:, L + 3 :]),

@@ -67,8 +67,9 @@ def hand_shape(session: Session) -> FloatArray:
     """The hand markers' mean positions ``(H, 3)`` over the reference recording (mm)."""
     ref = session.reference.markers
     pts = np.stack([ref[k] for k in session.marker_map[HAND_SENSOR]], axis=1)
-    with np.errstate(invalid="ignore"):
-        return np.nanmean(pts, axis=0)
+    ok = np.isfinite(pts)
+    with np.errstate(invalid="ignore"):  # a marker never seen: NaN (no warning)
+        return np.where(ok, pts, 0.0).sum(axis=0) / ok.sum(axis=0)
 
 
 def carry_back(

@@ -9,7 +9,9 @@ same object the file readers return) with each frame's arrival time. Source spec
 * ``liberty:PORT[@BAUD]`` -- a Liberty on a serial port (:mod:`.liberty_serial`);
 * ``lsl:NAME`` -- an LSL stream of type ``MoCap`` whose channels are labelled
   ``<sensor>.x|y|z`` (position, unit in the channel metadata) and
-  ``<sensor>.qw|qx|qy|qz`` (quaternion, scalar first).
+  ``<sensor>.qw|qx|qy|qz`` (quaternion, scalar first); for a model fitted from markers,
+  marker positions ``<marker>_X|_Y|_Z`` or ``<marker>.x|y|z`` (:func:`.lsl.marker_layout`),
+  and a replay a marker recording (:mod:`fingerfit.live.markers`).
 
 The live sources survive an outage: a serial port that fails is reopened, an LSL stream
 that goes away is looked for again, for up to ``reconnect`` s (``--reconnect``), with one
@@ -106,6 +108,9 @@ from .lsl import (
 )
 from .lsl import (
     _lsl_lost_error as _lsl_lost_error,
+)
+from .lsl import (
+    marker_layout as marker_layout,
 )
 from .lsl import (
     mocap_layout as mocap_layout,

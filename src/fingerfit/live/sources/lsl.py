@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from ...errors import FingerfitError, shown
-from ...session import UNITS_TO_MM, PoseSeries
+from ...session import UNITS_TO_MM, PoseSeries, Recording
 from ...transforms import matrix_from_quat_wxyz
 from .. import require
 from .common import (
@@ -91,14 +91,7 @@ def mocap_layout(
                 path=f"lsl:{name}",
             )
         for i in pi:
-            u = units[i].strip().lower()
-            if u not in _UNIT_MM:
-                raise FingerfitError(
-                    f"channel {labels[i]}: unit '{shown(units[i])}' is not a length unit "
-                    f"({', '.join(_UNIT_MM)})",
-                    path=f"lsl:{name}",
-                )
-            scale[i] = _UNIT_MM[u]
+            scale[i] = _length_scale(labels[i], units[i], name)
         pos[s], quat[s] = np.array(pi), np.array(qi)
     if not pos:
         raise FingerfitError(
@@ -107,6 +100,75 @@ def mocap_layout(
             path=f"lsl:{name}",
         )
     return pos, quat, scale
+
+
+def _length_scale(label: str, unit: str, name: str) -> float:
+    """A position channel's factor to millimetres; a clear error for a unit not
+    understood."""
+    u = unit.strip().lower()
+    if u not in _UNIT_MM:
+        raise FingerfitError(
+            f"channel {label}: unit '{shown(unit)}' is not a length unit ({', '.join(_UNIT_MM)})",
+            path=f"lsl:{name}",
+        )
+    return _UNIT_MM[u]
+
+
+def marker_layout(
+    labels: list[str], units: list[str], markers: list[str], name: str
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Channel indices of each marker's position in an LSL MoCap stream of markers.
+
+    A marker's channels are labelled ``<marker>_X|_Y|_Z`` (the Qualisys LSL app's labels)
+    or ``<marker>.x|y|z`` (a pose stream's, :func:`mocap_layout`); their unit is in the
+    channel metadata (``meters``, ``mm``, ...).
+
+    Parameters
+    ----------
+    labels, units : list of str
+        Channel labels and units.
+    markers : list of str
+        The model's markers; one with none of its channels is absent (the caller checks
+        the layout), one with some of them is an error.
+    name : str
+        Stream name, for messages.
+
+    Returns
+    -------
+    positions : dict[str, ndarray]
+        marker -> channel indices ``(3,)`` x, y, z, for the markers the stream has.
+    scale : ndarray, shape (n_channels,)
+        Factor to millimetres per channel.
+    """
+    where = {lab: i for i, lab in enumerate(labels)}
+    scale = np.ones(len(labels))
+    pos = {}
+    for m in markers:
+        found = None
+        for names in ([f"{m}_{c}" for c in "XYZ"], [f"{m}.{c}" for c in "xyz"]):
+            idx = [where.get(k) for k in names]
+            if all(i is None for i in idx):
+                continue
+            if None in idx:
+                raise FingerfitError(
+                    f"marker {m}: not all of {'|'.join(names)} (labels: "
+                    f"{shown(', '.join(labels), 80)})",
+                    path=f"lsl:{name}",
+                )
+            found = idx
+            break
+        if found is None:
+            continue
+        for i in found:
+            scale[i] = _length_scale(labels[i], units[i], name)
+        pos[m] = np.array(found)
+    if not pos:
+        raise FingerfitError(
+            f"no channels {markers[0]}_X|_Y|_Z (or {markers[0]}.x|y|z), nor of any other "
+            f"marker of the model (labels: {shown(', '.join(labels), 80)})",
+            path=f"lsl:{name}",
+        )
+    return pos, scale
 
 
 #: Seconds a reconnecting LSL source waits for a stream it found to answer.
@@ -137,6 +199,10 @@ class LslSource:
         Seconds to wait for the stream to appear.
     reconnect : float
         Seconds to keep looking for a lost stream (0: the stream ends at once).
+    markers : bool
+        The stream carries marker positions (``sensors`` are then the model's markers,
+        :func:`marker_layout`; the blocks' recordings hold
+        :attr:`~fingerfit.session.Recording.markers`), not poses.
     check : callable, optional
         Called with the set of sensors a stream it finds has (each time it finds one);
         raises :class:`FingerfitError` when they cannot determine the model's joints
@@ -158,8 +224,10 @@ class LslSource:
         timeout: float = 5.0,
         reconnect: float = DEFAULT_RECONNECT_S,
         check: Callable[[set[str]], None] | None = None,
+        markers: bool = False,
     ) -> None:
         self._pylsl = pylsl = require("pylsl")
+        self.markers = markers
         self.check = check or self._every_sensor
         self.name = f"lsl:{name}"
         self.stream = name
@@ -204,7 +272,8 @@ class LslSource:
             inlet is closed again).
         """
         pylsl = self._pylsl
-        if info.type() != "MoCap":
+        # (the Qualisys LSL app's marker streams are of type "Mocap")
+        if info.type() != "MoCap" and not (self.markers and info.type().lower() == "mocap"):
             raise FingerfitError(
                 f"stream type is '{shown(info.type())}', not MoCap", path=self.name
             )
@@ -226,7 +295,11 @@ class LslSource:
                 labels.append(ch.child_value("label"))
                 units.append(ch.child_value("unit"))
                 ch = ch.next_sibling()
-            pos, quat, scale = mocap_layout(labels, units, self.sensors, self.stream)
+            if self.markers:
+                pos, scale = marker_layout(labels, units, self.sensors, self.stream)
+                quat: dict[str, np.ndarray] = {}
+            else:
+                pos, quat, scale = mocap_layout(labels, units, self.sensors, self.stream)
             self.check(set(pos))
             inlet.open_stream(timeout=timeout)
         except BaseException:
@@ -313,6 +386,12 @@ class LslSource:
             if t_first is None:
                 t_first = ts[0]
             n = x.shape[0]
+            if self.markers:
+                markers = {m: x[:, pi] for m, pi in self.pos.items()}
+                yield Block(
+                    Recording(self.name, ts - t_first, {}, markers=markers), np.full(n, now)
+                )
+                continue
             poses = {}
             for s, pi in self.pos.items():
                 q = x[:, self.quat[s]]
