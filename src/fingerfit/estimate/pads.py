@@ -190,24 +190,17 @@ def fit_pads(
         x[free] = np.linalg.solve(n[np.ix_(free, free)], c[free] - n[np.ix_(free, held)] @ q[held])
         return x
 
-    def held_out(weight: float) -> FloatArray:
-        """Each event's mean squared gap (mm^2) with the pads fitted without it."""
-        out = np.empty(len(normal))
+    def held_out(weight: float) -> float:
+        err = 0.0
         for e in range(len(normal)):
             x = solve(weight, e)
-            out[e] = x @ normal[e] @ x - 2 * linear[e] @ x + const[e]
-        return out
+            err += x @ normal[e] @ x - 2 * linear[e] @ x + const[e]
+        return err / len(normal)
 
-    per_event = [held_out(w) for w in PRIOR_WEIGHTS]
-    scores = [float(g.mean()) for g in per_event]
-    # The strongest prior whose held-out gap is within one standard error of the best
-    # (the one-standard-error rule): weights the events cannot tell apart give the same
-    # pads, whichever of them a few frames more or less would make the best.
-    i = int(np.argmin(scores))
-    se = float(per_event[i].std(ddof=1) / np.sqrt(len(normal))) if len(normal) > 1 else 0.0
-    weight = max(
-        w for w, sc in zip(PRIOR_WEIGHTS, scores, strict=True) if sc <= scores[i] + se + 1e-12
-    )
+    scores = [held_out(w) for w in PRIOR_WEIGHTS]
+    # The strongest prior within rounding of the best held-out gap.
+    best = min(scores)
+    weight = max(w for w, sc in zip(PRIOR_WEIGHTS, scores, strict=True) if sc <= best + 1e-12)
     x, kept = solve(weight), []
     while True:  # a digit whose pad is dorsal keeps its prior; the others meet it there
         dorsal_now = [
