@@ -262,3 +262,13 @@ def test_key_marked_holds_name_the_finger_nearest_the_thumb(lab):
         assert [(e.target, e.start, e.end) for e in found] == [
             (e.target, e.start, e.end) for e in truth
         ]
+
+
+def test_a_negative_landmark_sd_is_refused(tmp_path):
+    from fingerfit.errors import FingerfitError
+
+    path = tmp_path / "landmarks.csv"
+    path.write_text("name,x,y,z,sd\nindex.tip,1,2,3,-0.5\n")
+    with pytest.raises(FingerfitError) as exc:
+        read_landmark_table(path)
+    assert str(exc.value) == f"{path}:2: field 'sd': sd must not be negative"

@@ -31,7 +31,7 @@ def stylus(
     pivot: Annotated[
         Path | None,
         typer.Argument(
-            metavar="[PIVOT]",
+            metavar="PIVOT",
             help="Pose recording of the stylus turned about its tip resting in a divot.",
             show_default=False,
         ),
