@@ -272,3 +272,13 @@ def test_a_negative_landmark_sd_is_refused(tmp_path):
     with pytest.raises(FingerfitError) as exc:
         read_landmark_table(path)
     assert str(exc.value) == f"{path}:2: field 'sd': sd must not be negative"
+
+
+def test_the_command_line_names_the_protocols_capture_has():
+    """``fingerfit.cli.capture`` spells the protocols out (its start-up imports no NumPy):
+    they must be those of :mod:`fingerfit.capture.protocols`."""
+    from fingerfit.capture import protocols
+    from fingerfit.cli import capture as cli
+
+    assert set(cli.PROTOCOLS) == set(protocols.PROTOCOLS)
+    assert cli.HOLD_PROTOCOLS == protocols.HOLD_PROTOCOLS

@@ -40,6 +40,15 @@ MIN_HOLD_S = 0.3
 STILL_WINDOW_S = 0.25
 
 
+def _carried(recording: Recording, digit: str, local: FloatArray) -> FloatArray:
+    """A point of ``digit``'s distal segment, ``local`` ``(3,)`` in its sensor's frame
+    (mm), in the tracker frame in every frame of ``recording``: ``(n, 3)`` mm."""
+    from ..digits import DIGITS
+
+    pose = recording.poses[DIGITS[digit].distal_sensor]
+    return np.einsum("nij,j->ni", pose.rotation, local) + pose.position
+
+
 def _still(rel: FloatArray, k: int) -> np.ndarray:
     """Frames ``(n,)`` whose centred window of ``k`` frames of ``rel (n, 3)`` has a spread
     at most :data:`STILL_MM` (running sums, as :func:`fingerfit.stylus.landmarks.next_take`)."""
@@ -74,23 +83,16 @@ def find_holds(
     list of TargetEvent
         ``(recording, first, digit, start, end)`` rows for ``events.csv``, by start.
     """
-    from ..digits import DIGITS
-
     if first not in pads:
         return []
-
-    def point(d: str) -> FloatArray:
-        pose = recording.poses[DIGITS[d].sensors()[-1]]
-        return np.einsum("nij,j->ni", pose.rotation, pads[d]) + pose.position
-
     k = max(3, round(STILL_WINDOW_S * rate_hz))
     shortest = max(1, round(MIN_HOLD_S * rate_hz))
-    p0 = point(first)
+    p0 = _carried(recording, first, pads[first])
     events: list[TargetEvent] = []
     for d in pads:
         if d == first:
             continue
-        rel = p0 - point(d)
+        rel = p0 - _carried(recording, d, pads[d])
         hold = (np.linalg.norm(rel, axis=1) <= TOUCH_MM) & _still(rel, k)
         edges = np.flatnonzero(np.diff(np.concatenate([[0], hold.astype(np.int8), [0]])))
         trim = k // 2
@@ -114,7 +116,7 @@ def pad_points(
     out = {}
     for d in digits:
         pad = landmarks.get(f"{d}.{kind}")
-        sensor = DIGITS[d].sensors()[-1]
+        sensor = DIGITS[d].distal_sensor
         if pad is None or sensor not in reference.poses:
             continue
         pos, rot = reference.poses[sensor].mean()
@@ -140,17 +142,11 @@ def marked_holds(
     unpaired : int
         A last press without its end (1) or none (0).
     """
-    from ..digits import DIGITS
-
-    def point(d: str) -> FloatArray:
-        pose = recording.poses[DIGITS[d].sensors()[-1]]
-        return np.einsum("nij,j->ni", pose.rotation, points[d]) + pose.position
-
     others = [d for d in points if d != first]
     if first not in points or not others:
         return [], len(presses) % 2
-    p0 = point(first)
-    dist = {d: np.linalg.norm(p0 - point(d), axis=1) for d in others}
+    p0 = _carried(recording, first, points[first])
+    dist = {d: np.linalg.norm(p0 - _carried(recording, d, points[d]), axis=1) for d in others}
     events = []
     for a, b in zip(presses[0::2], presses[1::2], strict=False):
         inside = (recording.time >= a) & (recording.time <= b)

@@ -52,7 +52,7 @@ def landmark_segment(name: str) -> str | None:
     digit, what = name.split(".", 1)
     d = DIGITS[digit]
     if what in ("tip", "pad"):
-        return d.sensors()[-1]
+        return d.distal_sensor
     return d.joint_sensors()[what][0]
 
 
@@ -170,9 +170,13 @@ def next_take(
         if hit.size == 0:
             return None
         begin = start + int(hit[0])
-    spreads = window_spreads(points, k)
-    still = np.flatnonzero(spreads[begin + k - 1 :] <= max_spread_mm) if n >= begin + k else []
-    if len(still) == 0:
+    if n < begin + k:
+        return None
+    # Only the frames from ``begin`` on: each window looked at lies within them, and a
+    # live capture calls this for every block (the earlier frames were looked at then).
+    spreads = window_spreads(points[begin:], k)
+    still = np.flatnonzero(spreads[k - 1 :] <= max_spread_mm)
+    if still.size == 0:
         return None
     end = begin + k - 1 + int(still[0]) + 1
     return end - k, end
