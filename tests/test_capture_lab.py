@@ -282,3 +282,18 @@ def test_the_command_line_names_the_protocols_capture_has():
 
     assert set(cli.PROTOCOLS) == set(protocols.PROTOCOLS)
     assert cli.HOLD_PROTOCOLS == protocols.HOLD_PROTOCOLS
+
+
+def test_a_source_that_ends_before_a_landmark_keeps_its_recording(lab):
+    sim, folder, root = lab
+    new = root / "P04"
+    assert _reference(folder, new).exit_code == 0
+    rec = sim.stylus.landmarks
+    short = write_pose_csv(root / "short.csv", rec.slice(slice(0, 480)))  # 2 s: one take
+    r = _run(new, "--protocol", "landmarks", "--stylus", root / "stylus.json",
+             "--source", f"replay:{short}@1000")  # fmt: skip
+    assert r.exit_code == 2
+    assert "before a landmark was taken: landmarks.csv not written" in r.output
+    assert "(480 frames) is kept in" in r.output
+    assert not (new / "landmarks.csv").exists()
+    assert (new / "landmarks_stylus.csv").is_file()

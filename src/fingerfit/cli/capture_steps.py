@@ -274,22 +274,27 @@ def capture_landmarks(
         source.close()
         if viewer is not None:
             viewer.close(bool(taker.done))
+    recorded = acc.recording()
+    raw_file = {raw: rendered(raw.name, lambda p: write_pose_csv(p, recorded, units=meta["units"]))}
+    why = "interrupted" if interrupted else "the source ended"
     if not taker.done:
+        if recorded.n_frames == 0:
+            raise FingerfitError(f"{why} before any frame; no file written", field="--source")
+        write_files(raw_file)  # what was recorded is kept, though no landmark was taken
         raise FingerfitError(
-            f"{'interrupted' if interrupted else 'the source ended'} before a landmark was "
-            "taken; no file written",
+            f"{why} before a landmark was taken: landmarks.csv not written; the stylus "
+            f"recording ({recorded.n_frames} frames) is kept in {raw}",
             field="--source",
         )
     points, sds = taker.result(means)
     merged = {**{k: v for k, v in have[0].items() if k not in points}, **points}
     merged_sd = {**{k: v for k, v in have[1].items() if k not in points}, **sds}
-    recorded = acc.recording()
     write_files(
         {
             lm_path: rendered(
                 LANDMARKS_FILE, lambda p: write_landmarks(p, merged, meta["units"], merged_sd)
             ),
-            raw: rendered(raw.name, lambda p: write_pose_csv(p, recorded, units=meta["units"])),
+            **raw_file,
         }
     )
     if taker.rejected:
