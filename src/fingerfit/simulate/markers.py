@@ -26,7 +26,7 @@ distal phalanx; the thumb's metacarpal, proximal and distal):
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -83,6 +83,10 @@ class MarkerTruth:
     slide : dict[str, ndarray]
         Marker label -> ``(3,)`` its skin slide per radian of the joint below (mm/rad).
     noise_mm : float
+    distal, square : dict[str, ndarray]
+        With the ``coupled`` slide law (:func:`simulate_markers`): marker label -> ``(3,)``
+        its slide per radian of the joint beyond its segment (mm/rad) and per radian
+        squared of the joint below (mm/rad^2); empty otherwise.
     """
 
     layout: str
@@ -90,6 +94,8 @@ class MarkerTruth:
     position: dict[str, FloatArray]
     slide: dict[str, FloatArray]
     noise_mm: float
+    distal: dict[str, FloatArray] = field(default_factory=dict)
+    square: dict[str, FloatArray] = field(default_factory=dict)
 
 
 @dataclass
@@ -186,6 +192,32 @@ def _slide_angle(frames: dict, segment: str) -> FloatArray:
     return np.asarray(frames["angles"][digit][joint])
 
 
+def _distal_angle(frames: dict, segment: str) -> FloatArray | None:
+    """The flexion ``(n,)`` (rad) of the joint at the distal end of a digit's
+    ``segment`` (None for the hand and a distal phalanx)."""
+    if segment == HAND_SENSOR:
+        return None
+    digit, name = segment.split(".")
+    k = DIGITS[digit].segments.index(name) + 1
+    if k >= len(DIGITS[digit].joints):
+        return None
+    return np.asarray(frames["angles"][digit][DIGITS[digit].joints[k]])
+
+
+def _coupled_gains(
+    truth: MarkerTruth, rng: np.random.Generator
+) -> tuple[dict[str, FloatArray], dict[str, FloatArray]]:
+    """The ``coupled`` slide law's extra gains: half the proximal slide's SD per radian of
+    the joint beyond the segment, and half per radian squared of the joint below, each
+    drawn in the direction of a fresh proximal-like slide."""
+    distal, square = {}, {}
+    for label, g in truth.slide.items():
+        scale = np.linalg.norm(g)
+        distal[label] = 0.5 * scale * unit(rng.normal(size=3))
+        square[label] = 0.5 * scale * unit(rng.normal(size=3))
+    return distal, square
+
+
 def marker_positions(
     truth: MarkerTruth, frames: dict, rng: np.random.Generator
 ) -> dict[str, FloatArray]:
@@ -209,6 +241,11 @@ def marker_positions(
         r, t = frames["motions"][seg]
         theta = _slide_angle(frames, seg)
         local = truth.position[label] + theta[:, None] * truth.slide[label]
+        if label in truth.square:
+            local = local + theta[:, None] ** 2 * truth.square[label]
+            beyond = _distal_angle(frames, seg)
+            if beyond is not None:
+                local = local + beyond[:, None] * truth.distal[label]
         p = np.einsum("nij,nj->ni", r, local) + t
         if truth.noise_mm > 0:
             p += rng.normal(0.0, truth.noise_mm, p.shape)
@@ -223,6 +260,7 @@ def simulate_markers(
     seed: int = 0,
     noise_mm: float = NOISE_MM,
     slide: float | None = None,
+    slide_law: str = "linear",
 ) -> MarkerSimulation:
     """Skin markers on a simulated subject: the marker session of the same motion.
 
@@ -238,6 +276,12 @@ def simulate_markers(
     slide : float, optional
         Skin slide scale (0: markers fixed to the bone); default the simulation's
         ``sta``.
+    slide_law : {"linear", "coupled"}
+        ``linear``: a marker slides in proportion to the flexion of the joint below its
+        segment. ``coupled``: also with the joint beyond its segment and with the square
+        of the joint below (:func:`_coupled_gains`, its own random stream: the linear
+        part is the same as ``linear``'s), a world the marker fit's slide model does not
+        contain.
 
     Returns
     -------
@@ -253,6 +297,11 @@ def simulate_markers(
     scale = sim.truth.config.sta if slide is None else slide
     segment, position, gains = place_markers(sim, layout, rng, slide=scale)
     truth = MarkerTruth(layout, segment, position, gains, float(noise_mm))
+    if slide_law == "coupled":
+        distal, square = _coupled_gains(truth, np.random.default_rng([seed, 1]))
+        truth = replace(truth, distal=distal, square=square)
+    elif slide_law != "linear":
+        raise FingerfitError(f"must be linear or coupled, not {slide_law!r}", field="slide_law")
 
     def markers(rec: Recording) -> Recording:
         pos = marker_positions(truth, sim.truth.frames[rec.name], rng)
