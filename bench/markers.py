@@ -76,7 +76,8 @@ def _axis_errors(fit: DigitFit, lines, truth) -> dict:
         x = b @ t
         c = fit.covariance[level, :2, :2]
         covered = bool(np.all(np.isfinite(c)) and x @ np.linalg.solve(c, x) <= CHI2_95)
-        out[joint] = {"axis_deg": err, "covered": covered}
+        ci = fit.axis_ci_deg(level) if np.all(np.isfinite(c)) else float("nan")
+        out[joint] = {"axis_deg": err, "covered": covered, "ci_deg": ci}
     return out
 
 
@@ -109,10 +110,16 @@ def _floor(fit: DigitFit, sim, ms) -> dict:
 
 
 def run_subject(
-    cond: str, layout: str, sim, sixdof_tip: float, seed: int, slide: bool = False
+    cond: str,
+    layout: str,
+    sim,
+    sixdof_tip: float,
+    seed: int,
+    slide: bool = False,
+    slide_law: str = "linear",
 ) -> dict:
     """One subject in one layout: the fit, its errors, the floor, the tip ratio."""
-    ms = simulate_markers(sim, layout, seed=seed)
+    ms = simulate_markers(sim, layout, seed=seed, slide_law=slide_law)
     t0 = time.perf_counter()
     fit = fit_marker_session(ms.session, slide=slide)
     seconds = time.perf_counter() - t0
@@ -129,6 +136,8 @@ def run_subject(
         "seconds": seconds,
         "frames": int(digit.data.frames),
         "mp_axes": len(digit.layout.names) - 2,
+        "mp_order": digit.layout.order,
+        "slide_sd": None if digit.slide_sd is None else [float(x) for x in digit.slide_sd],
         "rms_mm": digit.result.rms_mm,
         "notes": fit.notes,
         "fit": _axis_errors(digit, digit.result.lines, truth),
@@ -160,6 +169,7 @@ def summarise(rows: list[dict]) -> dict:
                     "floor_deg_mean": float(np.mean(floor)),
                     "floor_deg_max": float(np.max(floor)),
                     "covered": float(np.mean([v["fit"][j]["covered"] for v in vals])),
+                    "ci_deg_mean": float(np.nanmean([v["fit"][j]["ci_deg"] for v in vals])),
                     "target_deg": TARGETS_DEG[j],
                     "met": bool(np.max(fit) <= TARGETS_DEG[j]),
                 }
@@ -199,6 +209,12 @@ def main() -> None:
     parser.add_argument("--layouts", default="todorov,phalanx")
     parser.add_argument("--speed", action="store_true")
     parser.add_argument("--slide", action="store_true", help="estimate the markers' slide")
+    parser.add_argument(
+        "--slide-law",
+        default="linear",
+        choices=("linear", "coupled"),
+        help="how the simulated skin slides (simulate_markers)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     conditions = args.conditions.split(",")
@@ -213,7 +229,15 @@ def main() -> None:
             model = fit_session(sim.session, FitOptions())
             sixdof = float(np.nanmean(tip_errors(sim, model)))
             for k, layout in enumerate(args.layouts.split(",")):
-                r = run_subject(cond, layout, sim, sixdof, seed=k + 1, slide=args.slide)
+                r = run_subject(
+                    cond,
+                    layout,
+                    sim,
+                    sixdof,
+                    seed=k + 1,
+                    slide=args.slide,
+                    slide_law=args.slide_law,
+                )
                 rows.append(r)
                 f = r["fit"]
                 print(

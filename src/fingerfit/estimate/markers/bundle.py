@@ -230,7 +230,7 @@ class HandFrames:
         return HandFrames(back @ self.rotation, np.einsum("nij,nj->ni", back, self.offset) + tau)
 
 
-def _observed(data: DigitMarkers, hand: HandFrames) -> tuple[FloatArray, FloatArray, FloatArray]:
+def observed(data: DigitMarkers, hand: HandFrames) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The digit's and the hand's markers with the hand frames' correction, and the
     pivot ``(3,)``."""
     pivot = data.hand_shape.mean(axis=0)
@@ -248,7 +248,7 @@ def residual(
 ) -> float:
     """The cost (mm^2): the digit's markers, the hand's markers about their shape, the
     reference term and (with ``slide``) the slide's prior."""
-    y, yh, _ = _observed(data, hand)
+    y, yh, _ = observed(data, hand)
     p, *_ = predict(structure, lines, data.segment, places(structure, data, u, q, slide), q)
     r = (y - p) * data.present[:, None]
     rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
@@ -277,7 +277,7 @@ def _reference_residual(data: DigitMarkers, u: FloatArray) -> FloatArray:
     return ref * np.sqrt(data.reference_count)[:, None]
 
 
-def _frame_columns(points: FloatArray, pivot: FloatArray) -> FloatArray:
+def frame_columns(points: FloatArray, pivot: FloatArray) -> FloatArray:
     """``d p / d (omega, tau)`` of carried-back points ``(K, 3, n)``: ``(n, K, 3, 6)``
     (``J = -d y / d x``: ``-[y - h]x`` and ``I``)."""
     d = (points - pivot[:, None]).transpose(2, 0, 1)  # (n, K, 3)
@@ -322,7 +322,7 @@ def normal_equations(
     """
     M, L, n = len(data.labels), structure.levels, data.frames
     H = data.hand.shape[0]
-    y, yh, pivot = _observed(data, hand)
+    y, yh, pivot = observed(data, hand)
     ut = places(structure, data, u, q, slide)
     p, rot, axes, centres, prox = predict(structure, lines, data.segment, ut, q, levels=True)
     r = (y - p) * data.present[:, None]
@@ -335,9 +335,9 @@ def normal_equations(
     if slide is not None:  # the slide moves with the angle it follows
         jq[np.arange(M), structure.flexion[data.segment]] += matvec_rows(rot, slide[..., None])
     jq = jq.transpose(3, 0, 2, 1)  # (n, M, 3, L)
-    jf = np.concatenate([jq, _frame_columns(y, pivot)], axis=3).reshape(n, 3 * M, L + 6)
+    jf = np.concatenate([jq, frame_columns(y, pivot)], axis=3).reshape(n, 3 * M, L + 6)
     jh = np.zeros((n, H, 3, L + 6))
-    jh[..., L:] = _frame_columns(yh, pivot)
+    jh[..., L:] = frame_columns(yh, pivot)
     mask = np.repeat(data.present.T, 3, axis=1)[..., None]  # (n, 3 M, 1)
     jf *= mask
     if free.any():

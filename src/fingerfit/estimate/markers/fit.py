@@ -13,11 +13,11 @@ one line naming the joint. The result is the usual :class:`~fingerfit.model.Hand
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...digits import DIGITS, HAND_SENSOR, second_axis
+from ...digits import ABDUCTION_FIRST, DIGITS, FLEXION_FIRST, HAND_SENSOR, second_axis
 from ...errors import FingerfitError
 from ...io.rigid import technical_frame
 from ...model import HandModel, JointModel, JointQuality, assemble_digit
@@ -25,7 +25,8 @@ from ...session import Session, joint_sensors, sensor_name
 from ...transforms import FloatArray, unit
 from .bundle import BundleResult, Lines, Structure, adjust, line_covariance
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
-from .start import staged_start
+from .start import flexion_sign, staged_start
+from .uncertainty import slide_uncertainty
 
 #: A finger's MP keeps its second axis when it lowers the cost by more than this many
 #: standard deviations of what its unknowns absorb of the noise (:func:`fit_finger`).
@@ -64,14 +65,27 @@ class ChainLayout:
     first: list[int]
     second: dict[int, int]
 
+    @property
+    def order(self) -> str:
+        """The two-axis joint's order (``abduction_first`` when the second axis is
+        proximal)."""
+        return FLEXION_FIRST if self.first[0] == 0 and self.second else ABDUCTION_FIRST
 
-def chain_layout(digit: str, two_axis: bool) -> ChainLayout:
-    """The chain of ``digit``: a finger's MP a hinge or two axes (ab/adduction proximal,
-    :mod:`fingerfit.digits`); the thumb's CMC two axes (flexion proximal), MCP and IP
-    hinges."""
+
+def chain_layout(digit: str, two_axis: bool, order: str = ABDUCTION_FIRST) -> ChainLayout:
+    """The chain of ``digit``: a finger's MP a hinge or two axes (``order``: the
+    ab/adduction axis proximal, :mod:`fingerfit.digits`' order, or the flexion axis
+    proximal); the thumb's CMC two axes (flexion proximal), MCP and IP hinges."""
     if digit == "thumb":
         return ChainLayout(
             ["cmc", "cmc_abduction", "mcp", "ip"],
+            Structure(np.array([2, 3, 4]), np.array([0, 2, 3])),
+            [0, 2, 3],
+            {0: 1},
+        )
+    if two_axis and order == FLEXION_FIRST:
+        return ChainLayout(
+            ["mp", "mp_abduction", "pip", "dip"],
             Structure(np.array([2, 3, 4]), np.array([0, 2, 3])),
             [0, 2, 3],
             {0: 1},
@@ -99,10 +113,16 @@ class DigitFit:
     data : DigitMarkers
     result : BundleResult
     covariance : ndarray, shape (L, 4, 4)
-        Each line's two direction (rad) and two point (mm) unknowns
-        (:func:`.bundle.line_covariance`; ``inf`` where undetermined).
+        Each line's two direction (rad) and two point (mm) unknowns: the camera noise's
+        and the skin slide's (:func:`.uncertainty.slide_uncertainty`) for a fit of fixed
+        marker places, the noise's (:func:`.bundle.line_covariance`) for one that
+        estimated the slides; NaN where held.
     notes : list of str
         One line per parameter held or choice made.
+    slide_sd : ndarray, shape (6,) or None
+        The skin slide's SD along the bone, across and dorsal (mm/rad) of the digit's
+        markers, then of the hand's, estimated from the recording
+        (:class:`.uncertainty.SlideUncertainty`).
     """
 
     digit: str
@@ -111,6 +131,7 @@ class DigitFit:
     result: BundleResult
     covariance: FloatArray
     notes: list[str] = field(default_factory=list)
+    slide_sd: FloatArray | None = None
 
     def axis_sd_deg(self, level: int) -> float:
         """The largest SD of the direction of ``level`` (deg)."""
@@ -160,11 +181,13 @@ def fit_digit(
     two_axis: bool,
     start: BundleResult | None = None,
     slide: bool = True,
+    order: str = ABDUCTION_FIRST,
 ) -> DigitFit:
     """Start, adjust and check one digit's chain (:func:`chain_layout`): from the staged
-    start, or (a finger's two-axis MP) from its hinge fit ``start`` with the second axis
-    added, perpendicular to the flexion axis and the proximal phalanx, at angle 0."""
-    layout = chain_layout(digit, two_axis)
+    start, or (a finger's two-axis MP, in ``order``) from its hinge fit ``start`` with the
+    second axis added, perpendicular to the flexion axis and the proximal phalanx, at
+    angle 0."""
+    layout = chain_layout(digit, two_axis, order)
 
     def again(
         r: BundleResult, lines: Lines, q: FloatArray, free: np.ndarray | None
@@ -193,18 +216,32 @@ def fit_digit(
         lines = start.lines
         near = start.u[data.segment == 0].mean(axis=0)
         bone = unit(near - lines.centre[0])
-        ab = Lines(
-            np.vstack([unit(np.cross(bone, lines.axis[0])), lines.axis]),
-            np.vstack([lines.centre[0], lines.centre]),
+        extra = unit(np.cross(bone, lines.axis[0]))
+        at = 0 if layout.order == ABDUCTION_FIRST else 1
+        two = Lines(
+            np.insert(lines.axis, at, extra, axis=0),
+            np.insert(lines.centre, at, lines.centre[0], axis=0),
         )
-        q = np.vstack([np.zeros((1, data.frames)), start.q])
+        q = np.insert(start.q, at, 0.0, axis=0)
         free = None if start.slide is None else slide_free(data, layout.structure.levels)
-        result = again(start, ab, q, free)
+        result = again(start, two, q, free)
+    # The same motion, the angles within a turn and each flexion axis pointed so that
+    # flexion is positive.
+    q = np.mod(result.q + np.pi, 2 * np.pi) - np.pi
+    flipped = [k for k in layout.first if flexion_sign(q[k]) < 0]
+    if flipped or np.any(q != result.q):
+        axis = result.lines.axis.copy()
+        axis[flipped], q[flipped] = -axis[flipped], -q[flipped]
+        result = again(result, Lines(axis, result.lines.centre), q, result.free)
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
         result = again(result, result.lines, result.q, result.free & ~bad)
         fit.result, fit.covariance = result, line_covariance(result)
+    if result.slide is None:
+        uncertainty = slide_uncertainty(data, layout.structure, result)
+        fit.covariance = uncertainty.covariance
+        fit.slide_sd = uncertainty.slide_sd
     return fit
 
 
@@ -212,23 +249,34 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
     """A finger with its MP a hinge, two axes, or (``auto``) two axes when the second
     explains the markers beyond what its per-frame angle absorbs of the noise.
 
-    The two-axis fit starts from the hinge's. Its ``n + 4`` more unknowns (an angle per
-    frame, the line) lower the cost by about ``(n + 4) sigma^2`` on noise alone (a
-    chi-square with that many degrees of freedom); ``auto`` keeps the second axis when the
-    drop exceeds that by more than :data:`SECOND_AXIS_Z` of its standard deviations
-    ``sqrt(2 (n + 4))``, ``sigma^2`` the two-axis fit's residual variance.
+    The two-axis fits start from the hinge's, one with the ab/adduction axis proximal and
+    one with the flexion axis proximal; the lower cost decides the order (the two have the
+    same unknowns). Its ``n + 4`` more unknowns (an angle per frame, the line) lower the
+    cost by about ``(n + 4) sigma^2`` on noise alone (a chi-square with that many degrees
+    of freedom); ``auto`` keeps the second axis when the drop exceeds that by more than
+    :data:`SECOND_AXIS_Z` of its standard deviations ``sqrt(2 (n + 4))``, ``sigma^2`` the
+    two-axis fit's residual variance.
     """
     hinge = fit_digit(data, digit, False, slide=slide)
     if mp_axes == "hinge":
         return hinge
-    two = fit_digit(data, digit, True, start=hinge.result, slide=slide)
+    orders = [
+        fit_digit(data, digit, True, start=hinge.result, slide=slide, order=o)
+        for o in (ABDUCTION_FIRST, FLEXION_FIRST)
+    ]
+    two, other = sorted(orders, key=lambda f: f.result.cost)
     extra = data.frames + 4
     n, k = two.result.normal.qq.shape[:2]
     dof = max(two.result.normal.count - n * k - two.result.normal.gg.shape[0], 1)
     sigma2 = two.result.cost / dof
     z = ((hinge.result.cost - two.result.cost) / sigma2 - extra) / math.sqrt(2 * extra)
     if mp_axes == "two" or z > SECOND_AXIS_Z:
-        two.notes.append(f"{digit} mp: two axes (the second lowers the cost by {z:.3g} SD)")
+        proximal = "ab/adduction" if two.layout.order == ABDUCTION_FIRST else "flexion"
+        gap = (other.result.cost - two.result.cost) / sigma2
+        two.notes.append(
+            f"{digit} mp: two axes (the second lowers the cost by {z:.3g} SD), the "
+            f"{proximal} axis proximal (the other order's cost {gap:.3g} sigma^2 higher)"
+        )
         return two
     hinge.notes.append(
         f"{digit} mp: a hinge (a second axis lowers the cost by {z:.3g} SD, "
@@ -335,7 +383,7 @@ def _model(
     }
     digits = {}
     for d, fit in fits.items():
-        r, data, names = fit.result, fit.data, fit.layout.names
+        r, data = fit.result, fit.data
         sensors = joint_sensors(d)
         joints, seconds = {}, {}
         for j, joint in enumerate(DIGITS[d].joints):
@@ -365,8 +413,8 @@ def _model(
                 f"marker {data.labels[far]} taken as the tip"
             )
         dm = assemble_digit(d, joints, tip, seconds)
-        if d != "thumb" and seconds:
-            assert names[0] == "mp_abduction"  # abduction proximal: the finger's own order
+        if seconds and fit.layout.order != DIGITS[d].order[DIGITS[d].joints[0]]:
+            dm = replace(dm, axis_order={DIGITS[d].joints[0]: fit.layout.order})
         digits[d] = dm
         for s, seg in enumerate(DIGITS[d].segments):
             name = sensor_name(d, seg)
