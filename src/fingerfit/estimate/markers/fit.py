@@ -207,11 +207,13 @@ def fit_digit(
 
     if start is None:
         result = staged_start(data, layout.structure, layout.first, layout.second)
-        if slide:
-            result.slide = np.zeros((len(data.labels), 3))
-            result = again(
-                result, result.lines, result.q, slide_free(data, layout.structure.levels)
-            )
+        if slide:  # from the slides the fixed-place fit's residuals call for
+            free = slide_free(data, layout.structure.levels)
+            guess = slide_uncertainty(data, layout.structure, result)
+            L = layout.structure.levels
+            result.slide = np.where(free[-guess.slide.size :].reshape(-1, 3), guess.slide, 0.0)
+            result.u = result.u + guess.step[4 * L :].reshape(-1, 3)
+            result = again(result, result.lines.moved(guess.step[: 4 * L]), result.q, free)
     else:
         lines = start.lines
         near = start.u[data.segment == 0].mean(axis=0)
@@ -238,8 +240,14 @@ def fit_digit(
     if bad.any():
         result = again(result, result.lines, result.q, result.free & ~bad)
         fit.result, fit.covariance = result, line_covariance(result)
-    if result.slide is None:
-        uncertainty = slide_uncertainty(data, layout.structure, result)
+    return fit
+
+
+def with_slide_uncertainty(fit: DigitFit) -> DigitFit:
+    """``fit`` with the covariance of its lines holding the skin's slide
+    (:func:`.uncertainty.slide_uncertainty`), for a fit of fixed marker places."""
+    if fit.result.slide is None:
+        uncertainty = slide_uncertainty(fit.data, fit.layout.structure, fit.result)
         fit.covariance = uncertainty.covariance
         fit.slide_sd = uncertainty.slide_sd
     return fit
@@ -259,7 +267,7 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
     """
     hinge = fit_digit(data, digit, False, slide=slide)
     if mp_axes == "hinge":
-        return hinge
+        return with_slide_uncertainty(hinge)
     orders = [
         fit_digit(data, digit, True, start=hinge.result, slide=slide, order=o)
         for o in (ABDUCTION_FIRST, FLEXION_FIRST)
@@ -277,12 +285,12 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
             f"{digit} mp: two axes (the second lowers the cost by {z:.3g} SD), the "
             f"{proximal} axis proximal (the other order's cost {gap:.3g} sigma^2 higher)"
         )
-        return two
+        return with_slide_uncertainty(two)
     hinge.notes.append(
         f"{digit} mp: a hinge (a second axis lowers the cost by {z:.3g} SD, "
         f"not above {SECOND_AXIS_Z:g})"
     )
-    return hinge
+    return with_slide_uncertainty(hinge)
 
 
 @dataclass
@@ -361,6 +369,14 @@ def fit_marker_session(
     for d in session.fingers:
         data = digit_markers(session, d, moving, reference)
         fits[d] = fit_finger(data, d, mp_axes, slide)
+        sd = fits[d].slide_sd
+        if sd is not None:
+            fits[d].notes.append(
+                f"{d}: skin slide SD along the bone, across and dorsal {sd[0]:.2g}, "
+                f"{sd[1]:.2g}, {sd[2]:.2g} mm/rad (the hand's markers {sd[3]:.2g}, "
+                f"{sd[4]:.2g}, {sd[5]:.2g}), estimated from the recording: the axes' "
+                "intervals hold it"
+            )
         notes += fits[d].notes
     model = _model(session, shape, fits, notes)
     return MarkerFit(model, fits, notes)
@@ -451,7 +467,10 @@ def _quality(fit: DigitFit, level: int) -> JointQuality:
         conditioning=[],
         spread_mm=0.0,
         residual_mm=[fit.result.rms_mm],
-        notes=[f"marker bundle adjustment: axis SD {fit.axis_sd_deg(level):.3g} deg"],
+        notes=[
+            f"marker bundle adjustment: axis SD {fit.axis_sd_deg(level):.3g} deg "
+            + ("(noise and skin slide)" if fit.slide_sd is not None else "(noise)")
+        ],
         axis_ci_deg=ci if math.isfinite(ci) else None,
     )
 

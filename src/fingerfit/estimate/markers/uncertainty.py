@@ -40,6 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import ndtr
 
 from ...transforms import FloatArray, unit
 from .bundle import (
@@ -81,12 +82,20 @@ class SlideUncertainty:
         recording determines the slide's scale poorly.
     iterations : int
         EM iterations.
+    slide : ndarray, shape (M, 3)
+        The digit's markers' slides expected given the recording (the posterior mean,
+        mm/rad, tracker coordinates at the reference posture).
+    step : ndarray, shape (4 L + 3 M,)
+        The lines' and places' step that goes with them (:meth:`.bundle.Lines.moved`,
+        then mm; 0 where held).
     """
 
     covariance: FloatArray
     slide_sd: FloatArray
     used_sd: FloatArray
     iterations: int
+    slide: FloatArray
+    step: FloatArray
 
 
 def marker_frames(data: DigitMarkers, structure: Structure, result: BundleResult) -> FloatArray:
@@ -181,7 +190,10 @@ def slide_uncertainty(
     idx = np.flatnonzero(result.free)
     full[np.ix_(idx, idx)] = cov_g
     lines = np.stack([full[4 * j : 4 * j + 4, 4 * j : 4 * j + 4] for j in range(L)])
-    return SlideUncertainty(lines, np.sqrt(tau2), np.sqrt(used), it)
+    slides = (tr[ng:, ng:] @ mean[ng:])[: 3 * M].reshape(M, 3)
+    step = np.zeros(G)
+    step[idx] = mean[:ng]
+    return SlideUncertainty(lines, np.sqrt(tau2), np.sqrt(used), it, slides, step)
 
 
 def _with_hand_slides(
@@ -248,7 +260,6 @@ def _expected_variance(tau2: FloatArray, sd: FloatArray) -> FloatArray:
     likelihood about the estimate ``tau2`` with SD ``sd``, truncated to positive
     variances (a flat prior on the variance). ``tau2`` where the recording determines
     it well, above it where it does not."""
-    from scipy.stats import norm
-
     a = tau2 / np.maximum(sd, 1e-300)
-    return tau2 + sd * norm.pdf(a) / np.maximum(norm.cdf(a), 1e-300)
+    pdf = np.exp(-0.5 * a * a) / np.sqrt(2 * np.pi)
+    return tau2 + sd * pdf / np.maximum(ndtr(a), 1e-300)
