@@ -1,7 +1,8 @@
-"""`fingerfit stream --retarget ROBOT` and `--tips-frame hand` with a model fitted from skin
-markers: the robot's joints are those of retargeting the angles `fingerfit angles` gives
-for the same frames (the digits put by the model's chain at those angles, in the hand's
-frame), and the hand's frame is the simulated hand's."""
+"""`fingerfit stream --retarget ROBOT`, `--tips-frame hand` and `--view-save` with a model
+fitted from skin markers: the robot's joints are those of retargeting the angles and tips
+`fingerfit angles` gives for the same frames, the hand's frame (the rigid fit of its
+markers) is the simulated hand's, and the view shows the markers where the model puts
+them."""
 
 from __future__ import annotations
 
@@ -160,3 +161,57 @@ def test_replayed_stream_drives_the_robot(tmp_path: Path) -> None:
     assert names == list(bot.joint_names)
     exp = _retarget_angles(model, bot, rmap, rec, marker_angles(model, rec)["index"])
     np.testing.assert_allclose(pos, exp, rtol=0, atol=ROBOT_RAD)
+
+
+def test_view_save_shows_the_hand_the_markers_and_the_robot(tmp_path: Path) -> None:
+    """`stream --view-save --retarget shadow` of a marker recording: every frame of the
+    hand (skeleton, axes, tips, the hand's frame), the measured markers as recorded and
+    where the model puts them (within a few mm of them: the hand's frame of its markers'
+    rigid fit, without each digit's correction), and the robot of every frame."""
+    pytest.importorskip("rerun")
+    from fingerfit.kinematics.markers import model_marker_positions
+
+    from .test_view import _read
+
+    model, bot, rmap = robot()
+    n = 200
+    rec = read_marker_recording(marker_subject()[0] / "test.trc").slice(slice(0, n))
+    trc = write_markers(tmp_path / "test.trc", rec, units="mm")
+    out = tmp_path / "live.rrd"
+    proc = subprocess.run(
+        [FINGERFIT, "stream", str(marker_subject()[1]), "--source", f"replay:{trc}@20",
+         "--retarget", "shadow", "--view-save", str(out), "-q"],
+        capture_output=True, text=True, timeout=HANG_S,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"view {n} logged, 0 dropped" in proc.stdout, proc.stdout
+    rows, static = _read(out)
+    expected = ["/person/skeleton", "/person/joints", "/person/axes", "/person/tips", "/sensors"]
+    expected += ["/markers/measured", "/markers/model", "/markers/residual", "/robot/tips"]
+    expected += [f"/angles/index/{a}" for a in model.fingers["index"].angle_names()]
+    assert set(expected) <= set(rows), sorted(set(expected) - set(rows))
+    for entity in rows:
+        assert sorted(rows[entity]["frame"]) == list(range(n)), entity
+    assert "Points3D:labels" in static["/markers/measured"]
+
+    def points(entity: str) -> np.ndarray:
+        got = [v for _, v in sorted(rows[entity]["Points3D:positions"], key=lambda r: r[0])]
+        return np.array(got, dtype=float)
+
+    want = marker_angles(model, rec)["index"]
+    labels = list(model.markers)
+    measured = np.stack([rec.markers[k] for k in labels], axis=1)
+    np.testing.assert_allclose(points("/markers/measured"), measured, rtol=0, atol=1e-3)
+    a = dict(zip(want.names, want.angles.T, strict=True))
+    kin = Kinematics(rec.time, {"user_axis": {"index": FingerMotion(a, want.tip)}})
+    _, placed = model_marker_positions(model, hand_poses(model, rec), kin)
+    np.testing.assert_allclose(points("/markers/model"), placed, rtol=0, atol=0.02)
+    gap = np.linalg.norm(placed - measured, axis=2)
+    assert np.median(gap) < 2.0 and gap.max() < 8.0, (np.median(gap), gap.max())
+    tips = np.array([v for _, v in sorted(rows["/person/tips"]["tip_mm"])]).reshape(n, 3)
+    np.testing.assert_allclose(tips, want.tip, rtol=0, atol=BLOCK_MM)
+    exp = _retarget_angles(model, bot, rmap, rec, want)
+    series = {k.replace("\\", ""): v for k, v in rows.items()}
+    for j, name in enumerate(bot.joint_names):
+        got = [v[0] for _, v in sorted(series[f"/robot_angles/{name}"]["Scalars:scalars"])]
+        np.testing.assert_allclose(got, np.degrees(exp[:, j]), atol=np.degrees(ROBOT_RAD))

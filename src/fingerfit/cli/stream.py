@@ -276,7 +276,6 @@ def stream(
         kind,
         replay_path is not None and is_marker_file(replay_path),
         orthogonal,
-        view or view_save is not None,
     )
     units_given = units
     units = units or model.session_units
@@ -481,7 +480,6 @@ def check_marker_stream(
     kind: str,
     marker_file: bool,
     orthogonal: bool,
-    view: bool,
 ) -> None:
     """Refuse, in one line, a source of the other kind than the model (a model fitted from
     markers streams marker positions, a 6-DOF model sensor poses) and, for a marker model,
@@ -505,11 +503,6 @@ def check_marker_stream(
     if orthogonal:
         raise FingerfitError(
             "was fitted from markers: it has its fitted axes only, no --orthogonal variant",
-            path=model_path,
-        )
-    if view:
-        raise FingerfitError(
-            "--view is not built for a model fitted from markers yet (docs/markers.md)",
             path=model_path,
         )
 

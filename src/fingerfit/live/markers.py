@@ -10,7 +10,8 @@ The result is a :class:`~fingerfit.kinematics.Kinematics` with the channel names
 6-DOF model, so the outputs (LSL, ROS 2, rosbag2, ``--record``) take it unchanged.
 
 What a hand sensor gives a 6-DOF model, the hand's pose in each frame, is here the rigid
-fit of the model's hand markers (:func:`hand_poses`): with it (:func:`with_hand`) the
+fit of the model's hand markers (:func:`~fingerfit.kinematics.markers.hand_poses`): with
+it (:func:`~fingerfit.kinematics.markers.with_hand`) the
 robot (``--retarget``), the fingertips in the hand's frame (``--tips-frame hand``) and
 the view take a marker block as they take a 6-DOF one.
 """
@@ -21,10 +22,11 @@ import numpy as np
 
 from ..digits import HAND_SENSOR
 from ..errors import FingerfitError
-from ..kinematics import Kinematics, chain_points, compute_kinematics
+from ..kinematics import Kinematics, compute_kinematics
+from ..kinematics.markers import hand_poses, with_hand
 from ..kinematics.results import FingerMotion
 from ..model import HandModel
-from ..session import PoseSeries, Recording
+from ..session import Recording
 
 
 def is_marker_model(model: HandModel) -> bool:
@@ -102,94 +104,6 @@ def kinematics_of(model: HandModel, recording: Recording, variants: tuple[str, .
     return compute_kinematics(model, recording, variants)
 
 
-def hand_poses(model: HandModel, recording: Recording) -> PoseSeries:
-    """The hand's pose in each frame, as the hand sensor of a 6-DOF model gives it.
-
-    Parameters
-    ----------
-    model : HandModel
-        Fitted from markers: its hand markers' places at the reference posture and the
-        hand's reference pose (:attr:`HandModel.reference_poses`, the technical frame of
-        those markers).
-    recording : Recording
-        Marker positions ``(n, 3)`` mm, tracker frame, NaN where unseen.
-
-    Returns
-    -------
-    PoseSeries
-        Position ``(n, 3)`` mm and rotation ``(n, 3, 3)`` (hand frame -> tracker): the
-        reference pose carried by the rigid fit of the hand markers
-        (:func:`fingerfit.io.rigid.fit_cluster`, as the marker fit carries markers back);
-        NaN where fewer than three hand markers were seen (or on one line).
-    """
-    from ..io.rigid import fit_cluster
-
-    labels = markers_of(model, HAND_SENSOR)
-    shape = np.array([model.markers[k][1] for k in labels])
-    fit = fit_cluster(np.stack([recording.markers[k] for k in labels], axis=1), shape)
-    p0, r0 = model.reference_poses[HAND_SENSOR]
-    return PoseSeries(fit.rotation @ p0 + fit.translation, fit.rotation @ r0)
-
-
-def with_hand(
-    model: HandModel, recording: Recording, kin: Kinematics
-) -> tuple[Recording, Kinematics]:
-    """A marker block as a 6-DOF model's block reads: the hand's pose in every frame, and
-    each digit's pad beside its tip.
-
-    What the robot (``--retarget``), the fingertips in the hand's frame (``--tips-frame
-    hand``) and the view take of a marker model's frames: they read the hand's pose from
-    the recording's hand sensor (:func:`hand_poses`) and the tips (and pads) from the
-    kinematics, as they do of a 6-DOF model's.
-
-    Parameters
-    ----------
-    model : HandModel
-        Fitted from markers.
-    recording : Recording
-        The block's marker positions ``(n, 3)`` mm, tracker frame.
-    kin : Kinematics
-        Its :func:`marker_kinematics` (``user_axis``).
-
-    Returns
-    -------
-    recording : Recording
-        ``recording`` with the pose series ``hand`` (:func:`hand_poses`).
-    kinematics : Kinematics
-        ``user_axis``: the same angles (rad) and tips (mm, tracker frame); for a digit
-        with a pad point, its pad ``(n, 3)`` (mm, tracker frame): the tip plus the
-        pad's offset from it as the model's chain turns it at the solved angles,
-        carried by the hand's rotation. NaN where the angles or the hand's pose are.
-
-    Notes
-    -----
-    The tips are those of ``fingerfit angles`` (each digit's adjustment corrects the
-    hand's frame with its own markers), the hand's pose the plain rigid fit of its
-    markers. The digits as the chain puts them in each digit's corrected frame (the
-    chain's tips at the solved angles) lie farther from the truth: on simulated
-    subjects (index finger, Todorov's layout, 0.3 mm noise, skin sliding; 1000 frames),
-    the tip in the hand's frame is 2.2 mm (median) from the true tip in the true hand's
-    frame this way, 3.6 mm as the chain's tip (MyoHand world); 8.9 and 9.0 mm in the
-    realistic world, whose tip error is the fit's.
-    """
-    hand = hand_poses(model, recording)
-    r0 = model.reference_poses[HAND_SENSOR][1]
-    turn = hand.rotation @ r0.T  # reference posture -> tracker, each frame
-    motions = {}
-    for d, m in kin.motions["user_axis"].items():
-        fm = model.fingers[d]
-        pad = None
-        if fm.pad is not None:
-            offset = chain_points(fm, "user_axis", m.angles, fm.pad) - chain_points(
-                fm, "user_axis", m.angles, fm.tip
-            )
-            pad = m.tip + np.einsum("nij,nj->ni", turn, offset)
-        motions[d] = FingerMotion(m.angles, m.tip, pad)
-    poses = {**recording.poses, HAND_SENSOR: hand}
-    out = Recording(recording.name, recording.time, poses, recording.notes, recording.markers)
-    return out, Kinematics(kin.time, {"user_axis": motions})
-
-
 def check_marker_source(model: HandModel, recording_markers: set[str], where: str) -> None:
     """Refuse a marker source that lacks a marker of the model (one line naming it and
     the source)."""
@@ -200,3 +114,16 @@ def check_marker_source(model: HandModel, recording_markers: set[str], where: st
             "needs every marker the model was fitted with)",
             path=where,
         )
+
+
+__all__ = [
+    "check_marker_source",
+    "hand_poses",
+    "is_marker_model",
+    "kinematics_of",
+    "marker_kinematics",
+    "marker_presence",
+    "markers_of",
+    "model_markers",
+    "with_hand",
+]
