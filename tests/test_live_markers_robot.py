@@ -139,6 +139,20 @@ def test_the_hand_frame_is_the_simulated_hands() -> None:
     assert mm.max() < HAND_MM, mm.max()
 
 
+def _replay(tmp_path: Path, *outputs: str, n: int = 200) -> tuple[Recording, str]:
+    """`fingerfit stream --retarget shadow` of the first ``n`` frames of the test
+    recording replayed (20 times real time) into ``outputs``: the frames and its output."""
+    rec = read_marker_recording(marker_subject()[0] / "test.trc").slice(slice(0, n))
+    trc = write_markers(tmp_path / "test.trc", rec, units="mm")
+    proc = subprocess.run(
+        [FINGERFIT, "stream", str(marker_subject()[1]), "--source", f"replay:{trc}@20",
+         "--retarget", "shadow", *outputs, "-q"],
+        capture_output=True, text=True, timeout=HANG_S,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return rec, proc.stdout
+
+
 def test_replayed_stream_drives_the_robot(tmp_path: Path) -> None:
     """`stream --source replay:test.trc --retarget shadow --ros2-bag`: the bag holds the
     robot's joints of every frame, those of retargeting `fingerfit angles`' angles."""
@@ -146,17 +160,9 @@ def test_replayed_stream_drives_the_robot(tmp_path: Path) -> None:
     from .test_live_retarget import _bag
 
     model, bot, rmap = robot()
-    n = 200
-    rec = read_marker_recording(marker_subject()[0] / "test.trc").slice(slice(0, n))
-    trc = write_markers(tmp_path / "test.trc", rec, units="mm")
     bag = tmp_path / "bag"
-    proc = subprocess.run(
-        [FINGERFIT, "stream", str(marker_subject()[1]), "--source", f"replay:{trc}@20",
-         "--retarget", "shadow", "--ros2-bag", str(bag), "-q"],
-        capture_output=True, text=True, timeout=HANG_S,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert f"{n} recorded" in proc.stdout, proc.stdout
+    rec, output = _replay(tmp_path, "--ros2-bag", str(bag))
+    assert f"{rec.n_frames} recorded" in output, output
     names, pos, _ = _bag(bag)
     assert names == list(bot.joint_names)
     exp = _retarget_angles(model, bot, rmap, rec, marker_angles(model, rec)["index"])
@@ -174,17 +180,10 @@ def test_view_save_shows_the_hand_the_markers_and_the_robot(tmp_path: Path) -> N
     from .test_view import _read
 
     model, bot, rmap = robot()
-    n = 200
-    rec = read_marker_recording(marker_subject()[0] / "test.trc").slice(slice(0, n))
-    trc = write_markers(tmp_path / "test.trc", rec, units="mm")
     out = tmp_path / "live.rrd"
-    proc = subprocess.run(
-        [FINGERFIT, "stream", str(marker_subject()[1]), "--source", f"replay:{trc}@20",
-         "--retarget", "shadow", "--view-save", str(out), "-q"],
-        capture_output=True, text=True, timeout=HANG_S,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert f"view {n} logged, 0 dropped" in proc.stdout, proc.stdout
+    rec, output = _replay(tmp_path, "--view-save", str(out))
+    n = rec.n_frames
+    assert f"view {n} logged, 0 dropped" in output, output
     rows, static = _read(out)
     expected = ["/person/skeleton", "/person/joints", "/person/axes", "/person/tips", "/sensors"]
     expected += ["/markers/measured", "/markers/model", "/markers/residual", "/robot/tips"]

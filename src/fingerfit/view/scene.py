@@ -277,8 +277,7 @@ def marker_scene(model: HandModel, recording: Recording, kin: Kinematics | None 
     model : HandModel
         Fitted from markers.
     recording : Recording
-        Marker positions ``(n, 3)`` mm, tracker frame, NaN where unseen; every marker of
-        the model.
+        The model's markers over ``n`` frames (mm, tracker frame; NaN: unseen).
     kin : Kinematics, optional
         Its :func:`fingerfit.live.markers.marker_kinematics` (computed when not given).
 
