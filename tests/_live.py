@@ -241,6 +241,7 @@ class FakeLsl:
     def __init__(self, delay: float = 0.0) -> None:
         self.delay = delay
         self.angles: list[np.ndarray] = []
+        self.tips: list[np.ndarray] = []
         self.valid: list[np.ndarray] = []
         self.arrival: list[np.ndarray] = []
         self.robot: list[np.ndarray] = []
@@ -248,6 +249,7 @@ class FakeLsl:
 
     def push(self, angles, tips, valid, arrival, robot=None, source=None) -> None:
         self.angles.append(angles.copy())
+        self.tips.append(tips.copy())
         if source is not None:
             self.source.append(source.copy())
         self.valid.append(valid.copy())

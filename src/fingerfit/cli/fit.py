@@ -35,8 +35,41 @@ TABLE_LEGEND = {
 }
 
 
+#: One line per column of the fit table of a model fitted from markers (a bundle
+#: adjustment over every frame: no grasp cycles, so none of the cycles' figures).
+MARKER_LEGEND = {
+    "digit": "digit name",
+    "joint": "each axis, proximal to distal: the flexion joints and a two-axis joint's "
+    "<joint>_abduction",
+    "ROM°": "range of the axis's angle over the fitted frames, degrees",
+    "residual mm": "RMS marker residual per coordinate of the digit's adjustment (the "
+    "camera noise and skin slide it could not explain)",
+    "axis SD°": "largest standard deviation of the axis direction (the adjustment's covariance)",
+    "axis ±°": "95 % half-angle of the axis direction (the largest angle of its 95 % region)",
+    "bone mm": "segment length from this joint's centre to the next joint's centre (dip: to "
+    "the tip)",
+}
+
+
+def _table(model: HandModel, legend: dict[str, str]) -> Table:
+    """An empty fit table titled with the model's subject, method and two-axis joints,
+    its caption a line per column of ``legend`` (digit and joint left out)."""
+    two = sorted({f"{j.upper()}" for fm in model.fingers.values() for j in fm.second_axes})
+    t = Table(
+        title=f"{escape(model.subject)}: method {escape(model.method)}"
+        + (f", two-axis {', '.join(two)}" if two else ""),
+        title_justify="left",
+        caption="\n".join(f"{k}: {v}" for k, v in legend.items() if k not in ("digit", "joint")),
+        caption_justify="left",
+    )
+    for c in legend:
+        t.add_column(c, justify="left" if c in ("digit", "joint") else "right")
+    return t
+
+
 def quality_table(model: HandModel) -> Table:
-    """Per joint: cycles, range of motion, centre-to-axis distance, conditioning, bone length.
+    """Per joint: cycles, range of motion, centre-to-axis distance, conditioning, bone
+    length; of a model fitted from markers, :func:`marker_quality_table`.
 
     The caption is a one-line legend per column (:data:`TABLE_LEGEND`).
     """
@@ -44,18 +77,9 @@ def quality_table(model: HandModel) -> Table:
 
     from ..transforms import angle_between_axes, distance_between_lines
 
-    two = sorted({f"{j.upper()}" for fm in model.fingers.values() for j in fm.second_axes})
-    t = Table(
-        title=f"{escape(model.subject)}: method {escape(model.method)}"
-        + (f", two-axis {', '.join(two)}" if two else ""),
-        title_justify="left",
-        caption="\n".join(
-            f"{k}: {v}" for k, v in TABLE_LEGEND.items() if k not in ("digit", "joint")
-        ),
-        caption_justify="left",
-    )
-    for c in TABLE_LEGEND:
-        t.add_column(c, justify="left" if c in ("digit", "joint") else "right")
+    if model.markers:
+        return marker_quality_table(model)
+    t = _table(model, TABLE_LEGEND)
     for f, fm in model.fingers.items():
         for (j, jm), length in zip(fm.joints.items(), fm.segment_lengths.values(), strict=True):
             q = jm.quality
@@ -79,6 +103,39 @@ def quality_table(model: HandModel) -> Table:
                 f"{length:.1f}",
                 two_axes,
             )
+    return t
+
+
+def marker_quality_table(model: HandModel) -> Table:
+    """Per axis of a model fitted from markers: range of motion, the digit's marker
+    residual, the axis direction's SD and 95 % half-angle, bone length
+    (:data:`MARKER_LEGEND`; the adjustment's :class:`~fingerfit.model.JointQuality`:
+    ``rom_deg``, ``residual_mm``, ``axis_ci_deg``).
+
+    An axis the markers did not determine (its direction's covariance infinite) shows
+    ``–`` for its SD and half-angle.
+    """
+    import math
+
+    from ..estimate.markers.fit import CHI2_95
+
+    t = _table(model, MARKER_LEGEND)
+    for f, fm in model.fingers.items():
+        for (j, jm), length in zip(fm.joints.items(), fm.segment_lengths.values(), strict=True):
+            for axis, bone in ((jm, f"{length:.1f}"), (fm.second_axes.get(j), "–")):
+                if axis is None:
+                    continue
+                q = axis.quality
+                ci = q.axis_ci_deg
+                t.add_row(
+                    f,
+                    axis.name,
+                    f"{max(q.rom_deg):.0f}" if q.rom_deg else "–",
+                    f"{max(q.residual_mm):.2f}" if q.residual_mm else "–",
+                    "–" if ci is None else f"{ci / math.sqrt(CHI2_95):.2f}",
+                    "–" if ci is None else f"{ci:.1f}",
+                    bone,
+                )
     return t
 
 

@@ -275,9 +275,7 @@ def stream(
         markers,
         kind,
         replay_path is not None and is_marker_file(replay_path),
-        retarget is not None,
-        view or view_save is not None,
-        tips_frame,
+        orthogonal,
     )
     units_given = units
     units = units or model.session_units
@@ -481,13 +479,11 @@ def check_marker_stream(
     markers: bool,
     kind: str,
     marker_file: bool,
-    retarget: bool,
-    view: bool,
-    tips_frame: str,
+    orthogonal: bool,
 ) -> None:
     """Refuse, in one line, a source of the other kind than the model (a model fitted from
-    markers streams marker positions, a 6-DOF model sensor poses) and what a marker model
-    does not stream yet (``--retarget``, ``--view``, fingertips in the hand frame)."""
+    markers streams marker positions, a 6-DOF model sensor poses) and, for a marker model,
+    ``--orthogonal`` (it has its fitted axes only)."""
     from ..errors import FingerfitError
 
     if not markers:
@@ -504,16 +500,11 @@ def check_marker_stream(
             "replay:X.trc|.tsv|.c3d or lsl:NAME, a MoCap stream of markers), not poses",
             path=model_path,
         )
-    for given, name in (
-        (retarget, "--retarget"),
-        (view, "--view"),
-        (tips_frame == "hand", "--tips-frame hand"),
-    ):
-        if given:
-            raise FingerfitError(
-                f"{name} is not built for a model fitted from markers yet (docs/markers.md)",
-                path=model_path,
-            )
+    if orthogonal:
+        raise FingerfitError(
+            "was fitted from markers: it has its fitted axes only, no --orthogonal variant",
+            path=model_path,
+        )
 
 
 def check_view(view: bool, view_save: Path | None, record: Path | None) -> None:

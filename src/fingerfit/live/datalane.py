@@ -15,7 +15,7 @@ from ..model import HandModel
 from ..track.recording import last_frame, track_recording
 from ..track.report import tracking_columns
 from ..transforms import FloatArray
-from .markers import is_marker_model, kinematics_of
+from .markers import is_marker_model, kinematics_of, with_hand
 from .outputs import BagOutput, RecordOutput
 from .sources import MAX_BLOCK, Block
 from .values import (
@@ -102,6 +102,7 @@ class DataLane:
         self._stop = threading.Event()
         self._last: FloatArray | None = None
         self.solves = model.tracking is not None
+        self.markers = is_marker_model(model)
         self._anchor = None  # the last frame written: the next block's temporal anchor
         self.error: BaseException | None = None
         self.ok = True
@@ -192,7 +193,8 @@ class DataLane:
             else source_codes(presence, self.sensors, self.model, self.channels.digits, self.solves)
         )
         if self.retargeter is not None:
-            robot = self.retargeter.step(rec, kin)[0]
+            fed = with_hand(self.model, rec, kin) if self.markers else (rec, kin)
+            robot = self.retargeter.step(*fed)[0]
         if self.bag is not None:
             if robot is not None:
                 joints = robot

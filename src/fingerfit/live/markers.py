@@ -8,6 +8,12 @@ the bundle adjustment's inner step with the model held, solved for all the block
 at once (its frames are independent blocks of one sparse system: no loop over frames).
 The result is a :class:`~fingerfit.kinematics.Kinematics` with the channel names of a
 6-DOF model, so the outputs (LSL, ROS 2, rosbag2, ``--record``) take it unchanged.
+
+What a hand sensor gives a 6-DOF model, the hand's pose in each frame, is here the rigid
+fit of the model's hand markers (:func:`~fingerfit.kinematics.markers.hand_poses`): with
+it (:func:`~fingerfit.kinematics.markers.with_hand`) the
+robot (``--retarget``), the fingertips in the hand's frame (``--tips-frame hand``) and
+the view take a marker block as they take a 6-DOF one.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ import numpy as np
 from ..digits import HAND_SENSOR
 from ..errors import FingerfitError
 from ..kinematics import Kinematics, compute_kinematics
+from ..kinematics.markers import hand_poses, with_hand
 from ..kinematics.results import FingerMotion
 from ..model import HandModel
 from ..session import Recording
@@ -107,3 +114,16 @@ def check_marker_source(model: HandModel, recording_markers: set[str], where: st
             "needs every marker the model was fitted with)",
             path=where,
         )
+
+
+__all__ = [
+    "check_marker_source",
+    "hand_poses",
+    "is_marker_model",
+    "kinematics_of",
+    "marker_kinematics",
+    "marker_presence",
+    "markers_of",
+    "model_markers",
+    "with_hand",
+]

@@ -21,7 +21,7 @@ from ..session import HAND_SENSOR, PoseSeries, Recording
 from ..track.live import LiveTracker
 from ..transforms import FloatArray
 from .datalane import DataLane
-from .markers import is_marker_model, kinematics_of
+from .markers import is_marker_model, kinematics_of, with_hand
 from .outputs import BagOutput, LslOutput, RecordOutput, Ros2Output
 from .sources import Block
 from .values import (
@@ -103,10 +103,9 @@ class Streamer:
         if tips_frame not in ("tracker", "hand"):
             raise FingerfitError("must be tracker or hand", field="--tips-frame")
         markers = is_marker_model(model)
-        if markers and tips_frame == "hand":
+        if markers and retargeter is not None and retargeter.variant != "user_axis":
             raise FingerfitError(
-                "a model fitted from markers streams fingertips in the tracker frame only",
-                field="--tips-frame",
+                "a model fitted from markers has its fitted axes only", field="--orthogonal"
             )
         check_max_age(1e3 * max_age)
         if on_silence not in SILENCE_POLICIES:
@@ -283,6 +282,8 @@ class Streamer:
                 self.tracker.remember(kin, float(rec.time[0]))
             else:
                 source = self.tracker.step(rec, kin)
+        if self.markers and (self.retargeter is not None or self.tips_frame == "hand"):
+            rec, kin = with_hand(self.model, rec, kin)  # the hand's pose, as a sensor's
         robot = self.retargeter.step(rec, kin)[0] if self.retargeter is not None else None
         compute = time.perf_counter() - t
         held = self._frame.values(kin, rec, robot, source)

@@ -41,7 +41,7 @@ from ..errors import FingerfitError
 from ..kinematics import compute_kinematics
 from ..model import HandModel
 from ..processes import child_ignores_interrupt, context, end_child, start_child
-from ..session import Recording, concat_recordings
+from ..session import HAND_SENSOR, PoseSeries, Recording, concat_recordings
 from ..track.recording import last_frame, track_recording
 from ..transforms import FloatArray
 from .rerunlog import (
@@ -56,6 +56,7 @@ from .rerunlog import (
 from .scene import (
     RobotPlacement,
     hand_scene,
+    marker_scene,
     require_rerun,
 )
 
@@ -187,7 +188,7 @@ class LiveView:
         if self.robot is not None and q is None:
             rows, q = self._sent_until(first + n)
             rows = rows - first
-        block = Recording("", recording.time, recording.poses)
+        block = Recording("", recording.time, recording.poses, markers=recording.markers)
         item = ("frames", first, block, rows, q)
         if self.policy == "drop":
             try:
@@ -284,14 +285,20 @@ class _Logger:
         """Log the block whose first frame is the stream's frame ``first``; the robot at
         the block's ``rows`` (all when None) with joints ``q`` (rows, nq)."""
         n = recording.n_frames
-        if self.model.tracking is not None and n:
-            # Frames with a missing sensor: solved by the model as the stream's files are,
-            # joined to the previous block by the temporal prior.
-            kin = track_recording(self.model, recording, _VARIANTS, anchor=self._anchor).kinematics
-            self._anchor = last_frame(kin)
+        if self.model.markers:  # a model fitted from markers: its markers' kinematics
+            scene = marker_scene(self.model, recording)
+            # the robot is placed by the hand's pose (its markers' rigid fit)
+            recording = Recording(recording.name, recording.time, hand_pose(scene))
         else:
-            kin = compute_kinematics(self.model, recording, _VARIANTS)
-        scene = hand_scene(self.model, recording, kin)
+            if self.model.tracking is not None and n:
+                # Frames with a missing sensor: solved by the model as the stream's files
+                # are, joined to the previous block by the temporal prior.
+                track = track_recording(self.model, recording, _VARIANTS, anchor=self._anchor)
+                kin = track.kinematics
+                self._anchor = last_frame(kin)
+            else:
+                kin = compute_kinematics(self.model, recording, _VARIANTS)
+            scene = hand_scene(self.model, recording, kin)
         if not self._started:
             log_static(scene, self.stream)
             if self.placement is not None:
@@ -319,6 +326,13 @@ def _portable(exc: BaseException) -> BaseException:
     except Exception:
         return FingerfitError(f"live view: {type(exc).__name__}: {exc}")
     return exc
+
+
+def hand_pose(scene) -> dict[str, PoseSeries]:
+    """The hand sensor's poses of a :class:`~fingerfit.view.scene.Scene` (a marker model's:
+    its markers' rigid fit), as a recording's poses."""
+    position, rotation = scene.sensors[HAND_SENSOR]
+    return {HAND_SENSOR: PoseSeries(position, rotation)}
 
 
 class _Joined:

@@ -89,7 +89,7 @@ def blueprint(robot: bool = False):
         rrb.Horizontal(
             rrb.Spatial3DView(
                 origin="/",
-                contents=["/person/**", "/sensors/**", "/truth/**", "/robot/**"],
+                contents=["/person/**", "/sensors/**", "/markers/**", "/truth/**", "/robot/**"],
                 name="hand (mm, tracker frame)",
             ),
             rrb.Vertical(*series),
@@ -152,6 +152,24 @@ def log_static(scene: Scene, stream) -> None:
     if scene.sensors:
         colours = list(_SENSOR_AXIS_COLOURS) * len(scene.sensors)
         _static(rr, stream, "sensors", rr.Arrows3D.from_fields(colors=colours, radii=[0.6]))
+    if scene.markers is not None:
+        labels = scene.markers.labels
+        for entity, colour, radius in (
+            ("measured", "markers", 2.0),
+            ("model", "model_markers", 1.5),
+        ):
+            _static(
+                rr,
+                stream,
+                f"markers/{entity}",
+                rr.Points3D.from_fields(colors=[_COLOURS[colour]], radii=[radius], labels=labels),
+            )
+        _static(
+            rr,
+            stream,
+            "markers/residual",
+            rr.LineStrips3D.from_fields(colors=[_COLOURS["model_markers"]], radii=[0.4]),
+        )
     have = _truth_digits(scene)
     if have:
         _static(
@@ -230,6 +248,8 @@ def log_frames(scene: Scene, stream, first: int = 0) -> None:
     ab/adduction purple), ``person/tips`` (with ``tip_mm``, the same tips in float64:
     Rerun stores positions in float32), ``person/pads``, ``person/orthogonal/tips``,
     ``sensors`` (each sensor's x, y, z axes), ``angles/<digit>/<angle>`` (deg),
+    ``markers/measured``, ``markers/model`` and ``markers/residual`` (a marker model's
+    markers as recorded, where the model puts them, a line between the two),
     ``truth/tips``, and the robot's (:func:`log_robot_frames`). Their colours and labels
     are :func:`log_static`'s.
     """
@@ -273,6 +293,14 @@ def log_frames(scene: Scene, stream, first: int = 0) -> None:
                 columns=rr.Scalars.columns(scalars=np.degrees(a)),
                 recording=stream,
             )
+    if scene.markers is not None:  # measured, the model's, and a line between each pair
+        m = scene.markers
+        _points(rr, stream, "markers/measured", idx, m.measured)
+        _points(rr, stream, "markers/model", idx, m.model)
+        k = len(m.labels)
+        pairs = [np.array([i, k + i]) for i in range(k)]
+        both = np.concatenate([m.measured, m.model], axis=1)
+        _strips(rr, stream, "markers/residual", idx, both, pairs)
     have = _truth_digits(scene)
     if have:
         truth = np.stack([scene.truth_tips[g] for g in have], axis=1)

@@ -44,6 +44,8 @@ _COLOURS = {
     "truth": (40, 220, 90),
     "robot": (160, 160, 160),
     "robot_tips": (255, 215, 0),
+    "markers": (0, 220, 220),
+    "model_markers": (255, 0, 200),
 }
 _SENSOR_AXIS_COLOURS = ((230, 40, 40), (40, 200, 40), (60, 90, 255))
 
@@ -137,6 +139,9 @@ class Scene:
     truth_tips : dict[str, ndarray], optional
         Digit -> true tip ``(n, 3)`` of a simulated session.
     robot : RobotScene, optional
+    markers : MarkerPoints, optional
+        A model fitted from markers: the measured markers beside where the model puts
+        them (:func:`marker_scene`).
     notes : list of str
     """
 
@@ -150,11 +155,32 @@ class Scene:
     sensors: dict[str, tuple[FloatArray, FloatArray]]
     truth_tips: dict[str, FloatArray] | None = None
     robot: RobotScene | None = None
+    markers: MarkerPoints | None = None
     notes: list[str] = field(default_factory=list)
 
     @property
     def n_frames(self) -> int:
         return int(self.time.shape[0])
+
+
+@dataclass(frozen=True)
+class MarkerPoints:
+    """A marker model's markers over a recording (tracker frame, mm).
+
+    Attributes
+    ----------
+    labels : list of str
+        The model's markers, in its order.
+    measured : ndarray, shape (n, M, 3)
+        As recorded; NaN where unseen.
+    model : ndarray, shape (n, M, 3)
+        Where the model puts them at the solved angles and the hand's pose
+        (:func:`fingerfit.kinematics.markers.model_marker_positions`).
+    """
+
+    labels: list[str]
+    measured: FloatArray
+    model: FloatArray
 
 
 def _carry(model: HandModel, recording: Recording, points: FloatArray) -> FloatArray:
@@ -239,6 +265,36 @@ def hand_scene(model: HandModel, recording: Recording, kin: Kinematics | None = 
         axis_vectors=h - o,
         sensors=sensors,
     )
+
+
+def marker_scene(model: HandModel, recording: Recording, kin: Kinematics | None = None) -> Scene:
+    """The hand of a model fitted from markers over a marker recording: :func:`hand_scene`
+    with the hand's pose of its markers' rigid fit (shown as the ``hand`` sensor's axes),
+    and the measured markers beside where the model puts them.
+
+    Parameters
+    ----------
+    model : HandModel
+        Fitted from markers.
+    recording : Recording
+        The model's markers over ``n`` frames (mm, tracker frame; NaN: unseen).
+    kin : Kinematics, optional
+        Its :func:`fingerfit.live.markers.marker_kinematics` (computed when not given).
+
+    Returns
+    -------
+    Scene
+        User-axis model only (a marker model has no orthogonal variant); ``markers`` set.
+    """
+    from ..kinematics.markers import model_marker_positions, with_hand
+    from ..live.markers import marker_kinematics
+
+    rec, kin = with_hand(model, recording, kin or marker_kinematics(model, recording))
+    scene = hand_scene(model, Recording(rec.name, rec.time, rec.poses), kin)
+    labels, placed = model_marker_positions(model, rec.poses[HAND_SENSOR], kin)
+    measured = np.stack([recording.markers[k] for k in labels], axis=1)
+    scene.markers = MarkerPoints(labels, measured, placed)
+    return scene
 
 
 def truth_tips(recording_path: Path, n_frames: int) -> tuple[dict[str, FloatArray] | None, str]:
