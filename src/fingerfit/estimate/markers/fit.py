@@ -207,13 +207,11 @@ def fit_digit(
 
     if start is None:
         result = staged_start(data, layout.structure, layout.first, layout.second)
-        if slide:  # from the slides the fixed-place fit's residuals call for
-            free = slide_free(data, layout.structure.levels)
-            guess = slide_uncertainty(data, layout.structure, result)
-            L = layout.structure.levels
-            result.slide = np.where(free[-guess.slide.size :].reshape(-1, 3), guess.slide, 0.0)
-            result.u = result.u + guess.step[4 * L :].reshape(-1, 3)
-            result = again(result, result.lines.moved(guess.step[: 4 * L]), result.q, free)
+        if slide:
+            result.slide = np.zeros((len(data.labels), 3))
+            result = again(
+                result, result.lines, result.q, slide_free(data, layout.structure.levels)
+            )
     else:
         lines = start.lines
         near = start.u[data.segment == 0].mean(axis=0)

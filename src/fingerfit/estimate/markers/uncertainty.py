@@ -82,20 +82,12 @@ class SlideUncertainty:
         recording determines the slide's scale poorly.
     iterations : int
         EM iterations.
-    slide : ndarray, shape (M, 3)
-        The digit's markers' slides expected given the recording (the posterior mean,
-        mm/rad, tracker coordinates at the reference posture).
-    step : ndarray, shape (4 L + 3 M,)
-        The lines' and places' step that goes with them (:meth:`.bundle.Lines.moved`,
-        then mm; 0 where held).
     """
 
     covariance: FloatArray
     slide_sd: FloatArray
     used_sd: FloatArray
     iterations: int
-    slide: FloatArray
-    step: FloatArray
 
 
 def marker_frames(data: DigitMarkers, structure: Structure, result: BundleResult) -> FloatArray:
@@ -190,10 +182,7 @@ def slide_uncertainty(
     idx = np.flatnonzero(result.free)
     full[np.ix_(idx, idx)] = cov_g
     lines = np.stack([full[4 * j : 4 * j + 4, 4 * j : 4 * j + 4] for j in range(L)])
-    slides = (tr[ng:, ng:] @ mean[ng:])[: 3 * M].reshape(M, 3)
-    step = np.zeros(G)
-    step[idx] = mean[:ng]
-    return SlideUncertainty(lines, np.sqrt(tau2), np.sqrt(used), it, slides, step)
+    return SlideUncertainty(lines, np.sqrt(tau2), np.sqrt(used), it)
 
 
 def _with_hand_slides(
