@@ -201,6 +201,28 @@ def speed(frames: int = 10_000) -> dict:
     return out
 
 
+def markdown(summary: dict) -> str:
+    """The summary as the table of ``docs/markers.md``."""
+    lines = [
+        "| condition / layout | MP deg mean (max) | PIP | DIP | floor MP / PIP / DIP "
+        "| truth in 95 % region MP / PIP / DIP | 95 % half-angle MP / PIP / DIP "
+        "| tip mm (6-DOF) | ratio |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for key, s in summary.items():
+        n = s["subjects"]
+        cells = [f"{s[j]['axis_deg_mean']:.1f} ({s[j]['axis_deg_max']:.1f})" for j in JOINTS]
+        floor = " / ".join(f"{s[j]['floor_deg_mean']:.1f}" for j in JOINTS)
+        covered = " / ".join(f"{round(s[j]['covered'] * n)}" for j in JOINTS) + f" of {n}"
+        ci = " / ".join(f"{s[j].get('ci_deg_mean', float('nan')):.1f}" for j in JOINTS)
+        tip = f"{s['tip_mm_mean']:.2f} ({s['sixdof_tip_mm_mean']:.2f})"
+        lines.append(
+            f"| {key} | {' | '.join(cells)} | {floor} | {covered} | {ci} | {tip} "
+            f"| {s['tip_ratio']:.2f}x |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--subjects", type=int, default=3)
@@ -257,6 +279,7 @@ def main() -> None:
     if args.speed:
         doc["speed"] = speed()
     print(json.dumps(doc["summary"], indent=1))
+    print(markdown(doc["summary"]))
     if args.json:
         args.json.write_text(json.dumps(doc, indent=1) + "\n")
 

@@ -227,9 +227,10 @@ def fit_digit(
         result = again(start, two, q, free)
     # The same motion, the angles within a turn and each flexion axis pointed so that
     # flexion is positive.
-    q = np.mod(result.q + np.pi, 2 * np.pi) - np.pi
+    turned = np.abs(result.q) > np.pi
+    q = np.where(turned, np.mod(result.q + np.pi, 2 * np.pi) - np.pi, result.q)
     flipped = [k for k in layout.first if flexion_sign(q[k]) < 0]
-    if flipped or np.any(q != result.q):
+    if flipped or turned.any():
         axis = result.lines.axis.copy()
         axis[flipped], q[flipped] = -axis[flipped], -q[flipped]
         result = again(result, Lines(axis, result.lines.centre), q, result.free)

@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 
 from ...transforms import FloatArray, unit
-from .bundle import BundleResult, HandFrames, Lines, Structure, adjust, predict, residual
+from .bundle import BundleResult, HandFrames, Lines, Structure, adjust, predict
 from .observe import DigitMarkers
 
 
@@ -48,13 +48,7 @@ def circle_axis(tracks: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
     """
     scatter = sum(np.cov(t.T) * len(t) for t in tracks)
     _, vec = np.linalg.eigh(scatter)
-    return vec[:, 0], circle_centre(tracks, vec[:, 0])
-
-
-def circle_centre(tracks: list[FloatArray], axis: FloatArray) -> FloatArray:
-    """The mean centre ``(3,)`` (mm) of points turning on circles about a line of
-    direction ``axis (3,)``: each track's algebraic circle fit in the plane
-    perpendicular to it."""
+    axis = vec[:, 0]
     basis = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]  # (3, 2)
     centres = []
     for t in tracks:
@@ -64,7 +58,7 @@ def circle_centre(tracks: list[FloatArray], axis: FloatArray) -> FloatArray:
         sol = np.linalg.lstsq(a, (xy * xy).sum(axis=1), rcond=None)[0]
         along = (t @ axis).mean()
         centres.append(basis @ sol[:2] + along * axis)
-    return np.mean(centres, axis=0)
+    return axis, np.mean(centres, axis=0)
 
 
 def turn_about(
@@ -142,31 +136,19 @@ def staged_start(
             tracks = np.einsum("mjin,mjn->min", rot, tracks - p0)
         tracks = tracks.transpose(0, 2, 1)  # (m, n, 3)
         usable = [t[np.isfinite(t).all(axis=1)] for t in tracks]
-        usable = [t for t in usable if len(t) > 3]
-        lines_up_to = Lines(axis[:levels], centre[:levels])
-        sub = Structure(structure.depth[: j + 1])
-        part = subset(data, j)
-        starts = []
-        # The arcs' own plane; beyond the first joint also the parent joint's axis (a
-        # short arc of one marker tilts its plane freely): the lower cost decides.
-        for a in [circle_axis(usable)[0]] + ([axis[first_levels[j - 1]]] if j > 0 else []):
-            c = circle_centre(usable, a)
-            ang = np.stack([turn_about(t, u[i], a, c) for t, i in zip(tracks, child, strict=True)])
-            seen = np.isfinite(ang)
-            theta = np.where(seen, ang, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
-            if flexion_sign(theta) < 0:
-                a, theta = -a, -theta
-            lines_up_to.axis[level], lines_up_to.centre[level] = a, c
-            trial_q = q[:levels].copy()
-            trial_q[level] = theta
-            cost = residual(part, sub, lines_up_to, u[: len(part.labels)], trial_q, hand)
-            starts.append((cost, a, c, theta))
-        _, a, c, theta = min(starts, key=lambda x: x[0])
+        a, c = circle_axis([t for t in usable if len(t) > 3])
+        ang = np.stack([turn_about(t, u[i], a, c) for t, i in zip(tracks, child, strict=True)])
+        seen = np.isfinite(ang)
+        theta = np.where(seen, ang, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
+        if flexion_sign(theta) < 0:
+            a, theta = -a, -theta
         axis[level], centre[level], q[level] = a, c, theta
         if j in second:
             bone = unit(u[child].mean(axis=0) - c)
             axis[second[j]] = unit(np.cross(bone, a))
             centre[second[j]] = c
+        sub = Structure(structure.depth[: j + 1])
+        part = subset(data, j)
         result = adjust(
             part,
             sub,

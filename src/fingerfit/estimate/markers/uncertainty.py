@@ -245,7 +245,7 @@ def _scale_covariance(info: FloatArray, ng: int, tau2: FloatArray, group: np.nda
 
 
 def _expected_variance(tau2: FloatArray, sd: FloatArray) -> FloatArray:
-    """The slide's variances ``(3,)`` expected given the recording: the mean of a normal
+    """The slide's variances ``(6,)`` expected given the recording: the mean of a normal
     likelihood about the estimate ``tau2`` with SD ``sd``, truncated to positive
     variances (a flat prior on the variance). ``tau2`` where the recording determines
     it well, above it where it does not."""
