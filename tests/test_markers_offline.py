@@ -209,8 +209,9 @@ def _written(write, path: Path, rec) -> Path:
 @pytest.mark.parametrize("command", ["retarget", "view", "angles"])
 def test_the_other_kind_of_recording_is_refused_in_one_line(command: str, tmp_path: Path) -> None:
     """A 6-DOF model with a marker recording, a model fitted from markers with a pose
-    recording, a marker recording without one of the model's markers: one line naming
-    the file (and the marker), exit 2, nothing written."""
+    recording, a marker recording without one of the model's markers, a model fitted
+    from markers with ``--orthogonal``: one line naming the file (and the marker), exit
+    2, nothing written."""
     f = _files()
     out = tmp_path / ("out.rrd" if command == "view" else "out.csv")
     tail = ["--save", str(out)] if command == "view" else ["-o", str(out)]
@@ -229,3 +230,7 @@ def test_the_other_kind_of_recording_is_refused_in_one_line(command: str, tmp_pa
     assert "poses.csv: is not a marker recording" in line and "fitted from markers" in line
     line = refused(f["markers"], f["short"])
     assert "short.trc" in line and "no marker IND3_1 of the model in the recording" in line
+    if command != "angles":  # a marker model has its fitted axes only
+        tail.append("--orthogonal")
+        line = refused(f["markers"], f["trc"])
+        assert "marker_model.json: was fitted from markers" in line and "--orthogonal" in line
