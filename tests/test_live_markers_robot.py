@@ -175,15 +175,22 @@ def test_view_save_shows_the_hand_the_markers_and_the_robot(tmp_path: Path) -> N
     where the model puts them (within a few mm of them: the hand's frame of its markers'
     rigid fit, without each digit's correction), and the robot of every frame."""
     pytest.importorskip("rerun")
+    out = tmp_path / "live.rrd"
+    rec, output = _replay(tmp_path, "--view-save", str(out))
+    assert f"view {rec.n_frames} logged, 0 dropped" in output, output
+    check_marker_view(out, rec)
+
+
+def check_marker_view(out: Path, rec: Recording) -> None:
+    """The view file ``out`` of the marker recording ``rec`` with the Shadow hand
+    (`stream --view-save`, `view --save`): every frame of the hand, the markers measured
+    and where the model puts them, and the robot of retargeting `fingerfit angles`."""
     from fingerfit.kinematics.markers import model_marker_positions
 
     from .test_view import _read
 
     model, bot, rmap = robot()
-    out = tmp_path / "live.rrd"
-    rec, output = _replay(tmp_path, "--view-save", str(out))
     n = rec.n_frames
-    assert f"view {n} logged, 0 dropped" in output, output
     rows, static = _read(out)
     expected = ["/person/skeleton", "/person/joints", "/person/axes", "/person/tips", "/sensors"]
     expected += ["/markers/measured", "/markers/model", "/markers/residual", "/robot/tips"]

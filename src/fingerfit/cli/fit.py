@@ -167,6 +167,46 @@ def read_checked_recording(
     return rec
 
 
+def is_marker_input(model: HandModel, model_path: Path, recording: Path) -> bool:
+    """Whether ``recording`` is a marker recording (``.trc``, ``.tsv``, ``.c3d``) for a
+    model fitted from markers (``angles``, ``view``, ``retarget``), else a pose recording
+    for a 6-DOF model; the other kind refused in one line naming the file and the model."""
+    from ..errors import FingerfitError
+    from ..io.markers import MARKER_SUFFIXES, is_marker_file
+
+    markers = is_marker_file(recording)
+    if markers and not model.markers:
+        raise FingerfitError(
+            f"is a marker recording, but {model_path} was fitted from 6-DOF sensors and "
+            "takes pose recordings (fit a model from a marker session: docs/markers.md)",
+            path=recording,
+        )
+    if model.markers and not markers:
+        raise FingerfitError(
+            f"is not a marker recording ({', '.join(MARKER_SUFFIXES)}), but {model_path} "
+            "was fitted from markers and takes recordings of its markers",
+            path=recording,
+        )
+    return markers
+
+
+def read_marker_input(
+    model: HandModel, path: Path, units: str | None, quiet: bool = False
+) -> Recording:
+    """A marker recording read for a model fitted from markers: its notes (gaps counted)
+    shown unless ``quiet``, every marker of the model present (else one line naming the
+    marker and the file). ``units`` overrides the file's own (``--units``; None: the
+    file's)."""
+    from ..io.markers import read_marker_recording
+    from ..live.markers import check_marker_source
+
+    rec = read_marker_recording(path, units=units)
+    for note in rec.notes if not quiet else []:
+        notice("note", note)
+    check_marker_source(model, set(rec.markers), str(path), "recording")
+    return rec
+
+
 def check_solved(tracked, path: Path, force: bool) -> None:
     """The frames the model solved, checked against it (the residual of its solution: the
     pivot check of a reduced layout, :func:`fingerfit.estimate.plausibility.check_tracking`);
@@ -273,20 +313,10 @@ def _fit_markers(session, names: list[str] | None, bar, task):
 
 def _marker_angles(model, recording: Path, output: Path, quiet: bool) -> None:
     """``fingerfit angles`` of a marker recording with a model fitted from markers."""
-    from ..errors import FingerfitError
     from ..estimate.markers.angles import angles_table, marker_angles
     from ..io.atomic import atomic_write
-    from ..io.markers import is_marker_file, read_marker_recording
 
-    if not (model.markers and is_marker_file(recording)):
-        raise FingerfitError(
-            "a marker recording needs a model fitted from markers, and a model fitted "
-            "from markers a marker recording (.trc, .tsv, .c3d)",
-            path=recording,
-        )
-    rec = read_marker_recording(recording)
-    for note in rec.notes if not quiet else []:
-        notice("note", note)
+    rec = read_marker_input(model, recording, None, quiet)
     result = marker_angles(model, rec)
     table = angles_table(rec.time, result)
     with atomic_write(output, newline="") as fh:
@@ -391,9 +421,7 @@ def angles(
             raise typer.BadParameter(
                 f"the model has no '{d}' (has: {', '.join(model.fingers)})", param_hint="--fingers"
             )
-    from ..io.markers import is_marker_file
-
-    if model.markers or is_marker_file(recording):
+    if is_marker_input(model, model_path, recording):
         _marker_angles(model, recording, output, quiet)
         return
     chosen = None if sensors is None else [x.strip() for x in sensors.split(",") if x.strip()]

@@ -83,6 +83,16 @@ def check_robot_options(
     return inputs
 
 
+def check_orthogonal(model_path: Path, markers: bool, orthogonal: bool) -> None:
+    """Refuse ``--orthogonal`` for a model fitted from markers (``markers``) in one line:
+    it has its fitted axes only (``retarget``, ``view``, ``stream``)."""
+    if markers and orthogonal:
+        raise FingerfitError(
+            "was fitted from markers: it has its fitted axes only, no --orthogonal variant",
+            path=model_path,
+        )
+
+
 def resolve_robot(robot: str, map_path: Path | None, hand: str, option: str = "--robot"):
     """:func:`fingerfit.retarget.resolve`, its errors about the robot naming ``option``.
 
@@ -109,7 +119,13 @@ def retarget(
     model_path: Annotated[
         Path, typer.Argument(metavar="MODEL", help="Model JSON from `fingerfit fit`.")
     ],
-    recording: Annotated[Path, typer.Argument(help="Pose CSV (canonical format).")],
+    recording: Annotated[
+        Path,
+        typer.Argument(
+            help="Pose CSV (canonical format); with a model fitted from markers, a marker "
+            "recording (.trc, .tsv, .c3d)."
+        ),
+    ],
     output: Annotated[
         Path,
         typer.Option(
@@ -125,7 +141,10 @@ def retarget(
     orthogonal: OrthogonalOption = False,
     units: Annotated[
         str | None,
-        typer.Option(help="Units of the recording (default: the model's session units)."),
+        typer.Option(
+            help="Units of the recording (default: the model's session units; a marker "
+            "recording's own)."
+        ),
     ] = None,
     figure: Annotated[
         str | None,
@@ -152,6 +171,7 @@ def retarget(
     from ..retarget import retarget as run
     from ..retarget.palm import palm_in_hand_sensor, person_palm
     from ..session import UNITS_TO_MM
+    from .fit import is_marker_input, read_marker_input
 
     robot_files = check_robot_options(robot, map_path, method, contact_mm)
     if output.suffix.lower() not in (".csv", ".parquet"):
@@ -166,6 +186,9 @@ def retarget(
     for t in targets:
         check_target(t, overwrite=overwrite)
     model = load_model(model_path)
+    markers = is_marker_input(model, model_path, recording)
+    check_orthogonal(model_path, markers, orthogonal)
+    units_given = units
     units = units or model.session_units
     if units not in UNITS_TO_MM:
         raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
@@ -178,23 +201,35 @@ def retarget(
             )
         frames = [int(v) for v in items]
     robot_model, rmap = resolve_robot(robot, map_path, model.hand)
-    rec = read_pose_csv(recording, units=units)
-    for note in rec.notes:
-        notice("note", note)
+    if markers:
+        rec = read_marker_input(model, recording, units_given)
+    else:
+        rec = read_pose_csv(recording, units=units)
+        for note in rec.notes:
+            notice("note", note)
     bad = [f for f in frames if f >= rec.n_frames]
     if bad:
         raise FingerfitError(
             f"frame {bad[0]} is past the recording's {rec.n_frames} frames", field="--figure"
         )
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        enforce(check_recording(model, rec, units, recording), False)
-    for w in caught:
-        notice("warning", str(w.message))
+    if not markers:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            enforce(check_recording(model, rec, units, recording), False)
+        for w in caught:
+            notice("warning", str(w.message))
     variant = "orthogonal" if orthogonal else "user_axis"
     with progress(quiet) as bar:
-        task = bar.add_task(f"retargeting ({method})", total=1)
-        res = run(model, rec, robot_model, rmap, method, variant, contact_mm=contact_mm)
+        task = bar.add_task(f"retargeting ({method})", total=2 if markers else 1)
+        kin = None
+        if markers:  # the angles of `fingerfit angles`, the hand's pose of its markers
+            from ..kinematics.markers import with_hand
+            from ..live.markers import marker_kinematics
+
+            bar.update(task, description="angles of the markers")
+            rec, kin = with_hand(model, rec, marker_kinematics(model, rec))
+            bar.update(task, advance=1, description=f"retargeting ({method})")
+        res = run(model, rec, robot_model, rmap, method, variant, contact_mm=contact_mm, kin=kin)
         bar.advance(task)
     for note in res.notes:
         notice("note", note)
@@ -215,7 +250,7 @@ def retarget(
     if frames:
         from ..retarget.figure import figure_png
 
-        files[png] = figure_png(model, rec, res, robot_model, rmap, frames, variant)
+        files[png] = figure_png(model, rec, res, robot_model, rmap, frames, variant, kin)
     write_files(files, overwrite=overwrite)
     err = np.linalg.norm(res.tips - res.targets, axis=2)
     say(

@@ -15,6 +15,7 @@ from .retarget import (
     MapOption,
     MethodOption,
     OrthogonalOption,
+    check_orthogonal,
     check_robot_options,
     resolve_robot,
 )
@@ -500,11 +501,7 @@ def check_marker_stream(
             "replay:X.trc|.tsv|.c3d or lsl:NAME, a MoCap stream of markers), not poses",
             path=model_path,
         )
-    if orthogonal:
-        raise FingerfitError(
-            "was fitted from markers: it has its fitted axes only, no --orthogonal variant",
-            path=model_path,
-        )
+    check_orthogonal(model_path, markers, orthogonal)
 
 
 def check_view(view: bool, view_save: Path | None, record: Path | None) -> None:

@@ -9,7 +9,14 @@ import typer
 
 from ..errors import FingerfitError
 from .app import Quiet, app, notice, progress, say, user_errors
-from .retarget import ROBOT_HELP, MapOption, MethodOption, OrthogonalOption, check_robot_options
+from .retarget import (
+    ROBOT_HELP,
+    MapOption,
+    MethodOption,
+    OrthogonalOption,
+    check_orthogonal,
+    check_robot_options,
+)
 
 
 @app.command()
@@ -18,7 +25,13 @@ def view(
     model_path: Annotated[
         Path, typer.Argument(metavar="MODEL", help="Model JSON from `fingerfit fit`.")
     ],
-    recording: Annotated[Path, typer.Argument(help="Pose CSV (canonical format).")],
+    recording: Annotated[
+        Path,
+        typer.Argument(
+            help="Pose CSV (canonical format); with a model fitted from markers, a marker "
+            "recording (.trc, .tsv, .c3d)."
+        ),
+    ],
     robot: Annotated[
         str | None, typer.Option(help=f"Also show a robot hand posed by the retarget: {ROBOT_HELP}")
     ] = None,
@@ -47,7 +60,10 @@ def view(
     ] = 9876,
     units: Annotated[
         str | None,
-        typer.Option(help="Units of the recording (default: the model's session units)."),
+        typer.Option(
+            help="Units of the recording (default: the model's session units; a marker "
+            "recording's own)."
+        ),
     ] = None,
     force: Annotated[
         bool,
@@ -60,12 +76,14 @@ def view(
     quiet: Quiet = False,
 ) -> None:
     """Show the fitted hand per frame in the Rerun viewer: segments, joint centres and
-    axes, tips and pads of both models, sensors, joint angles; a robot hand beside it."""
+    axes, tips and pads of both models, sensors, joint angles; a robot hand beside it.
+    A model fitted from markers shows a marker recording: its markers as recorded and
+    where the model puts them too (docs/markers.md)."""
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..model import load_model
     from ..session import UNITS_TO_MM
     from ..view import has_display, require_rerun
-    from .fit import read_checked_recording
+    from .fit import is_marker_input, read_checked_recording, read_marker_input
 
     inputs = [model_path, recording]
     if robot is not None:
@@ -83,10 +101,15 @@ def view(
         )
     require_rerun()  # before any work: a missing package is one line naming the extra
     model = load_model(model_path)
-    units = units or model.session_units
-    if units not in UNITS_TO_MM:
-        raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
-    rec = read_checked_recording(model, recording, units, None, force)
+    markers = is_marker_input(model, model_path, recording)
+    check_orthogonal(model_path, markers, orthogonal)
+    if markers:
+        rec = read_marker_input(model, recording, units)
+    else:
+        units = units or model.session_units
+        if units not in UNITS_TO_MM:
+            raise FingerfitError(f"must be one of {', '.join(UNITS_TO_MM)}", field="--units")
+        rec = read_checked_recording(model, recording, units, None, force)
     scene = _scene(model, rec, recording, robot, map_path, method, orthogonal, quiet)
     for note in scene.notes:
         notice("note", note)
@@ -108,11 +131,16 @@ def _scene(model, rec, recording: Path, robot, map_path, method, orthogonal, qui
     """The :class:`fingerfit.view.Scene` of a recording, with the robot and the truth."""
     from ..track import track_recording
     from ..view import hand_scene, robot_scene, truth_tips
+    from ..view.scene import hand_recording, marker_scene
 
     with progress(quiet) as bar:
         task = bar.add_task("kinematics", total=3 if robot is not None else 2)
-        kin = track_recording(model, rec).kinematics  # missing sensors solved by the model
-        scene = hand_scene(model, rec, kin)
+        if model.markers:  # the angles of `fingerfit angles`, the hand of its markers
+            scene = marker_scene(model, rec)
+            rec, kin = hand_recording(scene, rec), scene.kinematics
+        else:
+            kin = track_recording(model, rec).kinematics  # missing sensors: the model's
+            scene = hand_scene(model, rec, kin)
         bar.update(task, advance=1, description="truth")
         scene.truth_tips, note = truth_tips(recording, rec.n_frames)
         if note:

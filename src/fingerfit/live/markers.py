@@ -104,13 +104,16 @@ def kinematics_of(model: HandModel, recording: Recording, variants: tuple[str, .
     return compute_kinematics(model, recording, variants)
 
 
-def check_marker_source(model: HandModel, recording_markers: set[str], where: str) -> None:
-    """Refuse a marker source that lacks a marker of the model (one line naming it and
-    the source)."""
+def check_marker_source(
+    model: HandModel, recording_markers: set[str], where: str, what: str = "source"
+) -> None:
+    """Refuse a marker source (``what``: ``source`` of a stream, ``recording`` of
+    ``view``/``retarget``) that lacks a marker of the model, in one line naming the
+    marker and ``where``."""
     missing = [k for k in model_markers(model) if k not in recording_markers]
     if missing:
         raise FingerfitError(
-            f"no marker {', '.join(missing)} of the model in the source (a marker stream "
+            f"no marker {', '.join(missing)} of the model in the {what} (a marker {what} "
             "needs every marker the model was fitted with)",
             path=where,
         )

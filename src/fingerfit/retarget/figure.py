@@ -14,7 +14,7 @@ import io
 
 import numpy as np
 
-from ..kinematics import chain_points, compute_kinematics
+from ..kinematics import Kinematics, chain_points, compute_kinematics
 from ..model import HandModel
 from ..session import Recording
 from ..transforms import FloatArray
@@ -31,6 +31,7 @@ def figure_png(
     rmap: RobotMap,
     frames: list[int],
     variant: str = "user_axis",
+    kin: Kinematics | None = None,
 ) -> bytes:
     """PNG bytes: one row per frame, the person (left) and the robot (right), side view.
 
@@ -43,6 +44,10 @@ def figure_png(
         0-based frame numbers.
     variant : str
         Model variant that drove the robot.
+    kin : Kinematics, optional
+        The kinematics that drove it (a model fitted from markers: its markers' angles,
+        :func:`fingerfit.kinematics.markers.with_hand`); computed from ``recording``
+        when not given.
     """
     import matplotlib
 
@@ -52,7 +57,8 @@ def figure_png(
     from . import setup
 
     s = setup(model, robot, rmap)
-    kin = compute_kinematics(model, recording, variants=(variant,), fingers=s.digits)
+    if kin is None:
+        kin = compute_kinematics(model, recording, variants=(variant,), fingers=s.digits)
     renders = render_robot(robot, result.q[frames], s.robot_palm)
     cols = 2 if isinstance(renders, str) else 3
     fig, axes = plt.subplots(

@@ -41,7 +41,7 @@ from ..errors import FingerfitError
 from ..kinematics import compute_kinematics
 from ..model import HandModel
 from ..processes import child_ignores_interrupt, context, end_child, start_child
-from ..session import HAND_SENSOR, PoseSeries, Recording, concat_recordings
+from ..session import Recording, concat_recordings
 from ..track.recording import last_frame, track_recording
 from ..transforms import FloatArray
 from .rerunlog import (
@@ -55,6 +55,7 @@ from .rerunlog import (
 )
 from .scene import (
     RobotPlacement,
+    hand_recording,
     hand_scene,
     marker_scene,
     require_rerun,
@@ -287,8 +288,7 @@ class _Logger:
         n = recording.n_frames
         if self.model.markers:  # a model fitted from markers: its markers' kinematics
             scene = marker_scene(self.model, recording)
-            # the robot is placed by the hand's pose (its markers' rigid fit)
-            recording = Recording(recording.name, recording.time, hand_pose(scene))
+            recording = hand_recording(scene, recording)  # the robot is placed by it
         else:
             if self.model.tracking is not None and n:
                 # Frames with a missing sensor: solved by the model as the stream's files
@@ -326,13 +326,6 @@ def _portable(exc: BaseException) -> BaseException:
     except Exception:
         return FingerfitError(f"live view: {type(exc).__name__}: {exc}")
     return exc
-
-
-def hand_pose(scene) -> dict[str, PoseSeries]:
-    """The hand sensor's poses of a :class:`~fingerfit.view.scene.Scene` (a marker model's:
-    its markers' rigid fit), as a recording's poses."""
-    position, rotation = scene.sensors[HAND_SENSOR]
-    return {HAND_SENSOR: PoseSeries(position, rotation)}
 
 
 class _Joined:

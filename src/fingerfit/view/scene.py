@@ -16,7 +16,7 @@ import numpy as np
 
 from ..kinematics import Kinematics, compute_kinematics
 from ..model import HandModel
-from ..session import HAND_SENSOR, Recording
+from ..session import HAND_SENSOR, PoseSeries, Recording
 from ..transforms import FloatArray, rotate_about_lines
 from .robotgeometry import RobotGeometry, robot_geometry
 
@@ -297,9 +297,18 @@ def marker_scene(model: HandModel, recording: Recording, kin: Kinematics | None 
     return scene
 
 
+def hand_recording(scene: Scene, recording: Recording) -> Recording:
+    """The frames of a marker model's :func:`marker_scene` as a robot is placed by them:
+    ``recording``'s time with the hand's pose of its markers' rigid fit (the scene's
+    ``hand`` sensor; mm, tracker frame) as the hand sensor's poses."""
+    position, rotation = scene.sensors[HAND_SENSOR]
+    return Recording(recording.name, recording.time, {HAND_SENSOR: PoseSeries(position, rotation)})
+
+
 def truth_tips(recording_path: Path, n_frames: int) -> tuple[dict[str, FloatArray] | None, str]:
     """The true tips of a simulated session's recording, when ``truth/<recording>`` is
-    beside it (``fingerfit simulate``; :func:`fingerfit.evaluate.truth.load_truth`).
+    beside it (``fingerfit simulate``; :func:`fingerfit.evaluate.truth.load_truth`); for
+    a marker recording ``X.trc`` (``fingerfit simulate markers``), ``truth/X.csv``.
 
     Returns
     -------
@@ -309,21 +318,23 @@ def truth_tips(recording_path: Path, n_frames: int) -> tuple[dict[str, FloatArra
         Why there are none (empty when there are).
     """
     from ..evaluate.truth import load_truth
+    from ..io.markers import is_marker_file
 
-    folder = Path(recording_path).resolve().parent
-    if not (folder / "truth" / Path(recording_path).name).is_file():
+    path = Path(recording_path)
+    folder = path.resolve().parent
+    name = Path(path.stem).with_suffix(".csv").name if is_marker_file(path) else path.name
+    if not (folder / "truth" / name).is_file():
         return None, ""
     truth = load_truth(folder)
     if truth is None:
         return None, f"no truth.json beside {recording_path}: no true tips shown"
-    tips = truth.tips.get(Path(recording_path).name)
+    tips = truth.tips.get(name)
     if not tips:
         return None, ""
     rows = next(iter(tips.values())).shape[0]
     if rows != n_frames:
         return None, (
-            f"truth/{Path(recording_path).name} has {rows} rows, the recording {n_frames} "
-            "frames: no true tips shown"
+            f"truth/{name} has {rows} rows, the recording {n_frames} frames: no true tips shown"
         )
     return tips, ""
 
