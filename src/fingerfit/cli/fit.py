@@ -288,6 +288,12 @@ def _marker_angles(model, recording: Path, output: Path, quiet: bool) -> None:
     for note in rec.notes if not quiet else []:
         notice("note", note)
     result = marker_angles(model, rec)
+    for d, a in result.items():
+        if a.unconverged:
+            notice(
+                "warning",
+                f"{d}: {a.unconverged} frames unconverged (their angles the last iterate's)",
+            )
     table = angles_table(rec.time, result)
     with atomic_write(output, newline="") as fh:
         table.to_csv(fh, index=False, lineterminator="\n")
