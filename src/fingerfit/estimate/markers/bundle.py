@@ -207,7 +207,7 @@ class Normal:
     cost : float
     count : int
         Scalar observations (3 per seen marker, reference means included).
-    frame_cost : ndarray, shape (n,)
+    frame_cost : ndarray, shape (n,), optional
         Each frame's part of ``cost`` (its digit's and hand's markers, mm^2).
     """
 
@@ -218,7 +218,7 @@ class Normal:
     bg: FloatArray
     cost: float
     count: int
-    frame_cost: FloatArray
+    frame_cost: FloatArray | None = None
 
 
 @dataclass
