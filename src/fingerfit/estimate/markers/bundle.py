@@ -157,20 +157,17 @@ def line_columns(
     moves it by ``(w x v) sin q + (w (a.v) + a (w.v)) (1 - cos q)``, ``v = R^T (p - c)``
     the marker before that rotation.
     """
-    return np.moveaxis(_line_rows(structure, lines, segment, p, q, proximal, axes, centres), 0, -1)
+    return np.moveaxis(
+        _line_rows(structure, lines, segment, (p, q, proximal, axes, centres)), 0, -1
+    )
 
 
 def _line_rows(
-    structure: Structure,
-    lines: Lines,
-    segment: np.ndarray,
-    p: FloatArray,
-    q: FloatArray,
-    proximal: FloatArray,
-    axes: FloatArray,
-    centres: FloatArray,
+    structure: Structure, lines: Lines, segment: np.ndarray, posed: tuple[FloatArray, ...]
 ) -> FloatArray:
-    """:func:`line_columns` unknown first, ``(4 L, M, 3, n)`` (each column written whole)."""
+    """:func:`line_columns` unknown first, ``(4 L, M, 3, n)`` (each column written whole);
+    ``posed`` its ``p, q, proximal, axes, centres``."""
+    p, q, proximal, axes, centres = posed
     L = structure.levels
     moves = np.arange(L)[None, :] < structure.depth[segment][:, None]  # (M, L)
     out = np.zeros((4 * L, *p.shape))
@@ -273,12 +270,26 @@ def residual(
     """The cost (mm^2): the digit's markers, the hand's markers about their shape, the
     reference term and (with ``slide``) the slide's prior."""
     y, yh, _ = observed(data, hand)
-    p, *_ = predict(structure, lines, data.segment, places(structure, data, u, q, slide), q)
-    r = (y - p) * data.present[:, None]
-    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
+    r, rh, _ = _residuals(
+        data,
+        y,
+        yh,
+        predict(structure, lines, data.segment, places(structure, data, u, q, slide), q),
+    )
     ref = _reference_residual(data, u)
     prior = 0.0 if slide is None else float((slide * slide).sum()) / SLIDE_PRIOR**2
     return float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum()) + prior
+
+
+def _residuals(
+    data: DigitMarkers, y: FloatArray, yh: FloatArray, posed: tuple[FloatArray, ...]
+) -> tuple[FloatArray, FloatArray, tuple[FloatArray, ...]]:
+    """The digit's markers' residuals ``y - p`` ``(M, 3, n)`` (``p`` the first of
+    :func:`predict`'s ``posed``) and the hand's about their shape ``(H, 3, n)``, 0 where
+    unseen (mm), and ``posed`` itself."""
+    r = (y - posed[0]) * data.present[:, None]
+    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
+    return r, rh, posed
 
 
 def places(
@@ -425,9 +436,10 @@ def frame_terms(
     H = data.hand.shape[0]
     y, yh, pivot = observed(data, hand)
     ut = places(structure, data, u, q, slide)
-    p, rot, axes, centres, prox = predict(structure, lines, data.segment, ut, q, levels=True)
-    r = (y - p) * data.present[:, None]
-    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
+    r, rh, posed = _residuals(
+        data, y, yh, predict(structure, lines, data.segment, ut, q, levels=True)
+    )
+    p, rot, axes, centres, prox = posed
     # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
     d = p[:, None] - centres[None]  # (M, L, 3, n)
     jq = cross_rows(axes, d)  # (M, L, 3, n)
@@ -470,7 +482,7 @@ def _global_products(
     M, L, n = len(data.labels), structure.levels, data.frames
     K = jf.shape[2]
     q = posed[1]
-    rows = _line_rows(structure, lines, data.segment, *posed)
+    rows = _line_rows(structure, lines, data.segment, posed)
     rows *= data.present[None, :, None, :]
     jl = np.ascontiguousarray(rows.transpose(3, 1, 2, 0)).reshape(n, 3 * M, 4 * L)
     # The places' columns: marker i's three rows are its segment's rotation (the other
