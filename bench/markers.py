@@ -22,7 +22,8 @@ fit_marker_session`). Scored against the truth:
   fit's chain, marker places and slides, every frame's angles) on the same markers.
 
 ``--speed`` adds the time of a marker fit of 10,000 grasp frames of one finger and of the
-four fingers.
+four fingers; ``--speed-only`` times them alone (``--json bench/markers_speed.json``), with
+the machine's load average before and after each.
 """
 
 from __future__ import annotations
@@ -194,10 +195,21 @@ def speed(frames: int = 10_000) -> dict:
         )[0]
         ms = simulate_markers(sim, "todorov", seed=1)
         n = sum(r.n_frames for r in ms.session.grasp)
-        t0 = time.perf_counter()
+        load = os.getloadavg()[0]
+        t0, c0 = time.perf_counter(), time.process_time()
         fit_marker_session(ms.session)
-        out[label] = {"frames": n, "seconds": time.perf_counter() - t0}
-        print(f"speed {label}: {n} frames, {out[label]['seconds']:.1f} s", flush=True)
+        seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+        out[label] = {
+            "frames": n,
+            "seconds": seconds,
+            "cpu_seconds": cpu,
+            "load_average_1min": [load, os.getloadavg()[0]],
+        }
+        print(
+            f"speed {label}: {n} frames, {seconds:.1f} s ({cpu:.1f} s CPU; load average "
+            f"{load:.1f} before, {os.getloadavg()[0]:.1f} after)",
+            flush=True,
+        )
     return out
 
 
@@ -230,6 +242,7 @@ def main() -> None:
     parser.add_argument("--conditions", default=DEFAULT_CONDITIONS)
     parser.add_argument("--layouts", default="todorov,phalanx")
     parser.add_argument("--speed", action="store_true")
+    parser.add_argument("--speed-only", action="store_true", help="time the fits alone")
     parser.add_argument("--slide", action="store_true", help="estimate the markers' slide")
     parser.add_argument(
         "--slide-law",
@@ -243,6 +256,11 @@ def main() -> None:
     for c in conditions:
         if c not in CONDITIONS:
             parser.error(f"unknown condition {c!r}; one of {', '.join(CONDITIONS)}")
+    if args.speed_only:
+        doc = {"command": "python bench/markers.py " + " ".join(sys.argv[1:]), "speed": speed()}
+        if args.json:
+            args.json.write_text(json.dumps(doc, indent=1) + "\n")
+        return
     rows = []
     t0 = time.perf_counter()
     for cond in conditions:

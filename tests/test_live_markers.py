@@ -31,15 +31,9 @@ from ._live import HANG_S, FakeLsl, fitted, stream_from_outlet, write_recording
 
 FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
 #: How far a frame solved in a block of the stream may lie from `fingerfit angles`' solve
-#: of the whole recording: the adjustment stops when a step lowers the block's cost by
-#: less than 1e-10 of it, so a frame's angles move by up to 6e-4 deg (tips 7e-5 mm)
-#: between blocks of different sizes (measured on this subject): 0.01 deg and 0.01 mm.
-#: (Not in deep flexion: there a few frames of this subject's test recording, 3244-3573,
-#: stop at the adjustment's 100 iterations unconverged, and differ by up to 4.5 deg
-#: between blocks -- docs/markers.md; the recordings below end before them.)
-BLOCK_DEG, BLOCK_MM = 0.01, 0.01
-#: Frames of the test recording replayed (4.2 s at 240 Hz).
-FRAMES = 1000
+#: of the whole recording: each frame is solved on its own (estimate/markers/frames.py),
+#: so only rounding (measured below 1e-11 deg and 1e-12 mm).
+BLOCK_DEG, BLOCK_MM = 1e-6, 1e-6
 
 
 @functools.cache
@@ -66,7 +60,7 @@ def test_replay_of_a_marker_recording_equals_angles(tmp_path: Path) -> None:
     under the channel names of a 6-DOF model (flexion joints, then the fingertip)."""
     d, model = marker_subject()
     want_csv, got_csv = tmp_path / "angles.csv", tmp_path / "stream.csv"
-    rec = read_marker_recording(d / "test.trc").slice(slice(0, FRAMES))
+    rec = read_marker_recording(d / "test.trc")
     trc = write_markers(tmp_path / "test.trc", rec, units="mm")
     res = CliRunner().invoke(app, ["angles", str(model), str(trc), "-o", str(want_csv)])
     assert res.exit_code == 0, res.output
@@ -80,7 +74,7 @@ def test_replay_of_a_marker_recording_equals_angles(tmp_path: Path) -> None:
     assert list(got.columns) == [
         "time", "index.mp", "index.pip", "index.dip", "index.tip.x", "index.tip.y", "index.tip.z"
     ]  # fmt: skip
-    assert f"{FRAMES} recorded" in proc.stdout, proc.stdout
+    assert f"{rec.n_frames} recorded" in proc.stdout, proc.stdout
     _compare(got, want)
 
 

@@ -35,7 +35,7 @@ pytest.importorskip("pinocchio")
 
 FINGERFIT = str(Path(sys.executable).with_name("fingerfit"))
 #: How far the robot's joints of the stream may lie from retargeting the angles of the
-#: whole recording's solve: the person's angles differ by up to BLOCK_DEG (0.01 deg) and
+#: whole recording's solve: the person's angles differ by up to BLOCK_DEG (1e-6 deg) and
 #: the tips by BLOCK_MM between solves of different blocks (tests/test_live_markers.py);
 #: the robot's tip solver turns such a tip change into joint changes of the same order
 #: (a joint ~50 mm from the tip: 0.01 mm -> 0.01 deg), so 0.05 deg holds them with room.

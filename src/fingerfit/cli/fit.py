@@ -318,6 +318,12 @@ def _marker_angles(model, recording: Path, output: Path, quiet: bool) -> None:
 
     rec = read_marker_input(model, recording, None, quiet)
     result = marker_angles(model, rec)
+    for d, a in result.items():
+        if a.unconverged:
+            notice(
+                "warning",
+                f"{d}: {a.unconverged} frames unconverged (their angles the last iterate's)",
+            )
     table = angles_table(rec.time, result)
     with atomic_write(output, newline="") as fh:
         table.to_csv(fh, index=False, lineterminator="\n")

@@ -2,9 +2,10 @@
 
 The inner step of the bundle adjustment with the model held: per frame, the digit's
 angles and the hand's frame that put the model's markers (:attr:`HandModel.markers`)
-nearest the measured ones (position-only residuals, :func:`.bundle.adjust` with no global
-unknown free). Each frame starts from its markers' turns about the model's lines, joint by
-joint (:func:`.start.turn_about`).
+nearest the measured ones (position-only residuals), each frame solved on its own
+(:func:`.frames.solve_frames`: a frame's angles do not depend on the frames solved with
+it). Each frame starts from its markers' turns about the model's lines, joint by joint
+(:func:`.start.turn_about`).
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from ...io.rigid import ClusterFit, fit_cluster
 from ...model import HandModel
 from ...session import Recording, Session
 from ...transforms import FloatArray, rotate_about_line
-from .bundle import BundleResult, Lines, Structure, adjust, predict
+from .bundle import Lines, Structure, predict
+from .frames import FrameSolution, solve_frames
 from .observe import DigitMarkers, carry_back, digit_markers
 from .start import turn_about
 
@@ -38,12 +40,16 @@ class DigitAngles:
         Fingertip (mm, tracker coordinates).
     rms_mm : float
         RMS residual per coordinate over the recording (mm).
+    unconverged : int
+        Frames whose solve stopped unconverged (:data:`.frames.MAX_STEPS`); their
+        angles are the last iterate's.
     """
 
     names: list[str]
     angles: FloatArray
     tip: FloatArray
     rms_mm: float
+    unconverged: int = 0
 
 
 def _session_of(model: HandModel, recording: Recording) -> Session:
@@ -105,12 +111,14 @@ def marker_angles(model: HandModel, recording: Recording) -> dict[str, DigitAngl
         u = np.array([model.markers[k][1] for k in data.labels])
         slide = np.array([model.markers[k][2] for k in data.labels])
         q = _start(data, structure, lines, u, first)
-        free = np.zeros(4 * len(chain) + 6 * len(u), dtype=bool)
-        result = adjust(data, structure, lines, u, q, slide=slide, free=free, tol=1e-10)
+        result = solve_frames(data, structure, lines, u, q, slide)
         seen = hand_ok & data.present.any(axis=0)
         angles = np.where(seen[None], result.q, np.nan).T
         tip = _tip(model, d, structure, lines, result, data, hand, seen)
-        out[d] = DigitAngles(names, angles, tip, result.rms_mm)
+        count = 3 * int(data.present.sum() + data.hand_present.sum())
+        rms = float(np.sqrt(result.cost.sum() / max(count, 1)))
+        unconverged = int((~result.converged & seen).sum())
+        out[d] = DigitAngles(names, angles, tip, rms, unconverged)
     return out
 
 
@@ -143,7 +151,7 @@ def _tip(
     digit: str,
     structure: Structure,
     lines: Lines,
-    result: BundleResult,
+    result: FrameSolution,
     data: DigitMarkers,
     hand: ClusterFit,
     seen: np.ndarray,

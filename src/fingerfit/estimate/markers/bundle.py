@@ -129,6 +129,14 @@ def predict(
     return p, rot, pose.axes[0], pose.centres[0]
 
 
+def cross_rows(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a x b`` over whole rows of frames, ``(..., 3, n)`` (broadcast): the components on
+    the second-to-last axis (:func:`numpy.cross` moves that axis last and back)."""
+    a0, a1, a2 = a[..., 0, :], a[..., 1, :], a[..., 2, :]
+    b0, b1, b2 = b[..., 0, :], b[..., 1, :], b[..., 2, :]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-2)
+
+
 def line_columns(
     structure: Structure,
     lines: Lines,
@@ -149,24 +157,34 @@ def line_columns(
     moves it by ``(w x v) sin q + (w (a.v) + a (w.v)) (1 - cos q)``, ``v = R^T (p - c)``
     the marker before that rotation.
     """
+    return np.moveaxis(
+        _line_rows(structure, lines, segment, (p, q, proximal, axes, centres)), 0, -1
+    )
+
+
+def _line_rows(
+    structure: Structure, lines: Lines, segment: np.ndarray, posed: tuple[FloatArray, ...]
+) -> FloatArray:
+    """:func:`line_columns` unknown first, ``(4 L, M, 3, n)`` (each column written whole);
+    ``posed`` its ``p, q, proximal, axes, centres``."""
+    p, q, proximal, axes, centres = posed
     L = structure.levels
     moves = np.arange(L)[None, :] < structure.depth[segment][:, None]  # (M, L)
-    out = np.zeros((*p.shape, 4 * L))
+    out = np.zeros((4 * L, *p.shape))
     sin, cos1 = np.sin(q), 1.0 - np.cos(q)  # (L, n)
     for k in range(L):
+        m = np.flatnonzero(moves[:, k])
         basis = orthonormal_basis(lines.axis[k])[:2]  # (2, 3)
         a, c = axes[k], centres[k]  # (3, n)
-        d = p - c  # (M, 3, n)
+        d = p[m] - c  # (m, 3, n)
         ad = (a * d).sum(axis=1, keepdims=True)
-        v = d * (1.0 - cos1[k]) - np.cross(a[None], d, axis=1) * sin[k] + a * ad * cos1[k]
+        v = d * (1.0 - cos1[k]) - cross_rows(a, d) * sin[k] + a * ad * cos1[k]
         av = (a * v).sum(axis=1, keepdims=True)
         for i in range(2):
             w = matvec_rows(proximal[k], basis[i][:, None])  # (3, n)
             wv = (w * v).sum(axis=1, keepdims=True)
-            da = np.cross(w[None], v, axis=1) * sin[k] + (w * av + a * wv) * cos1[k]
-            dc = w * cos1[k] - np.cross(a, w, axis=0) * sin[k]
-            out[..., 4 * k + i] = da * moves[:, k, None, None]
-            out[..., 4 * k + 2 + i] = dc[None] * moves[:, k, None, None]
+            out[4 * k + i, m] = cross_rows(w, v) * sin[k] + (w * av + a * wv) * cos1[k]
+            out[4 * k + 2 + i, m] = w * cos1[k] - cross_rows(a, w) * sin[k]
     return out
 
 
@@ -186,6 +204,8 @@ class Normal:
     cost : float
     count : int
         Scalar observations (3 per seen marker, reference means included).
+    frame_cost : ndarray, shape (n,), optional
+        Each frame's part of ``cost`` (its digit's and hand's markers, mm^2).
     """
 
     qq: FloatArray
@@ -195,6 +215,7 @@ class Normal:
     bg: FloatArray
     cost: float
     count: int
+    frame_cost: FloatArray | None = None
 
 
 @dataclass
@@ -249,12 +270,26 @@ def residual(
     """The cost (mm^2): the digit's markers, the hand's markers about their shape, the
     reference term and (with ``slide``) the slide's prior."""
     y, yh, _ = observed(data, hand)
-    p, *_ = predict(structure, lines, data.segment, places(structure, data, u, q, slide), q)
-    r = (y - p) * data.present[:, None]
-    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
+    r, rh, _ = _residuals(
+        data,
+        y,
+        yh,
+        predict(structure, lines, data.segment, places(structure, data, u, q, slide), q),
+    )
     ref = _reference_residual(data, u)
     prior = 0.0 if slide is None else float((slide * slide).sum()) / SLIDE_PRIOR**2
     return float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum()) + prior
+
+
+def _residuals(
+    data: DigitMarkers, y: FloatArray, yh: FloatArray, posed: tuple[FloatArray, ...]
+) -> tuple[FloatArray, FloatArray, tuple[FloatArray, ...]]:
+    """The digit's markers' residuals ``y - p`` ``(M, 3, n)`` (``p`` the first of
+    :func:`predict`'s ``posed``) and the hand's about their shape ``(H, 3, n)``, 0 where
+    unseen (mm), and ``posed`` itself."""
+    r = (y - posed[0]) * data.present[:, None]
+    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
+    return r, rh, posed
 
 
 def places(
@@ -319,53 +354,25 @@ def normal_equations(
     scores : ndarray, shape (n, K + G)
         Each frame's ``J^T r`` (frame unknowns, then the global ones), for the
         covariance's clusters.
+
+    Notes
+    -----
+    A marker's place enters only its own three rows, through its segment's rotation:
+    the places' columns are block-diagonal, and their products are formed marker by
+    marker, never as a dense ``(3 M, 3 M)`` block.
     """
     M, L, n = len(data.labels), structure.levels, data.frames
-    H = data.hand.shape[0]
-    y, yh, pivot = observed(data, hand)
-    ut = places(structure, data, u, q, slide)
-    p, rot, axes, centres, prox = predict(structure, lines, data.segment, ut, q, levels=True)
-    r = (y - p) * data.present[:, None]
-    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
-    # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
-    d = p[:, None] - centres[None]  # (M, L, 3, n)
-    a = np.broadcast_to(axes[None], d.shape)
-    jq = np.cross(a, d, axis=2)  # (M, L, 3, n)
-    jq *= (np.arange(L)[None, :] < structure.depth[data.segment][:, None])[..., None, None]
-    if slide is not None:  # the slide moves with the angle it follows
-        jq[np.arange(M), structure.flexion[data.segment]] += matvec_rows(rot, slide[..., None])
-    jq = jq.transpose(3, 0, 2, 1)  # (n, M, 3, L)
-    jf = np.concatenate([jq, frame_columns(y, pivot)], axis=3).reshape(n, 3 * M, L + 6)
-    jh = np.zeros((n, H, 3, L + 6))
-    jh[..., L:] = frame_columns(yh, pivot)
-    mask = np.repeat(data.present.T, 3, axis=1)[..., None]  # (n, 3 M, 1)
-    jf *= mask
+    f = frame_terms(data, structure, lines, u, q, hand, slide)
+    G = 4 * L + 3 * M * (1 if slide is None else 2)
     if free.any():
-        jl = line_columns(structure, lines, data.segment, p, q, prox, axes, centres)
-        jl = jl.transpose(2, 0, 1, 3).reshape(n, 3 * M, 4 * L)  # from (M, 3, n, 4 L)
-        ju = np.zeros((n, M, 3, M, 3))
-        ju[:, np.arange(M), :, np.arange(M), :] = rot.transpose(0, 3, 1, 2)
-        blocks = [jl, ju.reshape(n, 3 * M, 3 * M)]
-        if slide is not None:
-            theta = q[structure.flexion[data.segment]].T  # (n, M)
-            blocks.append((ju * theta[:, :, None, None, None]).reshape(n, 3 * M, 3 * M))
-        jg = np.concatenate(blocks, axis=2)[..., free] * mask
+        masked = f.rot * data.present[:, None, None]
+        qg, gg, sg = _global_products(structure, lines, data, f.posed, masked, f.jf, f.rr, slide)
+        if not free.all():
+            qg, gg, sg = qg[..., free], gg[np.ix_(free, free)], sg[:, free]
     else:  # the model held (the angles of a recording): no global column to build
-        jg = np.zeros((n, 3 * M, 0))
-    jh *= data.hand_present.T[:, :, None, None]
-    jh = jh.reshape(n, 3 * H, L + 6)
-    rr = r.transpose(2, 0, 1).reshape(n, 3 * M)
-    rrh = rh.transpose(2, 0, 1).reshape(n, 3 * H)
-    jft, jht, jgt = jf.transpose(0, 2, 1), jh.transpose(0, 2, 1), jg.transpose(0, 2, 1)
-    qq = jft @ jf + jht @ jh
-    qg = jft @ jg
-    flat = jg.reshape(n * jg.shape[1], jg.shape[-1])
-    gg = flat.T @ flat
-    bq = (jft @ rr[..., None] + jht @ rrh[..., None])[..., 0]
-    sg = (jgt @ rr[..., None])[..., 0]
+        qg, gg, sg = np.zeros((n, L + 6, 0)), np.zeros((0, 0)), np.zeros((n, 0))
     bg = sg.sum(axis=0)
     ref = _reference_residual(data, u)
-    G = 4 * L + 3 * M * (1 if slide is None else 2)
     uw = np.zeros(G)
     uw[4 * L : 4 * L + 3 * M] = np.repeat(data.reference_count, 3)
     ref_b = np.zeros(G)
@@ -377,10 +384,140 @@ def normal_equations(
         prior = float((slide * slide).sum()) / SLIDE_PRIOR**2
     gg[np.diag_indices_from(gg)] += uw[free]
     bg += ref_b[free]
-    cost = float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum()) + prior
+    cost = float(f.cost.sum() + (ref * ref).sum()) + prior
     count = 3 * int(data.present.sum() + data.hand_present.sum() + (data.reference_count > 0).sum())
-    normal = Normal(qq, qg, gg, bq, bg, cost, count)
-    return normal, np.concatenate([bq, sg], axis=1)
+    normal = Normal(f.qq, qg, gg, f.bq, bg, cost, count, f.cost)
+    return normal, np.concatenate([f.bq, sg], axis=1)
+
+
+@dataclass
+class FrameTerms:
+    """Each frame's part of the normal equations (``K = L + 6`` unknowns: the angles,
+    then the hand frame's rotation and translation).
+
+    Attributes
+    ----------
+    qq : ndarray, shape (n, K, K)
+    bq : ndarray, shape (n, K)
+        ``J^T r`` (``r`` measured minus predicted).
+    cost : ndarray, shape (n,)
+        Each frame's sum of squared residuals, its digit's and hand's markers (mm^2).
+    jf : ndarray, shape (n, 3 M, K)
+        The digit markers' columns (0 where unseen).
+    rr : ndarray, shape (n, 3 M)
+        Their residuals (mm; 0 where unseen).
+    rot : ndarray, shape (M, 3, 3, n)
+        Each marker's segment rotation.
+    posed : tuple
+        ``p, q, proximal, axes, centres`` of :func:`line_columns`.
+    """
+
+    qq: FloatArray
+    bq: FloatArray
+    cost: FloatArray
+    jf: FloatArray
+    rr: FloatArray
+    rot: FloatArray
+    posed: tuple[FloatArray, ...]
+
+
+def frame_terms(
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    hand: HandFrames,
+    slide: FloatArray | None = None,
+) -> FrameTerms:
+    """Each frame's part of the normal equations at ``q (L, n)`` (rad), ``hand``, the
+    lines, places ``u (M, 3)`` (mm) and slides ``slide (M, 3)`` (mm/rad) as given."""
+    M, L, n = len(data.labels), structure.levels, data.frames
+    H = data.hand.shape[0]
+    y, yh, pivot = observed(data, hand)
+    ut = places(structure, data, u, q, slide)
+    r, rh, posed = _residuals(
+        data, y, yh, predict(structure, lines, data.segment, ut, q, levels=True)
+    )
+    p, rot, axes, centres, prox = posed
+    # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
+    d = p[:, None] - centres[None]  # (M, L, 3, n)
+    jq = cross_rows(axes, d)  # (M, L, 3, n)
+    jq *= (np.arange(L)[None, :] < structure.depth[data.segment][:, None])[..., None, None]
+    if slide is not None:  # the slide moves with the angle it follows
+        jq[np.arange(M), structure.flexion[data.segment]] += matvec_rows(rot, slide[..., None])
+    jf = np.empty((n, M, 3, L + 6))
+    jf[..., :L] = jq.transpose(3, 0, 2, 1)
+    jf[..., L:] = frame_columns(y, pivot)
+    jf *= data.present.T[:, :, None, None]
+    jf = jf.reshape(n, 3 * M, L + 6)
+    jh = frame_columns(yh, pivot) * data.hand_present.T[:, :, None, None]
+    jh = jh.reshape(n, 3 * H, 6)
+    rr = r.transpose(2, 0, 1).reshape(n, 3 * M)
+    rrh = rh.transpose(2, 0, 1).reshape(n, 3 * H)
+    jft, jht = jf.transpose(0, 2, 1), jh.transpose(0, 2, 1)
+    qq = jft @ jf
+    qq[:, L:, L:] += jht @ jh
+    bq = (jft @ rr[..., None])[..., 0]
+    bq[:, L:] += (jht @ rrh[..., None])[..., 0]
+    cost = (rr * rr).sum(axis=1) + (rrh * rrh).sum(axis=1)
+    return FrameTerms(qq, bq, cost, jf, rr, rot, (p, q, prox, axes, centres))
+
+
+def _global_products(
+    structure: Structure,
+    lines: Lines,
+    data: DigitMarkers,
+    posed: tuple[FloatArray, ...],
+    rot: FloatArray,
+    jf: FloatArray,
+    rr: FloatArray,
+    slide: FloatArray | None,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``J_f^T J_g (n, K, G)``, ``J_g^T J_g (G, G)`` and each frame's ``J_g^T r (n, G)``
+    over every global unknown (lines, places, with ``slide`` slides). ``posed``: ``p, q, proximal, axes, centres`` of
+    :func:`line_columns`; ``rot (M, 3, 3, n)`` the segments' rotations, 0 where a marker
+    is unseen; ``jf (n, 3 M, K)`` and ``rr (n, 3 M)`` the frames' columns and residuals
+    (unseen rows 0)."""
+    M, L, n = len(data.labels), structure.levels, data.frames
+    K = jf.shape[2]
+    q = posed[1]
+    rows = _line_rows(structure, lines, data.segment, posed)
+    rows *= data.present[None, :, None, :]
+    jl = np.ascontiguousarray(rows.transpose(3, 1, 2, 0)).reshape(n, 3 * M, 4 * L)
+    # The places' columns: marker i's three rows are its segment's rotation (the other
+    # rows 0); with slides a second block, the rotation times the angle it follows.
+    weights = [np.ones((M, n))]
+    if slide is not None:
+        weights.append(q[structure.flexion[data.segment]])  # (M, n)
+    rotn = np.ascontiguousarray(rot.transpose(3, 0, 1, 2))  # (n, M, 3, 3)
+    G = 4 * L + 3 * M * len(weights)
+    sg = np.empty((n, G))
+    sg[:, : 4 * L] = (rr[:, None] @ jl)[:, 0]
+    ru = (rotn.transpose(0, 1, 3, 2) @ rr.reshape(n, M, 3, 1))[..., 0]  # (n, M, 3)
+    for s, ws in enumerate(weights):
+        sg[:, 4 * L + 3 * M * s : 4 * L + 3 * M * (s + 1)] = (ru * ws.T[..., None]).reshape(n, -1)
+    jft = jf.reshape(n, M, 3, K).transpose(0, 1, 3, 2)  # (n, M, K, 3)
+    qg = np.empty((n, K, G))
+    gg = np.zeros((G, G))
+    qg[..., : 4 * L] = jf.transpose(0, 2, 1) @ jl
+    flat = jl.reshape(n * 3 * M, 4 * L)
+    gg[: 4 * L, : 4 * L] = flat.T @ flat
+    seen = data.present.T.astype(float)  # (n, M): R^T R = I where seen
+    for s, ws in enumerate(weights):
+        cols = slice(4 * L + 3 * M * s, 4 * L + 3 * M * (s + 1))
+        ju = rotn * ws.T[:, :, None, None]  # (n, M, 3, 3)
+        np.matmul(jft, ju, out=qg[..., cols].reshape(n, K, M, 3).transpose(0, 2, 1, 3))
+        for i in range(M):  # the lines' rows of marker i times its columns, over all frames
+            li = jl.reshape(n, M, 3, 4 * L)[:, i].reshape(3 * n, 4 * L)
+            gg[: 4 * L, cols][:, 3 * i : 3 * i + 3] = li.T @ ju[:, i].reshape(3 * n, 3)
+        for t, wt in enumerate(weights[: s + 1]):
+            block = np.zeros((M, 3, M, 3))
+            count = np.einsum("ni,ni,ni->i", seen, ws.T, wt.T)  # (M,)
+            block[np.arange(M), :, np.arange(M), :] = count[:, None, None] * np.eye(3)
+            gg[4 * L + 3 * M * t : 4 * L + 3 * M * (t + 1), cols] = block.reshape(3 * M, 3 * M)
+    gg = np.triu(gg) + np.triu(gg, 1).T
+    return qg, gg, sg
 
 
 def schur_step(nq: Normal, lam: float) -> tuple[FloatArray, FloatArray]:

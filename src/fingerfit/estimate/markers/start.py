@@ -157,7 +157,7 @@ def staged_start(
             q[:levels],
             hand=hand,
             max_iter=10 if j < len(first_levels) - 1 else 100,
-            tol=1e-6 if j < len(first_levels) - 1 else 1e-12,
+            tol=1e-6 if j < len(first_levels) - 1 else 1e-10,
         )
         axis[:levels], centre[:levels] = result.lines.axis, result.lines.centre
         u[: len(part.labels)], q[:levels], hand = result.u, result.q, result.hand

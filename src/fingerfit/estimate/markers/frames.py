@@ -1,0 +1,149 @@
+"""Each frame's angles with the model held: a Levenberg-Marquardt per frame.
+
+With the lines, the markers' places and their slides held, the cost of
+:mod:`.bundle` falls apart into one small problem per frame: its angles and its hand
+frame's correction (``K = L + 6`` unknowns). :func:`solve_frames` solves them side by
+side: every frame has its own damping, its own acceptance of a step and its own stopping
+rule, and leaves the iteration when it has converged. The frames still iterating are
+computed together (batched ``K x K`` solves; the loop is over iterations, never over
+frames), so a frame's answer is the same whether it was solved alone, in a block of
+frames or in the whole recording (to rounding).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ...transforms import FloatArray
+from .bundle import RIDGE, HandFrames, Lines, Structure, frame_terms
+from .observe import DigitMarkers
+
+#: A frame has converged when the undamped (Gauss-Newton) step from its point is below
+#: this in every unknown (rad, mm): its angles then lie within about this of the minimum
+#: (the steps shrink geometrically, in deep flexion by about 0.85 a step).
+STEP = 1e-8
+#: A frame that has taken this many steps (accepted or refused) without converging stops
+#: there, unconverged (reported).
+MAX_STEPS = 500
+#: Below this fraction of its cost a change is rounding: a step whose cost lies within it
+#: is taken, and judged by the linear model alone.
+FLOOR = 1e-11
+#: Damping (Marquardt: the diagonal times ``1 + lam``): the start and the bounds; a frame
+#: whose damping passes LAM_MAX has no step that lowers its cost (its minimum to
+#: rounding): converged.
+LAM_START, LAM_MIN, LAM_MAX = 1e-4, 1e-9, 1e8
+#: The damping's factor after a refused step, and after a taken one by the ratio of its
+#: gain to the gain its linear model promised: above GOOD, below POOR, between.
+LAM_UP, LAM_DOWN, LAM_POOR, LAM_SAME = 4.0, 1.0 / 3.0, 2.0, 1.0
+GOOD, POOR = 0.75, 0.25
+
+
+@dataclass
+class FrameSolution:
+    """Every frame's solution.
+
+    Attributes
+    ----------
+    q : ndarray, shape (L, n)
+        Angles (rad).
+    hand : HandFrames
+        Each frame's correction of the hand's frame.
+    cost : ndarray, shape (n,)
+        Each frame's sum of squared residuals (mm^2): its digit's and hand's markers.
+    steps : ndarray of int, shape (n,)
+        Steps each frame took (accepted or refused).
+    converged : ndarray of bool, shape (n,)
+        False where a frame stopped at :data:`MAX_STEPS`.
+    """
+
+    q: FloatArray
+    hand: HandFrames
+    cost: FloatArray
+    steps: np.ndarray
+    converged: np.ndarray
+
+
+def frames_of(data: DigitMarkers, idx: np.ndarray) -> DigitMarkers:
+    """The frames ``idx`` of ``data``."""
+    return replace(
+        data,
+        position=data.position[..., idx],
+        present=data.present[:, idx],
+        hand=data.hand[..., idx],
+        hand_present=data.hand_present[:, idx],
+    )
+
+
+def solve_frames(
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    slide: FloatArray | None = None,
+) -> FrameSolution:
+    """Every frame's angles and hand frame, the model held.
+
+    Parameters
+    ----------
+    data : DigitMarkers
+    structure : Structure
+    lines : Lines
+        The model's lines (tracker coordinates at the reference posture, mm).
+    u : ndarray, shape (M, 3)
+        The markers' places (mm).
+    q : ndarray, shape (L, n)
+        Start angles (rad).
+    slide : ndarray, shape (M, 3), optional
+        The markers' slides (mm/rad, :func:`.bundle.places`).
+
+    Returns
+    -------
+    FrameSolution
+    """
+    n, L = data.frames, structure.levels
+    q, hand = q.copy(), HandFrames.identity(n)
+    lam = np.full(n, LAM_START)
+    steps = np.zeros(n, dtype=int)
+    converged = np.ones(n, dtype=bool)
+    idx = np.arange(n)  # the frames still iterating
+    f = frame_terms(data, structure, lines, u, q, hand, slide)
+    qq, bq, cost = f.qq, f.bq, f.cost
+    while idx.size:
+        a = qq.copy()
+        diag = np.einsum("nkk->nk", a)
+        diag += RIDGE
+        # Converged: the undamped (Gauss-Newton) step from here is below STEP.
+        far = np.abs(np.linalg.solve(a, bq[..., None])[..., 0]).max(axis=1) > STEP
+        idx, a, diag, qq, bq = idx[far], a[far], diag[far], qq[far], bq[far]
+        diag *= 1.0 + lam[idx, None]
+        d = np.linalg.solve(a, bq[..., None])[..., 0]  # (m, K)
+        q_try = q[:, idx] + d[:, :L].T
+        now = HandFrames(hand.rotation[idx], hand.offset[idx])
+        h_try = now.moved(d[:, L : L + 3], d[:, L + 3 :])
+        nt = frame_terms(frames_of(data, idx), structure, lines, u, q_try, h_try, slide)
+        # Below the cost's rounding (FLOOR of it) a step is judged by the model alone.
+        floor = FLOOR * cost[idx]
+        ok = nt.cost <= cost[idx] + floor
+        gain = cost[idx] - nt.cost
+        # The gain against the one the linear model promised: a step that lowers the
+        # cost by far less (across a curved valley) is taken, but the damping grows.
+        promised = 2.0 * (d * bq).sum(axis=1) - np.einsum("nk,nkl,nl->n", d, qq, d)
+        ratio = np.where(promised > floor, gain / np.maximum(promised, 1e-300), 0.5)
+        factor = np.where(ratio > GOOD, LAM_DOWN, np.where(ratio < POOR, LAM_POOR, LAM_SAME))
+        lam[idx] = np.maximum(lam[idx] * np.where(ok, factor, LAM_UP), LAM_MIN)
+        at = idx[ok]
+        q[:, at] = q_try[:, ok]
+        hand.rotation[at], hand.offset[at] = h_try.rotation[ok], h_try.offset[ok]
+        cost[at] = nt.cost[ok]
+        qq[ok], bq[ok] = nt.qq[ok], nt.bq[ok]
+        steps[idx] += 1
+        # No step lowers the cost (its minimum to rounding): converged; out of steps: not.
+        stuck = lam[idx] > LAM_MAX
+        out = ~stuck & (steps[idx] >= MAX_STEPS)
+        converged[idx[out]] = False
+        go = ~(stuck | out)
+        idx, qq, bq = idx[go], qq[go], bq[go]
+    return FrameSolution(q, hand, cost, steps, converged)
