@@ -44,7 +44,8 @@ MARKER_LEGEND = {
     "ROM°": "range of the axis's angle over the fitted frames, degrees",
     "residual mm": "RMS marker residual per coordinate of the digit's adjustment (the "
     "camera noise and skin slide it could not explain)",
-    "axis SD°": "largest standard deviation of the axis direction (the adjustment's covariance)",
+    "axis SD°": "largest standard deviation of the axis direction (the camera noise's and "
+    "the skin slide's, docs/markers.md)",
     "axis ±°": "95 % half-angle of the axis direction (the largest angle of its 95 % region)",
     "bone mm": "segment length from this joint's centre to the next joint's centre (dip: to "
     "the tip)",
