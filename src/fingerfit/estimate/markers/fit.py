@@ -3,10 +3,12 @@
 Each digit's chain (:func:`chain_layout`) is started and adjusted by :mod:`.start` and
 :mod:`.bundle` on the reference and calibration (grasp) recordings. A finger's MP gets a
 second (ab/adduction) axis when the markers call for it (``mp_axes="auto"``,
-:func:`fit_finger`; else a hinge, said in one line). A line whose direction or point the markers leave undetermined (the
-covariance's standard deviation above :data:`UNDETERMINED_SD_DEG` /
+:func:`fit_finger`; else a hinge, said in one line), proximal or distal to the flexion
+axis as the lower cost decides. A line whose direction or point the markers leave
+undetermined (the noise's standard deviation above :data:`UNDETERMINED_SD_DEG` /
 :data:`UNDETERMINED_SD_MM`, or no information at all) is held at its start and said in
-one line naming the joint. The result is the usual :class:`~fingerfit.model.HandModel`
+one line naming the joint; the lines' uncertainty holds the skin's slide
+(:mod:`.uncertainty`). The result is the usual :class:`~fingerfit.model.HandModel`
 (``method`` ``markers``) plus each marker's place (:attr:`HandModel.markers`).
 """
 
