@@ -24,6 +24,7 @@ from ...errors import FingerfitError
 from ...io.rigid import technical_frame
 from ...model import HandModel, JointModel, JointQuality, assemble_digit
 from ...session import Session, joint_sensors, sensor_name
+from ...track.solver import wrap
 from ...transforms import FloatArray, unit
 from .bundle import BundleResult, Lines, Structure, adjust, line_covariance
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
@@ -230,7 +231,7 @@ def fit_digit(
     # The same motion, the angles within a turn and each flexion axis pointed so that
     # flexion is positive.
     turned = np.abs(result.q) > np.pi
-    q = np.where(turned, np.mod(result.q + np.pi, 2 * np.pi) - np.pi, result.q)
+    q = np.where(turned, wrap(result.q), result.q)
     flipped = [k for k in layout.first if flexion_sign(q[k]) < 0]
     if flipped or turned.any():
         axis = result.lines.axis.copy()

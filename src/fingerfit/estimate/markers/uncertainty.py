@@ -172,11 +172,13 @@ def slide_uncertainty(
         tau2 = new
         if done:
             break
-    sd = np.sqrt(np.diag(_scale_covariance(info, ng, tau2, group)))
-    used = _expected_variance(tau2, sd)
-    slide_cov = tr[ng:, ng:] @ np.diag(used[group]) @ tr[ng:, ng:].T
     sgg, sgs = s[:ng, :ng], s[:ng, ng:]
     inv = _pinv_scaled(sgg, np.sqrt(np.maximum(np.diag(sgg), 1e-300)))
+    # The slides' information with the lines and places eliminated (units of sigma^2).
+    w = info[ng:, ng:] - info[ng:, :ng] @ (sigma2 * inv) @ info[:ng, ng:]
+    sd = np.sqrt(np.diag(_scale_covariance((w + w.T) / 2, tau2, group)))
+    used = _expected_variance(tau2, sd)
+    slide_cov = tr[ng:, ng:] @ np.diag(used[group]) @ tr[ng:, ng:].T
     cov_g = inv @ (sigma2 * sgg + sgs @ slide_cov @ sgs.T) @ inv
     full = np.full((G, G), np.nan)
     idx = np.flatnonzero(result.free)
@@ -224,7 +226,7 @@ def _pinv_scaled(a: FloatArray, scale: FloatArray) -> FloatArray:
     return (v[:, keep] / w[keep]) @ v[:, keep].T / np.outer(scale, scale)
 
 
-def _scale_covariance(info: FloatArray, ng: int, tau2: FloatArray, group: np.ndarray) -> FloatArray:
+def _scale_covariance(w: FloatArray, tau2: FloatArray, group: np.ndarray) -> FloatArray:
     """The covariance ``(6, 6)`` of the estimated variances ``tau2`` (mm^4/rad^4): the
     inverse Fisher information of the marginal likelihood.
 
@@ -233,10 +235,6 @@ def _scale_covariance(info: FloatArray, ng: int, tau2: FloatArray, group: np.nda
     ``sigma^2``); ``I_kl = tr(P W E_k W P W E_l W) / 2``, ``P`` the pseudo-inverse of that
     covariance and ``E_k`` the selector of the components of variance ``k`` (``group``).
     """
-    sgg = info[:ng, :ng]
-    inv = _pinv_scaled(sgg, np.sqrt(np.maximum(np.diag(sgg), 1e-300)))
-    w = info[ng:, ng:] - info[ng:, :ng] @ inv @ info[:ng, ng:]
-    w = (w + w.T) / 2
     cov = w + w @ np.diag(tau2[group]) @ w
     p = _pinv_scaled(cov, np.sqrt(np.maximum(np.diag(cov), 1e-300)))
     grads = [p @ w @ np.diag((group == k).astype(float)) @ w for k in range(tau2.size)]
