@@ -240,3 +240,41 @@ def test_the_coupled_slide_law_adds_to_the_linear_one():
     np.testing.assert_allclose(got, np.einsum("nij,nj->ni", r, extra), atol=1e-9)
     with pytest.raises(FingerfitError, match="slide_law"):
         simulate_markers(sim, "todorov", slide_law="quadratic")
+
+
+def test_mixing_reaches_the_same_minimum_in_fewer_iterations():
+    """Anderson's mixing of the steps only proposes points: the adjustment ends where the
+    plain one ends (its axes within 1e-3 deg, the cost within 1e-9 of it), sooner."""
+    from fingerfit.estimate.markers.bundle import adjust
+
+    sim = simulate_subject(SimConfig(targets=False, test=False, cycles=3), 7)
+    data = _index(simulate_markers(sim, "todorov", seed=1))
+    st = Structure(np.array([1, 2, 3]))
+    start = staged_start(data, st, [0, 1, 2], {})
+    runs = {
+        mix: adjust(data, st, start.lines, start.u, start.q + 0.05, hand=start.hand, mix=mix)
+        for mix in (False, True)
+    }
+    plain, mixed = runs[False], runs[True]
+    assert mixed.iterations < plain.iterations, (mixed.iterations, plain.iterations)
+    assert abs(mixed.cost - plain.cost) <= 1e-9 * plain.cost
+    cos = np.abs(np.einsum("ki,ki->k", mixed.lines.axis, plain.lines.axis))
+    assert np.degrees(np.arccos(np.minimum(cos, 1.0))).max() < 1e-3
+
+
+def test_a_long_recording_fitted_coarse_first_ends_at_the_direct_fit(monkeypatch):
+    """Fitted first on every k-th frame, then on all: the same chain, the same axes (to
+    0.01 deg) and cost (1e-9 of it) as the fit of every frame from the start."""
+    from fingerfit.estimate.markers import fit as fit_module
+
+    sim = simulate_subject(SimConfig(targets=False, test=False, cycles=4, abduction=False), 5)
+    data = _index(simulate_markers(sim, "todorov", seed=1))
+    monkeypatch.setattr(fit_module, "COARSE_FRAMES", 10**9)
+    direct = fit_module.fit_finger(data, "index", "hinge", slide=False)
+    monkeypatch.setattr(fit_module, "COARSE_FRAMES", data.frames // 5)
+    assert fit_module.coarse_frames(data.frames) is not None
+    coarse = fit_module.fit_finger(data, "index", "hinge", slide=False)
+    assert coarse.layout.names == direct.layout.names
+    assert abs(coarse.result.cost - direct.result.cost) <= 1e-9 * direct.result.cost
+    cos = np.abs(np.einsum("ki,ki->k", coarse.result.lines.axis, direct.result.lines.axis))
+    assert np.degrees(np.arccos(np.minimum(cos, 1.0))).max() < 0.01

@@ -33,6 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from ...track.chains import Chains, matvec_rows
 from ...transforms import FloatArray, orthonormal_basis, unit
+from .mixing import Mixer, information_weights
 from .observe import DigitMarkers
 
 #: SD of the prior on a marker's slide per radian of its joint (mm/rad): the slide is
@@ -599,6 +600,7 @@ def adjust(
     free: np.ndarray | None = None,
     max_iter: int = 100,
     tol: float = 1e-12,
+    mix: bool = True,
 ) -> BundleResult:
     """Levenberg-Marquardt over the lines, the markers' places, every frame's angles and
     every frame's hand frame.
@@ -622,6 +624,9 @@ def adjust(
     max_iter : int
     tol : float
         Converged when an accepted step lowers the cost by less than ``tol`` of it.
+    mix : bool
+        Propose each step mixed with the last ones (:mod:`.mixing`), kept when it lowers
+        the cost below the plain step's.
 
     Returns
     -------
@@ -634,6 +639,10 @@ def adjust(
     hand = HandFrames.identity(data.frames) if hand is None else hand
     lines, u, q = lines.copy(), u.copy(), q.copy()
     nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide)
+    diagonal = np.zeros(G)
+    diagonal[free] = np.diag(nq.gg)
+    sizes = [(2, 3)] * 2 * L + [(1, 1)] * (G - 4 * L)
+    mixer = Mixer(information_weights(diagonal, sizes)) if mix else None
     lam = 1e-4
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
@@ -651,6 +660,15 @@ def adjust(
             )
             cost = residual(data, structure, *trial)
             if cost <= nq.cost:
+                if mixer is not None:
+                    here = _pack(lines, u, q, hand, slide)
+                    there = _pack(*trial)
+                    mixed = mixer.propose(here, (there[0] - here[0], there[1] - here[1]))
+                    if mixed is not None:
+                        candidate = _unpack(*mixed, L, M, slide is not None)
+                        c = residual(data, structure, *candidate)
+                        if c < cost:
+                            trial, cost = candidate, c
                 gain = nq.cost - cost
                 lines, u, q, hand, slide = trial
                 nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide)
@@ -658,12 +676,44 @@ def adjust(
                 done = gain <= tol * max(cost, 1e-300)
                 break
             lam *= 4.0
+            if mixer is not None:
+                mixer.forget()
         else:
             done = True  # no step lowers the cost
         if done:
             break
     rms = float(np.sqrt(nq.cost / max(nq.count, 1)))
     return BundleResult(lines, u, q, hand, slide, nq.cost, rms, it, nq, free)
+
+
+def _pack(
+    lines: Lines, u: FloatArray, q: FloatArray, hand: HandFrames, slide: FloatArray | None
+) -> tuple[FloatArray, FloatArray]:
+    """A point's coordinates for :class:`.mixing.Mixer`: the global ones ``(6 L + 3 M,)``
+    (each line's direction and point, the places, with ``slide`` the slides; mm, mm/rad)
+    and each frame's ``(n, L + 6)`` (angles, the hand correction's rotation vector, rad,
+    and offset, mm)."""
+    parts = [np.concatenate([lines.axis, lines.centre], axis=1).ravel(), u.ravel()]
+    if slide is not None:
+        parts.append(slide.ravel())
+    rotvec = Rotation.from_matrix(hand.rotation).as_rotvec()
+    return np.concatenate(parts), np.concatenate([q.T, rotvec, hand.offset], axis=1)
+
+
+def _unpack(
+    g: FloatArray, f: FloatArray, L: int, M: int, sliding: bool
+) -> tuple[Lines, FloatArray, FloatArray, HandFrames, FloatArray | None]:
+    """The point of :func:`_pack`'s coordinates (each direction scaled to unit length)."""
+    lines = g[: 6 * L].reshape(L, 6)
+    places = g[6 * L :].reshape(-1, M, 3)
+    hand = HandFrames(Rotation.from_rotvec(f[:, L : L + 3]).as_matrix(), f[:, L + 3 :].copy())
+    return (
+        Lines(unit(lines[:, :3]), lines[:, 3:].copy()),
+        places[0].copy(),
+        f[:, :L].T.copy(),
+        hand,
+        places[1].copy() if sliding else None,
+    )
 
 
 def line_covariance(result: BundleResult) -> FloatArray:

@@ -26,7 +26,8 @@ from ...model import HandModel, JointModel, JointQuality, assemble_digit
 from ...session import Session, joint_sensors, sensor_name
 from ...track.solver import wrap
 from ...transforms import FloatArray, unit
-from .bundle import BundleResult, Lines, Structure, adjust, line_covariance
+from .bundle import BundleResult, HandFrames, Lines, Structure, adjust, line_covariance
+from .frames import frames_of
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import flexion_sign, staged_start
 from .uncertainty import slide_uncertainty
@@ -43,6 +44,12 @@ UNDETERMINED_SD_MM = 20.0
 #: ``1e4`` mm^2 is ``1e-6`` mm^2: nothing the figures show).
 MAX_ITER = 60
 TOL = 1e-10
+#: A recording of more than twice this many frames is fitted first on every ``k``-th
+#: frame (about this many; the staged start, the hinge and both two-axis orders), then
+#: each of those fits is adjusted on every frame (:func:`fit_finger`): at 100 Hz the
+#: frames between carry little new information, and the long first stretch of the
+#: adjustment (an MP's second axis turning from its start) costs a fifth as much.
+COARSE_FRAMES = 2000
 #: Chi-square 95 % quantile with two degrees of freedom: an axis direction's (or a
 #: line point's) 95 % region is ``x^T C^-1 x <= CHI2_95``.
 CHI2_95 = 5.991
@@ -185,28 +192,18 @@ def fit_digit(
     start: BundleResult | None = None,
     slide: bool = True,
     order: str = ABDUCTION_FIRST,
+    max_iter: int = MAX_ITER,
 ) -> DigitFit:
     """Start, adjust and check one digit's chain (:func:`chain_layout`): from the staged
     start, or (a finger's two-axis MP, in ``order``) from its hinge fit ``start`` with the
     second axis added, perpendicular to the flexion axis and the proximal phalanx, at
-    angle 0."""
+    angle 0; each adjustment after the staged start at most ``max_iter`` iterations."""
     layout = chain_layout(digit, two_axis, order)
 
     def again(
         r: BundleResult, lines: Lines, q: FloatArray, free: np.ndarray | None
     ) -> BundleResult:
-        return adjust(
-            data,
-            layout.structure,
-            lines,
-            r.u,
-            q,
-            hand=r.hand,
-            slide=r.slide,
-            free=free,
-            max_iter=MAX_ITER,
-            tol=TOL,
-        )
+        return _again(data, layout, r, lines, q, free, max_iter=max_iter)
 
     if start is None:
         result = staged_start(data, layout.structure, layout.first, layout.second)
@@ -228,21 +225,79 @@ def fit_digit(
         q = np.insert(start.q, at, 0.0, axis=0)
         free = None if start.slide is None else slide_free(data, layout.structure.levels)
         result = again(start, two, q, free)
-    # The same motion, the angles within a turn and each flexion axis pointed so that
-    # flexion is positive.
+    return _finish(data, digit, layout, result, max_iter)
+
+
+def _finish(
+    data: DigitMarkers,
+    digit: str,
+    layout: ChainLayout,
+    result: BundleResult,
+    max_iter: int = MAX_ITER,
+) -> DigitFit:
+    """An adjusted chain checked: the angles within a turn and each flexion axis pointed
+    so that flexion is positive (the same motion; adjusted again when either changed),
+    then the lines the markers do not determine held at their start."""
     turned = np.abs(result.q) > np.pi
     q = np.where(turned, wrap(result.q), result.q)
     flipped = [k for k in layout.first if flexion_sign(q[k]) < 0]
     if flipped or turned.any():
         axis = result.lines.axis.copy()
         axis[flipped], q[flipped] = -axis[flipped], -q[flipped]
-        result = again(result, Lines(axis, result.lines.centre), q, result.free)
+        lines = Lines(axis, result.lines.centre)
+        result = _again(data, layout, result, lines, q, result.free, max_iter=max_iter)
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
-        result = again(result, result.lines, result.q, result.free & ~bad)
+        held = result.free & ~bad
+        result = _again(data, layout, result, result.lines, result.q, held, max_iter=max_iter)
         fit.result, fit.covariance = result, line_covariance(result)
     return fit
+
+
+def _again(
+    data: DigitMarkers,
+    layout: ChainLayout,
+    r: BundleResult,
+    lines: Lines,
+    q: FloatArray,
+    free: np.ndarray | None,
+    hand: HandFrames | None = None,
+    max_iter: int = MAX_ITER,
+) -> BundleResult:
+    """The adjustment of ``layout``'s chain from ``lines``, ``q`` and ``r``'s places,
+    slides and (unless ``hand`` is given) hand frames, at most ``max_iter`` iterations."""
+    return adjust(
+        data,
+        layout.structure,
+        lines,
+        r.u,
+        q,
+        hand=r.hand if hand is None else hand,
+        slide=r.slide,
+        free=free,
+        max_iter=max_iter,
+        tol=TOL,
+    )
+
+
+def coarse_frames(frames: int) -> np.ndarray | None:
+    """The frames ``(m,)`` a recording of ``frames`` is first fitted on: every ``k``-th,
+    about :data:`COARSE_FRAMES` of them; None when it has no more than twice that."""
+    k = math.ceil(frames / COARSE_FRAMES)
+    return np.arange(0, frames, k) if k > 2 else None
+
+
+def refined(fit: DigitFit, data: DigitMarkers, coarse: np.ndarray) -> DigitFit:
+    """``fit``, made on the frames ``coarse`` of ``data``, adjusted on all of them: each
+    frame starts from the nearest coarse frame's angles and hand frame, every global
+    unknown free again (then checked as any fit, :func:`_finish`)."""
+    r = fit.result
+    near = np.minimum(np.rint(np.arange(data.frames) / coarse[1]).astype(int), len(coarse) - 1)
+    hand = HandFrames(r.hand.rotation[near].copy(), r.hand.offset[near].copy())
+    free = None if r.slide is None else slide_free(data, fit.layout.structure.levels)
+    result = _again(data, fit.layout, r, r.lines, r.q[:, near], free, hand)
+    return _finish(data, fit.digit, fit.layout, result)
 
 
 def with_slide_uncertainty(fit: DigitFit) -> DigitFit:
@@ -261,19 +316,27 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
 
     The two-axis fits start from the hinge's, one with the ab/adduction axis proximal and
     one with the flexion axis proximal; the lower cost decides the order (the two have the
-    same unknowns). Its ``n + 4`` more unknowns (an angle per frame, the line) lower the
+    same unknowns). A long recording is fitted first on a coarse sample of its frames
+    (:data:`COARSE_FRAMES`), and each fit then adjusted on every frame
+    (:func:`refined`): the costs compared are the whole recording's. Its ``n + 4`` more unknowns (an angle per frame, the line) lower the
     cost by about ``(n + 4) sigma^2`` on noise alone (a chi-square with that many degrees
     of freedom); ``auto`` keeps the second axis when the drop exceeds that by more than
     :data:`SECOND_AXIS_Z` of its standard deviations ``sqrt(2 (n + 4))``, ``sigma^2`` the
     two-axis fit's residual variance.
     """
-    hinge = fit_digit(data, digit, False, slide=slide)
+    coarse = coarse_frames(data.frames)
+    work = data if coarse is None else frames_of(data, coarse)
+    # On the coarse frames the same work buys k times the iterations.
+    budget = MAX_ITER * (1 if coarse is None else int(coarse[1]))
+    hinge = fit_digit(work, digit, False, slide=slide, max_iter=budget)
+    orders = [
+        fit_digit(work, digit, True, start=hinge.result, slide=slide, order=o, max_iter=budget)
+        for o in ((ABDUCTION_FIRST, FLEXION_FIRST) if mp_axes != "hinge" else ())
+    ]
+    if coarse is not None:
+        hinge, orders = refined(hinge, data, coarse), [refined(o, data, coarse) for o in orders]
     if mp_axes == "hinge":
         return with_slide_uncertainty(hinge)
-    orders = [
-        fit_digit(data, digit, True, start=hinge.result, slide=slide, order=o)
-        for o in (ABDUCTION_FIRST, FLEXION_FIRST)
-    ]
     two, other = sorted(orders, key=lambda f: f.result.cost)
     extra = data.frames + 4
     n, k = two.result.normal.qq.shape[:2]
