@@ -183,12 +183,17 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def speed(frames: int = 10_000) -> dict:
-    """Seconds of a marker fit of ``frames`` grasp frames: one finger, four fingers."""
+    """Seconds of a marker fit of ``frames`` grasp frames: one finger, four fingers, and
+    four fingers in two worker processes (``fingerfit fit --jobs 2``; CPU seconds of this
+    process only)."""
+    from fingerfit.evaluate.study import study_executor
+
     out = {}
     cycles = int(np.ceil(frames / 500))
-    for label, fingers in (
-        ("one finger", ("index",)),
-        ("four fingers", ("index", "middle", "ring", "little")),
+    for label, fingers, jobs in (
+        ("one finger", ("index",), 1),
+        ("four fingers", ("index", "middle", "ring", "little"), 1),
+        ("four fingers, 2 worker processes", ("index", "middle", "ring", "little"), 2),
     ):
         sim = simulate_cohort(
             SimConfig(fingers=fingers, cycles=cycles, targets=False, test=False), 1, 5
@@ -197,7 +202,8 @@ def speed(frames: int = 10_000) -> dict:
         n = sum(r.n_frames for r in ms.session.grasp)
         load = os.getloadavg()[0]
         t0, c0 = time.perf_counter(), time.process_time()
-        fit_marker_session(ms.session)
+        with study_executor(jobs) as pool:
+            fit_marker_session(ms.session, executor=None if jobs == 1 else pool)
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
         out[label] = {
             "frames": n,
@@ -210,6 +216,8 @@ def speed(frames: int = 10_000) -> dict:
             f"{load:.1f} before, {os.getloadavg()[0]:.1f} after)",
             flush=True,
         )
+    four = out["four fingers"]["seconds"] / out["four fingers, 2 worker processes"]["seconds"]
+    print(f"speed: 2 worker processes {four:.2f}x faster than one on four fingers", flush=True)
     return out
 
 

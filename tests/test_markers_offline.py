@@ -234,3 +234,32 @@ def test_the_other_kind_of_recording_is_refused_in_one_line(command: str, tmp_pa
         tail.append("--orthogonal")
         line = refused(f["markers"], f["trc"])
         assert "marker_model.json: was fitted from markers" in line and "--orthogonal" in line
+
+
+def test_fit_jobs_fits_the_digits_in_worker_processes(tmp_path):
+    """``fingerfit fit --jobs 2`` of a marker session: each digit fitted in a worker
+    process, the model the same as one process's; a 6-DOF session refuses it in one
+    line."""
+    runner = CliRunner()
+    sim = ["simulate", str(tmp_path), "--subjects", "1", "--fingers", "index,middle"]
+    res = runner.invoke(app, [*sim, "--cycles", "2", "--markers", "todorov", "-q"])
+    assert res.exit_code == 0, res.output
+    (session,) = [p for p in tmp_path.iterdir() if p.is_dir()]
+    models = {}
+    for jobs in ("1", "2"):
+        out = tmp_path / f"jobs{jobs}.json"
+        res = runner.invoke(app, ["fit", str(session), "--jobs", jobs, "-q", "-o", str(out)])
+        assert res.exit_code == 0, res.output
+        models[jobs] = load_model(out)
+    for d in ("index", "middle"):
+        one, two = models["1"].fingers[d], models["2"].fingers[d]
+        for j in ("mp", "pip", "dip"):
+            np.testing.assert_array_equal(one.joints[j].axis, two.joints[j].axis)
+            np.testing.assert_array_equal(one.joints[j].center, two.joints[j].center)
+    six = tmp_path / "six"
+    res = runner.invoke(app, ["simulate", str(six), "--subjects", "1", "--fingers", "index", "-q"])
+    assert res.exit_code == 0, res.output
+    (s6,) = [p for p in six.iterdir() if p.is_dir()]
+    res = runner.invoke(app, ["fit", str(s6), "--jobs", "2", "-q"])
+    assert res.exit_code != 0
+    assert "only a marker session's digits" in res.output

@@ -249,6 +249,15 @@ def fit(
             "checks (units, quaternion order); the warnings are stored in the model file.",
         ),
     ] = False,
+    jobs: Annotated[
+        int,
+        typer.Option(
+            "--jobs",
+            "-j",
+            min=1,
+            help="Worker processes fitting a marker session's digits side by side.",
+        ),
+    ] = 1,
     quiet: QuietTable = False,
 ) -> None:
     """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
@@ -272,12 +281,17 @@ def fit(
             notice("note", note)
         n_fingers = len(names or s.fingers)
         if s.marker_map:
-            model = _fit_markers(s, names, bar, task)
+            model = _fit_markers(s, names, bar, task, jobs)
             path = save_model(model, target)
             if not quiet:
                 out.print(quality_table(model))
             say("model written to [bold]{}[/]", path)
             return
+        if jobs > 1:
+            raise typer.BadParameter(
+                "only a marker session's digits are fitted in worker processes",
+                param_hint="--jobs",
+            )
         bar.update(task, advance=1, description=f"fitting {n_fingers} digit(s) ({method})")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -295,17 +309,19 @@ def fit(
     say("model written to [bold]{}[/]", path)
 
 
-def _fit_markers(session, names: list[str] | None, bar, task):
-    """The marker fit of a marker session (:mod:`fingerfit.estimate.markers`), its notes
-    shown one per line."""
+def _fit_markers(session, names: list[str] | None, bar, task, jobs: int = 1):
+    """The marker fit of a marker session (:mod:`fingerfit.estimate.markers`), its digits
+    in ``jobs`` worker processes, its notes shown one per line."""
     import dataclasses
 
     from ..estimate.markers.fit import fit_marker_session
+    from ..evaluate.study import study_executor
 
     if names:
         session = dataclasses.replace(session, fingers=[d for d in session.fingers if d in names])
     bar.update(task, advance=1, description=f"fitting {len(session.fingers)} digit(s) (markers)")
-    result = fit_marker_session(session)
+    with study_executor(max(1, min(jobs, len(session.fingers)))) as pool:
+        result = fit_marker_session(session, executor=None if jobs == 1 else pool)
     bar.advance(task)
     for note in result.notes:
         notice("note", note)

@@ -15,6 +15,7 @@ one line naming the joint; the lines' uncertainty holds the skin's slide
 from __future__ import annotations
 
 import math
+from concurrent.futures import Executor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -376,7 +377,11 @@ class MarkerFit:
 
 
 def fit_marker_session(
-    session: Session, *, mp_axes: str = "auto", slide: bool = False
+    session: Session,
+    *,
+    mp_axes: str = "auto",
+    slide: bool = False,
+    executor: Executor | None = None,
 ) -> MarkerFit:
     """Fit the individual hand model of a marker session.
 
@@ -393,6 +398,9 @@ def fit_marker_session(
         (:func:`.bundle.places`, against the prior :data:`.bundle.SLIDE_PRIOR`). Off by
         default: the slide and the angle enter as a product, and the adjustment then
         crawls (``docs/markers.md``, measured).
+    executor : concurrent.futures.Executor, optional
+        Fits the digits side by side (each digit's fit is independent of the others';
+        the result is the same). Default: one after the other, in this process.
 
     Returns
     -------
@@ -430,10 +438,15 @@ def fit_marker_session(
     notes = []
     if lost or lost_ref:
         notes.append(f"{lost + lost_ref} frames without 3 hand markers left out")
-    fits = {}
+    datas = {d: digit_markers(session, d, moving, reference) for d in session.fingers}
+    if executor is None:
+        fits = {d: fit_finger(data, d, mp_axes, slide) for d, data in datas.items()}
+    else:
+        futures = {
+            d: executor.submit(fit_finger, data, d, mp_axes, slide) for d, data in datas.items()
+        }
+        fits = {d: f.result() for d, f in futures.items()}
     for d in session.fingers:
-        data = digit_markers(session, d, moving, reference)
-        fits[d] = fit_finger(data, d, mp_axes, slide)
         sd = fits[d].slide_sd
         if sd is not None:
             fits[d].notes.append(
