@@ -278,3 +278,22 @@ def test_a_long_recording_fitted_coarse_first_ends_at_the_direct_fit(monkeypatch
     assert abs(coarse.result.cost - direct.result.cost) <= 1e-9 * direct.result.cost
     cos = np.abs(np.einsum("ki,ki->k", coarse.result.lines.axis, direct.result.lines.axis))
     assert np.degrees(np.arccos(np.minimum(cos, 1.0))).max() < 0.01
+
+
+def test_a_two_axis_mp_is_named_by_its_motion():
+    """The two MP orders are one chain of two lines: the one whose angles span more is
+    the flexion axis, whichever start the adjustment came from."""
+    from types import SimpleNamespace
+
+    from fingerfit.digits import ABDUCTION_FIRST, FLEXION_FIRST
+    from fingerfit.estimate.markers.fit import _labelled, chain_layout, motion_range_deg
+
+    t = np.linspace(0.0, 1.0, 201)
+    q = np.stack([np.radians(80.0) * t, np.radians(10.0) * np.sin(7 * t), t, t])
+    result = SimpleNamespace(q=q, slide=None)
+    layout, same = _labelled(None, "index", chain_layout("index", True, ABDUCTION_FIRST), result, 1)
+    assert layout.order == FLEXION_FIRST and same is result
+    assert layout.names[layout.first[0]] == "mp" and layout.first[0] == 0
+    kept, _ = _labelled(None, "index", chain_layout("index", True, FLEXION_FIRST), result, 1)
+    assert kept.order == FLEXION_FIRST
+    assert abs(motion_range_deg(q[0]) - 72.0) < 1e-9  # the 5th to 95th percentile of 0-80

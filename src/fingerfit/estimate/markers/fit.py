@@ -45,6 +45,10 @@ UNDETERMINED_SD_MM = 20.0
 #: ``1e4`` mm^2 is ``1e-6`` mm^2: nothing the figures show).
 MAX_ITER = 60
 TOL = 1e-10
+#: No joint of a digit turns through half a turn: a two-axis MP minimum whose axes' angles
+#: span more (5th to 95th percentile, deg) has two nearly parallel axes turning against
+#: each other to soak up the skin's slide, and is left out (:func:`fit_finger`).
+HALF_TURN_DEG = 180.0
 #: A recording of more than twice this many frames is fitted first on every ``k``-th
 #: frame (about this many; the staged start, the hinge and both two-axis orders), then
 #: each of those fits is adjusted on every frame (:func:`fit_finger`): at 100 Hz the
@@ -226,7 +230,43 @@ def fit_digit(
         q = np.insert(start.q, at, 0.0, axis=0)
         free = None if start.slide is None else slide_free(data, layout.structure.levels)
         result = again(start, two, q, free)
+        layout, result = _labelled(data, digit, layout, result, max_iter)
     return _finish(data, digit, layout, result, max_iter)
+
+
+def _largest_range_deg(fit: DigitFit) -> float:
+    """The larger range of motion of a two-axis MP's two axes (deg)."""
+    return max(
+        motion_range_deg(fit.result.q[k]) for k in (fit.layout.first[0], fit.layout.second[0])
+    )
+
+
+def motion_range_deg(q: FloatArray) -> float:
+    """The range of an axis's angles ``(n,)`` (deg): the spread of their 5th to 95th
+    percentile."""
+    lo, hi = np.percentile(q, [5.0, 95.0])
+    return math.degrees(float(hi - lo))
+
+
+def _labelled(
+    data: DigitMarkers, digit: str, layout: ChainLayout, result: BundleResult, max_iter: int
+) -> tuple[ChainLayout, BundleResult]:
+    """A two-axis MP's layout named by its motion: the axis with the larger range is the
+    flexion axis.
+
+    The two orders are one chain (a proximal and a distal line); only the names differ.
+    Started with the ab/adduction axis distal, an adjustment can end with the distal axis
+    carrying the flexion: then it is named so (the lines and angles unchanged; with
+    slides, which follow the flexion angle, adjusted again).
+    """
+    flex, second = layout.first[0], layout.second[0]
+    if motion_range_deg(result.q[second]) <= motion_range_deg(result.q[flex]):
+        return layout, result
+    other = FLEXION_FIRST if layout.order == ABDUCTION_FIRST else ABDUCTION_FIRST
+    named = chain_layout(digit, True, other)
+    if result.slide is not None:
+        result = _again(data, named, result, result.lines, result.q, result.free, max_iter=max_iter)
+    return named, result
 
 
 def _finish(
@@ -298,7 +338,10 @@ def refined(fit: DigitFit, data: DigitMarkers, coarse: np.ndarray) -> DigitFit:
     hand = HandFrames(r.hand.rotation[near].copy(), r.hand.offset[near].copy())
     free = None if r.slide is None else slide_free(data, fit.layout.structure.levels)
     result = _again(data, fit.layout, r, r.lines, r.q[:, near], free, hand)
-    return _finish(data, fit.digit, fit.layout, result)
+    layout = fit.layout
+    if layout.second:
+        layout, result = _labelled(data, fit.digit, layout, result, MAX_ITER)
+    return _finish(data, fit.digit, layout, result)
 
 
 def with_slide_uncertainty(fit: DigitFit) -> DigitFit:
@@ -315,9 +358,10 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
     """A finger with its MP a hinge, two axes, or (``auto``) two axes when the second
     explains the markers beyond what its per-frame angle absorbs of the noise.
 
-    The two-axis fits start from the hinge's, one with the ab/adduction axis proximal and
-    one with the flexion axis proximal; the lower cost decides the order (the two have the
-    same unknowns). A long recording is fitted first on a coarse sample of its frames
+    The two-axis fits start from the hinge's, the second axis inserted proximal to the
+    flexion axis and distal to it: one chain of two lines from two starts; the lower
+    cost wins, and the axis with the larger range of motion is named flexion
+    (:func:`_labelled`), which gives the order. A long recording is fitted first on a coarse sample of its frames
     (:data:`COARSE_FRAMES`), and each fit then adjusted on every frame
     (:func:`refined`): the costs compared are the whole recording's. Its ``n + 4`` more unknowns (an angle per frame, the line) lower the
     cost by about ``(n + 4) sigma^2`` on noise alone (a chi-square with that many degrees
@@ -338,7 +382,17 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
         hinge, orders = refined(hinge, data, coarse), [refined(o, data, coarse) for o in orders]
     if mp_axes == "hinge":
         return with_slide_uncertainty(hinge)
-    two, other = sorted(orders, key=lambda f: f.result.cost)
+    turns = [_largest_range_deg(f) > HALF_TURN_DEG for f in orders]
+    turning = [f for f, t in zip(orders, turns, strict=True) if t]
+    plausible = [f for f, t in zip(orders, turns, strict=True) if not t] or orders
+    if mp_axes == "auto" and len(turning) == len(orders):
+        hinge.notes.append(
+            f"{digit} mp: a hinge (both two-axis minima turn an MP axis through "
+            f"{min(_largest_range_deg(f) for f in turning):.3g} deg or more: not a joint's motion)"
+        )
+        return with_slide_uncertainty(hinge)
+    two, *rest = sorted(plausible, key=lambda f: f.result.cost)
+    other = rest[0] if rest else turning[0]
     extra = data.frames + 4
     n, k = two.result.normal.qq.shape[:2]
     dof = max(two.result.normal.count - n * k - two.result.normal.gg.shape[0], 1)
@@ -347,10 +401,30 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
     if mp_axes == "two" or z > SECOND_AXIS_Z:
         proximal = "ab/adduction" if two.layout.order == ABDUCTION_FIRST else "flexion"
         gap = (other.result.cost - two.result.cost) / sigma2
+        flex, ab = (
+            motion_range_deg(two.result.q[k]) for k in (two.layout.first[0], two.layout.second[0])
+        )
+        if any(other is f for f in turning):
+            beyond = (
+                (
+                    f"the other start's minimum ({gap:.3g} sigma^2 lower)"
+                    if gap < 0
+                    else "the other start's minimum"
+                )
+                + f" turns an MP axis through {_largest_range_deg(other):.3g} deg: not a joint's motion"
+            )
+        else:
+            beyond = f"the other start's minimum {gap:.3g} sigma^2 higher"
         two.notes.append(
             f"{digit} mp: two axes (the second lowers the cost by {z:.3g} SD), the "
-            f"{proximal} axis proximal (the other order's cost {gap:.3g} sigma^2 higher)"
+            f"{proximal} axis proximal (ranges of motion: flexion {flex:.3g} deg, "
+            f"ab/adduction {ab:.3g} deg; {beyond})"
         )
+        if any(two is f for f in turning):
+            two.notes.append(
+                f"{digit} mp: warning: both two-axis minima turn an MP axis through more than "
+                f"{HALF_TURN_DEG:g} deg (not a joint's motion); mp_axes='two' kept the lower"
+            )
         return with_slide_uncertainty(two)
     hinge.notes.append(
         f"{digit} mp: a hinge (a second axis lowers the cost by {z:.3g} SD, "
