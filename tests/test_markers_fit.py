@@ -262,24 +262,6 @@ def test_mixing_reaches_the_same_minimum_in_fewer_iterations():
     assert np.degrees(np.arccos(np.minimum(cos, 1.0))).max() < 1e-3
 
 
-def test_a_long_recording_fitted_coarse_first_ends_at_the_direct_fit(monkeypatch):
-    """Fitted first on every k-th frame, then on all: the same chain, the same axes (to
-    0.01 deg) and cost (1e-9 of it) as the fit of every frame from the start."""
-    from fingerfit.estimate.markers import fit as fit_module
-
-    sim = simulate_subject(SimConfig(targets=False, test=False, cycles=4, abduction=False), 5)
-    data = _index(simulate_markers(sim, "todorov", seed=1))
-    monkeypatch.setattr(fit_module, "COARSE_FRAMES", 10**9)
-    direct = fit_module.fit_finger(data, "index", "hinge", slide=False)
-    monkeypatch.setattr(fit_module, "COARSE_FRAMES", data.frames // 5)
-    assert fit_module.coarse_frames(data.frames) is not None
-    coarse = fit_module.fit_finger(data, "index", "hinge", slide=False)
-    assert coarse.layout.names == direct.layout.names
-    assert abs(coarse.result.cost - direct.result.cost) <= 1e-9 * direct.result.cost
-    cos = np.abs(np.einsum("ki,ki->k", coarse.result.lines.axis, direct.result.lines.axis))
-    assert np.degrees(np.arccos(np.minimum(cos, 1.0))).max() < 0.01
-
-
 def test_a_two_axis_mp_is_named_by_its_motion():
     """The two MP orders are one chain of two lines: the one whose angles span more is
     the flexion axis, whichever start the adjustment came from."""

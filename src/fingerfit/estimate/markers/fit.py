@@ -27,8 +27,7 @@ from ...model import HandModel, JointModel, JointQuality, assemble_digit
 from ...session import Session, joint_sensors, sensor_name
 from ...track.solver import wrap
 from ...transforms import FloatArray, unit
-from .bundle import BundleResult, HandFrames, Lines, Structure, adjust, line_covariance
-from .frames import frames_of
+from .bundle import BundleResult, Lines, Structure, adjust, line_covariance
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import flexion_sign, staged_start
 from .uncertainty import slide_uncertainty
@@ -49,12 +48,6 @@ TOL = 1e-10
 #: span more (5th to 95th percentile, deg) has two nearly parallel axes turning against
 #: each other to soak up the skin's slide, and is left out (:func:`fit_finger`).
 HALF_TURN_DEG = 180.0
-#: A recording of more than twice this many frames is fitted first on every ``k``-th
-#: frame (about this many; the staged start, the hinge and both two-axis orders), then
-#: each of those fits is adjusted on every frame (:func:`fit_finger`): at 100 Hz the
-#: frames between carry little new information, and the long first stretch of the
-#: adjustment (an MP's second axis turning from its start) costs a fifth as much.
-COARSE_FRAMES = 2000
 #: Chi-square 95 % quantile with two degrees of freedom: an axis direction's (or a
 #: line point's) 95 % region is ``x^T C^-1 x <= CHI2_95``.
 CHI2_95 = 5.991
@@ -197,18 +190,17 @@ def fit_digit(
     start: BundleResult | None = None,
     slide: bool = True,
     order: str = ABDUCTION_FIRST,
-    max_iter: int = MAX_ITER,
 ) -> DigitFit:
     """Start, adjust and check one digit's chain (:func:`chain_layout`): from the staged
     start, or (a finger's two-axis MP, in ``order``) from its hinge fit ``start`` with the
     second axis added, perpendicular to the flexion axis and the proximal phalanx, at
-    angle 0; each adjustment after the staged start at most ``max_iter`` iterations."""
+    angle 0."""
     layout = chain_layout(digit, two_axis, order)
 
     def again(
         r: BundleResult, lines: Lines, q: FloatArray, free: np.ndarray | None
     ) -> BundleResult:
-        return _again(data, layout, r, lines, q, free, max_iter=max_iter)
+        return _again(data, layout, r, lines, q, free)
 
     if start is None:
         result = staged_start(data, layout.structure, layout.first, layout.second)
@@ -230,8 +222,8 @@ def fit_digit(
         q = np.insert(start.q, at, 0.0, axis=0)
         free = None if start.slide is None else slide_free(data, layout.structure.levels)
         result = again(start, two, q, free)
-        layout, result = _labelled(data, digit, layout, result, max_iter)
-    return _finish(data, digit, layout, result, max_iter)
+        layout, result = _labelled(data, digit, layout, result)
+    return _finish(data, digit, layout, result)
 
 
 def _largest_range_deg(fit: DigitFit) -> float:
@@ -249,7 +241,7 @@ def motion_range_deg(q: FloatArray) -> float:
 
 
 def _labelled(
-    data: DigitMarkers, digit: str, layout: ChainLayout, result: BundleResult, max_iter: int
+    data: DigitMarkers, digit: str, layout: ChainLayout, result: BundleResult
 ) -> tuple[ChainLayout, BundleResult]:
     """A two-axis MP's layout named by its motion: the axis with the larger range is the
     flexion axis.
@@ -265,7 +257,7 @@ def _labelled(
     other = FLEXION_FIRST if layout.order == ABDUCTION_FIRST else ABDUCTION_FIRST
     named = chain_layout(digit, True, other)
     if result.slide is not None:
-        result = _again(data, named, result, result.lines, result.q, result.free, max_iter=max_iter)
+        result = _again(data, named, result, result.lines, result.q, result.free)
     return named, result
 
 
@@ -274,7 +266,6 @@ def _finish(
     digit: str,
     layout: ChainLayout,
     result: BundleResult,
-    max_iter: int = MAX_ITER,
 ) -> DigitFit:
     """An adjusted chain checked: the angles within a turn and each flexion axis pointed
     so that flexion is positive (the same motion; adjusted again when either changed),
@@ -286,12 +277,12 @@ def _finish(
         axis = result.lines.axis.copy()
         axis[flipped], q[flipped] = -axis[flipped], -q[flipped]
         lines = Lines(axis, result.lines.centre)
-        result = _again(data, layout, result, lines, q, result.free, max_iter=max_iter)
+        result = _again(data, layout, result, lines, q, result.free)
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
         held = result.free & ~bad
-        result = _again(data, layout, result, result.lines, result.q, held, max_iter=max_iter)
+        result = _again(data, layout, result, result.lines, result.q, held)
         fit.result, fit.covariance = result, line_covariance(result)
     return fit
 
@@ -303,45 +294,21 @@ def _again(
     lines: Lines,
     q: FloatArray,
     free: np.ndarray | None,
-    hand: HandFrames | None = None,
-    max_iter: int = MAX_ITER,
 ) -> BundleResult:
     """The adjustment of ``layout``'s chain from ``lines``, ``q`` and ``r``'s places,
-    slides and (unless ``hand`` is given) hand frames, at most ``max_iter`` iterations."""
+    slides and hand frames."""
     return adjust(
         data,
         layout.structure,
         lines,
         r.u,
         q,
-        hand=r.hand if hand is None else hand,
+        hand=r.hand,
         slide=r.slide,
         free=free,
-        max_iter=max_iter,
+        max_iter=MAX_ITER,
         tol=TOL,
     )
-
-
-def coarse_frames(frames: int) -> np.ndarray | None:
-    """The frames ``(m,)`` a recording of ``frames`` is first fitted on: every ``k``-th,
-    about :data:`COARSE_FRAMES` of them; None when it has no more than twice that."""
-    k = math.ceil(frames / COARSE_FRAMES)
-    return np.arange(0, frames, k) if k > 2 else None
-
-
-def refined(fit: DigitFit, data: DigitMarkers, coarse: np.ndarray) -> DigitFit:
-    """``fit``, made on the frames ``coarse`` of ``data``, adjusted on all of them: each
-    frame starts from the nearest coarse frame's angles and hand frame, every global
-    unknown free again (then checked as any fit, :func:`_finish`)."""
-    r = fit.result
-    near = np.minimum(np.rint(np.arange(data.frames) / coarse[1]).astype(int), len(coarse) - 1)
-    hand = HandFrames(r.hand.rotation[near].copy(), r.hand.offset[near].copy())
-    free = None if r.slide is None else slide_free(data, fit.layout.structure.levels)
-    result = _again(data, fit.layout, r, r.lines, r.q[:, near], free, hand)
-    layout = fit.layout
-    if layout.second:
-        layout, result = _labelled(data, fit.digit, layout, result, MAX_ITER)
-    return _finish(data, fit.digit, layout, result)
 
 
 def with_slide_uncertainty(fit: DigitFit) -> DigitFit:
@@ -361,27 +328,20 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
     The two-axis fits start from the hinge's, the second axis inserted proximal to the
     flexion axis and distal to it: one chain of two lines from two starts; the lower
     cost wins, and the axis with the larger range of motion is named flexion
-    (:func:`_labelled`), which gives the order. A long recording is fitted first on a coarse sample of its frames
-    (:data:`COARSE_FRAMES`), and each fit then adjusted on every frame
-    (:func:`refined`): the costs compared are the whole recording's. Its ``n + 4`` more unknowns (an angle per frame, the line) lower the
-    cost by about ``(n + 4) sigma^2`` on noise alone (a chi-square with that many degrees
-    of freedom); ``auto`` keeps the second axis when the drop exceeds that by more than
+    (:func:`_labelled`), which gives the order. A minimum that turns an MP axis through
+    more than :data:`HALF_TURN_DEG` is left out. The second axis's ``n + 4`` more
+    unknowns (an angle per frame, the line) lower the cost by about ``(n + 4) sigma^2``
+    on noise alone (a chi-square with that many degrees of freedom); ``auto`` keeps the second axis when the drop exceeds that by more than
     :data:`SECOND_AXIS_Z` of its standard deviations ``sqrt(2 (n + 4))``, ``sigma^2`` the
     two-axis fit's residual variance.
     """
-    coarse = coarse_frames(data.frames)
-    work = data if coarse is None else frames_of(data, coarse)
-    # On the coarse frames the same work buys k times the iterations.
-    budget = MAX_ITER * (1 if coarse is None else int(coarse[1]))
-    hinge = fit_digit(work, digit, False, slide=slide, max_iter=budget)
-    orders = [
-        fit_digit(work, digit, True, start=hinge.result, slide=slide, order=o, max_iter=budget)
-        for o in ((ABDUCTION_FIRST, FLEXION_FIRST) if mp_axes != "hinge" else ())
-    ]
-    if coarse is not None:
-        hinge, orders = refined(hinge, data, coarse), [refined(o, data, coarse) for o in orders]
+    hinge = fit_digit(data, digit, False, slide=slide)
     if mp_axes == "hinge":
         return with_slide_uncertainty(hinge)
+    orders = [
+        fit_digit(data, digit, True, start=hinge.result, slide=slide, order=o)
+        for o in (ABDUCTION_FIRST, FLEXION_FIRST)
+    ]
     turns = [_largest_range_deg(f) > HALF_TURN_DEG for f in orders]
     turning = [f for f, t in zip(orders, turns, strict=True) if t]
     plausible = [f for f, t in zip(orders, turns, strict=True) if not t] or orders
