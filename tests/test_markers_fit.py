@@ -273,9 +273,9 @@ def test_a_two_axis_mp_is_named_by_its_motion():
     t = np.linspace(0.0, 1.0, 201)
     q = np.stack([np.radians(80.0) * t, np.radians(10.0) * np.sin(7 * t), t, t])
     result = SimpleNamespace(q=q, slide=None)
-    layout, same = _labelled(None, "index", chain_layout("index", True, ABDUCTION_FIRST), result, 1)
+    layout, same = _labelled(None, "index", chain_layout("index", True, ABDUCTION_FIRST), result)
     assert layout.order == FLEXION_FIRST and same is result
     assert layout.names[layout.first[0]] == "mp" and layout.first[0] == 0
-    kept, _ = _labelled(None, "index", chain_layout("index", True, FLEXION_FIRST), result, 1)
+    kept, _ = _labelled(None, "index", chain_layout("index", True, FLEXION_FIRST), result)
     assert kept.order == FLEXION_FIRST
     assert abs(motion_range_deg(q[0]) - 72.0) < 1e-9  # the 5th to 95th percentile of 0-80
