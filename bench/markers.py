@@ -183,18 +183,22 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def speed(frames: int = 10_000) -> dict:
-    """Seconds of a marker fit of ``frames`` grasp frames: one finger, four fingers, and
-    four fingers in two worker processes (``fingerfit fit --jobs 2``; CPU seconds of this
-    process only)."""
+    """Seconds of a marker fit of ``frames`` grasp frames: one finger without and with the
+    adjustment's Anderson mixing, four fingers, and four fingers in two worker processes
+    (``fingerfit fit --jobs 2``; CPU seconds of this process only)."""
+    from fingerfit.estimate.markers import bundle
     from fingerfit.evaluate.study import study_executor
 
     out = {}
     cycles = int(np.ceil(frames / 500))
-    for label, fingers, jobs in (
-        ("one finger", ("index",), 1),
-        ("four fingers", ("index", "middle", "ring", "little"), 1),
-        ("four fingers, 2 worker processes", ("index", "middle", "ring", "little"), 2),
+    four = ("index", "middle", "ring", "little")
+    for label, fingers, jobs, mix in (
+        ("one finger, steps not mixed", ("index",), 1, False),
+        ("one finger", ("index",), 1, True),
+        ("four fingers", four, 1, True),
+        ("four fingers, 2 worker processes", four, 2, True),
     ):
+        bundle.adjust.__kwdefaults__["mix"] = mix  # the Anderson mixing off: the old solver
         sim = simulate_cohort(
             SimConfig(fingers=fingers, cycles=cycles, targets=False, test=False), 1, 5
         )[0]
@@ -216,8 +220,10 @@ def speed(frames: int = 10_000) -> dict:
             f"{load:.1f} before, {os.getloadavg()[0]:.1f} after)",
             flush=True,
         )
-    four = out["four fingers"]["seconds"] / out["four fingers, 2 worker processes"]["seconds"]
-    print(f"speed: 2 worker processes {four:.2f}x faster than one on four fingers", flush=True)
+    mixed = out["one finger, steps not mixed"]["seconds"] / out["one finger"]["seconds"]
+    pool = out["four fingers"]["seconds"] / out["four fingers, 2 worker processes"]["seconds"]
+    print(f"speed: the steps mixed {mixed:.2f}x faster on one finger", flush=True)
+    print(f"speed: 2 worker processes {pool:.2f}x faster than one on four fingers", flush=True)
     return out
 
 
