@@ -331,9 +331,10 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
     (:func:`_labelled`), which gives the order. A minimum that turns an MP axis through
     more than :data:`HALF_TURN_DEG` is left out. The second axis's ``n + 4`` more
     unknowns (an angle per frame, the line) lower the cost by about ``(n + 4) sigma^2``
-    on noise alone (a chi-square with that many degrees of freedom); ``auto`` keeps the second axis when the drop exceeds that by more than
-    :data:`SECOND_AXIS_Z` of its standard deviations ``sqrt(2 (n + 4))``, ``sigma^2`` the
-    two-axis fit's residual variance.
+    on noise alone (a chi-square with that many degrees of freedom); ``auto`` keeps the
+    second axis when the drop exceeds that by more than :data:`SECOND_AXIS_Z` of its
+    standard deviations ``sqrt(2 (n + 4))``, ``sigma^2`` the two-axis fit's residual
+    variance.
     """
     hinge = fit_digit(data, digit, False, slide=slide)
     if mp_axes == "hinge":
@@ -365,13 +366,10 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
             motion_range_deg(two.result.q[k]) for k in (two.layout.first[0], two.layout.second[0])
         )
         if any(other is f for f in turning):
+            lower = f" ({-gap:.3g} sigma^2 lower)" if gap < 0 else ""
             beyond = (
-                (
-                    f"the other start's minimum ({gap:.3g} sigma^2 lower)"
-                    if gap < 0
-                    else "the other start's minimum"
-                )
-                + f" turns an MP axis through {_largest_range_deg(other):.3g} deg: not a joint's motion"
+                f"the other start's minimum{lower} turns an MP axis through "
+                f"{_largest_range_deg(other):.3g} deg: not a joint's motion"
             )
         else:
             beyond = f"the other start's minimum {gap:.3g} sigma^2 higher"
