@@ -6,6 +6,8 @@ kind of recording and a missing marker are refused in one line."""
 from __future__ import annotations
 
 import functools
+import subprocess
+import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -246,10 +248,14 @@ def test_fit_jobs_fits_the_digits_in_worker_processes(tmp_path):
     assert res.exit_code == 0, res.output
     (session,) = [p for p in tmp_path.iterdir() if p.is_dir()]
     models = {}
+    # The worker processes are started from a process of their own: this test process
+    # (a pytest-xdist worker) keeps no pool's state for the tests after it.
+    exe = Path(sys.executable).with_name("fingerfit")
     for jobs in ("1", "2"):
         out = tmp_path / f"jobs{jobs}.json"
-        res = runner.invoke(app, ["fit", str(session), "--jobs", jobs, "-q", "-o", str(out)])
-        assert res.exit_code == 0, res.output
+        cmd = [str(exe), "fit", str(session), "--jobs", jobs, "-q", "-o", str(out)]
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        assert res.returncode == 0, res.stdout + res.stderr
         models[jobs] = load_model(out)
     for d in ("index", "middle"):
         one, two = models["1"].fingers[d], models["2"].fingers[d]
