@@ -458,8 +458,16 @@ def test_a_ctrl_c_while_a_child_starts_ends_it_without_a_word(capfd, monkeypatch
 
     monkeypatch.setattr(SpawnProcess, "start", start_then_interrupt)
     monkeypatch.setattr(processes, "end_child", end)
-    with pytest.raises(KeyboardInterrupt):
-        processes.start_child(_report_signals, (q,), "probe")
+    # As at a terminal: Ctrl-C deliverable and handled by Python (a test process may have
+    # inherited SIGINT blocked or ignored from what started it or ran in it before).
+    mask = signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            processes.start_child(_report_signals, (q,), "probe")
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     assert len(ended) == 1 and ended[0].exitcode is not None  # ended, not left to start
     time.sleep(0.5)
     assert "Traceback" not in capfd.readouterr().err
