@@ -207,7 +207,7 @@ def speed(frames: int = 10_000) -> dict:
         load = os.getloadavg()[0]
         t0, c0 = time.perf_counter(), time.process_time()
         with study_executor(jobs) as pool:
-            fit_marker_session(ms.session, executor=None if jobs == 1 else pool)
+            fit_marker_session(ms.session, executor=pool)
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
         out[label] = {
             "frames": n,

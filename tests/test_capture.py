@@ -447,9 +447,8 @@ def test_a_ctrl_c_while_a_child_starts_ends_it_without_a_word(capfd, monkeypatch
 
     def start_then_interrupt(self):
         real_start(self)
-        # Ctrl-C as the child starts, sent to the main thread (where it is blocked): a
-        # process-wide signal could be taken by another thread an earlier test left in this
-        # process, and two full runs saw it go unhandled that way.
+        # Ctrl-C as the child starts, sent to the main thread (where start_child blocks
+        # it): not left to whichever thread of this process the kernel picks.
         signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
 
     def end(proc, timeout_s=0.0):

@@ -321,7 +321,7 @@ def _fit_markers(session, names: list[str] | None, bar, task, jobs: int = 1):
         session = dataclasses.replace(session, fingers=[d for d in session.fingers if d in names])
     bar.update(task, advance=1, description=f"fitting {len(session.fingers)} digit(s) (markers)")
     with study_executor(max(1, min(jobs, len(session.fingers)))) as pool:
-        result = fit_marker_session(session, executor=None if jobs == 1 else pool)
+        result = fit_marker_session(session, executor=pool)
     bar.advance(task)
     for note in result.notes:
         notice("note", note)
