@@ -6,9 +6,12 @@ kind of recording and a missing marker are refused in one line."""
 from __future__ import annotations
 
 import functools
+import os
+import signal
 import subprocess
 import sys
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -240,8 +243,8 @@ def test_the_other_kind_of_recording_is_refused_in_one_line(command: str, tmp_pa
 
 def test_fit_jobs_fits_the_digits_in_worker_processes(tmp_path):
     """``fingerfit fit --jobs 2`` of a marker session: each digit fitted in a worker
-    process, the model the same as one process's; a 6-DOF session refuses it in one
-    line."""
+    process, the model the same as one process's; Ctrl-C ends it without a word from
+    any process; a 6-DOF session refuses it in one line."""
     runner = CliRunner()
     sim = ["simulate", str(tmp_path), "--subjects", "1", "--fingers", "index,middle"]
     res = runner.invoke(app, [*sim, "--cycles", "2", "--markers", "todorov", "-q"])
@@ -262,6 +265,25 @@ def test_fit_jobs_fits_the_digits_in_worker_processes(tmp_path):
         for j in ("mp", "pip", "dip"):
             np.testing.assert_array_equal(one.joints[j].axis, two.joints[j].axis)
             np.testing.assert_array_equal(one.joints[j].center, two.joints[j].center)
+    # A terminal's Ctrl-C (the whole process group) once the workers run: no traceback
+    # from any process, no model file.
+    out = tmp_path / "interrupted.json"
+    cmd = [str(exe), "fit", str(session), "--jobs", "2", "-q", "-o", str(out)]
+    proc = subprocess.Popen(
+        cmd, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    deadline = time.monotonic() + 300  # a guard, not a measurement
+    while proc.poll() is None and time.monotonic() < deadline:
+        children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True)
+        if len(children.stdout.split()) >= 2:  # the resource tracker and a worker at least
+            break
+        time.sleep(0.05)
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)
+    output = proc.communicate(timeout=300)[0]
+    assert "Traceback" not in output, output
+    if proc.returncode != 0:  # interrupted before it was done
+        assert "interrupted" in output and not out.exists(), output
     six = tmp_path / "six"
     res = runner.invoke(app, ["simulate", str(six), "--subjects", "1", "--fingers", "index", "-q"])
     assert res.exit_code == 0, res.output

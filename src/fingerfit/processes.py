@@ -15,7 +15,8 @@ written.
   and :func:`child_ignores_interrupt`, its first call, ignores SIGINT and unblocks it:
   a Ctrl-C at any moment of its start is dropped, and the parent, which handles it,
   ends the child. In the parent a Ctrl-C while the child starts is raised once it has
-  started, and the child is ended (:func:`end_child`): never left to start alone.
+  started, and the child is ended (:func:`end_child`): never left to start alone. The
+  workers of :func:`worker_pool` (``--jobs``) start the same way.
 
 It imports nothing else of the package.
 """
@@ -29,6 +30,7 @@ import sys
 import threading
 import types
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Any
 
 #: Serialises the moment ``__main__`` is swapped while a child starts.
@@ -114,6 +116,34 @@ def start_child(target: Callable[..., Any], args: tuple, name: str) -> Any:
             end_child(proc)
             raise
     return proc
+
+
+class _QuietPool(ProcessPoolExecutor):
+    """A process pool whose workers start as :func:`start_child`'s children do: a
+    submit, which may start a worker, runs with SIGINT blocked (a Ctrl-C meanwhile is
+    raised after it), and each worker's initializer is :func:`child_ignores_interrupt`."""
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
+        with _interrupt_deferred(), _interrupt_blocked():
+            return super().submit(fn, *args, **kwargs)
+
+
+@contextlib.contextmanager
+def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """A ``spawn`` process pool of ``workers`` whose workers leave Ctrl-C to this
+    process (module docstring): none prints a traceback, and when the block ends by an
+    exception (Ctrl-C's ``KeyboardInterrupt`` included) they are ended at once (SIGTERM)
+    instead of finishing their tasks; else the pool is shut down, its tasks done."""
+    pool = _QuietPool(workers, mp_context=context(), initializer=child_ignores_interrupt)
+    try:
+        yield pool
+    except BaseException:
+        # No public way to end a pool's workers before Python 3.14.
+        for proc in list(pool._processes.values()):
+            proc.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
 
 
 def end_child(proc: Any, timeout_s: float | None = 0.0) -> None:

@@ -15,7 +15,7 @@ import json
 import shutil
 import warnings
 from collections.abc import Callable, Iterator
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from concurrent.futures import Executor, Future, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +27,7 @@ from ..errors import FingerfitError
 from ..estimate import FitOptions
 from ..io.atomic import atomic_write, staged_directory
 from ..model import save_model
+from ..processes import worker_pool
 from ..session import Session
 from . import figures
 from .gather import PackedSubjects, StudyTables
@@ -124,10 +125,9 @@ def study_executor(jobs: int = 1, scheduler: str | None = None) -> Iterator[Exec
     if jobs == 1:
         yield _InProcess()
         return
-    import multiprocessing
-
-    # spawn: workers never inherit the parent's threads (progress bar, Dask) or locks.
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+    # spawn: workers never inherit the parent's threads (progress bar, Dask) or locks;
+    # Ctrl-C is this process's: the workers print nothing and are ended at once.
+    with worker_pool(jobs) as pool:
         yield pool
 
 
