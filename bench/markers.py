@@ -46,7 +46,8 @@ from accuracy import CONDITIONS, tip_errors
 
 from fingerfit.estimate import FitOptions, fit_session
 from fingerfit.estimate.markers.angles import marker_angles
-from fingerfit.estimate.markers.bundle import Lines, adjust, line_covariance
+from fingerfit.estimate.markers.bundle import adjust, line_covariance
+from fingerfit.estimate.markers.chain import Lines
 from fingerfit.estimate.markers.fit import (
     CHI2_95,
     DigitFit,

@@ -7,13 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fingerfit.estimate.markers.bundle import (
-    Lines,
-    Structure,
-    line_columns,
-    line_covariance,
-    predict,
-)
+from fingerfit.estimate.markers.bundle import line_covariance
+from fingerfit.estimate.markers.chain import Lines, Structure, predict
+from fingerfit.estimate.markers.normal import line_columns
 from fingerfit.estimate.markers.observe import (
     carry_back,
     digit_markers,

@@ -20,7 +20,7 @@ from ...io.rigid import ClusterFit, fit_cluster
 from ...model import HandModel
 from ...session import Recording, Session
 from ...transforms import FloatArray, rotate_about_line
-from .bundle import Lines, Structure, predict
+from .chain import Lines, Structure, predict
 from .frames import FrameSolution, solve_frames
 from .observe import DigitMarkers, carry_back, digit_markers
 from .start import turn_about

@@ -27,7 +27,8 @@ from ...model import HandModel, JointModel, JointQuality, assemble_digit
 from ...session import Session, joint_sensors, sensor_name
 from ...track.solver import wrap
 from ...transforms import FloatArray, unit
-from .bundle import BundleResult, Lines, Structure, adjust, line_covariance
+from .bundle import BundleResult, adjust, line_covariance
+from .chain import Lines, Structure
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import flexion_sign, staged_start
 from .uncertainty import slide_uncertainty
@@ -427,7 +428,7 @@ def fit_marker_session(
         A finger's MP: two axes when the markers determine the second, a hinge, or two.
     slide : bool
         Estimate each marker's skin slide with the joint below it
-        (:func:`.bundle.places`, against the prior :data:`.bundle.SLIDE_PRIOR`). Off by
+        (:func:`.chain.places`, against the prior :data:`.chain.SLIDE_PRIOR`). Off by
         default: the slide and the angle enter as a product, and the adjustment then
         crawls (``docs/markers.md``, measured).
     executor : concurrent.futures.Executor, optional

@@ -17,7 +17,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ...transforms import FloatArray
-from .bundle import RIDGE, HandFrames, Lines, Structure, frame_terms
+from .chain import HandFrames, Lines, Structure
+from .normal import RIDGE, frame_terms
 from .observe import DigitMarkers
 
 #: A frame has converged when the undamped (Gauss-Newton) step from its point is below
@@ -97,7 +98,7 @@ def solve_frames(
     q : ndarray, shape (L, n)
         Start angles (rad).
     slide : ndarray, shape (M, 3), optional
-        The markers' slides (mm/rad, :func:`.bundle.places`).
+        The markers' slides (mm/rad, :func:`.chain.places`).
 
     Returns
     -------

@@ -27,7 +27,8 @@ from dataclasses import replace
 import numpy as np
 
 from ...transforms import FloatArray, unit
-from .bundle import BundleResult, HandFrames, Lines, Structure, adjust, predict
+from .bundle import BundleResult, adjust
+from .chain import HandFrames, Lines, Structure, predict
 from .observe import DigitMarkers
 
 

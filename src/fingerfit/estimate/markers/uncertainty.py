@@ -7,14 +7,14 @@ larger than the noise's, so ``sigma^2 S^-1`` alone (:func:`.bundle.line_covarian
 is no honest uncertainty.
 
 The slide is modelled as each marker's place moving linearly with the flexion angle of
-its segment's proximal joint, ``u + s theta`` (:func:`.bundle.places`; the hand's
+its segment's proximal joint, ``u + s theta`` (:func:`.chain.places`; the hand's
 markers with the digit's first joint), with ``s`` a random effect: in each marker's
 segment frame (along the bone, across it along the joint's axis, and dorsal; the hand's
 markers in the first segment's) its three components have variances ``tau^2``
 (mm^2/rad^2), one set for the digit's markers and one for the hand's. Near the fit
 (``s = 0``) the markers are linear in the unknowns, ``r = J_g dg + J_s s + e`` with
 ``e`` the camera noise (variance ``sigma^2`` per coordinate, the fit's residual
-variance), and with the frames' unknowns eliminated (:func:`.bundle.reduced`, the
+variance), and with the frames' unknowns eliminated (:func:`.normal.reduced`, the
 information ``S`` over the lines and places ``g`` and the slides ``s``):
 
 1. ``tau^2`` is the maximum of the marginal likelihood, by expectation-maximisation:
@@ -43,17 +43,9 @@ import numpy as np
 from scipy.special import ndtr
 
 from ...transforms import FloatArray, unit
-from .bundle import (
-    SLIDE_PRIOR,
-    BundleResult,
-    HandFrames,
-    Normal,
-    Structure,
-    frame_columns,
-    normal_equations,
-    observed,
-    reduced,
-)
+from .bundle import BundleResult
+from .chain import SLIDE_PRIOR, HandFrames, Structure, observed
+from .normal import Normal, frame_columns, normal_equations, reduced
 from .observe import DigitMarkers
 
 #: EM iterations of the slide's variances stop when none changes by more than this

@@ -1,0 +1,215 @@
+"""A digit's chain and its skin markers: the unknowns of the marker adjustment, where they
+put the markers, and the cost.
+
+The unknowns are the digit's **lines** (each axis's direction and a point of it, the chain
+of :mod:`fingerfit.track.chains`: a finger's MP with one or two axes, PIP, DIP; the thumb's
+CMC two axes, MCP one or two, IP), each **marker's place** ``u_i`` on its segment at the
+reference posture, and every frame's **angles** ``q_t``. Marker ``i`` on segment ``s`` is
+predicted at ``A_s(q_t) u_i`` (the chain's motion of that segment, :meth:`Chains.pose`)
+and measured at ``y_i(t)`` (the hand's motion removed, :mod:`.observe`); the reference
+recording pins the angles' zero: there ``y_i = u_i`` (its mean, weighted by its frame
+count). The cost is ``sum |y_i(t) - A_s(q_t) u_i|^2`` (mm^2, every marker seen in every
+frame, isotropic noise).
+
+Each frame's hand frame (the rigid fit of the hand's markers) is corrected by six more
+unknowns (:class:`HandFrames`), the hand's markers observed about their reference shape:
+without them the hand markers' noise, carried to a fingertip 100 mm away, tilted the DIP
+axis toward the direction that absorbs it. A direction moves in the plane perpendicular
+to it (2 unknowns) and a point of a line perpendicular to the line (2 unknowns; along the
+line it is no unknown): :meth:`Lines.moved`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ...track.chains import Chains, matvec_rows
+from ...transforms import FloatArray, orthonormal_basis, unit
+from .observe import DigitMarkers
+
+#: SD of the prior on a marker's slide per radian of its joint (mm/rad): the slide is
+#: estimated, when asked, against this prior (a weak one: skin moves a few mm over a
+#: joint's range).
+SLIDE_PRIOR = 3.0
+
+
+@dataclass
+class Lines:
+    """A chain's lines (tracker coordinates at the reference posture).
+
+    Attributes
+    ----------
+    axis : ndarray, shape (L, 3)
+        Unit directions, proximal first.
+    centre : ndarray, shape (L, 3)
+        A point of each line (mm).
+    """
+
+    axis: FloatArray
+    centre: FloatArray
+
+    def copy(self) -> Lines:
+        return Lines(self.axis.copy(), self.centre.copy())
+
+    def moved(self, step: FloatArray) -> Lines:
+        """The lines moved by ``step (4 L,)``: per level two direction and two point
+        unknowns in the plane perpendicular to the axis (rad, mm)."""
+        axis, centre = self.axis.copy(), self.centre.copy()
+        for k in range(axis.shape[0]):
+            b = orthonormal_basis(axis[k])[:2]  # (2, 3)
+            axis[k] = unit(axis[k] + step[4 * k : 4 * k + 2] @ b)
+            centre[k] = centre[k] + step[4 * k + 2 : 4 * k + 4] @ b
+        return Lines(axis, centre)
+
+
+@dataclass(frozen=True)
+class Structure:
+    """What moves what: ``depth (S,)`` axes moving each segment (segment ``s`` moves with
+    the first ``depth[s]`` axes); ``flexion (S,)`` the level of each segment's proximal
+    flexion axis, whose angle its markers slide with (needed to estimate the slide)."""
+
+    depth: np.ndarray
+    flexion: np.ndarray | None = None
+
+    @property
+    def levels(self) -> int:
+        return int(self.depth[-1])
+
+
+def predict(
+    structure: Structure,
+    lines: Lines,
+    segment: np.ndarray,
+    u: FloatArray,
+    q: FloatArray,
+    *,
+    levels: bool = False,
+) -> tuple[FloatArray, ...]:
+    """Markers where the chain puts them.
+
+    Parameters
+    ----------
+    structure : Structure
+    lines : Lines
+    segment : ndarray of int, shape (M,)
+    u : ndarray, shape (M, 3) or (M, 3, n)
+        Marker places at the reference posture (mm), or every frame's (sliding).
+    q : ndarray, shape (L, n)
+        Angles (rad).
+
+    Returns
+    -------
+    p : ndarray, shape (M, 3, n)
+        Predicted markers (mm).
+    rotation : ndarray, shape (M, 3, 3, n)
+        Each marker's segment rotation.
+    axes, centres : ndarray, shape (L, 3, n)
+        Each line where the proximal axes put it.
+    proximal : ndarray, shape (L, 3, 3, n)
+        With ``levels``: the rotation of the axes proximal to each level.
+    """
+    chains = Chains.from_lines(lines.axis[None], lines.centre[None], structure.depth[None])
+    pose = chains.pose(q[None])
+    level = structure.depth[segment]
+    rot = pose.rotation[0, level]  # (M, 3, 3, n)
+    p = matvec_rows(rot, u if u.ndim == 3 else u[..., None]) + pose.translation[0, level]
+    if levels:
+        return p, rot, pose.axes[0], pose.centres[0], pose.rotation[0, : structure.levels]
+    return p, rot, pose.axes[0], pose.centres[0]
+
+
+@dataclass
+class HandFrames:
+    """Each frame's correction of the hand's frame (the rigid fit of its markers): a
+    marker carried back to ``y`` is at ``C (y - h) + h - d`` (``h`` the hand shape's
+    centroid).
+
+    Attributes
+    ----------
+    rotation : ndarray, shape (n, 3, 3)
+    offset : ndarray, shape (n, 3)
+        mm.
+    """
+
+    rotation: FloatArray
+    offset: FloatArray
+
+    @classmethod
+    def identity(cls, n: int) -> HandFrames:
+        return cls(np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3)))
+
+    def apply(self, points: FloatArray, pivot: FloatArray) -> FloatArray:
+        """``points (K, 3, n)`` corrected (mm)."""
+        x = points - pivot[:, None]
+        out = np.einsum("nij,kjn->kin", self.rotation, x)
+        return out + (pivot[:, None] - self.offset.T)[None]
+
+    def moved(self, omega: FloatArray, tau: FloatArray) -> HandFrames:
+        """After a step ``omega (n, 3)`` rad, ``tau (n, 3)`` mm: ``y' = Rot(-omega) y - tau``
+        about the pivot."""
+        back = Rotation.from_rotvec(-omega).as_matrix()
+        return HandFrames(back @ self.rotation, np.einsum("nij,nj->ni", back, self.offset) + tau)
+
+
+def observed(data: DigitMarkers, hand: HandFrames) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The digit's and the hand's markers with the hand frames' correction, and the
+    pivot ``(3,)``."""
+    pivot = data.hand_shape.mean(axis=0)
+    return hand.apply(data.position, pivot), hand.apply(data.hand, pivot), pivot
+
+
+def total_cost(
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    hand: HandFrames,
+    slide: FloatArray | None = None,
+) -> float:
+    """The cost (mm^2): the digit's markers, the hand's markers about their shape, the
+    reference term and (with ``slide``) the slide's prior."""
+    y, yh, _ = observed(data, hand)
+    r, rh, _ = marker_residuals(
+        data,
+        y,
+        yh,
+        predict(structure, lines, data.segment, places(structure, data, u, q, slide), q),
+    )
+    ref = reference_residual(data, u)
+    prior = 0.0 if slide is None else float((slide * slide).sum()) / SLIDE_PRIOR**2
+    return float((r * r).sum() + (rh * rh).sum() + (ref * ref).sum()) + prior
+
+
+def marker_residuals(
+    data: DigitMarkers, y: FloatArray, yh: FloatArray, posed: tuple[FloatArray, ...]
+) -> tuple[FloatArray, FloatArray, tuple[FloatArray, ...]]:
+    """The digit's markers' residuals ``y - p`` ``(M, 3, n)`` (``p`` the first of
+    :func:`predict`'s ``posed``) and the hand's about their shape ``(H, 3, n)``, 0 where
+    unseen (mm), and ``posed`` itself."""
+    r = (y - posed[0]) * data.present[:, None]
+    rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
+    return r, rh, posed
+
+
+def places(
+    structure: Structure, data: DigitMarkers, u: FloatArray, q: FloatArray, slide: FloatArray | None
+) -> FloatArray:
+    """The markers' places ``(M, 3)``, or with ``slide (M, 3)`` (mm/rad) every frame's
+    ``u + slide theta`` ``(M, 3, n)``, ``theta`` the angle of the segment's proximal
+    flexion axis (rad)."""
+    if slide is None:
+        return u
+    assert structure.flexion is not None
+    theta = q[structure.flexion[data.segment]]  # (M, n)
+    return u[..., None] + slide[..., None] * theta[:, None, :]
+
+
+def reference_residual(data: DigitMarkers, u: FloatArray) -> FloatArray:
+    """``sqrt(n_ref) (ybar - u)`` of each marker ``(M, 3)`` (0 where never seen)."""
+    ok = data.reference_count > 0
+    ref = np.where(ok[:, None], data.reference - u, 0.0)
+    return ref * np.sqrt(data.reference_count)[:, None]

@@ -1,0 +1,362 @@
+"""The normal equations of the marker adjustment (:mod:`.bundle`) and their damped step.
+
+Each frame's unknowns (its angles, then its hand frame's rotation and translation: ``K =
+L + 6``) are coupled only to the global ones (the lines, the markers' places, their
+slides). The normal equations are reduced to the global unknowns by the Schur complement,
+all frames at once (batched ``K x K`` inverses), and the frames' steps follow by
+back-substitution. The Jacobian of a marker in its frame's angles is analytic (``a_k x
+(p - c_k)`` with the axes where the chain puts them), in its place ``u_i`` the segment's
+rotation, in the lines :func:`line_columns`, in the hand frame :func:`frame_columns`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...track.chains import matvec_rows
+from ...transforms import FloatArray, orthonormal_basis
+from .chain import (
+    SLIDE_PRIOR,
+    HandFrames,
+    Lines,
+    Structure,
+    marker_residuals,
+    observed,
+    places,
+    predict,
+    reference_residual,
+)
+from .observe import DigitMarkers
+
+#: Added to each frame's angle block (1/rad^2 in mm^2): an angle no marker of the frame
+#: determines stays where it is.
+RIDGE = 1e-9
+
+
+def cross_rows(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a x b`` over whole rows of frames, ``(..., 3, n)`` (broadcast): the components on
+    the second-to-last axis (:func:`numpy.cross` moves that axis last and back)."""
+    a0, a1, a2 = a[..., 0, :], a[..., 1, :], a[..., 2, :]
+    b0, b1, b2 = b[..., 0, :], b[..., 1, :], b[..., 2, :]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-2)
+
+
+def line_columns(
+    structure: Structure,
+    lines: Lines,
+    segment: np.ndarray,
+    p: FloatArray,
+    q: FloatArray,
+    proximal: FloatArray,
+    axes: FloatArray,
+    centres: FloatArray,
+) -> FloatArray:
+    """``d p / d (line unknowns)`` ``(M, 3, n, 4 L)``: per level two direction (rad) and
+    two point (mm) unknowns of :meth:`Lines.moved`.
+
+    With the line where the proximal axes put it (direction ``a``, point ``c``, rotation
+    ``R`` by ``q`` about it) and ``w`` a unit vector perpendicular to the reference
+    axis, carried by the proximal rotation: a point of the line moved by ``w`` moves the
+    marker by ``(I - R) w = w (1 - cos q) - (a x w) sin q``; the direction moved by ``w``
+    moves it by ``(w x v) sin q + (w (a.v) + a (w.v)) (1 - cos q)``, ``v = R^T (p - c)``
+    the marker before that rotation.
+    """
+    return np.moveaxis(
+        _line_rows(structure, lines, segment, (p, q, proximal, axes, centres)), 0, -1
+    )
+
+
+def _line_rows(
+    structure: Structure, lines: Lines, segment: np.ndarray, posed: tuple[FloatArray, ...]
+) -> FloatArray:
+    """:func:`line_columns` unknown first, ``(4 L, M, 3, n)`` (each column written whole);
+    ``posed`` its ``p, q, proximal, axes, centres``."""
+    p, q, proximal, axes, centres = posed
+    L = structure.levels
+    moves = np.arange(L)[None, :] < structure.depth[segment][:, None]  # (M, L)
+    out = np.zeros((4 * L, *p.shape))
+    sin, cos1 = np.sin(q), 1.0 - np.cos(q)  # (L, n)
+    for k in range(L):
+        m = np.flatnonzero(moves[:, k])
+        basis = orthonormal_basis(lines.axis[k])[:2]  # (2, 3)
+        a, c = axes[k], centres[k]  # (3, n)
+        d = p[m] - c  # (m, 3, n)
+        ad = (a * d).sum(axis=1, keepdims=True)
+        v = d * (1.0 - cos1[k]) - cross_rows(a, d) * sin[k] + a * ad * cos1[k]
+        av = (a * v).sum(axis=1, keepdims=True)
+        for i in range(2):
+            w = matvec_rows(proximal[k], basis[i][:, None])  # (3, n)
+            wv = (w * v).sum(axis=1, keepdims=True)
+            out[4 * k + i, m] = cross_rows(w, v) * sin[k] + (w * av + a * wv) * cos1[k]
+            out[4 * k + 2 + i, m] = w * cos1[k] - cross_rows(a, w) * sin[k]
+    return out
+
+
+@dataclass
+class Normal:
+    """The normal equations at a point, frames first (``K = L + 6`` unknowns per frame:
+    the angles, then the hand's rotation and translation).
+
+    Attributes
+    ----------
+    qq : ndarray, shape (n, K, K)
+    qg : ndarray, shape (n, K, G)
+    gg : ndarray, shape (G, G)
+    bq : ndarray, shape (n, K)
+    bg : ndarray, shape (G,)
+        ``J^T r`` (``r`` measured minus predicted).
+    cost : float
+    count : int
+        Scalar observations (3 per seen marker, reference means included).
+    frame_cost : ndarray, shape (n,), optional
+        Each frame's part of ``cost`` (its digit's and hand's markers, mm^2).
+    """
+
+    qq: FloatArray
+    qg: FloatArray
+    gg: FloatArray
+    bq: FloatArray
+    bg: FloatArray
+    cost: float
+    count: int
+    frame_cost: FloatArray | None = None
+
+
+def frame_columns(points: FloatArray, pivot: FloatArray) -> FloatArray:
+    """``d p / d (omega, tau)`` of carried-back points ``(K, 3, n)``: ``(n, K, 3, 6)``
+    (``J = -d y / d x``: ``-[y - h]x`` and ``I``)."""
+    d = (points - pivot[:, None]).transpose(2, 0, 1)  # (n, K, 3)
+    out = np.zeros((*d.shape, 6))
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    # -[d]x = [[0, z, -y], [-z, 0, x], [y, -x, 0]]
+    out[..., 0, 1], out[..., 0, 2] = z, -y
+    out[..., 1, 0], out[..., 1, 2] = -z, x
+    out[..., 2, 0], out[..., 2, 1] = y, -x
+    out[..., 0, 3] = out[..., 1, 4] = out[..., 2, 5] = 1.0
+    return out
+
+
+def normal_equations(
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    hand: HandFrames,
+    free: np.ndarray,
+    slide: FloatArray | None = None,
+) -> tuple[Normal, FloatArray]:
+    """The normal equations of every frame and of the global unknowns.
+
+    Parameters
+    ----------
+    free : ndarray of bool, shape (4 L + 3 M,) or, with ``slide``, (4 L + 6 M,)
+        Global unknowns that move (lines first, then the markers' places, then their
+        slides).
+    slide : ndarray, shape (M, 3), optional
+        Each marker's slide (mm/rad, :func:`places`): then unknowns too, with the prior
+        of :data:`SLIDE_PRIOR`.
+
+    Returns
+    -------
+    normal : Normal
+        Over the free global unknowns ``G``.
+    scores : ndarray, shape (n, K + G)
+        Each frame's ``J^T r`` (frame unknowns, then the global ones), for the
+        covariance's clusters.
+
+    Notes
+    -----
+    A marker's place enters only its own three rows, through its segment's rotation:
+    the places' columns are block-diagonal, and their products are formed marker by
+    marker, never as a dense ``(3 M, 3 M)`` block.
+    """
+    M, L, n = len(data.labels), structure.levels, data.frames
+    f = frame_terms(data, structure, lines, u, q, hand, slide)
+    G = 4 * L + 3 * M * (1 if slide is None else 2)
+    if free.any():
+        masked = f.rot * data.present[:, None, None]
+        qg, gg, sg = _global_products(structure, lines, data, f.posed, masked, f.jf, f.rr, slide)
+        if not free.all():
+            qg, gg, sg = qg[..., free], gg[np.ix_(free, free)], sg[:, free]
+    else:  # the model held (the angles of a recording): no global column to build
+        qg, gg, sg = np.zeros((n, L + 6, 0)), np.zeros((0, 0)), np.zeros((n, 0))
+    bg = sg.sum(axis=0)
+    ref = reference_residual(data, u)
+    uw = np.zeros(G)
+    uw[4 * L : 4 * L + 3 * M] = np.repeat(data.reference_count, 3)
+    ref_b = np.zeros(G)
+    ref_b[4 * L : 4 * L + 3 * M] = (ref * np.sqrt(data.reference_count)[:, None]).ravel()
+    prior = 0.0
+    if slide is not None:
+        uw[4 * L + 3 * M :] = 1.0 / SLIDE_PRIOR**2
+        ref_b[4 * L + 3 * M :] = -slide.ravel() / SLIDE_PRIOR**2
+        prior = float((slide * slide).sum()) / SLIDE_PRIOR**2
+    gg[np.diag_indices_from(gg)] += uw[free]
+    bg += ref_b[free]
+    cost = float(f.cost.sum() + (ref * ref).sum()) + prior
+    count = 3 * int(data.present.sum() + data.hand_present.sum() + (data.reference_count > 0).sum())
+    normal = Normal(f.qq, qg, gg, f.bq, bg, cost, count, f.cost)
+    return normal, np.concatenate([f.bq, sg], axis=1)
+
+
+@dataclass
+class FrameTerms:
+    """Each frame's part of the normal equations (``K = L + 6`` unknowns: the angles,
+    then the hand frame's rotation and translation).
+
+    Attributes
+    ----------
+    qq : ndarray, shape (n, K, K)
+    bq : ndarray, shape (n, K)
+        ``J^T r`` (``r`` measured minus predicted).
+    cost : ndarray, shape (n,)
+        Each frame's sum of squared residuals, its digit's and hand's markers (mm^2).
+    jf : ndarray, shape (n, 3 M, K)
+        The digit markers' columns (0 where unseen).
+    rr : ndarray, shape (n, 3 M)
+        Their residuals (mm; 0 where unseen).
+    rot : ndarray, shape (M, 3, 3, n)
+        Each marker's segment rotation.
+    posed : tuple
+        ``p, q, proximal, axes, centres`` of :func:`line_columns`.
+    """
+
+    qq: FloatArray
+    bq: FloatArray
+    cost: FloatArray
+    jf: FloatArray
+    rr: FloatArray
+    rot: FloatArray
+    posed: tuple[FloatArray, ...]
+
+
+def frame_terms(
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    hand: HandFrames,
+    slide: FloatArray | None = None,
+) -> FrameTerms:
+    """Each frame's part of the normal equations at ``q (L, n)`` (rad), ``hand``, the
+    lines, places ``u (M, 3)`` (mm) and slides ``slide (M, 3)`` (mm/rad) as given."""
+    M, L, n = len(data.labels), structure.levels, data.frames
+    H = data.hand.shape[0]
+    y, yh, pivot = observed(data, hand)
+    ut = places(structure, data, u, q, slide)
+    r, rh, posed = marker_residuals(
+        data, y, yh, predict(structure, lines, data.segment, ut, q, levels=True)
+    )
+    p, rot, axes, centres, prox = posed
+    # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
+    d = p[:, None] - centres[None]  # (M, L, 3, n)
+    jq = cross_rows(axes, d)  # (M, L, 3, n)
+    jq *= (np.arange(L)[None, :] < structure.depth[data.segment][:, None])[..., None, None]
+    if slide is not None:  # the slide moves with the angle it follows
+        jq[np.arange(M), structure.flexion[data.segment]] += matvec_rows(rot, slide[..., None])
+    jf = np.empty((n, M, 3, L + 6))
+    jf[..., :L] = jq.transpose(3, 0, 2, 1)
+    jf[..., L:] = frame_columns(y, pivot)
+    jf *= data.present.T[:, :, None, None]
+    jf = jf.reshape(n, 3 * M, L + 6)
+    jh = frame_columns(yh, pivot) * data.hand_present.T[:, :, None, None]
+    jh = jh.reshape(n, 3 * H, 6)
+    rr = r.transpose(2, 0, 1).reshape(n, 3 * M)
+    rrh = rh.transpose(2, 0, 1).reshape(n, 3 * H)
+    jft, jht = jf.transpose(0, 2, 1), jh.transpose(0, 2, 1)
+    qq = jft @ jf
+    qq[:, L:, L:] += jht @ jh
+    bq = (jft @ rr[..., None])[..., 0]
+    bq[:, L:] += (jht @ rrh[..., None])[..., 0]
+    cost = (rr * rr).sum(axis=1) + (rrh * rrh).sum(axis=1)
+    return FrameTerms(qq, bq, cost, jf, rr, rot, (p, q, prox, axes, centres))
+
+
+def _global_products(
+    structure: Structure,
+    lines: Lines,
+    data: DigitMarkers,
+    posed: tuple[FloatArray, ...],
+    rot: FloatArray,
+    jf: FloatArray,
+    rr: FloatArray,
+    slide: FloatArray | None,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``J_f^T J_g (n, K, G)``, ``J_g^T J_g (G, G)`` and each frame's ``J_g^T r (n, G)``
+    over every global unknown (lines, places, with ``slide`` slides). ``posed``: ``p, q, proximal, axes, centres`` of
+    :func:`line_columns`; ``rot (M, 3, 3, n)`` the segments' rotations, 0 where a marker
+    is unseen; ``jf (n, 3 M, K)`` and ``rr (n, 3 M)`` the frames' columns and residuals
+    (unseen rows 0)."""
+    M, L, n = len(data.labels), structure.levels, data.frames
+    K = jf.shape[2]
+    q = posed[1]
+    rows = _line_rows(structure, lines, data.segment, posed)
+    rows *= data.present[None, :, None, :]
+    jl = np.ascontiguousarray(rows.transpose(3, 1, 2, 0)).reshape(n, 3 * M, 4 * L)
+    # The places' columns: marker i's three rows are its segment's rotation (the other
+    # rows 0); with slides a second block, the rotation times the angle it follows.
+    weights = [np.ones((M, n))]
+    if slide is not None:
+        weights.append(q[structure.flexion[data.segment]])  # (M, n)
+    rotn = np.ascontiguousarray(rot.transpose(3, 0, 1, 2))  # (n, M, 3, 3)
+    G = 4 * L + 3 * M * len(weights)
+    sg = np.empty((n, G))
+    sg[:, : 4 * L] = (rr[:, None] @ jl)[:, 0]
+    ru = (rotn.transpose(0, 1, 3, 2) @ rr.reshape(n, M, 3, 1))[..., 0]  # (n, M, 3)
+    for s, ws in enumerate(weights):
+        sg[:, 4 * L + 3 * M * s : 4 * L + 3 * M * (s + 1)] = (ru * ws.T[..., None]).reshape(n, -1)
+    jft = jf.reshape(n, M, 3, K).transpose(0, 1, 3, 2)  # (n, M, K, 3)
+    qg = np.empty((n, K, G))
+    gg = np.zeros((G, G))
+    qg[..., : 4 * L] = jf.transpose(0, 2, 1) @ jl
+    flat = jl.reshape(n * 3 * M, 4 * L)
+    gg[: 4 * L, : 4 * L] = flat.T @ flat
+    seen = data.present.T.astype(float)  # (n, M): R^T R = I where seen
+    for s, ws in enumerate(weights):
+        cols = slice(4 * L + 3 * M * s, 4 * L + 3 * M * (s + 1))
+        ju = rotn * ws.T[:, :, None, None]  # (n, M, 3, 3)
+        np.matmul(jft, ju, out=qg[..., cols].reshape(n, K, M, 3).transpose(0, 2, 1, 3))
+        for i in range(M):  # the lines' rows of marker i times its columns, over all frames
+            li = jl.reshape(n, M, 3, 4 * L)[:, i].reshape(3 * n, 4 * L)
+            gg[: 4 * L, cols][:, 3 * i : 3 * i + 3] = li.T @ ju[:, i].reshape(3 * n, 3)
+        for t, wt in enumerate(weights[: s + 1]):
+            block = np.zeros((M, 3, M, 3))
+            count = np.einsum("ni,ni,ni->i", seen, ws.T, wt.T)  # (M,)
+            block[np.arange(M), :, np.arange(M), :] = count[:, None, None] * np.eye(3)
+            gg[4 * L + 3 * M * t : 4 * L + 3 * M * (t + 1), cols] = block.reshape(3 * M, 3 * M)
+    gg = np.triu(gg) + np.triu(gg, 1).T
+    return qg, gg, sg
+
+
+def schur_step(nq: Normal, lam: float) -> tuple[FloatArray, FloatArray]:
+    """The damped step ``(dq (n, K), dg (G,))`` of the normal equations: the frames'
+    blocks eliminated by the Schur complement, then back-substituted."""
+    qq = nq.qq.copy()
+    diag = np.einsum("nll->nl", qq)
+    diag *= 1.0 + lam
+    diag += RIDGE
+    w = np.linalg.inv(qq)  # (n, L, L)
+    wqg = w @ nq.qg  # (n, L, G)
+    s = nq.gg.copy()
+    s[np.diag_indices_from(s)] *= 1.0 + lam
+    G, nk = s.shape[0], nq.bq.size
+    s -= nq.qg.reshape(nk, G).T @ wqg.reshape(nk, G)
+    b = nq.bg - wqg.reshape(nk, G).T @ nq.bq.reshape(nk)
+    dg = np.linalg.solve(s + 1e-12 * np.eye(s.shape[0]), b)
+    dq = (w @ nq.bq[..., None])[..., 0] - wqg @ dg
+    return dq, dg
+
+
+def reduced(nq: Normal) -> tuple[FloatArray, FloatArray]:
+    """The Schur complement ``S (G, G)`` of the undamped normal equations (the global
+    unknowns' information, the frames' unknowns eliminated) and ``W Q_qg (n, K, G)``."""
+    qq = nq.qq.copy()
+    np.einsum("nll->nl", qq)[...] += RIDGE
+    wqg = np.linalg.solve(qq, nq.qg)
+    G, nk = nq.gg.shape[0], nq.bq.size
+    s = nq.gg - nq.qg.reshape(nk, G).T @ wqg.reshape(nk, G)
+    return s, wqg
