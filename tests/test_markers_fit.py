@@ -275,3 +275,39 @@ def test_a_two_axis_mp_is_named_by_its_motion():
     kept, _ = _labelled(None, "index", chain_layout("index", True, FLEXION_FIRST), result)
     assert kept.order == FLEXION_FIRST
     assert abs(motion_range_deg(q[0]) - 72.0) < 1e-9  # the 5th to 95th percentile of 0-80
+
+
+def test_blocks_and_threads_change_nothing(monkeypatch):
+    """The frames' work by blocks gives the normal equations of all frames at once (to
+    1e-12 of their scale; their step to 1e-9), and threads give the adjustment of one
+    thread bit for bit."""
+    from fingerfit.estimate.markers import chain
+    from fingerfit.estimate.markers.bundle import adjust
+    from fingerfit.estimate.markers.normal import normal_equations, schur_step
+
+    sim = simulate_subject(SimConfig(targets=False, test=False, cycles=3), 7)
+    data = _index(simulate_markers(sim, "todorov", seed=1))
+    st = Structure(np.array([1, 2, 3]))
+    start = staged_start(data, st, [0, 1, 2], {})
+    free = np.ones(4 * st.levels + 3 * len(data.labels), dtype=bool)
+    args = (data, st, start.lines, start.u, start.q + 0.05, start.hand, free)
+    steps = {}
+    for frames in (10**9, 97):  # one block; blocks of 97 frames, the last one shorter
+        monkeypatch.setattr(chain, "BLOCK_FRAMES", frames)
+        nq, scores = normal_equations(*args)
+        steps[frames] = (nq, scores, *schur_step(nq, 1e-3))
+    assert len(chain.frame_blocks(data.frames)) > 10
+    (one, s1, dq1, dg1), (many, s2, dq2, dg2) = steps[10**9], steps[97]
+    for a, b in ((one.qq, many.qq), (one.qg, many.qg), (one.gg, many.gg), (s1, s2)):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.abs(a).max())
+    # The step goes through the solve of the reduced system: its round-off, amplified.
+    for a, b in ((dq1, dq2), (dg1, dg2)):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-9 * np.abs(a).max())
+    assert abs(one.cost - many.cost) <= 1e-12 * one.cost
+    runs = [
+        adjust(data, st, start.lines, start.u, start.q + 0.05, hand=start.hand, threads=t)
+        for t in (1, 2)
+    ]
+    np.testing.assert_array_equal(runs[0].lines.axis, runs[1].lines.axis)
+    np.testing.assert_array_equal(runs[0].q, runs[1].q)
+    assert runs[0].cost == runs[1].cost and runs[0].iterations == runs[1].iterations

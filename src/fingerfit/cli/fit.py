@@ -255,7 +255,8 @@ def fit(
             "--jobs",
             "-j",
             min=1,
-            help="Worker processes fitting a marker session's digits side by side.",
+            help="Cores for a marker session's fit: its digits in worker processes side by "
+            "side, and a digit's frames in threads when the digits are fewer.",
         ),
     ] = 1,
     quiet: QuietTable = False,
@@ -310,8 +311,9 @@ def fit(
 
 
 def _fit_markers(session, names: list[str] | None, bar, task, jobs: int = 1):
-    """The marker fit of a marker session (:mod:`fingerfit.estimate.markers`), its digits
-    in ``jobs`` worker processes, its notes shown one per line."""
+    """The marker fit of a marker session (:mod:`fingerfit.estimate.markers`) on ``jobs``
+    cores (its digits in up to ``jobs`` worker processes, the cores left over threads of
+    each digit's adjustment), its notes shown one per line."""
     import dataclasses
 
     from ..estimate.markers.fit import fit_marker_session
@@ -320,8 +322,9 @@ def _fit_markers(session, names: list[str] | None, bar, task, jobs: int = 1):
     if names:
         session = dataclasses.replace(session, fingers=[d for d in session.fingers if d in names])
     bar.update(task, advance=1, description=f"fitting {len(session.fingers)} digit(s) (markers)")
-    with study_executor(max(1, min(jobs, len(session.fingers)))) as pool:
-        result = fit_marker_session(session, executor=pool)
+    workers = max(1, min(jobs, len(session.fingers)))
+    with study_executor(workers) as pool:
+        result = fit_marker_session(session, executor=pool, threads=max(1, jobs // workers))
     bar.advance(task)
     for note in result.notes:
         notice("note", note)

@@ -6,6 +6,8 @@ cost of :mod:`.chain`), on the block structure of :mod:`.normal`, its steps mixe
 
 from __future__ import annotations
 
+import contextlib
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +70,7 @@ def adjust(
     max_iter: int = 100,
     tol: float = 1e-12,
     mix: bool = True,
+    threads: int = 1,
 ) -> BundleResult:
     """Levenberg-Marquardt over the lines, the markers' places, every frame's angles and
     every frame's hand frame.
@@ -94,6 +97,9 @@ def adjust(
     mix : bool
         Propose each step mixed with the last ones (:mod:`.mixing`), kept when it lowers
         the cost below the plain step's.
+    threads : int
+        Threads that work through the frames' blocks side by side (:func:`.chain.
+        over_blocks`; the result is the same for any number).
 
     Returns
     -------
@@ -105,50 +111,51 @@ def adjust(
     lines_free = bool(free[: 4 * L].any())
     hand = HandFrames.identity(data.frames) if hand is None else hand
     lines, u, q = lines.copy(), u.copy(), q.copy()
-    nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide)
-    diagonal = np.zeros(G)
-    diagonal[free] = np.diag(nq.gg)
-    sizes = [(2, 3)] * 2 * L + [(1, 1)] * (G - 4 * L)
-    mixer = Mixer(information_weights(diagonal, sizes)) if mix else None
-    lam = 1e-4
-    it = 0
-    for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
-        done = False
-        for _ in range(12):
-            dq, dg = schur_step(nq, lam)
-            step = np.zeros(G)
-            step[free] = dg
-            trial = (
-                lines.moved(step[: 4 * L]) if lines_free else lines,
-                u + step[4 * L : 4 * L + 3 * M].reshape(M, 3),
-                q + dq[:, :L].T,
-                hand.moved(dq[:, L : L + 3], dq[:, L + 3 :]),
-                None if slide is None else slide + step[4 * L + 3 * M :].reshape(M, 3),
-            )
-            cost = total_cost(data, structure, *trial)
-            if cost <= nq.cost:
+    with ThreadPoolExecutor(threads) if threads > 1 else contextlib.nullcontext() as pool:
+        nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide, pool)
+        diagonal = np.zeros(G)
+        diagonal[free] = np.diag(nq.gg)
+        sizes = [(2, 3)] * 2 * L + [(1, 1)] * (G - 4 * L)
+        mixer = Mixer(information_weights(diagonal, sizes)) if mix else None
+        lam = 1e-4
+        it = 0
+        for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
+            done = False
+            for _ in range(12):
+                dq, dg = schur_step(nq, lam, pool)
+                step = np.zeros(G)
+                step[free] = dg
+                trial = (
+                    lines.moved(step[: 4 * L]) if lines_free else lines,
+                    u + step[4 * L : 4 * L + 3 * M].reshape(M, 3),
+                    q + dq[:, :L].T,
+                    hand.moved(dq[:, L : L + 3], dq[:, L + 3 :]),
+                    None if slide is None else slide + step[4 * L + 3 * M :].reshape(M, 3),
+                )
+                cost = total_cost(data, structure, *trial, pool)
+                if cost <= nq.cost:
+                    if mixer is not None:
+                        here = _pack(lines, u, q, hand, slide)
+                        there = _pack(*trial)
+                        mixed = mixer.propose(here, (there[0] - here[0], there[1] - here[1]))
+                        if mixed is not None:
+                            candidate = _unpack(*mixed, L, M, slide is not None)
+                            c = total_cost(data, structure, *candidate, pool)
+                            if c < cost:
+                                trial, cost = candidate, c
+                    gain = nq.cost - cost
+                    lines, u, q, hand, slide = trial
+                    nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide, pool)
+                    lam = max(lam / 3.0, 1e-9)
+                    done = gain <= tol * max(cost, 1e-300)
+                    break
+                lam *= 4.0
                 if mixer is not None:
-                    here = _pack(lines, u, q, hand, slide)
-                    there = _pack(*trial)
-                    mixed = mixer.propose(here, (there[0] - here[0], there[1] - here[1]))
-                    if mixed is not None:
-                        candidate = _unpack(*mixed, L, M, slide is not None)
-                        c = total_cost(data, structure, *candidate)
-                        if c < cost:
-                            trial, cost = candidate, c
-                gain = nq.cost - cost
-                lines, u, q, hand, slide = trial
-                nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide)
-                lam = max(lam / 3.0, 1e-9)
-                done = gain <= tol * max(cost, 1e-300)
+                    mixer.forget()
+            else:
+                done = True  # no step lowers the cost
+            if done:
                 break
-            lam *= 4.0
-            if mixer is not None:
-                mixer.forget()
-        else:
-            done = True  # no step lowers the cost
-        if done:
-            break
     rms = float(np.sqrt(nq.cost / max(nq.count, 1)))
     return BundleResult(lines, u, q, hand, slide, nq.cost, rms, it, nq, free)
 

@@ -191,20 +191,21 @@ def fit_digit(
     start: BundleResult | None = None,
     slide: bool = True,
     order: str = ABDUCTION_FIRST,
+    threads: int = 1,
 ) -> DigitFit:
     """Start, adjust and check one digit's chain (:func:`chain_layout`): from the staged
     start, or (a finger's two-axis MP, in ``order``) from its hinge fit ``start`` with the
     second axis added, perpendicular to the flexion axis and the proximal phalanx, at
-    angle 0."""
+    angle 0. ``threads``: :func:`.bundle.adjust`'s."""
     layout = chain_layout(digit, two_axis, order)
 
     def again(
         r: BundleResult, lines: Lines, q: FloatArray, free: np.ndarray | None
     ) -> BundleResult:
-        return _again(data, layout, r, lines, q, free)
+        return _again(data, layout, r, lines, q, free, threads)
 
     if start is None:
-        result = staged_start(data, layout.structure, layout.first, layout.second)
+        result = staged_start(data, layout.structure, layout.first, layout.second, threads=threads)
         if slide:
             result.slide = np.zeros((len(data.labels), 3))
             result = again(
@@ -223,8 +224,8 @@ def fit_digit(
         q = np.insert(start.q, at, 0.0, axis=0)
         free = None if start.slide is None else slide_free(data, layout.structure.levels)
         result = again(start, two, q, free)
-        layout, result = _labelled(data, digit, layout, result)
-    return _finish(data, digit, layout, result)
+        layout, result = _labelled(data, digit, layout, result, threads)
+    return _finish(data, digit, layout, result, threads)
 
 
 def _largest_range_deg(fit: DigitFit) -> float:
@@ -242,7 +243,7 @@ def motion_range_deg(q: FloatArray) -> float:
 
 
 def _labelled(
-    data: DigitMarkers, digit: str, layout: ChainLayout, result: BundleResult
+    data: DigitMarkers, digit: str, layout: ChainLayout, result: BundleResult, threads: int = 1
 ) -> tuple[ChainLayout, BundleResult]:
     """A two-axis MP's layout named by its motion: the axis with the larger range is the
     flexion axis.
@@ -258,7 +259,7 @@ def _labelled(
     other = FLEXION_FIRST if layout.order == ABDUCTION_FIRST else ABDUCTION_FIRST
     named = chain_layout(digit, True, other)
     if result.slide is not None:
-        result = _again(data, named, result, result.lines, result.q, result.free)
+        result = _again(data, named, result, result.lines, result.q, result.free, threads)
     return named, result
 
 
@@ -267,6 +268,7 @@ def _finish(
     digit: str,
     layout: ChainLayout,
     result: BundleResult,
+    threads: int = 1,
 ) -> DigitFit:
     """An adjusted chain checked: the angles within a turn and each flexion axis pointed
     so that flexion is positive (the same motion; adjusted again when either changed),
@@ -278,12 +280,12 @@ def _finish(
         axis = result.lines.axis.copy()
         axis[flipped], q[flipped] = -axis[flipped], -q[flipped]
         lines = Lines(axis, result.lines.centre)
-        result = _again(data, layout, result, lines, q, result.free)
+        result = _again(data, layout, result, lines, q, result.free, threads)
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
         held = result.free & ~bad
-        result = _again(data, layout, result, result.lines, result.q, held)
+        result = _again(data, layout, result, result.lines, result.q, held, threads)
         fit.result, fit.covariance = result, line_covariance(result)
     return fit
 
@@ -295,6 +297,7 @@ def _again(
     lines: Lines,
     q: FloatArray,
     free: np.ndarray | None,
+    threads: int = 1,
 ) -> BundleResult:
     """The adjustment of ``layout``'s chain from ``lines``, ``q`` and ``r``'s places,
     slides and hand frames."""
@@ -309,6 +312,7 @@ def _again(
         free=free,
         max_iter=MAX_ITER,
         tol=TOL,
+        threads=threads,
     )
 
 
@@ -322,7 +326,9 @@ def with_slide_uncertainty(fit: DigitFit) -> DigitFit:
     return fit
 
 
-def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True) -> DigitFit:
+def fit_finger(
+    data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True, threads: int = 1
+) -> DigitFit:
     """A finger with its MP a hinge, two axes, or (``auto``) two axes when the second
     explains the markers beyond what its per-frame angle absorbs of the noise.
 
@@ -337,11 +343,11 @@ def fit_finger(data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True)
     standard deviations ``sqrt(2 (n + 4))``, ``sigma^2`` the two-axis fit's residual
     variance.
     """
-    hinge = fit_digit(data, digit, False, slide=slide)
+    hinge = fit_digit(data, digit, False, slide=slide, threads=threads)
     if mp_axes == "hinge":
         return with_slide_uncertainty(hinge)
     orders = [
-        fit_digit(data, digit, True, start=hinge.result, slide=slide, order=o)
+        fit_digit(data, digit, True, start=hinge.result, slide=slide, order=o, threads=threads)
         for o in (ABDUCTION_FIRST, FLEXION_FIRST)
     ]
     turns = [_largest_range_deg(f) > HALF_TURN_DEG for f in orders]
@@ -415,6 +421,7 @@ def fit_marker_session(
     mp_axes: str = "auto",
     slide: bool = False,
     executor: Executor | None = None,
+    threads: int = 1,
 ) -> MarkerFit:
     """Fit the individual hand model of a marker session.
 
@@ -434,6 +441,9 @@ def fit_marker_session(
     executor : concurrent.futures.Executor, optional
         Fits the digits side by side (each digit's fit is independent of the others';
         the result is the same). Default: one after the other, in this process.
+    threads : int
+        Threads of each digit's adjustment (its frames' blocks side by side,
+        :func:`.bundle.adjust`; the result is the same for any number).
 
     Returns
     -------
@@ -473,10 +483,11 @@ def fit_marker_session(
         notes.append(f"{lost + lost_ref} frames without 3 hand markers left out")
     datas = {d: digit_markers(session, d, moving, reference) for d in session.fingers}
     if executor is None:
-        fits = {d: fit_finger(data, d, mp_axes, slide) for d, data in datas.items()}
+        fits = {d: fit_finger(data, d, mp_axes, slide, threads) for d, data in datas.items()}
     else:
         futures = {
-            d: executor.submit(fit_finger, data, d, mp_axes, slide) for d, data in datas.items()
+            d: executor.submit(fit_finger, data, d, mp_axes, slide, threads)
+            for d, data in datas.items()
         }
         fits = {d: f.result() for d, f in futures.items()}
     for d in session.fingers:

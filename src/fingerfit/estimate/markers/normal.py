@@ -11,6 +11,7 @@ rotation, in the lines :func:`line_columns`, in the hand frame :func:`frame_colu
 
 from __future__ import annotations
 
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +25,7 @@ from .chain import (
     Structure,
     marker_residuals,
     observed,
+    over_blocks,
     places,
     predict,
     reference_residual,
@@ -147,8 +149,10 @@ def normal_equations(
     hand: HandFrames,
     free: np.ndarray,
     slide: FloatArray | None = None,
+    pool: Executor | None = None,
 ) -> tuple[Normal, FloatArray]:
-    """The normal equations of every frame and of the global unknowns.
+    """The normal equations of every frame and of the global unknowns, the frames by
+    blocks (:func:`.chain.over_blocks`, with ``pool`` side by side).
 
     Parameters
     ----------
@@ -174,15 +178,25 @@ def normal_equations(
     marker, never as a dense ``(3 M, 3 M)`` block.
     """
     M, L, n = len(data.labels), structure.levels, data.frames
-    f = frame_terms(data, structure, lines, u, q, hand, slide)
-    G = 4 * L + 3 * M * (1 if slide is None else 2)
-    if free.any():
-        masked = f.rot * data.present[:, None, None]
-        qg, gg, sg = _global_products(structure, lines, data, f.posed, masked, f.jf, f.rr, slide)
-        if not free.all():
-            qg, gg, sg = qg[..., free], gg[np.ix_(free, free)], sg[:, free]
-    else:  # the model held (the angles of a recording): no global column to build
-        qg, gg, sg = np.zeros((n, L + 6, 0)), np.zeros((0, 0)), np.zeros((n, 0))
+    K, G = L + 6, 4 * L + 3 * M * (1 if slide is None else 2)
+    g = int(free.sum())
+    qq, bq, frame_cost = np.empty((n, K, K)), np.empty((n, K)), np.empty(n)
+    qg, sg = np.zeros((n, K, g)), np.zeros((n, g))
+
+    def block(frames: slice) -> FloatArray:
+        d = data.take(frames)
+        f = frame_terms(d, structure, lines, u, q[:, frames], hand.take(frames), slide)
+        qq[frames], bq[frames], frame_cost[frames] = f.qq, f.bq, f.cost
+        if not g:  # the model held (the angles of a recording): no global column to build
+            return np.zeros((0, 0))
+        masked = f.rot * d.present[:, None, None]
+        qgb, ggb, sgb = _global_products(structure, lines, d, f.posed, masked, f.jf, f.rr, slide)
+        if g < G:
+            qgb, ggb, sgb = qgb[..., free], ggb[np.ix_(free, free)], sgb[:, free]
+        qg[frames], sg[frames] = qgb, sgb
+        return ggb
+
+    gg = sum(over_blocks(block, n, pool), start=np.zeros((g, g)))
     bg = sg.sum(axis=0)
     ref = reference_residual(data, u)
     uw = np.zeros(G)
@@ -196,10 +210,10 @@ def normal_equations(
         prior = float((slide * slide).sum()) / SLIDE_PRIOR**2
     gg[np.diag_indices_from(gg)] += uw[free]
     bg += ref_b[free]
-    cost = float(f.cost.sum() + (ref * ref).sum()) + prior
+    cost = float(frame_cost.sum() + (ref * ref).sum()) + prior
     count = 3 * int(data.present.sum() + data.hand_present.sum() + (data.reference_count > 0).sum())
-    normal = Normal(f.qq, qg, gg, f.bq, bg, cost, count, f.cost)
-    return normal, np.concatenate([f.bq, sg], axis=1)
+    normal = Normal(qq, qg, gg, bq, bg, cost, count, frame_cost)
+    return normal, np.concatenate([bq, sg], axis=1)
 
 
 @dataclass
@@ -332,23 +346,33 @@ def _global_products(
     return qg, gg, sg
 
 
-def schur_step(nq: Normal, lam: float) -> tuple[FloatArray, FloatArray]:
+def schur_step(
+    nq: Normal, lam: float, pool: Executor | None = None
+) -> tuple[FloatArray, FloatArray]:
     """The damped step ``(dq (n, K), dg (G,))`` of the normal equations: the frames'
-    blocks eliminated by the Schur complement, then back-substituted."""
-    qq = nq.qq.copy()
-    diag = np.einsum("nll->nl", qq)
-    diag *= 1.0 + lam
-    diag += RIDGE
-    w = np.linalg.inv(qq)  # (n, L, L)
-    wqg = w @ nq.qg  # (n, L, G)
+    blocks eliminated by the Schur complement, then back-substituted; the frames by
+    blocks (:func:`.chain.over_blocks`, with ``pool`` side by side)."""
+    n, K, G = nq.qg.shape
+    wqg, wbq = np.empty((n, K, G)), np.empty((n, K))
+
+    def eliminate(frames: slice) -> tuple[FloatArray, FloatArray]:
+        qq = nq.qq[frames].copy()
+        diag = np.einsum("nll->nl", qq)
+        diag *= 1.0 + lam
+        diag += RIDGE
+        w = np.linalg.inv(qq)  # (b, K, K)
+        wqg[frames] = w @ nq.qg[frames]
+        wbq[frames] = (w @ nq.bq[frames, :, None])[..., 0]
+        qg, wq = nq.qg[frames].reshape(-1, G), wqg[frames].reshape(-1, G)
+        return qg.T @ wq, wq.T @ nq.bq[frames].reshape(-1)
+
+    parts = over_blocks(eliminate, n, pool)
     s = nq.gg.copy()
     s[np.diag_indices_from(s)] *= 1.0 + lam
-    G, nk = s.shape[0], nq.bq.size
-    s -= nq.qg.reshape(nk, G).T @ wqg.reshape(nk, G)
-    b = nq.bg - wqg.reshape(nk, G).T @ nq.bq.reshape(nk)
-    dg = np.linalg.solve(s + 1e-12 * np.eye(s.shape[0]), b)
-    dq = (w @ nq.bq[..., None])[..., 0] - wqg @ dg
-    return dq, dg
+    s -= sum((p[0] for p in parts), start=np.zeros((G, G)))
+    b = nq.bg - sum((p[1] for p in parts), start=np.zeros(G))
+    dg = np.linalg.solve(s + 1e-12 * np.eye(G), b)
+    return wbq - wqg @ dg, dg
 
 
 def reduced(nq: Normal) -> tuple[FloatArray, FloatArray]:

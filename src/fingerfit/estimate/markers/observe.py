@@ -11,7 +11,7 @@ than three visible, or on one line) is left out and counted.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -61,6 +61,16 @@ class DigitMarkers:
     @property
     def frames(self) -> int:
         return int(self.present.shape[1])
+
+    def take(self, frames: slice) -> DigitMarkers:
+        """The same markers over ``frames`` only (views, not copies)."""
+        return replace(
+            self,
+            position=self.position[..., frames],
+            present=self.present[:, frames],
+            hand=self.hand[..., frames],
+            hand_present=self.hand_present[:, frames],
+        )
 
 
 def hand_shape(session: Session) -> FloatArray:

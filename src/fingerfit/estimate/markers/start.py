@@ -96,7 +96,11 @@ def subset(data: DigitMarkers, last: int) -> DigitMarkers:
 
 
 def staged_start(
-    data: DigitMarkers, structure: Structure, first_levels: list[int], second: dict[int, int]
+    data: DigitMarkers,
+    structure: Structure,
+    first_levels: list[int],
+    second: dict[int, int],
+    threads: int = 1,
 ) -> BundleResult:
     """The staged solve of a digit's chain: each joint started from its child markers'
     arcs about it, then adjusted with every joint proximal to it.
@@ -110,6 +114,8 @@ def staged_start(
         The chain level of each joint's (flexion) axis, proximal joint first (3 entries).
     second : dict[int, int]
         Joint index -> the chain level of its second axis.
+    threads : int
+        :func:`.bundle.adjust`'s.
 
     Returns
     -------
@@ -159,6 +165,7 @@ def staged_start(
             hand=hand,
             max_iter=10 if j < len(first_levels) - 1 else 100,
             tol=1e-6 if j < len(first_levels) - 1 else 1e-10,
+            threads=threads,
         )
         axis[:levels], centre[:levels] = result.lines.axis, result.lines.centre
         u[: len(part.labels)], q[:levels], hand = result.u, result.q, result.hand
