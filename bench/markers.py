@@ -22,7 +22,7 @@ fit_marker_session`). Scored against the truth:
   fit's chain, marker places and slides, every frame's angles) on the same markers.
 
 ``--speed`` adds the time of a marker fit of 10,000 grasp frames of one finger and of the
-four fingers; ``--speed-only`` times them alone (``--json bench/markers_speed.json``), with
+four fingers (:func:`speed`); ``--speed-only`` times them alone (``--json bench/markers_speed.json``), with
 the machine's load average before and after each.
 """
 
@@ -184,31 +184,36 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def speed(frames: int = 10_000) -> dict:
-    """Seconds of a marker fit of ``frames`` grasp frames: one finger without and with the
-    adjustment's Anderson mixing, four fingers, and four fingers in two worker processes
-    (``fingerfit fit --jobs 2``; CPU seconds of this process only)."""
-    from fingerfit.estimate.markers import bundle
+    """Seconds of a marker fit of ``frames`` grasp frames: one finger with all its frames
+    in one block (:data:`~fingerfit.estimate.markers.chain.BLOCK_FRAMES`, the solver
+    before the blocks), by blocks, and by blocks in two threads (``fingerfit fit --jobs
+    2`` of one finger); four fingers in one process, and with ``--jobs 2`` (two worker
+    processes; CPU seconds of this process only)."""
+    from fingerfit.estimate.markers import chain
     from fingerfit.evaluate.study import study_executor
 
     out = {}
     cycles = int(np.ceil(frames / 500))
     four = ("index", "middle", "ring", "little")
-    for label, fingers, jobs, mix in (
-        ("one finger, steps not mixed", ("index",), 1, False),
+    block = chain.BLOCK_FRAMES
+    for label, fingers, jobs, blocks in (
+        ("one finger, one block", ("index",), 1, False),
         ("one finger", ("index",), 1, True),
+        ("one finger, --jobs 2 (2 threads)", ("index",), 2, True),
         ("four fingers", four, 1, True),
-        ("four fingers, 2 worker processes", four, 2, True),
+        ("four fingers, --jobs 2 (2 worker processes)", four, 2, True),
     ):
-        bundle.adjust.__kwdefaults__["mix"] = mix  # the Anderson mixing off: the old solver
+        chain.BLOCK_FRAMES = block if blocks else 10**9
         sim = simulate_cohort(
             SimConfig(fingers=fingers, cycles=cycles, targets=False, test=False), 1, 5
         )[0]
         ms = simulate_markers(sim, "todorov", seed=1)
         n = sum(r.n_frames for r in ms.session.grasp)
+        workers = min(jobs, len(fingers))  # as fingerfit fit --jobs
         load = os.getloadavg()[0]
         t0, c0 = time.perf_counter(), time.process_time()
-        with study_executor(jobs) as pool:
-            fit_marker_session(ms.session, executor=pool)
+        with study_executor(workers) as pool:
+            fit_marker_session(ms.session, executor=pool, threads=max(1, jobs // workers))
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
         out[label] = {
             "frames": n,
@@ -221,10 +226,17 @@ def speed(frames: int = 10_000) -> dict:
             f"{load:.1f} before, {os.getloadavg()[0]:.1f} after)",
             flush=True,
         )
-    mixed = out["one finger, steps not mixed"]["seconds"] / out["one finger"]["seconds"]
-    pool = out["four fingers"]["seconds"] / out["four fingers, 2 worker processes"]["seconds"]
-    print(f"speed: the steps mixed {mixed:.2f}x faster on one finger", flush=True)
-    print(f"speed: 2 worker processes {pool:.2f}x faster than one on four fingers", flush=True)
+    chain.BLOCK_FRAMES = block
+    one = out["one finger, one block"]["seconds"]
+    print(f"speed: blocks {one / out['one finger']['seconds']:.2f}x faster on one finger")
+    print(
+        f"speed: blocks in 2 threads {one / out['one finger, --jobs 2 (2 threads)']['seconds']:.2f}x"
+    )
+    four_one = out["four fingers"]["seconds"]
+    four_two = out["four fingers, --jobs 2 (2 worker processes)"]["seconds"]
+    print(
+        f"speed: 2 worker processes {four_one / four_two:.2f}x faster on four fingers", flush=True
+    )
     return out
 
 
