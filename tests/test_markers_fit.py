@@ -311,3 +311,19 @@ def test_blocks_and_threads_change_nothing(monkeypatch):
     np.testing.assert_array_equal(runs[0].lines.axis, runs[1].lines.axis)
     np.testing.assert_array_equal(runs[0].q, runs[1].q)
     assert runs[0].cost == runs[1].cost and runs[0].iterations == runs[1].iterations
+
+
+def test_an_adjustment_stopped_at_its_cap_is_said(monkeypatch):
+    """A fit whose adjustment stopped at the iteration cap says so in a note, and so does
+    the other MP start's minimum; converged, no warning."""
+    from fingerfit.estimate.markers import fit as marker_fit
+
+    sim = simulate_subject(SimConfig(targets=False, test=False, cycles=3), 7)
+    data = _index(simulate_markers(sim, "todorov", seed=1))
+    done = marker_fit.fit_finger(data, "index", "two", slide=False)
+    assert done.result.converged and not any("cap, not" in n for n in done.notes), done.notes
+    monkeypatch.setattr(marker_fit, "MAX_ITER", 2)
+    capped = marker_fit.fit_finger(data, "index", "two", slide=False)
+    assert not capped.result.converged and capped.result.iterations == 2
+    assert any("stopped at its 2-iteration cap, not converged" in n for n in capped.notes)
+    assert any("where it stopped at the 2-iteration cap" in n for n in capped.notes)

@@ -243,7 +243,7 @@ def test_the_other_kind_of_recording_is_refused_in_one_line(command: str, tmp_pa
 
 def test_fit_jobs_fits_the_digits_in_worker_processes(tmp_path):
     """``fingerfit fit --jobs 2`` of a marker session: each digit fitted in a worker
-    process, the model the same as one process's; Ctrl-C ends it without a word from
+    process, or one digit in two threads, the model the same as one process's; Ctrl-C ends it without a word from
     any process; a 6-DOF session refuses it in one line."""
     runner = CliRunner()
     sim = ["simulate", str(tmp_path), "--subjects", "1", "--fingers", "index,middle"]
@@ -254,17 +254,20 @@ def test_fit_jobs_fits_the_digits_in_worker_processes(tmp_path):
     # The worker processes are started from a process of their own: this test process
     # (a pytest-xdist worker) keeps no pool's state for the tests after it.
     exe = Path(sys.executable).with_name("fingerfit")
-    for jobs in ("1", "2"):
-        out = tmp_path / f"jobs{jobs}.json"
-        cmd = [str(exe), "fit", str(session), "--jobs", jobs, "-q", "-o", str(out)]
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    # Two digits on two cores: a worker process each; one digit: two threads.
+    for jobs, fingers in (("1", "index,middle"), ("2", "index,middle"), ("2", "index")):
+        out = tmp_path / f"jobs{jobs}{fingers}.json"
+        cmd = [str(exe), "fit", str(session), "--jobs", jobs, "--fingers", fingers, "-q"]
+        res = subprocess.run([*cmd, "-o", str(out)], capture_output=True, text=True, timeout=600)
         assert res.returncode == 0, res.stdout + res.stderr
-        models[jobs] = load_model(out)
-    for d in ("index", "middle"):
-        one, two = models["1"].fingers[d], models["2"].fingers[d]
-        for j in ("mp", "pip", "dip"):
-            np.testing.assert_array_equal(one.joints[j].axis, two.joints[j].axis)
-            np.testing.assert_array_equal(one.joints[j].center, two.joints[j].center)
+        models[jobs, fingers] = load_model(out)
+    one = models["1", "index,middle"]
+    for jobs, fingers in (("2", "index,middle"), ("2", "index")):
+        for d in fingers.split(","):
+            for j in ("mp", "pip", "dip"):
+                got = models[jobs, fingers].fingers[d].joints[j]
+                np.testing.assert_array_equal(got.axis, one.fingers[d].joints[j].axis)
+                np.testing.assert_array_equal(got.center, one.fingers[d].joints[j].center)
     # A terminal's Ctrl-C (the whole process group) once the workers run: no traceback
     # from any process, no model file.
     out = tmp_path / "interrupted.json"

@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 from ...transforms import FloatArray, unit
 from .chain import HandFrames, Lines, Structure, total_cost
 from .mixing import Mixer, information_weights
-from .normal import Normal, normal_equations, reduced, schur_step
+from .normal import Normal, normal_equations, reduced, schur_step, symmetric_pinv
 from .observe import DigitMarkers
 
 
@@ -40,6 +40,9 @@ class BundleResult:
     rms_mm : float
         RMS residual per coordinate (mm).
     iterations : int
+    converged : bool
+        False when it stopped at ``max_iter`` with the cost still falling by more than
+        ``tol`` of it per step.
     normal : Normal
         At the solution.
     free : ndarray of bool, shape (4 L + 3 M,)
@@ -53,6 +56,7 @@ class BundleResult:
     cost: float
     rms_mm: float
     iterations: int
+    converged: bool
     normal: Normal
     free: np.ndarray
 
@@ -118,7 +122,7 @@ def adjust(
         sizes = [(2, 3)] * 2 * L + [(1, 1)] * (G - 4 * L)
         mixer = Mixer(information_weights(diagonal, sizes)) if mix else None
         lam = 1e-4
-        it = 0
+        it, done = 0, False
         for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
             done = False
             for _ in range(12):
@@ -157,7 +161,7 @@ def adjust(
             if done:
                 break
     rms = float(np.sqrt(nq.cost / max(nq.count, 1)))
-    return BundleResult(lines, u, q, hand, slide, nq.cost, rms, it, nq, free)
+    return BundleResult(lines, u, q, hand, slide, nq.cost, rms, it, done, nq, free)
 
 
 def _pack(
@@ -196,20 +200,14 @@ def line_covariance(result: BundleResult) -> FloatArray:
 
     ``sigma^2 S^-1``, with ``S`` the Schur complement of the frames' unknowns in the
     undamped normal matrix and ``sigma^2`` the residual variance per coordinate. ``S`` is
-    inverted in its eigenvectors (scaled to a unit diagonal): a direction with no
-    information (below ``1e-12`` of the largest) gives its unknowns an infinite variance;
-    unknowns held fixed are NaN.
+    inverted by :func:`.normal.symmetric_pinv`: a direction with no information
+    gives its unknowns an infinite variance; unknowns held fixed are NaN.
     """
     s, _ = reduced(result.normal)
     n, k = result.normal.qq.shape[:2]
     dof = max(result.normal.count - n * k - s.shape[0], 1)
-    scale = np.sqrt(np.maximum(np.diag(s), 1e-300))
-    w, v = np.linalg.eigh(s / np.outer(scale, scale))
-    null = w <= 1e-12 * w.max()
-    inv = (v[:, ~null] / w[~null]) @ v[:, ~null].T / np.outer(scale, scale)
-    if null.any():
-        touched = (np.abs(v[:, null]) > 1e-3).any(axis=1)
-        inv[touched, :] = inv[:, touched] = np.inf
+    inv, touched = symmetric_pinv(s)
+    inv[touched, :] = inv[:, touched] = np.inf
     full = np.full((result.free.size, result.free.size), np.nan)
     idx = np.flatnonzero(result.free)
     full[np.ix_(idx, idx)] = result.cost / dof * inv

@@ -326,6 +326,18 @@ def with_slide_uncertainty(fit: DigitFit) -> DigitFit:
     return fit
 
 
+def _chosen(fit: DigitFit) -> DigitFit:
+    """The chosen fit of a finger, with the covariance of its lines
+    (:func:`with_slide_uncertainty`) and a note when its adjustment stopped at the
+    iteration cap."""
+    if not fit.result.converged:
+        fit.notes.append(
+            f"{fit.digit}: warning: the adjustment stopped at its {MAX_ITER}-iteration cap, "
+            "not converged (its axes may still move)"
+        )
+    return with_slide_uncertainty(fit)
+
+
 def fit_finger(
     data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True, threads: int = 1
 ) -> DigitFit:
@@ -345,7 +357,7 @@ def fit_finger(
     """
     hinge = fit_digit(data, digit, False, slide=slide, threads=threads)
     if mp_axes == "hinge":
-        return with_slide_uncertainty(hinge)
+        return _chosen(hinge)
     orders = [
         fit_digit(data, digit, True, start=hinge.result, slide=slide, order=o, threads=threads)
         for o in (ABDUCTION_FIRST, FLEXION_FIRST)
@@ -358,7 +370,7 @@ def fit_finger(
             f"{digit} mp: a hinge (both two-axis minima turn an MP axis through "
             f"{min(_largest_range_deg(f) for f in turning):.3g} deg or more: not a joint's motion)"
         )
-        return with_slide_uncertainty(hinge)
+        return _chosen(hinge)
     two, *rest = sorted(plausible, key=lambda f: f.result.cost)
     other = rest[0] if rest else turning[0]
     extra = data.frames + 4
@@ -380,6 +392,8 @@ def fit_finger(
             )
         else:
             beyond = f"the other start's minimum {gap:.3g} sigma^2 higher"
+        if not other.result.converged:
+            beyond += f" where it stopped at the {MAX_ITER}-iteration cap"
         two.notes.append(
             f"{digit} mp: two axes (the second lowers the cost by {z:.3g} SD), the "
             f"{proximal} axis proximal (ranges of motion: flexion {flex:.3g} deg, "
@@ -390,12 +404,12 @@ def fit_finger(
                 f"{digit} mp: warning: both two-axis minima turn an MP axis through more than "
                 f"{HALF_TURN_DEG:g} deg (not a joint's motion); mp_axes='two' kept the lower"
             )
-        return with_slide_uncertainty(two)
+        return _chosen(two)
     hinge.notes.append(
         f"{digit} mp: a hinge (a second axis lowers the cost by {z:.3g} SD, "
         f"not above {SECOND_AXIS_Z:g})"
     )
-    return with_slide_uncertainty(hinge)
+    return _chosen(hinge)
 
 
 @dataclass

@@ -384,3 +384,16 @@ def reduced(nq: Normal) -> tuple[FloatArray, FloatArray]:
     G, nk = nq.gg.shape[0], nq.bq.size
     s = nq.gg - nq.qg.reshape(nk, G).T @ wqg.reshape(nk, G)
     return s, wqg
+
+
+def symmetric_pinv(s: FloatArray) -> tuple[FloatArray, np.ndarray]:
+    """The pseudo-inverse of a symmetric positive semi-definite ``s (G, G)`` (an
+    information or a covariance matrix), inverted in its eigenvectors scaled to a unit
+    diagonal (a direction below ``1e-12`` of the largest eigenvalue is dropped), and
+    which unknowns (``(G,)`` bool) a dropped direction touches: of an information
+    matrix, the unknowns whose variance is unbounded."""
+    scale = np.sqrt(np.maximum(np.diag(s), 1e-300))
+    w, v = np.linalg.eigh(s / np.outer(scale, scale))
+    null = w <= 1e-12 * w.max()
+    inv = (v[:, ~null] / w[~null]) @ v[:, ~null].T / np.outer(scale, scale)
+    return inv, (np.abs(v[:, null]) > 1e-3).any(axis=1)

@@ -45,7 +45,7 @@ from scipy.special import ndtr
 from ...transforms import FloatArray, unit
 from .bundle import BundleResult
 from .chain import SLIDE_PRIOR, HandFrames, Structure, observed
-from .normal import Normal, frame_columns, normal_equations, reduced
+from .normal import Normal, frame_columns, normal_equations, reduced, symmetric_pinv
 from .observe import DigitMarkers
 
 #: EM iterations of the slide's variances stop when none changes by more than this
@@ -156,7 +156,7 @@ def slide_uncertainty(
     for it in range(1, EM_MAX_ITER + 1):  # noqa: B007 (the count is returned)
         prec = info.copy()
         prec[ng:, ng:] += np.diag(1.0 / tau2[group])
-        cov = _pinv_scaled(prec, np.sqrt(np.maximum(np.diag(prec), 1e-300)))
+        cov = symmetric_pinv(prec)[0]
         mean = cov @ grad
         second = mean[ng:] ** 2 + np.diag(cov)[ng:]
         new = np.maximum(np.bincount(group, second, 6) / np.bincount(group, minlength=6), 1e-12)
@@ -165,7 +165,7 @@ def slide_uncertainty(
         if done:
             break
     sgg, sgs = s[:ng, :ng], s[:ng, ng:]
-    inv = _pinv_scaled(sgg, np.sqrt(np.maximum(np.diag(sgg), 1e-300)))
+    inv = symmetric_pinv(sgg)[0]
     # The slides' information with the lines and places eliminated (units of sigma^2).
     w = info[ng:, ng:] - info[ng:, :ng] @ (sigma2 * inv) @ info[:ng, ng:]
     sd = np.sqrt(np.diag(_scale_covariance((w + w.T) / 2, tau2, group)))
@@ -210,14 +210,6 @@ def _with_hand_slides(
     )
 
 
-def _pinv_scaled(a: FloatArray, scale: FloatArray) -> FloatArray:
-    """The pseudo-inverse of the symmetric ``a`` scaled to a unit diagonal (directions
-    below ``1e-12`` of the largest eigenvalue dropped)."""
-    w, v = np.linalg.eigh(a / np.outer(scale, scale))
-    keep = w > 1e-12 * w.max()
-    return (v[:, keep] / w[keep]) @ v[:, keep].T / np.outer(scale, scale)
-
-
 def _scale_covariance(w: FloatArray, tau2: FloatArray, group: np.ndarray) -> FloatArray:
     """The covariance ``(6, 6)`` of the estimated variances ``tau2`` (mm^4/rad^4): the
     inverse Fisher information of the marginal likelihood.
@@ -228,10 +220,10 @@ def _scale_covariance(w: FloatArray, tau2: FloatArray, group: np.ndarray) -> Flo
     covariance and ``E_k`` the selector of the components of variance ``k`` (``group``).
     """
     cov = w + w @ np.diag(tau2[group]) @ w
-    p = _pinv_scaled(cov, np.sqrt(np.maximum(np.diag(cov), 1e-300)))
+    p = symmetric_pinv(cov)[0]
     grads = [p @ w @ np.diag((group == k).astype(float)) @ w for k in range(tau2.size)]
     fisher = np.array([[np.trace(a @ b) / 2 for b in grads] for a in grads])
-    return _pinv_scaled(fisher, np.sqrt(np.maximum(np.diag(fisher), 1e-300)))
+    return symmetric_pinv(fisher)[0]
 
 
 def _expected_variance(tau2: FloatArray, sd: FloatArray) -> FloatArray:
