@@ -152,8 +152,8 @@ class HandFrames:
     def identity(cls, n: int) -> HandFrames:
         return cls(np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3)))
 
-    def take(self, frames: slice) -> HandFrames:
-        """The corrections of ``frames`` only (views)."""
+    def take(self, frames: slice | np.ndarray) -> HandFrames:
+        """The corrections of ``frames`` only (a slice: views; indices: copies)."""
         return HandFrames(self.rotation[frames], self.offset[frames])
 
     def apply(self, points: FloatArray, pivot: FloatArray) -> FloatArray:

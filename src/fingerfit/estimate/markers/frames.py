@@ -12,7 +12,7 @@ frames or in the whole recording (to rounding).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -66,17 +66,6 @@ class FrameSolution:
     converged: np.ndarray
 
 
-def frames_of(data: DigitMarkers, idx: np.ndarray) -> DigitMarkers:
-    """The frames ``idx`` of ``data``."""
-    return replace(
-        data,
-        position=data.position[..., idx],
-        present=data.present[:, idx],
-        hand=data.hand[..., idx],
-        hand_present=data.hand_present[:, idx],
-    )
-
-
 def solve_frames(
     data: DigitMarkers,
     structure: Structure,
@@ -122,9 +111,9 @@ def solve_frames(
         diag *= 1.0 + lam[idx, None]
         d = np.linalg.solve(a, bq[..., None])[..., 0]  # (m, K)
         q_try = q[:, idx] + d[:, :L].T
-        now = HandFrames(hand.rotation[idx], hand.offset[idx])
+        now = hand.take(idx)
         h_try = now.moved(d[:, L : L + 3], d[:, L + 3 :])
-        nt = frame_terms(frames_of(data, idx), structure, lines, u, q_try, h_try, slide)
+        nt = frame_terms(data.take(idx), structure, lines, u, q_try, h_try, slide)
         # Below the cost's rounding (FLOOR of it) a step is judged by the model alone.
         floor = FLOOR * cost[idx]
         ok = nt.cost <= cost[idx] + floor

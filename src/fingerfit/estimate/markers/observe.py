@@ -62,8 +62,8 @@ class DigitMarkers:
     def frames(self) -> int:
         return int(self.present.shape[1])
 
-    def take(self, frames: slice) -> DigitMarkers:
-        """The same markers over ``frames`` only (views, not copies)."""
+    def take(self, frames: slice | np.ndarray) -> DigitMarkers:
+        """The same markers over ``frames`` only (a slice: views; indices: copies)."""
         return replace(
             self,
             position=self.position[..., frames],
