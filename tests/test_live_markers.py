@@ -20,6 +20,7 @@ from fingerfit.estimate.markers.angles import angles_table, marker_angles
 from fingerfit.estimate.markers.fit import fit_marker_session
 from fingerfit.io.markers import read_marker_recording
 from fingerfit.io.opensim import write_markers
+from fingerfit.live.outputs import RecordOutput
 from fingerfit.live.sources import Block
 from fingerfit.live.stream import Streamer
 from fingerfit.model import load_model, save_model
@@ -166,3 +167,40 @@ def test_the_other_kind_of_source_is_refused_in_one_line(tmp_path: Path) -> None
     line = _refused([str(marker_model), "--source", f"replay:{short}", "--record", str(out)])
     assert "IND3_1" in line and "short.trc" in line
     assert not out.exists()
+
+
+def test_unconverged_marker_solves_are_counted_and_said(monkeypatch) -> None:
+    """Frames whose marker solve stops unconverged (here: the solver allowed 2 steps) are
+    counted by the robot lane and by the data lane, as many as `fingerfit angles` counts
+    frame by frame, and said in the stream's summary line."""
+    from fingerfit.cli.stream import summary_line
+    from fingerfit.estimate.markers import frames
+
+    _, model_path = marker_subject()
+    model = load_model(model_path)
+    rec = read_marker_recording(marker_subject()[0] / "test.trc").slice(slice(0, 30))
+    rec = Recording(rec.name, rec.time, {}, markers=rec.markers)
+    monkeypatch.setattr(frames, "MAX_STEPS", 2)
+    want = sum(
+        marker_angles(model, rec.slice(slice(i, i + 1)))["index"].unconverged for i in range(30)
+    )
+    assert want > 0
+    streamer = Streamer(model, lsl=FakeLsl(), max_age=3600.0)
+    for i in range(rec.n_frames):
+        streamer.process(Block(rec.slice(slice(i, i + 1)), np.array([time.monotonic()])))
+    s = streamer.summary
+    assert (s.sent, s.unconverged) == (30, want)
+    line = summary_line(s, live=True, files=False, max_age_ms=100.0, retargets=False, view=False)
+    assert f"{want} marker solves of them unconverged" in line
+    # The data lane (a recording): every frame, in blocks, counted the same.
+    with tempfile.TemporaryDirectory() as tmp:
+        recorded = Streamer(model, record=RecordOutput(Path(tmp) / "out.csv"))
+        recorded.process(Block(rec, np.full(rec.n_frames, time.monotonic())))
+        recorded.close()
+    assert (recorded.summary.recorded, recorded.summary.data_unconverged) == (30, want)
+    line = summary_line(recorded.summary, live=False, files=True, max_age_ms=100.0)
+    assert f"30 recorded ({want} marker solves unconverged)" in line
+    monkeypatch.setattr(frames, "MAX_STEPS", 500)
+    quiet = Streamer(model, lsl=FakeLsl(), max_age=3600.0)
+    quiet.process(Block(rec.slice(slice(0, 1)), np.array([time.monotonic()])))
+    assert quiet.summary.unconverged == 0

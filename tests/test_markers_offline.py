@@ -154,7 +154,7 @@ def test_retargeting_markers_is_near_retargeting_the_six_dof_fit(world: str) -> 
     bot, rmap = resolve("shadow", None, six.hand)
     pose = sim.session.test[0].slice(slice(0, FRAMES))
     markers = ms.session.test[0].slice(slice(0, FRAMES))
-    rec, kin_m = with_hand(marker_model, markers, marker_kinematics(marker_model, markers))
+    rec, kin_m = with_hand(marker_model, markers, marker_kinematics(marker_model, markers)[0])
     res_m = retarget(marker_model, rec, bot, rmap, "tip", kin=kin_m)
     kin_6 = track_recording(six, pose, variants=("user_axis",)).kinematics
     res_6 = retarget(six, pose, bot, rmap, "tip", kin=kin_6)

@@ -227,7 +227,14 @@ def retarget(
             from ..live.markers import marker_kinematics
 
             bar.update(task, description="angles of the markers")
-            rec, kin = with_hand(model, rec, marker_kinematics(model, rec))
+            solved, unconverged = marker_kinematics(model, rec)
+            if unconverged:
+                notice(
+                    "warning",
+                    f"{unconverged} marker solves unconverged (a digit in a frame each; "
+                    "their angles the last iterate's)",
+                )
+            rec, kin = with_hand(model, rec, solved)
             bar.update(task, advance=1, description=f"retargeting ({method})")
         res = run(model, rec, robot_model, rmap, method, variant, contact_mm=contact_mm, kin=kin)
         bar.advance(task)

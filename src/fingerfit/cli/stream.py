@@ -364,7 +364,7 @@ def stream(
     try:
         lsl_out = ros_out = bag_out = rec_out = live_view = None
         empty = empty_recording(sensors, markers)
-        ch = channels_of(model, kinematics_of(model, empty, ("user_axis",)))
+        ch = channels_of(model, kinematics_of(model, empty, ("user_axis",))[0])
         if lsl:
             robot_outlet = (
                 {
@@ -595,9 +595,13 @@ def summary_line(
     if live:
         counts.append(
             f"{s.sent} sent, {s.skipped} skipped, {s.stale} stale (--max-age {max_age_ms:g} ms)"
+            + (f", {s.unconverged} marker solves of them unconverged" if s.unconverged else "")
         )
     if files:
-        counts.append(f"{s.recorded} recorded")
+        counts.append(
+            f"{s.recorded} recorded"
+            + (f" ({s.data_unconverged} marker solves unconverged)" if s.data_unconverged else "")
+        )
     if view:
         counts.append(f"view {s.view_logged} logged, {s.view_dropped} dropped")
     text = f"{s.received} frames received in {s.seconds:.1f} s"

@@ -141,7 +141,7 @@ class DataLane:
                     # No frame at all: still a complete CSV (an empty recording's header).
                     variants = ("user_axis", "orthogonal")
                     empty = empty_recording(self.sensors, is_marker_model(self.model))
-                    kin = kinematics_of(self.model, empty, variants)
+                    kin = kinematics_of(self.model, empty, variants)[0]
                     self.record.push(self._table(kin, None))
         except BaseException as exc:  # handed to the loop, which raises it
             self.error, ok = exc, False
@@ -183,7 +183,8 @@ class DataLane:
         elif self.plan is not None and rec.n_frames:
             kin = self.plan.run(rec)
         else:
-            kin = kinematics_of(self.model, rec, self.variants)
+            kin, unconverged = kinematics_of(self.model, rec, self.variants)
+            s.data_unconverged += unconverged
         if kin is not None and rec.n_frames and self.solves:
             self._anchor = last_frame(kin)
         joints = robot = None

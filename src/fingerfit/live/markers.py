@@ -59,7 +59,7 @@ def marker_presence(recording: Recording, labels: list[str]) -> np.ndarray:
     return out
 
 
-def marker_kinematics(model: HandModel, recording: Recording) -> Kinematics:
+def marker_kinematics(model: HandModel, recording: Recording) -> tuple[Kinematics, int]:
     """Angles and fingertips of a block of marker frames, as ``fingerfit angles`` gives
     them for a marker recording.
 
@@ -73,17 +73,22 @@ def marker_kinematics(model: HandModel, recording: Recording) -> Kinematics:
 
     Returns
     -------
-    Kinematics
+    kinematics : Kinematics
         Variant ``user_axis`` only; per digit its angles (rad) in the model's
         :meth:`~fingerfit.model.DigitModel.angle_names` order (flexion joints, then
         ``<joint>_abduction``) and its tip ``(n, 3)`` (mm, tracker frame); NaN in a frame
         the model could not place the digit.
+    unconverged : int
+        Solves that stopped unconverged, a digit in a frame each, summed over the digits
+        (their angles the last iterate's;
+        :attr:`~fingerfit.estimate.markers.angles.DigitAngles.unconverged`).
     """
     from ..estimate.markers.angles import marker_angles
 
     n = recording.n_frames
     motions: dict[str, FingerMotion] = {}
     solved = marker_angles(model, recording) if n else {}
+    unconverged = sum(a.unconverged for a in solved.values())
     for d, fm in model.fingers.items():
         names = fm.angle_names()
         if d in solved:
@@ -92,16 +97,18 @@ def marker_kinematics(model: HandModel, recording: Recording) -> Kinematics:
             motions[d] = FingerMotion({k: a.angles[:, col[k]] for k in names}, a.tip)
         else:
             motions[d] = FingerMotion({k: np.zeros(0) for k in names}, np.zeros((0, 3)))
-    return Kinematics(recording.time, {"user_axis": motions})
+    return Kinematics(recording.time, {"user_axis": motions}), unconverged
 
 
-def kinematics_of(model: HandModel, recording: Recording, variants: tuple[str, ...]) -> Kinematics:
-    """A block's kinematics: :func:`marker_kinematics` for a model fitted from markers
-    (``variants`` then ``user_axis`` only), else
-    :func:`~fingerfit.kinematics.compute_kinematics`."""
+def kinematics_of(
+    model: HandModel, recording: Recording, variants: tuple[str, ...]
+) -> tuple[Kinematics, int]:
+    """A block's kinematics and its marker solves that stopped unconverged:
+    :func:`marker_kinematics` for a model fitted from markers (``variants`` then
+    ``user_axis`` only), else :func:`~fingerfit.kinematics.compute_kinematics` (0)."""
     if is_marker_model(model):
         return marker_kinematics(model, recording)
-    return compute_kinematics(model, recording, variants)
+    return compute_kinematics(model, recording, variants), 0
 
 
 def check_marker_source(

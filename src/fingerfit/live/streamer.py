@@ -129,7 +129,7 @@ class Streamer:
         # Names from a probe of no frames; values are then taken by name from every
         # block, so the channel order is fixed for the whole stream.
         self.channels = channels or channels_of(
-            model, kinematics_of(model, empty_recording(self.sensors, markers), ("user_axis",))
+            model, kinematics_of(model, empty_recording(self.sensors, markers), ("user_axis",))[0]
         )
         # The model's constants are prepared once (swing-twist models; the paper's
         # projection angles go through compute_kinematics on every block).
@@ -265,12 +265,13 @@ class Streamer:
             return
         rec = block.recording if n == 1 else block.recording.slice(slice(n - 1, n))
         t = time.perf_counter()
+        unconverged = 0
         if self.tracker is not None and not valid and self._all_solved(present):
             kin = self.tracker.blank(rec)  # no digit to compute directly: all solved
         elif self.plan is not None:
             kin = self.plan.run(rec)
         else:
-            kin = kinematics_of(self.model, rec, self.variants)
+            kin, unconverged = kinematics_of(self.model, rec, self.variants)
         source = None
         if self.markers and not valid:  # the marker IK solves with the markers seen
             codes = source_codes(
@@ -299,6 +300,7 @@ class Streamer:
         self._push(held, self._valid, self._arrival, robot is not None)
         done = time.monotonic()
         s.sent += 1
+        s.unconverged += unconverged
         s.add(done - arrived, compute, 1, sent_age)
         if self._view_sent is not None:  # the view's robot: this frame's sent joints
             self._view_sent.append((s.received + n - 1, held["robot"][0].copy()))

@@ -436,6 +436,10 @@ class Summary:
         Of those, frames with a digit the model could not solve (the hand sensor or every
         sensor of the digit missing, or a model without calibration statistics): its
         values held. The others were solved by the model.
+    unconverged, data_unconverged : int
+        A model fitted from markers: solves (a digit in a frame each) that stopped
+        unconverged, their angles the last iterate's, among the frames sent (robot lane)
+        and among those computed for the files (data lane).
     silences : int
         Times the source fell silent for ``silence`` s (the watchdog fired).
     outages, reconnects : int
@@ -477,6 +481,8 @@ class Summary:
     lost: int = 0
     invalid: int = 0
     held: int = 0
+    unconverged: int = 0
+    data_unconverged: int = 0
     silences: int = 0
     outages: int = 0
     reconnects: int = 0

@@ -289,7 +289,7 @@ def marker_scene(model: HandModel, recording: Recording, kin: Kinematics | None 
     from ..kinematics.markers import model_marker_positions, with_hand
     from ..live.markers import marker_kinematics
 
-    rec, kin = with_hand(model, recording, kin or marker_kinematics(model, recording))
+    rec, kin = with_hand(model, recording, kin or marker_kinematics(model, recording)[0])
     scene = hand_scene(model, Recording(rec.name, rec.time, rec.poses), kin)
     labels, placed = model_marker_positions(model, rec.poses[HAND_SENSOR], kin)
     measured = np.stack([recording.markers[k] for k in labels], axis=1)
