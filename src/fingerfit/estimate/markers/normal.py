@@ -160,8 +160,11 @@ def normal_equations(
         Global unknowns that move (lines first, then the markers' places, then their
         slides).
     slide : ndarray, shape (M, 3), optional
-        Each marker's slide (mm/rad, :func:`places`): then unknowns too, with the prior
-        of :data:`SLIDE_PRIOR`.
+        Each marker's slide (mm/rad, :func:`.chain.places`): then unknowns too, with the
+        prior of :data:`.chain.SLIDE_PRIOR`.
+    pool : concurrent.futures.Executor, optional
+        A thread pool that works through the frames' blocks side by side (the result is
+        the same without it).
 
     Returns
     -------
