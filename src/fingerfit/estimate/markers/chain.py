@@ -191,26 +191,59 @@ def total_cost(
     (:func:`over_blocks`, with ``pool`` side by side)."""
 
     def block(frames: slice) -> float:
-        d, qb = data.take(frames), q[:, frames]
-        y, yh, _ = observed(d, hand.take(frames))
-        posed = predict(structure, lines, d.segment, places(structure, d, u, qb, slide), qb)
-        r, rh, _ = marker_residuals(d, y, yh, posed)
-        return float((r * r).sum() + (rh * rh).sum())
+        d, qb, hb = data.take(frames), q[:, frames], hand.take(frames)
+        res = marker_residuals(d, structure, lines, u, qb, hb, slide)
+        return float((res.r * res.r).sum() + (res.rh * res.rh).sum())
 
     ref = reference_residual(data, u)
     prior = 0.0 if slide is None else float((slide * slide).sum()) / SLIDE_PRIOR**2
     return sum(over_blocks(block, data.frames, pool)) + float((ref * ref).sum()) + prior
 
 
+@dataclass
+class MarkerResiduals:
+    """The markers at a point of the unknowns (frames last, mm).
+
+    Attributes
+    ----------
+    y, yh : ndarray, shape (M, 3, n) and (H, 3, n)
+        The digit's and the hand's markers with the hand frames' correction
+        (:func:`observed`).
+    pivot : ndarray, shape (3,)
+    r, rh : ndarray, shape (M, 3, n) and (H, 3, n)
+        The digit's residuals ``y - p`` and the hand's about their shape, 0 where unseen.
+    posed : tuple
+        :func:`predict`'s result (``p`` first).
+    """
+
+    y: FloatArray
+    yh: FloatArray
+    pivot: FloatArray
+    r: FloatArray
+    rh: FloatArray
+    posed: tuple[FloatArray, ...]
+
+
 def marker_residuals(
-    data: DigitMarkers, y: FloatArray, yh: FloatArray, posed: tuple[FloatArray, ...]
-) -> tuple[FloatArray, FloatArray, tuple[FloatArray, ...]]:
-    """The digit's markers' residuals ``y - p`` ``(M, 3, n)`` (``p`` the first of
-    :func:`predict`'s ``posed``) and the hand's about their shape ``(H, 3, n)``, 0 where
-    unseen (mm), and ``posed`` itself."""
+    data: DigitMarkers,
+    structure: Structure,
+    lines: Lines,
+    u: FloatArray,
+    q: FloatArray,
+    hand: HandFrames,
+    slide: FloatArray | None = None,
+    *,
+    levels: bool = False,
+) -> MarkerResiduals:
+    """The markers observed, where the chain puts them (:func:`predict`, with
+    ``levels``) and their residuals, at angles ``q (L, n)`` (rad), ``hand``, the lines,
+    places ``u (M, 3)`` (mm) and slides ``slide (M, 3)`` (mm/rad)."""
+    y, yh, pivot = observed(data, hand)
+    ut = places(structure, data, u, q, slide)
+    posed = predict(structure, lines, data.segment, ut, q, levels=levels)
     r = (y - posed[0]) * data.present[:, None]
     rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
-    return r, rh, posed
+    return MarkerResiduals(y, yh, pivot, r, rh, posed)
 
 
 def places(

@@ -24,10 +24,7 @@ from .chain import (
     Lines,
     Structure,
     marker_residuals,
-    observed,
     over_blocks,
-    places,
-    predict,
     reference_residual,
 )
 from .observe import DigitMarkers
@@ -263,12 +260,9 @@ def frame_terms(
     lines, places ``u (M, 3)`` (mm) and slides ``slide (M, 3)`` (mm/rad) as given."""
     M, L, n = len(data.labels), structure.levels, data.frames
     H = data.hand.shape[0]
-    y, yh, pivot = observed(data, hand)
-    ut = places(structure, data, u, q, slide)
-    r, rh, posed = marker_residuals(
-        data, y, yh, predict(structure, lines, data.segment, ut, q, levels=True)
-    )
-    p, rot, axes, centres, prox = posed
+    res = marker_residuals(data, structure, lines, u, q, hand, slide, levels=True)
+    y, yh, pivot, r, rh = res.y, res.yh, res.pivot, res.r, res.rh
+    p, rot, axes, centres, prox = res.posed
     # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
     d = p[:, None] - centres[None]  # (M, L, 3, n)
     jq = cross_rows(axes, d)  # (M, L, 3, n)
