@@ -216,15 +216,17 @@ def test_robot_lane_frame_values_equal_block_values(tips_frame: str) -> None:
 
 class _SlowOnce:
     """A retargeter stand-in whose step for one frame (by its recording time) takes
-    ``delay`` s: that frame goes stale in its compute."""
+    ``delay`` s: that frame goes stale in its compute. ``fired``: whether it did."""
 
     variant = "user_axis"
 
     def __init__(self, slow_time: float, delay: float) -> None:
         self.slow_time, self.delay = slow_time, delay
+        self.fired = False
 
     def step(self, rec, kin):
         if rec.time[0] == self.slow_time:
+            self.fired = True
             time.sleep(self.delay)
         return (np.zeros((1, 2)),)
 
@@ -233,15 +235,21 @@ def test_a_frame_that_goes_stale_in_its_compute_is_not_held() -> None:
     """The hold is the last frame sent: a frame computed but too old to send (its compute
     outlasted --max-age) does not become the value a later frame's missing sensor keeps."""
     model = load_model(fitted()[1])
-    # Frame 30 computes for 30 ms (--max-age 10 ms); every frame after it that can be sent
+    # Frame 30 computes for 0.6 s (--max-age 0.25 s); every frame after it that can be sent
     # next lacks the hand sensor, so nothing can be computed or solved: its values are held.
-    rec = short_recording(60, tuple((i, "hand") for i in range(31, 60)))
+    # From frame 27 on the frames come 0.15 s apart, so that a busy machine neither skips
+    # frame 30 (a newer frame in its block) nor lets a frame age past --max-age on arrival
+    # (the watchdog off: those gaps are not silences here).
+    rec = short_recording(40, tuple((i, "hand") for i in range(31, 40)))
+    gap = np.maximum(np.arange(40) - 26, 0) * 0.15
+    rec = Recording(rec.name, rec.time + gap, rec.poses)
     lsl = FakeLsl()
-    slow = _SlowOnce(float(rec.time[30]), 0.03)
-    streamer = Streamer(model, lsl=lsl, retargeter=slow, max_age=0.010)
+    slow = _SlowOnce(float(rec.time[30]), 0.6)
+    streamer = Streamer(model, lsl=lsl, retargeter=slow, max_age=0.25)
     source = Logged(ReplaySource(rec, 1.0))
-    s = run(source, streamer, status=False)
-    assert s.received == 60 == s.sent + s.skipped + s.stale and s.stale >= 1
+    s = run(source, streamer, status=False, silence=None)
+    assert slow.fired
+    assert s.received == 40 == s.sent + s.skipped + s.stale and s.stale >= 1
     arrivals = np.concatenate(source.blocks_seen)
     sent = np.searchsorted(arrivals, np.concatenate(lsl.arrival))
     assert 30 not in sent  # stale: not sent
