@@ -7,7 +7,7 @@ cost of :mod:`.chain`), on the block structure of :mod:`.normal`, its steps mixe
 from __future__ import annotations
 
 import contextlib
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Executor, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,6 +61,11 @@ class BundleResult:
     free: np.ndarray
 
 
+#: :func:`adjust`'s ``near`` in the fits: converged within ``sqrt(1e-3)``, about 0.03,
+#: standard deviations of the minimum.
+NEAR = 1e-3
+
+
 def adjust(
     data: DigitMarkers,
     structure: Structure,
@@ -73,6 +78,7 @@ def adjust(
     free: np.ndarray | None = None,
     max_iter: int = 100,
     tol: float = 1e-12,
+    near: float | None = None,
     mix: bool = True,
     threads: int = 1,
 ) -> BundleResult:
@@ -98,6 +104,12 @@ def adjust(
     max_iter : int
     tol : float
         Converged when an accepted step lowers the cost by less than ``tol`` of it.
+    near : float, optional
+        Converged too when an accepted step lowers the cost by less than ``near``
+        ``sigma^2`` (the residual variance per coordinate) and the Gauss-Newton step
+        from the new point would too: the point is then within ``sqrt(near)``
+        standard deviations of the minimum in the metric of the fit's covariance
+        (the decrease ``b^T (J^T J)^-1 b`` of that step is its squared length in it).
     mix : bool
         Propose each step mixed with the last ones (:mod:`.mixing`), kept when it lowers
         the cost below the plain step's.
@@ -151,7 +163,9 @@ def adjust(
                     lines, u, q, hand, slide = trial
                     nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide, pool)
                     lam = max(lam / 3.0, 1e-9)
-                    done = gain <= tol * max(cost, 1e-300)
+                    done = gain <= tol * max(cost, 1e-300) or (
+                        near is not None and _near_minimum(nq, gain, near, pool)
+                    )
                     break
                 lam *= 4.0
                 if mixer is not None:
@@ -162,6 +176,15 @@ def adjust(
                 break
     rms = float(np.sqrt(nq.cost / max(nq.count, 1)))
     return BundleResult(lines, u, q, hand, slide, nq.cost, rms, it, done, nq, free)
+
+
+def _near_minimum(nq: Normal, gain: float, near: float, pool: Executor | None) -> bool:
+    """Whether the last step's ``gain`` (mm^2) and the Gauss-Newton step from ``nq``'s
+    point would each lower the cost by less than ``near`` residual variances."""
+    if gain > near * nq.sigma2:
+        return False
+    dq, dg = schur_step(nq, 0.0, pool)
+    return float(np.vdot(nq.bq, dq) + nq.bg @ dg) <= near * nq.sigma2
 
 
 def _pack(
@@ -204,12 +227,10 @@ def line_covariance(result: BundleResult) -> FloatArray:
     gives its unknowns an infinite variance; unknowns held fixed are NaN.
     """
     s, _ = reduced(result.normal)
-    n, k = result.normal.qq.shape[:2]
-    dof = max(result.normal.count - n * k - s.shape[0], 1)
     inv, touched = symmetric_pinv(s)
     inv[touched, :] = inv[:, touched] = np.inf
     full = np.full((result.free.size, result.free.size), np.nan)
     idx = np.flatnonzero(result.free)
-    full[np.ix_(idx, idx)] = result.cost / dof * inv
+    full[np.ix_(idx, idx)] = result.normal.sigma2 * inv
     L = result.lines.axis.shape[0]
     return np.stack([full[4 * k : 4 * k + 4, 4 * k : 4 * k + 4] for k in range(L)])

@@ -27,7 +27,7 @@ from ...model import HandModel, JointModel, JointQuality, assemble_digit
 from ...session import Session, joint_sensors, sensor_name
 from ...track.solver import wrap
 from ...transforms import FloatArray, unit
-from .bundle import BundleResult, adjust, line_covariance
+from .bundle import NEAR, BundleResult, adjust, line_covariance
 from .chain import Lines, Structure
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import flexion_sign, staged_start
@@ -42,8 +42,9 @@ UNDETERMINED_SD_DEG = 20.0
 UNDETERMINED_SD_MM = 20.0
 #: The adjustments after the staged start stop after this many iterations, or when an
 #: iteration lowers the cost by less than this fraction of it (``1e-10`` of a cost of
-#: ``1e4`` mm^2 is ``1e-6`` mm^2: nothing the figures show).
-MAX_ITER = 60
+#: ``1e4`` mm^2 is ``1e-6`` mm^2: nothing the figures show), or when they are near the
+#: minimum (:data:`.bundle.NEAR`).
+MAX_ITER = 100
 TOL = 1e-10
 #: No joint of a digit turns through half a turn: a two-axis MP minimum whose axes' angles
 #: span more (5th to 95th percentile, deg) has two nearly parallel axes turning against
@@ -271,8 +272,14 @@ def _finish(
     threads: int = 1,
 ) -> DigitFit:
     """An adjusted chain checked: the angles within a turn and each flexion axis pointed
-    so that flexion is positive (the same motion; adjusted again when either changed),
-    then the lines the markers do not determine held at their start."""
+    so that flexion is positive, then the lines the markers do not determine held at
+    their start.
+
+    Wrapping an angle or turning an axis and its angles over is the same motion at the
+    same cost: the adjustment is not run again (a chain stopped at its iteration cap
+    stays stopped there, the cap one number), its normal equations are evaluated at the
+    new coordinates, for the covariance.
+    """
     turned = np.abs(result.q) > np.pi
     q = np.where(turned, wrap(result.q), result.q)
     flipped = [k for k in layout.first if flexion_sign(q[k]) < 0]
@@ -280,7 +287,8 @@ def _finish(
         axis = result.lines.axis.copy()
         axis[flipped], q[flipped] = -axis[flipped], -q[flipped]
         lines = Lines(axis, result.lines.centre)
-        result = _again(data, layout, result, lines, q, result.free, threads)
+        there = _again(data, layout, result, lines, q, result.free, threads, max_iter=0)
+        result = replace(there, iterations=result.iterations, converged=result.converged)
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
@@ -298,9 +306,11 @@ def _again(
     q: FloatArray,
     free: np.ndarray | None,
     threads: int = 1,
+    max_iter: int | None = None,
 ) -> BundleResult:
     """The adjustment of ``layout``'s chain from ``lines``, ``q`` and ``r``'s places,
-    slides and hand frames."""
+    slides and hand frames, up to ``max_iter`` iterations (default :data:`MAX_ITER`; 0:
+    its normal equations there)."""
     return adjust(
         data,
         layout.structure,
@@ -310,8 +320,9 @@ def _again(
         hand=r.hand,
         slide=r.slide,
         free=free,
-        max_iter=MAX_ITER,
+        max_iter=MAX_ITER if max_iter is None else max_iter,
         tol=TOL,
+        near=NEAR,
         threads=threads,
     )
 
@@ -374,9 +385,7 @@ def fit_finger(
     two, *rest = sorted(plausible, key=lambda f: f.result.cost)
     other = rest[0] if rest else turning[0]
     extra = data.frames + 4
-    n, k = two.result.normal.qq.shape[:2]
-    dof = max(two.result.normal.count - n * k - two.result.normal.gg.shape[0], 1)
-    sigma2 = two.result.cost / dof
+    sigma2 = two.result.normal.sigma2
     z = ((hinge.result.cost - two.result.cost) / sigma2 - extra) / math.sqrt(2 * extra)
     if mp_axes == "two" or z > SECOND_AXIS_Z:
         proximal = "ab/adduction" if two.layout.order == ABDUCTION_FIRST else "flexion"

@@ -122,6 +122,13 @@ class Normal:
     count: int
     frame_cost: FloatArray | None = None
 
+    @property
+    def sigma2(self) -> float:
+        """The residual variance per coordinate (mm^2): the cost over the observations
+        less the frames' and the global unknowns."""
+        n, k = self.qq.shape[:2]
+        return self.cost / max(self.count - n * k - self.gg.shape[0], 1)
+
 
 def frame_columns(points: FloatArray, pivot: FloatArray) -> FloatArray:
     """``d p / d (omega, tau)`` of carried-back points ``(K, 3, n)``: ``(n, K, 3, 6)``

@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 
 from ...transforms import FloatArray, unit
-from .bundle import BundleResult, adjust
+from .bundle import NEAR, BundleResult, adjust
 from .chain import HandFrames, Lines, Structure, predict
 from .observe import DigitMarkers
 
@@ -165,6 +165,7 @@ def staged_start(
             hand=hand,
             max_iter=10 if j < len(first_levels) - 1 else 100,
             tol=1e-6 if j < len(first_levels) - 1 else 1e-10,
+            near=None if j < len(first_levels) - 1 else NEAR,
             threads=threads,
         )
         axis[:levels], centre[:levels] = result.lines.axis, result.lines.centre
