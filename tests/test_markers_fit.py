@@ -354,23 +354,3 @@ def test_near_the_minimum_stops_sooner_within_its_distance():
     cos = np.abs(np.einsum("ki,ki->k", near.lines.axis, full.lines.axis))
     assert (np.arccos(np.minimum(cos, 1.0)) < np.sqrt(NEAR) * sd.max(axis=1)).all()
 
-
-def test_an_axis_turned_over_is_not_adjusted_again():
-    """An adjusted chain whose flexion axis points the wrong way is turned over (axis and
-    angles negated: the same motion at the same cost) without another adjustment: its
-    iterations, its convergence and its cost stay."""
-    from fingerfit.estimate.markers import fit as marker_fit
-
-    sim = simulate_subject(SimConfig(targets=False, test=False, cycles=3), 7)
-    data = _index(simulate_markers(sim, "todorov", seed=1))
-    layout = marker_fit.chain_layout("index", False)
-    done = marker_fit.fit_digit(data, "index", False, slide=False).result
-    axis, q = done.lines.axis.copy(), done.q.copy()
-    axis[1], q[1] = -axis[1], -q[1]
-    wrong = replace(done, lines=Lines(axis, done.lines.centre), q=q, iterations=7)
-    fit = marker_fit._finish(data, "index", layout, wrong)
-    np.testing.assert_array_equal(fit.result.lines.axis, done.lines.axis)
-    np.testing.assert_array_equal(fit.result.q, done.q)
-    assert fit.result.iterations == 7 and fit.result.converged
-    assert abs(fit.result.cost - done.cost) <= 1e-12 * done.cost
-    np.testing.assert_allclose(fit.covariance, line_covariance(done), rtol=1e-8, atol=0)

@@ -44,7 +44,7 @@ UNDETERMINED_SD_MM = 20.0
 #: iteration lowers the cost by less than this fraction of it (``1e-10`` of a cost of
 #: ``1e4`` mm^2 is ``1e-6`` mm^2: nothing the figures show), or when they are near the
 #: minimum (:data:`.bundle.NEAR`).
-MAX_ITER = 100
+MAX_ITER = 60
 TOL = 1e-10
 #: No joint of a digit turns through half a turn: a two-axis MP minimum whose axes' angles
 #: span more (5th to 95th percentile, deg) has two nearly parallel axes turning against
@@ -272,14 +272,8 @@ def _finish(
     threads: int = 1,
 ) -> DigitFit:
     """An adjusted chain checked: the angles within a turn and each flexion axis pointed
-    so that flexion is positive, then the lines the markers do not determine held at
-    their start.
-
-    Wrapping an angle or turning an axis and its angles over is the same motion at the
-    same cost: the adjustment is not run again (a chain stopped at its iteration cap
-    stays stopped there, the cap one number), its normal equations are evaluated at the
-    new coordinates, for the covariance.
-    """
+    so that flexion is positive (the same motion; adjusted again when either changed),
+    then the lines the markers do not determine held at their start."""
     turned = np.abs(result.q) > np.pi
     q = np.where(turned, wrap(result.q), result.q)
     flipped = [k for k in layout.first if flexion_sign(q[k]) < 0]
@@ -287,8 +281,7 @@ def _finish(
         axis = result.lines.axis.copy()
         axis[flipped], q[flipped] = -axis[flipped], -q[flipped]
         lines = Lines(axis, result.lines.centre)
-        there = _again(data, layout, result, lines, q, result.free, threads, max_iter=0)
-        result = replace(there, iterations=result.iterations, converged=result.converged)
+        result = _again(data, layout, result, lines, q, result.free, threads)
     fit = DigitFit(digit, layout, data, result, line_covariance(result))
     bad = _undetermined(fit)
     if bad.any():
@@ -306,11 +299,9 @@ def _again(
     q: FloatArray,
     free: np.ndarray | None,
     threads: int = 1,
-    max_iter: int | None = None,
 ) -> BundleResult:
     """The adjustment of ``layout``'s chain from ``lines``, ``q`` and ``r``'s places,
-    slides and hand frames, up to ``max_iter`` iterations (default :data:`MAX_ITER`; 0:
-    its normal equations there)."""
+    slides and hand frames."""
     return adjust(
         data,
         layout.structure,
@@ -320,7 +311,7 @@ def _again(
         hand=r.hand,
         slide=r.slide,
         free=free,
-        max_iter=MAX_ITER if max_iter is None else max_iter,
+        max_iter=MAX_ITER,
         tol=TOL,
         near=NEAR,
         threads=threads,
