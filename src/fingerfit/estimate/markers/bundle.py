@@ -16,7 +16,16 @@ from scipy.spatial.transform import Rotation
 from ...transforms import FloatArray, unit
 from .chain import HandFrames, Lines, Structure, total_cost
 from .mixing import Mixer, information_weights
-from .normal import Normal, normal_equations, reduced, schur_step, symmetric_pinv
+from .normal import (
+    LAM_START,
+    Normal,
+    damping,
+    normal_equations,
+    promised,
+    reduced,
+    schur_step,
+    symmetric_pinv,
+)
 from .observe import DigitMarkers
 
 
@@ -133,7 +142,7 @@ def adjust(
         diagonal[free] = np.diag(nq.gg)
         sizes = [(2, 3)] * 2 * L + [(1, 1)] * (G - 4 * L)
         mixer = Mixer(information_weights(diagonal, sizes)) if mix else None
-        lam = 1e-4
+        lam = LAM_START
         it, done = 0, False
         for it in range(1, max_iter + 1):  # noqa: B007 (the count is returned)
             done = False
@@ -150,6 +159,7 @@ def adjust(
                 )
                 cost = total_cost(data, structure, *trial, pool)
                 if cost <= nq.cost:
+                    ratio = (nq.cost - cost) / max(promised(nq, dq, dg), 1e-300)
                     if mixer is not None:
                         here = _pack(lines, u, q, hand, slide)
                         there = _pack(*trial)
@@ -162,12 +172,12 @@ def adjust(
                     gain = nq.cost - cost
                     lines, u, q, hand, slide = trial
                     nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide, pool)
-                    lam = max(lam / 3.0, 1e-9)
+                    lam = float(damping(lam, True, ratio))
                     done = gain <= tol * max(cost, 1e-300) or (
                         near is not None and _near_minimum(nq, gain, near, pool)
                     )
                     break
-                lam *= 4.0
+                lam = float(damping(lam, False, 0.0))
                 if mixer is not None:
                     mixer.forget()
             else:

@@ -18,7 +18,7 @@ import numpy as np
 
 from ...transforms import FloatArray
 from .chain import HandFrames, Lines, Structure
-from .normal import RIDGE, frame_terms
+from .normal import LAM_START, RIDGE, damping, frame_terms
 from .observe import DigitMarkers
 
 #: A frame has converged when the undamped (Gauss-Newton) step from its point is below
@@ -31,14 +31,9 @@ MAX_STEPS = 500
 #: Below this fraction of its cost a change is rounding: a step whose cost lies within it
 #: is taken, and judged by the linear model alone.
 FLOOR = 1e-11
-#: Damping (Marquardt: the diagonal times ``1 + lam``): the start and the bounds; a frame
-#: whose damping passes LAM_MAX has no step that lowers its cost (its minimum to
-#: rounding): converged.
-LAM_START, LAM_MIN, LAM_MAX = 1e-4, 1e-9, 1e8
-#: The damping's factor after a refused step, and after a taken one by the ratio of its
-#: gain to the gain its linear model promised: above GOOD, below POOR, between.
-LAM_UP, LAM_DOWN, LAM_POOR, LAM_SAME = 4.0, 1.0 / 3.0, 2.0, 1.0
-GOOD, POOR = 0.75, 0.25
+#: A frame whose damping (:func:`.normal.damping`) passes this has no step that lowers
+#: its cost (its minimum to rounding): converged.
+LAM_MAX = 1e8
 
 
 @dataclass
@@ -120,10 +115,9 @@ def solve_frames(
         gain = cost[idx] - nt.cost
         # The gain against the one the linear model promised: a step that lowers the
         # cost by far less (across a curved valley) is taken, but the damping grows.
-        promised = 2.0 * (d * bq).sum(axis=1) - np.einsum("nk,nkl,nl->n", d, qq, d)
-        ratio = np.where(promised > floor, gain / np.maximum(promised, 1e-300), 0.5)
-        factor = np.where(ratio > GOOD, LAM_DOWN, np.where(ratio < POOR, LAM_POOR, LAM_SAME))
-        lam[idx] = np.maximum(lam[idx] * np.where(ok, factor, LAM_UP), LAM_MIN)
+        promise = 2.0 * (d * bq).sum(axis=1) - np.einsum("nk,nkl,nl->n", d, qq, d)
+        ratio = np.where(promise > floor, gain / np.maximum(promise, 1e-300), 0.5)
+        lam[idx] = damping(lam[idx], ok, ratio)
         at = idx[ok]
         q[:, at] = q_try[:, ok]
         hand.rotation[at], hand.offset[at] = h_try.rotation[ok], h_try.offset[ok]

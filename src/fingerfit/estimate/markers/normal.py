@@ -32,6 +32,33 @@ from .observe import DigitMarkers
 #: Added to each frame's angle block (1/rad^2 in mm^2): an angle no marker of the frame
 #: determines stays where it is.
 RIDGE = 1e-9
+#: Damping (Marquardt: the diagonal times ``1 + lam``) of the adjustment and of the
+#: frames' solves: the start and the floor (:func:`damping`).
+LAM_START, LAM_MIN = 1e-4, 1e-9
+#: The damping's factor after a refused step, and after a taken one by the ratio of its
+#: gain to the gain its linear model promised: above GOOD, below POOR, between.
+LAM_UP, LAM_DOWN, LAM_POOR, LAM_SAME = 4.0, 1.0 / 3.0, 2.0, 1.0
+GOOD, POOR = 0.75, 0.25
+
+
+def damping(lam: FloatArray | float, taken: np.ndarray | bool, ratio: FloatArray | float):
+    """The next damping after a step (one or one per frame): up by :data:`LAM_UP` when
+    refused; when ``taken``, by the ``ratio`` of its gain to the gain the linear model
+    promised (:func:`promised`): down when the model held (above :data:`GOOD`), up when
+    the step lowered the cost by far less (across a curved valley, below :data:`POOR`),
+    else kept; never below :data:`LAM_MIN`."""
+    factor = np.where(ratio > GOOD, LAM_DOWN, np.where(ratio < POOR, LAM_POOR, LAM_SAME))
+    return np.maximum(lam * np.where(taken, factor, LAM_UP), LAM_MIN)
+
+
+def promised(nq: Normal, dq: FloatArray, dg: FloatArray) -> float:
+    """The decrease of the cost (mm^2) that the linear model promises for the step
+    ``dq (n, K)``, ``dg (G,)`` from ``nq``'s point: ``2 b^T d - d^T A d`` (``A`` the
+    undamped normal matrix)."""
+    b = float(np.vdot(nq.bq, dq) + nq.bg @ dg)
+    frames = np.einsum("nk,nkl,nl->", dq, nq.qq, dq)
+    cross = np.einsum("nk,nkg->g", dq, nq.qg) @ dg
+    return 2.0 * b - float(frames + 2.0 * cross + dg @ nq.gg @ dg)
 
 
 def cross_rows(a: FloatArray, b: FloatArray) -> FloatArray:
