@@ -353,4 +353,3 @@ def test_near_the_minimum_stops_sooner_within_its_distance():
     sd = np.sqrt(np.einsum("kii->ki", line_covariance(full))[:, :2])  # rad
     cos = np.abs(np.einsum("ki,ki->k", near.lines.axis, full.lines.axis))
     assert (np.arccos(np.minimum(cos, 1.0)) < np.sqrt(NEAR) * sd.max(axis=1)).all()
-
