@@ -118,7 +118,8 @@ def adjust(
         ``sigma^2`` (the residual variance per coordinate) and the Gauss-Newton step
         from the new point would too: the point is then within ``sqrt(near)``
         standard deviations of the minimum in the metric of the fit's covariance
-        (the decrease ``b^T (J^T J)^-1 b`` of that step is its squared length in it).
+        (the decrease ``b^T (J^T J)^-1 b`` of that step is ``sigma^2`` times its
+        squared length in it).
     mix : bool
         Propose each step mixed with the last ones (:mod:`.mixing`), kept when it lowers
         the cost below the plain step's.
