@@ -41,12 +41,15 @@ LAM_UP, LAM_DOWN, LAM_POOR, LAM_SAME = 4.0, 1.0 / 3.0, 2.0, 1.0
 GOOD, POOR = 0.75, 0.25
 
 
-def damping(lam: FloatArray | float, taken: np.ndarray | bool, ratio: FloatArray | float):
+def damping(
+    lam: FloatArray | float, taken: np.ndarray | bool, ratio: FloatArray | float
+) -> FloatArray:
     """The next damping after a step (one or one per frame): up by :data:`LAM_UP` when
     refused; when ``taken``, by the ``ratio`` of its gain to the gain the linear model
     promised (:func:`promised`): down when the model held (above :data:`GOOD`), up when
     the step lowered the cost by far less (across a curved valley, below :data:`POOR`),
-    else kept; never below :data:`LAM_MIN`."""
+    else kept; never below :data:`LAM_MIN`. Shaped as ``lam`` (a NumPy scalar for a
+    float)."""
     factor = np.where(ratio > GOOD, LAM_DOWN, np.where(ratio < POOR, LAM_POOR, LAM_SAME))
     return np.maximum(lam * np.where(taken, factor, LAM_UP), LAM_MIN)
 
