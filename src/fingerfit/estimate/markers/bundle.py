@@ -192,10 +192,11 @@ def adjust(
 def _near_minimum(nq: Normal, gain: float, near: float, pool: Executor | None) -> bool:
     """Whether the last step's ``gain`` (mm^2) and the Gauss-Newton step from ``nq``'s
     point would each lower the cost by less than ``near`` residual variances."""
-    if gain > near * nq.sigma2:
+    limit = near * nq.sigma2
+    if gain > limit:
         return False
     dq, dg = schur_step(nq, 0.0, pool)
-    return float(np.vdot(nq.bq, dq) + nq.bg @ dg) <= near * nq.sigma2
+    return float(np.vdot(nq.bq, dq) + nq.bg @ dg) <= limit
 
 
 def _pack(
