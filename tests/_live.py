@@ -329,8 +329,12 @@ def stream_from_outlet(
 ) -> tuple[int, str, str]:
     """Publish ``data`` (n, channels) with ``times`` (s from 0) on an LSL outlet of type
     ``stream_type`` (channel ``labels``, ``units``), 10 samples every 10 ms, to a
-    ``fingerfit stream MODEL --source lsl:NAME --record RECORD --duration 2`` subprocess
-    started first; its exit code, stdout and stderr."""
+    ``fingerfit stream MODEL --source lsl:NAME --record RECORD --duration 1.5`` subprocess
+    started first; its exit code, stdout and stderr. The duration ends the stream before
+    the source's silence limit (:data:`~fingerfit.live.sources.lsl.NO_DATA_SECONDS`, 2 s)
+    would, also when a busy machine starts the stream's loop after every sample was sent
+    (they then come in one block, the silence counted from its arrival as the duration
+    is)."""
     import os
     import sys
 
@@ -349,7 +353,7 @@ def stream_from_outlet(
     fingerfit = str(Path(sys.executable).with_name("fingerfit"))
     proc = subprocess.Popen(
         [fingerfit, "stream", str(model_path), "--source", f"lsl:{name}", "--record",
-         str(record), "--duration", "2", "-q"],
+         str(record), "--duration", "1.5", "-q"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:

@@ -209,7 +209,7 @@ def stream(
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..io.markers import is_marker_file
     from ..live import sources as src
-    from ..live.markers import check_marker_source, is_marker_model, kinematics_of
+    from ..live.markers import check_marker_source, is_marker_model, kinematics_of, marker_solver
     from ..live.outputs import BagOutput, LslOutput, RecordOutput, Ros2Output, dds_topic
     from ..live.stream import (
         SILENCE_POLICIES,
@@ -271,6 +271,8 @@ def stream(
         raise FingerfitError("exists; choose a new folder for the bag", path=ros2_bag)
     model = load_model(model_path)
     markers = is_marker_model(model)
+    if markers:  # its import (about a second) before the source opens, not on its frames
+        marker_solver()
     check_marker_stream(
         model_path,
         markers,

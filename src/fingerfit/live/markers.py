@@ -18,6 +18,8 @@ the view take a marker block as they take a 6-DOF one.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from ..digits import HAND_SENSOR
@@ -59,6 +61,17 @@ def marker_presence(recording: Recording, labels: list[str]) -> np.ndarray:
     return out
 
 
+def marker_solver() -> Callable[[HandModel, Recording], dict]:
+    """The marker solver, :func:`fingerfit.estimate.markers.angles.marker_angles`.
+
+    Imported on first use (about a second: SciPy's optimisers among its imports). A
+    stream of a marker model calls this before its first frame, so that the import does
+    not hold up the first frames streamed nor the lane that records them."""
+    from ..estimate.markers.angles import marker_angles
+
+    return marker_angles
+
+
 def marker_kinematics(model: HandModel, recording: Recording) -> tuple[Kinematics, int]:
     """Angles and fingertips of a block of marker frames, as ``fingerfit angles`` gives
     them for a marker recording.
@@ -83,11 +96,9 @@ def marker_kinematics(model: HandModel, recording: Recording) -> tuple[Kinematic
         (their angles the last iterate's;
         :attr:`~fingerfit.estimate.markers.angles.DigitAngles.unconverged`).
     """
-    from ..estimate.markers.angles import marker_angles
-
     n = recording.n_frames
     motions: dict[str, FingerMotion] = {}
-    solved = marker_angles(model, recording) if n else {}
+    solved = marker_solver()(model, recording) if n else {}
     unconverged = sum(a.unconverged for a in solved.values())
     for d, fm in model.fingers.items():
         names = fm.angle_names()

@@ -21,7 +21,7 @@ from ..session import HAND_SENSOR, PoseSeries, Recording
 from ..track.live import LiveTracker
 from ..transforms import FloatArray
 from .datalane import DataLane
-from .markers import is_marker_model, kinematics_of, with_hand
+from .markers import is_marker_model, kinematics_of, marker_solver, with_hand
 from .outputs import BagOutput, LslOutput, RecordOutput, Ros2Output
 from .sources import Block
 from .values import (
@@ -120,6 +120,8 @@ class Streamer:
         self.on_silence = on_silence
         self.sensors = model_sensors(model)
         self.markers = markers
+        if markers:
+            marker_solver()  # imported now, not on the first frames
         self.live = lsl is not None or ros2 is not None
         variants = ["user_axis"]
         if retargeter is not None and retargeter.variant not in variants:
