@@ -146,12 +146,14 @@ def geometry_errors(sim: SimulatedSubject, model: HandModel) -> tuple[list, list
     return deg, mm
 
 
-def tip_errors(sim: SimulatedSubject, model: HandModel, variant: str = "user_axis") -> FloatArray:
+def tip_errors(
+    sim: SimulatedSubject, model: HandModel, variant: str = "user_axis", digit: str = FINGER
+) -> FloatArray:
     """Fingertip error per frame of the free-motion test recording (mm)."""
     rec = sim.session.test[0]
-    kin = compute_kinematics(model, rec, variants=(variant,), fingers=[FINGER])
-    true_tip = sim.truth.frames[rec.name]["tip"][FINGER]
-    return np.linalg.norm(kin.motions[variant][FINGER].tip - true_tip, axis=1)
+    kin = compute_kinematics(model, rec, variants=(variant,), fingers=[digit])
+    true_tip = sim.truth.frames[rec.name]["tip"][digit]
+    return np.linalg.norm(kin.motions[variant][digit].tip - true_tip, axis=1)
 
 
 def true_angle_tip_errors(sim: SimulatedSubject, model: HandModel) -> FloatArray:

@@ -36,6 +36,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -58,41 +59,46 @@ from fingerfit.simulate.study import SimConfig, simulate_cohort
 from fingerfit.simulate.truthmodel import truth_model
 from fingerfit.transforms import orthonormal_basis
 
-FINGER = "index"
-JOINTS = ("mp", "pip", "dip")
+#: The axes scored per digit benchmarked (``--digit``): a finger's flexion axes; the
+#: thumb's, and its CMC's ab/adduction axis (always fitted).
+AXES = {"index": ("mp", "pip", "dip"), "thumb": ("cmc", "cmc_abduction", "mcp", "ip")}
+#: Issue targets (Todorov's layout, a finger); the thumb has none.
 TARGETS_DEG = {"mp": 6.0, "pip": 1.5, "dip": 5.0}
 TIP_RATIO_TARGET = 2.0
 DEFAULT_CONDITIONS = "realistic,MyoHand world,MP ab/adduction off"
 
 
 def _axis_errors(fit: DigitFit, lines, truth) -> dict:
-    """Per flexion joint: angle to the true axis (deg) and whether the truth is inside the
-    95 % region of the fit's direction."""
+    """Per scored axis (:data:`AXES`): angle to the true axis (deg; sign ignored for an
+    ab/adduction axis) and whether the truth is inside the 95 % region of the fit's
+    direction."""
     out = {}
-    for j, joint in enumerate(JOINTS):
-        level = fit.layout.first[j]
+    for name in AXES[fit.digit]:
+        level = fit.layout.names.index(name)
         a = lines.axis[level]
-        t = truth.fingers[FINGER].joints[joint].axis
+        t = truth.axis(fit.digit, name).axis
+        if level not in fit.layout.first:
+            t = t * np.sign(a @ t)
         err = float(np.degrees(np.arccos(np.clip(a @ t, -1.0, 1.0))))
         b = orthonormal_basis(a)[:2]
         x = b @ t
         c = fit.covariance[level, :2, :2]
         covered = bool(np.all(np.isfinite(c)) and x @ np.linalg.solve(c, x) <= CHI2_95)
         ci = fit.axis_ci_deg(level) if np.all(np.isfinite(c)) else float("nan")
-        out[joint] = {"axis_deg": err, "covered": covered, "ci_deg": ci}
+        out[name] = {"axis_deg": err, "covered": covered, "ci_deg": ci}
     return out
 
 
 def _floor(fit: DigitFit, sim, ms) -> dict:
-    """The adjustment started from the true parameters, in the fit's chain (a second MP
-    axis the truth lacks: the fit's own; MyoHand's flexion-first MP in the fit's
+    """The adjustment started from the true parameters, in the fit's chain (a second axis
+    the truth lacks: the fit's own, its angles 0; MyoHand's flexion-first MP in the fit's
     ab/adduction-first order)."""
     truth = truth_model(sim)
     layout = fit.layout
     axis, centre = [], []
     for k, n in enumerate(layout.names):
         try:
-            jm = truth.axis(FINGER, n)
+            jm = truth.axis(fit.digit, n)
             axis.append(jm.axis)
             centre.append(jm.center)
         except KeyError:
@@ -100,14 +106,19 @@ def _floor(fit: DigitFit, sim, ms) -> dict:
             centre.append(fit.result.lines.centre[k])
     lines = Lines(np.array(axis), np.array(centre))
     u = np.array([ms.markers.position[k] for k in fit.data.labels])
-    frames = [sim.truth.frames[r.name]["angles"][FINGER] for r in sim.session.grasp]
-    q = np.stack([np.concatenate([f[n] for f in frames]) for n in layout.names])
+    frames = [sim.truth.frames[r.name]["angles"][fit.digit] for r in sim.session.grasp]
+    q = np.stack(
+        [
+            np.concatenate([f.get(n, np.zeros_like(f[layout.names[0]])) for f in frames])
+            for n in layout.names
+        ]
+    )
     slide = None
     if fit.result.slide is not None:  # the true slides where the fit estimates them
         slide = np.array([ms.markers.slide[k] for k in fit.data.labels])
         slide[~fit.result.free[-slide.size :].reshape(slide.shape)] = 0.0
     result = adjust(fit.data, layout.structure, lines, u, q, slide=slide, free=fit.result.free)
-    floor = DigitFit(FINGER, layout, fit.data, result, line_covariance(result))
+    floor = DigitFit(fit.digit, layout, fit.data, result, line_covariance(result))
     return _axis_errors(floor, result.lines, truth)
 
 
@@ -119,17 +130,19 @@ def run_subject(
     seed: int,
     slide: bool = False,
     slide_law: str = "linear",
+    name: str = "index",
 ) -> dict:
-    """One subject in one layout: the fit, its errors, the floor, the tip ratio."""
+    """One subject in one layout: the fit of digit ``name``, its errors, the floor, the
+    tip ratio."""
     ms = simulate_markers(sim, layout, seed=seed, slide_law=slide_law)
     t0 = time.perf_counter()
-    fit = fit_marker_session(ms.session, slide=slide)
+    fit = fit_marker_session(replace(ms.session, fingers=[name]), slide=slide)
     seconds = time.perf_counter() - t0
-    digit = fit.digits[FINGER]
+    digit = fit.digits[name]
     truth = truth_model(sim)
     test = ms.session.test[0]
-    tip = marker_angles(fit.model, test)[FINGER].tip
-    true_tip = sim.truth.frames[sim.session.test[0].name]["tip"][FINGER]
+    tip = marker_angles(fit.model, test)[name].tip
+    true_tip = sim.truth.frames[sim.session.test[0].name]["tip"][name]
     tip_err = float(np.nanmean(np.linalg.norm(tip - true_tip, axis=1)))
     return {
         "condition": cond,
@@ -137,7 +150,7 @@ def run_subject(
         "subject": sim.session.subject,
         "seconds": seconds,
         "frames": int(digit.data.frames),
-        "mp_axes": len(digit.layout.names) - 2,
+        "mp_axes": 2 if digit.layout.choice in digit.layout.second else 1,
         "mp_order": digit.layout.order,
         "slide_sd": None if digit.slide_sd is None else [float(x) for x in digit.slide_sd],
         "rms_mm": digit.result.rms_mm,
@@ -150,8 +163,9 @@ def run_subject(
     }
 
 
-def summarise(rows: list[dict]) -> dict:
-    """Per condition and layout: mean and largest axis errors, coverage, tip ratio."""
+def summarise(rows: list[dict], name: str = "index") -> dict:
+    """Per condition and layout: mean and largest axis errors, coverage, tip ratio (digit
+    ``name``'s axes, :data:`AXES`)."""
     out: dict = {}
     for r in rows:
         out.setdefault(r["condition"], {}).setdefault(r["layout"], []).append(r)
@@ -162,7 +176,7 @@ def summarise(rows: list[dict]) -> dict:
                 "subjects": len(vals),
                 "seconds_mean": float(np.mean([v["seconds"] for v in vals])),
             }
-            for j in JOINTS:
+            for j in AXES[name]:
                 fit = [v["fit"][j]["axis_deg"] for v in vals]
                 floor = [v["floor"][j]["axis_deg"] for v in vals]
                 s[j] = {
@@ -172,8 +186,8 @@ def summarise(rows: list[dict]) -> dict:
                     "floor_deg_max": float(np.max(floor)),
                     "covered": float(np.mean([v["fit"][j]["covered"] for v in vals])),
                     "ci_deg_mean": float(np.nanmean([v["fit"][j]["ci_deg"] for v in vals])),
-                    "target_deg": TARGETS_DEG[j],
-                    "met": bool(np.max(fit) <= TARGETS_DEG[j]),
+                    "target_deg": TARGETS_DEG.get(j) if name != "thumb" else None,
+                    "met": bool(np.max(fit) <= TARGETS_DEG[j]) if name != "thumb" else None,
                 }
             s["tip_mm_mean"] = float(np.mean([v["tip_mm"] for v in vals]))
             s["sixdof_tip_mm_mean"] = float(np.mean([v["sixdof_tip_mm"] for v in vals]))
@@ -240,20 +254,23 @@ def speed(frames: int = 10_000) -> dict:
     return out
 
 
-def markdown(summary: dict) -> str:
+def markdown(summary: dict, name: str = "index") -> str:
     """The summary as the table of ``docs/markers.md``."""
+    axes = AXES[name]
+    up = " / ".join(a.upper().replace("_ABDUCTION", " ab") for a in axes)
     lines = [
-        "| condition / layout | MP deg mean (max) | PIP | DIP | floor MP / PIP / DIP "
-        "| truth in 95 % region MP / PIP / DIP | 95 % half-angle MP / PIP / DIP "
+        f"| condition / layout | {axes[0].upper()} deg mean (max) | "
+        + " | ".join(a.upper().replace("_ABDUCTION", " ab") for a in axes[1:])
+        + f" | floor {up} | truth in 95 % region {up} | 95 % half-angle {up} "
         "| tip mm (6-DOF) | ratio |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|" + "---|" * (len(axes) + 5),
     ]
     for key, s in summary.items():
         n = s["subjects"]
-        cells = [f"{s[j]['axis_deg_mean']:.1f} ({s[j]['axis_deg_max']:.1f})" for j in JOINTS]
-        floor = " / ".join(f"{s[j]['floor_deg_mean']:.1f}" for j in JOINTS)
-        covered = " / ".join(f"{round(s[j]['covered'] * n)}" for j in JOINTS) + f" of {n}"
-        ci = " / ".join(f"{s[j].get('ci_deg_mean', float('nan')):.1f}" for j in JOINTS)
+        cells = [f"{s[j]['axis_deg_mean']:.1f} ({s[j]['axis_deg_max']:.1f})" for j in axes]
+        floor = " / ".join(f"{s[j]['floor_deg_mean']:.1f}" for j in axes)
+        covered = " / ".join(f"{round(s[j]['covered'] * n)}" for j in axes) + f" of {n}"
+        ci = " / ".join(f"{s[j].get('ci_deg_mean', float('nan')):.1f}" for j in axes)
         tip = f"{s['tip_mm_mean']:.2f} ({s['sixdof_tip_mm_mean']:.2f})"
         lines.append(
             f"| {key} | {' | '.join(cells)} | {floor} | {covered} | {ci} | {tip} "
@@ -268,6 +285,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--conditions", default=DEFAULT_CONDITIONS)
     parser.add_argument("--layouts", default="todorov,phalanx")
+    parser.add_argument(
+        "--digit",
+        default="index",
+        choices=tuple(AXES),
+        help="the digit fitted and scored (the thumb's subjects have the index finger too)",
+    )
     parser.add_argument("--speed", action="store_true")
     parser.add_argument("--speed-only", action="store_true", help="time the fits alone")
     parser.add_argument("--slide", action="store_true", help="estimate the markers' slide")
@@ -291,10 +314,11 @@ def main() -> None:
     rows = []
     t0 = time.perf_counter()
     for cond in conditions:
-        config = SimConfig(**{"fingers": (FINGER,), **CONDITIONS[cond]})
+        fingers = ("index",) if args.digit == "index" else ("index", args.digit)
+        config = SimConfig(**{"fingers": fingers, **CONDITIONS[cond]})
         for sim in simulate_cohort(config, args.subjects, args.seed):
             model = fit_session(sim.session, FitOptions())
-            sixdof = float(np.nanmean(tip_errors(sim, model)))
+            sixdof = float(np.nanmean(tip_errors(sim, model, digit=args.digit)))
             for k, layout in enumerate(args.layouts.split(",")):
                 r = run_subject(
                     cond,
@@ -304,13 +328,14 @@ def main() -> None:
                     seed=k + 1,
                     slide=args.slide,
                     slide_law=args.slide_law,
+                    name=args.digit,
                 )
                 rows.append(r)
-                f = r["fit"]
                 print(
-                    f"{cond} / {layout} {r['subject']}: axis deg mp {f['mp']['axis_deg']:.2f} "
-                    f"pip {f['pip']['axis_deg']:.2f} dip {f['dip']['axis_deg']:.2f}; floor "
-                    + " ".join(f"{j} {r['floor'][j]['axis_deg']:.2f}" for j in JOINTS)
+                    f"{cond} / {layout} {r['subject']}: axis deg "
+                    + " ".join(f"{j} {r['fit'][j]['axis_deg']:.2f}" for j in AXES[args.digit])
+                    + "; floor "
+                    + " ".join(f"{j} {r['floor'][j]['axis_deg']:.2f}" for j in AXES[args.digit])
                     + f"; tip {r['tip_mm']:.2f} mm vs 6-DOF {sixdof:.2f} ({r['seconds']:.0f} s)",
                     flush=True,
                 )
@@ -318,13 +343,14 @@ def main() -> None:
         "command": "python bench/markers.py " + " ".join(sys.argv[1:]),
         "subjects": args.subjects,
         "seconds": time.perf_counter() - t0,
-        "summary": summarise(rows),
+        "digit": args.digit,
+        "summary": summarise(rows, args.digit),
         "rows": rows,
     }
     if args.speed:
         doc["speed"] = speed()
     print(json.dumps(doc["summary"], indent=1))
-    print(markdown(doc["summary"]))
+    print(markdown(doc["summary"], args.digit))
     if args.json:
         args.json.write_text(json.dumps(doc, indent=1) + "\n")
 

@@ -30,6 +30,7 @@ from typing import TypeVar
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ...digits import ABDUCTION_FIRST, DIGITS, FLEXION_FIRST, second_axis
 from ...track.chains import Chains, matvec_rows
 from ...transforms import FloatArray, orthonormal_basis, unit
 from .observe import DigitMarkers
@@ -88,6 +89,70 @@ class Structure:
     @property
     def levels(self) -> int:
         return int(self.depth[-1])
+
+
+@dataclass(frozen=True)
+class ChainLayout:
+    """A digit's chain for the marker fit (:func:`chain_layout`).
+
+    Attributes
+    ----------
+    names : list of str
+        Each level's axis name, proximal first (``mp_abduction``, ``mp``, ``pip``, ...).
+    structure : Structure
+    first : list of int
+        The level of each joint's flexion axis.
+    second : dict[int, int]
+        Joint index -> the level of its second axis.
+    choice : int
+        The joint whose second axis is the model's choice (a finger's MP, the thumb's
+        MCP); the others' are fixed by the digit (the thumb's CMC always has two).
+    """
+
+    names: list[str]
+    structure: Structure
+    first: list[int]
+    second: dict[int, int]
+    choice: int = 0
+
+    def order_of(self, joint: int) -> str:
+        """A two-axis joint's order: ``abduction_first`` when its second axis is
+        proximal."""
+        return ABDUCTION_FIRST if self.second[joint] < self.first[joint] else FLEXION_FIRST
+
+    @property
+    def order(self) -> str:
+        """The order of the choice joint (:data:`ABDUCTION_FIRST` for a hinge)."""
+        return self.order_of(self.choice) if self.choice in self.second else ABDUCTION_FIRST
+
+
+def chain_layout(digit: str, two_axis: bool, order: str = ABDUCTION_FIRST) -> ChainLayout:
+    """The chain of ``digit``: the joint whose second axis is a choice (a finger's MP,
+    the thumb's MCP) a hinge or, with ``two_axis``, two axes in ``order`` (the
+    ab/adduction axis proximal, or the flexion axis); a joint that always has two (the
+    thumb's CMC) in the digit's order (:data:`fingerfit.digits.DIGITS`)."""
+    d = DIGITS[digit]
+    choice = next(
+        j for j, joint in enumerate(d.joints) if joint in d.second_axes
+        and joint not in d.required_second
+    )  # fmt: skip
+    names: list[str] = []
+    first: list[int] = []
+    second: dict[int, int] = {}
+    depth = []
+    for j, joint in enumerate(d.joints):
+        if joint in d.required_second or (two_axis and j == choice):
+            pair = [joint, second_axis(joint)]
+            if (order if j == choice else d.order[joint]) == ABDUCTION_FIRST:
+                pair.reverse()
+            second[j] = len(names) + pair.index(second_axis(joint))
+            first.append(len(names) + pair.index(joint))
+            names += pair
+        else:
+            first.append(len(names))
+            names.append(joint)
+        depth.append(len(names))
+    return ChainLayout(names, Structure(np.array(depth), np.array(first)), first, second, choice)
 
 
 def predict(

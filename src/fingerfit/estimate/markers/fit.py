@@ -1,10 +1,10 @@
 """A marker session fitted into the individual hand model, digit by digit.
 
-Each digit's chain (:func:`chain_layout`) is started and adjusted by :mod:`.start` and
-:mod:`.bundle` on the reference and calibration (grasp) recordings. A finger's MP gets a
-second (ab/adduction) axis when the markers call for it (``mp_axes="auto"``,
-:func:`fit_finger`; else a hinge, said in one line), proximal or distal to the flexion
-axis as the lower cost decides. A line whose direction or point the markers leave
+Each digit's chain (:func:`.chain.chain_layout`) is started and adjusted by :mod:`.start`
+and :mod:`.bundle` on the reference and calibration (grasp) recordings. The thumb's CMC
+always has two axes; a finger's MP and the thumb's MCP get a second (ab/adduction) axis
+when the markers call for it (``mp_axes="auto"``, :func:`fit_digit`; else a hinge, said
+in one line), proximal or distal to the flexion axis as the lower cost decides. A line whose direction or point the markers leave
 undetermined (the noise's standard deviation above :data:`UNDETERMINED_SD_DEG` /
 :data:`UNDETERMINED_SD_MM`, or no information at all) is held at its start and said in
 one line naming the joint; the lines' uncertainty holds the skin's slide
@@ -28,13 +28,13 @@ from ...session import Session, joint_sensors, sensor_name
 from ...track.solver import wrap
 from ...transforms import FloatArray, unit
 from .bundle import NEAR, BundleResult, adjust, line_covariance
-from .chain import Lines, Structure
+from .chain import ChainLayout, Lines, chain_layout
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import flexion_sign, staged_start
 from .uncertainty import slide_uncertainty
 
 #: A finger's MP keeps its second axis when it lowers the cost by more than this many
-#: standard deviations of what its unknowns absorb of the noise (:func:`fit_finger`).
+#: standard deviations of what its unknowns absorb of the noise (:func:`fit_digit`).
 SECOND_AXIS_Z = 5.0
 #: A line's direction with a larger SD (deg), or its point with a larger SD (mm), is not
 #: determined by the markers.
@@ -48,68 +48,11 @@ MAX_ITER = 60
 TOL = 1e-10
 #: No joint of a digit turns through half a turn: a two-axis MP minimum whose axes' angles
 #: span more (5th to 95th percentile, deg) has two nearly parallel axes turning against
-#: each other to soak up the skin's slide, and is left out (:func:`fit_finger`).
+#: each other to soak up the skin's slide, and is left out (:func:`fit_digit`).
 HALF_TURN_DEG = 180.0
 #: Chi-square 95 % quantile with two degrees of freedom: an axis direction's (or a
 #: line point's) 95 % region is ``x^T C^-1 x <= CHI2_95``.
 CHI2_95 = 5.991
-
-
-@dataclass(frozen=True)
-class ChainLayout:
-    """A digit's chain for the marker fit.
-
-    Attributes
-    ----------
-    names : list of str
-        Each level's axis name, proximal first (``mp_abduction``, ``mp``, ``pip``, ...).
-    structure : Structure
-    first : list of int
-        The level of each joint's flexion axis.
-    second : dict[int, int]
-        Joint index -> the level of its second axis.
-    """
-
-    names: list[str]
-    structure: Structure
-    first: list[int]
-    second: dict[int, int]
-
-    @property
-    def order(self) -> str:
-        """The two-axis joint's order (``abduction_first`` when the second axis is
-        proximal)."""
-        return FLEXION_FIRST if self.first[0] == 0 and self.second else ABDUCTION_FIRST
-
-
-def chain_layout(digit: str, two_axis: bool, order: str = ABDUCTION_FIRST) -> ChainLayout:
-    """The chain of ``digit``: a finger's MP a hinge or two axes (``order``: the
-    ab/adduction axis proximal, :mod:`fingerfit.digits`' order, or the flexion axis
-    proximal); the thumb's CMC two axes (flexion proximal), MCP and IP hinges."""
-    if digit == "thumb":
-        return ChainLayout(
-            ["cmc", "cmc_abduction", "mcp", "ip"],
-            Structure(np.array([2, 3, 4]), np.array([0, 2, 3])),
-            [0, 2, 3],
-            {0: 1},
-        )
-    if two_axis and order == FLEXION_FIRST:
-        return ChainLayout(
-            ["mp", "mp_abduction", "pip", "dip"],
-            Structure(np.array([2, 3, 4]), np.array([0, 2, 3])),
-            [0, 2, 3],
-            {0: 1},
-        )
-    if two_axis:
-        return ChainLayout(
-            ["mp_abduction", "mp", "pip", "dip"],
-            Structure(np.array([2, 3, 4]), np.array([1, 2, 3])),
-            [1, 2, 3],
-            {0: 0},
-        )
-    return ChainLayout(
-        ["mp", "pip", "dip"], Structure(np.array([1, 2, 3]), np.array([0, 1, 2])), [0, 1, 2], {}
-    )
 
 
 @dataclass
@@ -185,7 +128,7 @@ def slide_free(data: DigitMarkers, levels: int) -> np.ndarray:
     return free
 
 
-def fit_digit(
+def fit_chain(
     data: DigitMarkers,
     digit: str,
     two_axis: bool,
@@ -195,9 +138,9 @@ def fit_digit(
     threads: int = 1,
 ) -> DigitFit:
     """Start, adjust and check one digit's chain (:func:`chain_layout`): from the staged
-    start, or (a finger's two-axis MP, in ``order``) from its hinge fit ``start`` with the
-    second axis added, perpendicular to the flexion axis and the proximal phalanx, at
-    angle 0. ``threads``: :func:`.bundle.adjust`'s."""
+    start, or (the choice joint's two axes, in ``order``: a finger's MP, the thumb's MCP)
+    from its hinge fit ``start`` with the second axis added, perpendicular to the flexion
+    axis and the child segment, at angle 0. ``threads``: :func:`.bundle.adjust`'s."""
     layout = chain_layout(digit, two_axis, order)
 
     def again(
@@ -206,21 +149,23 @@ def fit_digit(
         return _again(data, layout, r, lines, q, free, threads)
 
     if start is None:
-        result = staged_start(data, layout.structure, layout.first, layout.second, threads=threads)
+        result = staged_start(data, layout, threads=threads)
         if slide:
             result.slide = np.zeros((len(data.labels), 3))
             result = again(
                 result, result.lines, result.q, slide_free(data, layout.structure.levels)
             )
     else:
+        c = layout.choice
+        flex = chain_layout(digit, False).first[c]
         lines = start.lines
-        near = start.u[data.segment == 0].mean(axis=0)
-        bone = unit(near - lines.centre[0])
-        extra = unit(np.cross(bone, lines.axis[0]))
-        at = 0 if layout.order == ABDUCTION_FIRST else 1
+        near = start.u[data.segment == c].mean(axis=0)
+        bone = unit(near - lines.centre[flex])
+        extra = unit(np.cross(bone, lines.axis[flex]))
+        at = layout.second[c]  # the hinge chain's levels from here on move one down
         two = Lines(
             np.insert(lines.axis, at, extra, axis=0),
-            np.insert(lines.centre, at, lines.centre[0], axis=0),
+            np.insert(lines.centre, at, lines.centre[flex], axis=0),
         )
         q = np.insert(start.q, at, 0.0, axis=0)
         free = None if start.slide is None else slide_free(data, layout.structure.levels)
@@ -230,9 +175,10 @@ def fit_digit(
 
 
 def _largest_range_deg(fit: DigitFit) -> float:
-    """The larger range of motion of a two-axis MP's two axes (deg)."""
+    """The larger range of motion of the choice joint's two axes (deg)."""
+    c = fit.layout.choice
     return max(
-        motion_range_deg(fit.result.q[k]) for k in (fit.layout.first[0], fit.layout.second[0])
+        motion_range_deg(fit.result.q[k]) for k in (fit.layout.first[c], fit.layout.second[c])
     )
 
 
@@ -246,7 +192,7 @@ def motion_range_deg(q: FloatArray) -> float:
 def _labelled(
     data: DigitMarkers, digit: str, layout: ChainLayout, result: BundleResult, threads: int = 1
 ) -> tuple[ChainLayout, BundleResult]:
-    """A two-axis MP's layout named by its motion: the axis with the larger range is the
+    """The choice joint's two axes named by their motion: the axis with the larger range is the
     flexion axis.
 
     The two orders are one chain (a proximal and a distal line); only the names differ.
@@ -254,7 +200,7 @@ def _labelled(
     carrying the flexion: then it is named so (the lines and angles unchanged; with
     slides, which follow the flexion angle, adjusted again).
     """
-    flex, second = layout.first[0], layout.second[0]
+    flex, second = layout.first[layout.choice], layout.second[layout.choice]
     if motion_range_deg(result.q[second]) <= motion_range_deg(result.q[flex]):
         return layout, result
     other = FLEXION_FIRST if layout.order == ABDUCTION_FIRST else ABDUCTION_FIRST
@@ -340,16 +286,18 @@ def _chosen(fit: DigitFit) -> DigitFit:
     return with_slide_uncertainty(fit)
 
 
-def fit_finger(
+def fit_digit(
     data: DigitMarkers, digit: str, mp_axes: str, slide: bool = True, threads: int = 1
 ) -> DigitFit:
-    """A finger with its MP a hinge, two axes, or (``auto``) two axes when the second
-    explains the markers beyond what its per-frame angle absorbs of the noise.
+    """A digit with its choice joint (a finger's MP, the thumb's MCP,
+    :attr:`.chain.ChainLayout.choice`) a hinge, two axes, or (``auto``) two axes when the
+    second explains the markers beyond what its per-frame angle absorbs of the noise;
+    ``mp_axes`` says which.
 
     The two-axis fits start from the hinge's, the second axis inserted proximal to the
     flexion axis and distal to it: one chain of two lines from two starts; the lower
     cost wins, and the axis with the larger range of motion is named flexion
-    (:func:`_labelled`), which gives the order. A minimum that turns an MP axis through
+    (:func:`_labelled`), which gives the order. A minimum that turns an axis through
     more than :data:`HALF_TURN_DEG` is left out. The second axis's ``n + 4`` more
     unknowns (an angle per frame, the line) lower the cost by about ``(n + 4) sigma^2``
     on noise alone (a chi-square with that many degrees of freedom); ``auto`` keeps the
@@ -357,11 +305,13 @@ def fit_finger(
     standard deviations ``sqrt(2 (n + 4))``, ``sigma^2`` the two-axis fit's residual
     variance.
     """
-    hinge = fit_digit(data, digit, False, slide=slide, threads=threads)
+    hinge = fit_chain(data, digit, False, slide=slide, threads=threads)
+    c = hinge.layout.choice
+    joint = f"{digit} {DIGITS[digit].joints[c]}"
     if mp_axes == "hinge":
         return _chosen(hinge)
     orders = [
-        fit_digit(data, digit, True, start=hinge.result, slide=slide, order=o, threads=threads)
+        fit_chain(data, digit, True, start=hinge.result, slide=slide, order=o, threads=threads)
         for o in (ABDUCTION_FIRST, FLEXION_FIRST)
     ]
     turns = [_largest_range_deg(f) > HALF_TURN_DEG for f in orders]
@@ -369,7 +319,7 @@ def fit_finger(
     plausible = [f for f, t in zip(orders, turns, strict=True) if not t] or orders
     if mp_axes == "auto" and len(turning) == len(orders):
         hinge.notes.append(
-            f"{digit} mp: a hinge (both two-axis minima turn an MP axis through "
+            f"{joint}: a hinge (both two-axis minima turn an axis through "
             f"{min(_largest_range_deg(f) for f in turning):.3g} deg or more: not a joint's motion)"
         )
         return _chosen(hinge)
@@ -382,12 +332,12 @@ def fit_finger(
         proximal = "ab/adduction" if two.layout.order == ABDUCTION_FIRST else "flexion"
         gap = (other.result.cost - two.result.cost) / sigma2
         flex, ab = (
-            motion_range_deg(two.result.q[k]) for k in (two.layout.first[0], two.layout.second[0])
+            motion_range_deg(two.result.q[k]) for k in (two.layout.first[c], two.layout.second[c])
         )
         if any(other is f for f in turning):
             lower = f" ({-gap:.3g} sigma^2 lower)" if gap < 0 else ""
             beyond = (
-                f"the other start's minimum{lower} turns an MP axis through "
+                f"the other start's minimum{lower} turns an axis through "
                 f"{_largest_range_deg(other):.3g} deg: not a joint's motion"
             )
         else:
@@ -395,18 +345,18 @@ def fit_finger(
         if not other.result.converged:
             beyond += f" where it stopped at the {MAX_ITER}-iteration cap"
         two.notes.append(
-            f"{digit} mp: two axes (the second lowers the cost by {z:.3g} SD), the "
+            f"{joint}: two axes (the second lowers the cost by {z:.3g} SD), the "
             f"{proximal} axis proximal (ranges of motion: flexion {flex:.3g} deg, "
             f"ab/adduction {ab:.3g} deg; {beyond})"
         )
         if any(two is f for f in turning):
             two.notes.append(
-                f"{digit} mp: warning: both two-axis minima turn an MP axis through more than "
+                f"{joint}: warning: both two-axis minima turn an axis through more than "
                 f"{HALF_TURN_DEG:g} deg (not a joint's motion); mp_axes='two' kept the lower"
             )
         return _chosen(two)
     hinge.notes.append(
-        f"{digit} mp: a hinge (a second axis lowers the cost by {z:.3g} SD, "
+        f"{joint}: a hinge (a second axis lowers the cost by {z:.3g} SD, "
         f"not above {SECOND_AXIS_Z:g})"
     )
     return _chosen(hinge)
@@ -443,10 +393,12 @@ def fit_marker_session(
     ----------
     session : Session
         With a ``marker_map`` (checked when it was loaded: the hand 3 or more markers,
-        every segment of every digit one or more) and marker recordings: the reference
-        (the angles' zero) and the grasp recordings are fitted.
+        every segment of every digit one or more; the thumb's metacarpal two or more:
+        refused in one line here) and marker recordings: the reference (the angles'
+        zero) and the grasp recordings are fitted.
     mp_axes : {"auto", "hinge", "two"}
-        A finger's MP: two axes when the markers determine the second, a hinge, or two.
+        A finger's MP, the thumb's MCP: two axes when the markers determine the second,
+        a hinge, or two (the thumb's CMC always has two, :func:`.chain.chain_layout`).
     slide : bool
         Estimate each marker's skin slide with the joint below it
         (:func:`.chain.places`, against the prior :data:`.chain.SLIDE_PRIOR`). Off by
@@ -472,13 +424,16 @@ def fit_marker_session(
         raise FingerfitError("not a marker session (no marker map)", path=session.path)
     if mp_axes not in ("auto", "hinge", "two"):
         raise FingerfitError(f"must be auto, hinge or two, not {mp_axes!r}", field="--mp-axes")
-    if "thumb" in session.fingers:
-        raise FingerfitError(
-            "thumb: the marker fit does not fit the thumb yet (its CMC's two axes are not "
-            "found from the markers' arcs: 56-86 deg off in simulation); leave it out with "
-            "--fingers",
-            path=session.path,
-        )
+    for d in session.fingers:
+        for joint in DIGITS[d].required_second:
+            seg = sensor_name(d, DIGITS[d].segments[DIGITS[d].joints.index(joint)])
+            if len(session.marker_map.get(seg, [])) == 1:
+                raise FingerfitError(
+                    f"{seg} has one marker: {d} {joint}'s two axes need two or more (one "
+                    "marker's direction from the joint has as many degrees of freedom as the "
+                    "joint; docs/markers.md)",
+                    path=None if session.path is None else session.path / "markers.toml",
+                )
     for d in session.fingers:
         for j, seg in enumerate(DIGITS[d].segments):
             if not session.marker_map.get(sensor_name(d, seg)):
@@ -497,10 +452,10 @@ def fit_marker_session(
         notes.append(f"{lost + lost_ref} frames without 3 hand markers left out")
     datas = {d: digit_markers(session, d, moving, reference) for d in session.fingers}
     if executor is None:
-        fits = {d: fit_finger(data, d, mp_axes, slide, threads) for d, data in datas.items()}
+        fits = {d: fit_digit(data, d, mp_axes, slide, threads) for d, data in datas.items()}
     else:
         futures = {
-            d: executor.submit(fit_finger, data, d, mp_axes, slide, threads)
+            d: executor.submit(fit_digit, data, d, mp_axes, slide, threads)
             for d, data in datas.items()
         }
         fits = {d: f.result() for d, f in futures.items()}
@@ -528,6 +483,7 @@ def _model(
 ) -> HandModel:
     """The HandModel of the digits' fits."""
     rot, origin = technical_frame(shape)
+    side = 1.0 if session.hand == "right" else -1.0
     poses: dict[str, tuple[FloatArray, FloatArray]] = {HAND_SENSOR: (origin, rot)}
     markers = {
         label: (HAND_SENSOR, p, np.zeros(3))
@@ -538,19 +494,26 @@ def _model(
         r, data = fit.result, fit.data
         sensors = joint_sensors(d)
         joints, seconds = {}, {}
-        for j, joint in enumerate(DIGITS[d].joints):
+        names = DIGITS[d].joints
+        nears = [r.u[data.segment == j].mean(axis=0) for j in range(len(names))]
+        for j, joint in enumerate(names):
             level = fit.layout.first[j]
-            near = r.u[data.segment == j].mean(axis=0)
-            centre = _centre_on_line(r.lines.axis[level], r.lines.centre[level], near)
-            quality = _quality(fit, level)
-            joints[joint] = (*sensors[joint], centre, r.lines.axis[level], quality)
-            if j in fit.layout.second:
-                k = fit.layout.second[j]
-                c2 = _centre_on_line(r.lines.axis[k], r.lines.centre[k], near)
-                a2 = r.lines.axis[k]
-                seconds[joint] = JointModel(
-                    second_axis(joint), *sensors[joint], c2, a2, a2, _quality(fit, k)
-                )
+            centre = _centre_on_line(r.lines.axis[level], r.lines.centre[level], nears[j])
+            joints[joint] = (*sensors[joint], centre, r.lines.axis[level], _quality(fit, level))
+        for j, k in fit.layout.second.items():
+            joint = names[j]
+            c2 = _centre_on_line(r.lines.axis[k], r.lines.centre[k], nears[j])
+            beyond = joints[names[j + 1]][2] if j + 1 < len(names) else nears[j]
+            bone = beyond - joints[joint][2]
+            # Positive ab/adduction (docs/conventions.md): the axis on the side of
+            # bone x flexion axis for a right hand (a finger's radial deviation, the
+            # thumb's palmar abduction), the other for a left one.
+            a2 = r.lines.axis[k] * _sign(
+                side * (r.lines.axis[k] @ np.cross(bone, joints[joint][3]))
+            )
+            seconds[joint] = JointModel(
+                second_axis(joint), *sensors[joint], c2, a2, a2, _quality(fit, k)
+            )
         tip_name = f"{d}.tip"
         if tip_name in session.landmarks:
             tip = session.landmarks[tip_name]
@@ -565,8 +528,13 @@ def _model(
                 f"marker {data.labels[far]} taken as the tip"
             )
         dm = assemble_digit(d, joints, tip, seconds)
-        if seconds and fit.layout.order != DIGITS[d].order[DIGITS[d].joints[0]]:
-            dm = replace(dm, axis_order={DIGITS[d].joints[0]: fit.layout.order})
+        orders = {
+            names[j]: fit.layout.order_of(j)
+            for j in fit.layout.second
+            if fit.layout.order_of(j) != DIGITS[d].order[names[j]]
+        }
+        if orders:
+            dm = replace(dm, axis_order=orders)
         digits[d] = dm
         for s, seg in enumerate(DIGITS[d].segments):
             name = sensor_name(d, seg)
@@ -588,6 +556,11 @@ def _model(
         warnings=tuple(notes),
         markers=markers,
     )
+
+
+def _sign(x: float) -> float:
+    """``-1.0`` for a negative ``x``, else ``1.0``."""
+    return -1.0 if x < 0 else 1.0
 
 
 def _quality(fit: DigitFit, level: int) -> JointQuality:

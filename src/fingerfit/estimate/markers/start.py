@@ -12,9 +12,13 @@ wrong minima, DIP up to 50 deg off):
 2. each frame's angle is the mean over the child markers of their turn about that line
    from their reference place; the axis is oriented so that the grasp's larger angles
    are positive (flexion);
-3. a joint's second axis (a finger's MP ab/adduction, the thumb's CMC and MCP) starts
-   perpendicular to the first axis and to the bone (the child markers' direction from the
-   joint), through the same point, its angles at 0.
+3. a joint that always has two axes (the thumb's CMC) starts from its child segment's
+   pose each frame instead (:func:`saddle_start`): the rigid fit of its markers and the
+   point whose distance to each stays most nearly constant, then the saddle fit of
+   those poses (:mod:`fingerfit.estimate.saddle`, the 6-DOF pipeline's): a circle fit
+   took its axes 56-86 deg off on simulated thumbs, whose CMC turns about both axes at
+   once. A joint whose second axis is a model choice (a finger's MP, the thumb's MCP)
+   gets it later, from the hinge fit (:func:`.fit.fit_chain`).
 
 A segment whose markers all sit on one line through the joint (or a joint that did not
 move) gives no plane: the fit reports it (:mod:`.determined`).
@@ -26,9 +30,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...transforms import FloatArray, unit
+from ...angles import two_axis_angles
+from ...digits import FLEXION_FIRST
+from ...errors import FingerfitError
+from ...io.rigid import fit_cluster
+from ...transforms import FloatArray
+from ..saddle import fit_saddle
 from .bundle import NEAR, BundleResult, adjust
-from .chain import HandFrames, Lines, Structure, predict
+from .chain import ChainLayout, HandFrames, Lines, Structure, predict
 from .observe import DigitMarkers
 
 
@@ -60,6 +69,79 @@ def circle_axis(tracks: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
         along = (t @ axis).mean()
         centres.append(basis @ sol[:2] + along * axis)
     return axis, np.mean(centres, axis=0)
+
+
+def sphere_centre(tracks: list[FloatArray]) -> FloatArray:
+    """The point ``(3,)`` (mm) whose distance to each marker stays most nearly constant
+    over its track: ``|p|^2 = 2 p . c + k_i``, linear in ``c`` and each marker's ``k_i``.
+
+    Parameters
+    ----------
+    tracks : list of ndarray, shape (n_i, 3)
+        Each marker's positions (mm) in the frame where the joint is fixed; no NaN.
+    """
+    m = len(tracks)
+    rows = [
+        np.column_stack([2 * t, np.repeat(np.eye(m)[i][None], len(t), axis=0)])
+        for i, t in enumerate(tracks)
+    ]
+    rhs = np.concatenate([(t * t).sum(axis=1) for t in tracks])
+    return np.linalg.lstsq(np.vstack(rows), rhs, rcond=None)[0][:3]
+
+
+def saddle_start(
+    tracks: FloatArray, reference: FloatArray, name: str
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """A two-axis joint's start from its child markers: the segment's pose each frame from
+    its markers and the joint's centre (:func:`sphere_centre`), then the saddle fit of
+    those poses (:func:`fingerfit.estimate.saddle.fit_saddle`, the flexion axis proximal).
+
+    Parameters
+    ----------
+    tracks : ndarray, shape (m, n, 3)
+        The child segment's markers (mm) in the parent's frame; NaN where unseen.
+    reference : ndarray, shape (m, 3)
+        Their places at the reference posture (mm, the same frame).
+    name : str
+        The joint, for the error.
+
+    Returns
+    -------
+    axis, centre : ndarray, shape (2, 3)
+        The proximal (flexion) and distal (ab/adduction) lines at the reference posture.
+    q : ndarray, shape (2, n)
+        Their angles (rad; 0 where a marker is unseen).
+
+    Raises
+    ------
+    FingerfitError
+        Fewer than two markers on the segment: a marker's direction from the joint has
+        two degrees of freedom, as many as the joint, and its pose has none to spare.
+    """
+    m, n = tracks.shape[:2]
+    if m < 2:
+        raise FingerfitError(
+            f"{name}: one marker on its segment cannot start the joint's two axes "
+            "(it needs two or more; docs/markers.md)"
+        )
+    seen = np.isfinite(tracks).all(axis=(0, 2))
+    c = sphere_centre([t[seen] for t in tracks])
+    points = np.concatenate([np.broadcast_to(c, (1, n, 3)), tracks]).transpose(1, 0, 2)
+    pose = fit_cluster(points, np.vstack([c, reference]))
+    ok = np.isfinite(pose.rotation).all(axis=(1, 2))
+    try:
+        fit = fit_saddle(
+            pose.rotation[ok], pose.translation[ok], np.eye(3), order=FLEXION_FIRST,
+            strict_order=False,
+        )  # fmt: skip
+    except FingerfitError as exc:
+        raise FingerfitError(f"{name}: {exc.reason}") from None
+    axis = np.stack([fit.flexion_axis, fit.abduction_axis])
+    centre = np.stack([fit.flexion_point, fit.abduction_point])
+    q = np.zeros((2, n))
+    beta, theta = two_axis_angles(pose.rotation[ok], fit.abduction_axis, fit.flexion_axis)
+    q[0, ok], q[1, ok] = beta, theta
+    return axis, centre, q
 
 
 def turn_about(
@@ -95,25 +177,16 @@ def subset(data: DigitMarkers, last: int) -> DigitMarkers:
     )
 
 
-def staged_start(
-    data: DigitMarkers,
-    structure: Structure,
-    first_levels: list[int],
-    second: dict[int, int],
-    threads: int = 1,
-) -> BundleResult:
+def staged_start(data: DigitMarkers, layout: ChainLayout, threads: int = 1) -> BundleResult:
     """The staged solve of a digit's chain: each joint started from its child markers'
-    arcs about it, then adjusted with every joint proximal to it.
+    arcs about it (a joint with two axes, the thumb's CMC: :func:`saddle_start`), then
+    adjusted with every joint proximal to it.
 
     Parameters
     ----------
     data : DigitMarkers
-    structure : Structure
-        The whole chain.
-    first_levels : list of int
-        The chain level of each joint's (flexion) axis, proximal joint first (3 entries).
-    second : dict[int, int]
-        Joint index -> the chain level of its second axis.
+    layout : ChainLayout
+        The whole chain (:func:`.chain.chain_layout`).
     threads : int
         :func:`.bundle.adjust`'s.
 
@@ -123,6 +196,7 @@ def staged_start(
         The adjustment of the last stage (every marker, the whole chain), from which
         :func:`.bundle.adjust` goes on.
     """
+    structure, first_levels, second = layout.structure, layout.first, layout.second
     L, n = structure.levels, data.frames
     axis, centre = np.zeros((L, 3)), np.zeros((L, 3))
     q = np.zeros((L, n))
@@ -142,18 +216,21 @@ def staged_start(
             p0, rot, _, _ = predict(sub, lines, seg, zero, q[: sub.levels])
             tracks = np.einsum("mjin,mjn->min", rot, tracks - p0)
         tracks = tracks.transpose(0, 2, 1)  # (m, n, 3)
-        usable = [t[np.isfinite(t).all(axis=1)] for t in tracks]
-        a, c = circle_axis([t for t in usable if len(t) > 3])
-        ang = np.stack([turn_about(t, u[i], a, c) for t, i in zip(tracks, child, strict=True)])
-        seen = np.isfinite(ang)
-        theta = np.where(seen, ang, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
-        if flexion_sign(theta) < 0:
-            a, theta = -a, -theta
-        axis[level], centre[level], q[level] = a, c, theta
         if j in second:
-            bone = unit(u[child].mean(axis=0) - c)
-            axis[second[j]] = unit(np.cross(bone, a))
-            centre[second[j]] = c
+            k = second[j]
+            ax2, c2, q2 = saddle_start(tracks, u[child], f"{data.digit} {layout.names[level]}")
+            if flexion_sign(q2[0]) < 0:
+                ax2[0], q2[0] = -ax2[0], -q2[0]
+            axis[[level, k]], centre[[level, k]], q[[level, k]] = ax2, c2, q2
+        else:
+            usable = [t[np.isfinite(t).all(axis=1)] for t in tracks]
+            a, c = circle_axis([t for t in usable if len(t) > 3])
+            ang = np.stack([turn_about(t, u[i], a, c) for t, i in zip(tracks, child, strict=True)])
+            seen = np.isfinite(ang)
+            theta = np.where(seen, ang, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
+            if flexion_sign(theta) < 0:
+                a, theta = -a, -theta
+            axis[level], centre[level], q[level] = a, c, theta
         sub = Structure(structure.depth[: j + 1])
         part = subset(data, j)
         result = adjust(
