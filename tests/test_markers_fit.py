@@ -145,7 +145,19 @@ def exact_thumb():
     return simulate_markers(simulate_subject(cfg, 5), "todorov", seed=1, noise_mm=0.0)
 
 
-def test_noise_free_thumb_markers_give_back_the_truth(exact_thumb):
+@pytest.fixture(scope="module")
+def thumb_start(exact_thumb):
+    """The noise-free thumb's markers, its chain (the MCP a hinge) and its staged start."""
+    s = exact_thumb.session
+    shape = hand_shape(s)
+    moving, _ = carry_back(s, s.grasp, shape)
+    ref, _ = carry_back(s, [s.reference], shape)
+    data = digit_markers(s, "thumb", moving, ref)
+    layout = chain_layout("thumb", False)
+    return data, layout, staged_start(data, layout)
+
+
+def test_noise_free_thumb_markers_give_back_the_truth(exact_thumb, thumb_start):
     """The thumb's CMC turns about both its axes at once: started from its metacarpal's
     poses (the saddle fit), the chain comes back exact, its CMC's two axes included; the
     model signs the CMC's ab/adduction axis as palmar abduction (the truth's sign, a left
@@ -153,13 +165,8 @@ def test_noise_free_thumb_markers_give_back_the_truth(exact_thumb):
     from fingerfit.estimate.markers.fit import fit_marker_session
 
     s = exact_thumb.session
-    shape = hand_shape(s)
-    moving, _ = carry_back(s, s.grasp, shape)
-    ref, _ = carry_back(s, [s.reference], shape)
-    data = digit_markers(s, "thumb", moving, ref)
-    layout = chain_layout("thumb", False)
+    data, layout, result = thumb_start
     assert layout.names == ["cmc", "cmc_abduction", "mcp", "ip"]
-    result = staged_start(data, layout)
     truth = truth_model(exact_thumb.sim)
     for k, name in enumerate(layout.names):
         jt = truth.axis("thumb", name)
@@ -173,6 +180,25 @@ def test_noise_free_thumb_markers_give_back_the_truth(exact_thumb):
     model = fit_marker_session(replace(s, fingers=["thumb"]), mp_axes="hinge").model
     for name in ("cmc", "cmc_abduction", "mcp", "ip"):
         assert model.axis("thumb", name).axis @ truth.axis("thumb", name).axis > 1 - 1e-12, name
+
+
+def test_a_frame_on_the_other_branch_comes_back_from_its_neighbours(thumb_start):
+    """A frame whose CMC angles sit on their other branch (a minimum of its own, far from
+    its markers) is solved again from its neighbours' angles and comes back to the
+    truth; no other frame moves."""
+    from fingerfit.estimate.markers.frames import from_neighbours, solve_frames
+
+    data, layout, result = thumb_start
+    st, i = layout.structure, data.frames // 2
+    q = result.q.copy()
+    q[:2, i] = np.radians([-165.0, -136.0])  # as a start once left a simulated thumb's
+    args = (data, st, result.lines, result.u)
+    stuck = solve_frames(*args, q)
+    assert stuck.cost[i] > 1.0  # mm^2: a minimum of its own, not the motion's
+    assert abs(stuck.q[0, i] - result.q[0, i]) > 1.0  # rad
+    q2, _, moved = from_neighbours(*args, stuck.q, stuck.hand)
+    assert moved == 1
+    np.testing.assert_allclose(q2[:, i], result.q[:, i], atol=1e-6)
 
 
 def test_a_thumb_cmc_with_one_marker_is_refused_in_one_line(exact_thumb):

@@ -27,6 +27,7 @@ move) gives no plane: the fit reports it (:mod:`.determined`).
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -38,6 +39,7 @@ from ...transforms import FloatArray
 from ..saddle import fit_saddle
 from .bundle import NEAR, BundleResult, adjust
 from .chain import ChainLayout, HandFrames, Lines, Structure, predict
+from .frames import from_neighbours
 from .observe import DigitMarkers
 
 
@@ -233,18 +235,21 @@ def staged_start(data: DigitMarkers, layout: ChainLayout, threads: int = 1) -> B
             axis[level], centre[level], q[level] = a, c, theta
         sub = Structure(structure.depth[: j + 1])
         part = subset(data, j)
-        result = adjust(
-            part,
-            sub,
-            Lines(axis[:levels], centre[:levels]),
-            u[: len(part.labels)],
-            q[:levels],
-            hand=hand,
-            max_iter=10 if j < len(first_levels) - 1 else 100,
-            tol=1e-6 if j < len(first_levels) - 1 else 1e-10,
-            near=None if j < len(first_levels) - 1 else NEAR,
-            threads=threads,
+        last = j == len(first_levels) - 1
+
+        stage = partial(
+            adjust, part, sub, max_iter=100 if last else 10, tol=1e-10 if last else 1e-6,
+            near=NEAR if last else None, threads=threads,
+        )  # fmt: skip
+        result = stage(
+            Lines(axis[:levels], centre[:levels]), u[: len(part.labels)], q[:levels], hand=hand
         )
+        if j in second:  # frames its start left on the angles' other branch
+            q2, hand2, moved = from_neighbours(
+                part, sub, result.lines, result.u, result.q, result.hand
+            )
+            if moved:
+                result = stage(result.lines, result.u, q2, hand=hand2)
         axis[:levels], centre[:levels] = result.lines.axis, result.lines.centre
         u[: len(part.labels)], q[:levels], hand = result.u, result.q, result.hand
     assert result is not None
