@@ -197,17 +197,37 @@ def summarise(rows: list[dict], name: str = "index") -> dict:
     return summary
 
 
+def _session_of(fingers: tuple[str, ...], frames: int):
+    """A simulated subject whose grasp recordings have about ``frames`` frames: the
+    fingers' at 240 Hz, ``frames / 500`` grasp cycles; with the thumb, whose own
+    recordings (circumduction, opposition, pinches) are 13 thousand frames at 240 Hz,
+    at 100 Hz (the rate of the issue's session command) and as many grasp cycles as
+    bring the total to ``frames`` (the frames grow by the same count per cycle)."""
+
+    def sim_of(cycles: int, rate: float):
+        config = SimConfig(fingers=fingers, cycles=cycles, targets=False, test=False, rate_hz=rate)
+        return simulate_cohort(config, 1, 5)[0]
+
+    def count(sim) -> int:
+        return sum(r.n_frames for r in sim.session.grasp)
+
+    if "thumb" not in fingers:
+        return sim_of(int(np.ceil(frames / 500)), 240.0)
+    one, ten = count(sim_of(1, 100.0)), count(sim_of(10, 100.0))
+    return sim_of(max(1, round(1 + 9 * (frames - one) / (ten - one))), 100.0)
+
+
 def speed(frames: int = 10_000) -> dict:
     """Seconds of a marker fit of ``frames`` grasp frames: one finger with all its frames
     in one block (:data:`~fingerfit.estimate.markers.chain.BLOCK_FRAMES`, the solver
     before the blocks), by blocks, and by blocks in two threads (``fingerfit fit --jobs
     2`` of one finger); four fingers in one process, and with ``--jobs 2`` (two worker
-    processes; CPU seconds of this process only)."""
+    processes; CPU seconds of this process only); the whole hand with ``--jobs 2``
+    (:func:`_session_of`)."""
     from fingerfit.estimate.markers import chain
     from fingerfit.evaluate.study import study_executor
 
     out = {}
-    cycles = int(np.ceil(frames / 500))
     four = ("index", "middle", "ring", "little")
     block = chain.BLOCK_FRAMES
     for label, fingers, jobs, blocks in (
@@ -216,11 +236,10 @@ def speed(frames: int = 10_000) -> dict:
         ("one finger, --jobs 2 (2 threads)", ("index",), 2, True),
         ("four fingers", four, 1, True),
         ("four fingers, --jobs 2 (2 worker processes)", four, 2, True),
+        ("whole hand, --jobs 2 (2 worker processes)", ("thumb", *four), 2, True),
     ):
         chain.BLOCK_FRAMES = block if blocks else 10**9
-        sim = simulate_cohort(
-            SimConfig(fingers=fingers, cycles=cycles, targets=False, test=False), 1, 5
-        )[0]
+        sim = _session_of(fingers, frames)
         ms = simulate_markers(sim, "todorov", seed=1)
         n = sum(r.n_frames for r in ms.session.grasp)
         workers = min(jobs, len(fingers))  # as fingerfit fit --jobs
@@ -251,6 +270,8 @@ def speed(frames: int = 10_000) -> dict:
     print(
         f"speed: 2 worker processes {four_one / four_two:.2f}x faster on four fingers", flush=True
     )
+    whole = out["whole hand, --jobs 2 (2 worker processes)"]
+    print(f"speed: the whole hand, --jobs 2: {whole['seconds']:.1f} s", flush=True)
     return out
 
 
