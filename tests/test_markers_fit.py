@@ -192,13 +192,12 @@ def test_a_frame_on_the_other_branch_comes_back_from_its_neighbours(thumb_start)
     st, i = layout.structure, data.frames // 2
     q = result.q.copy()
     q[:2, i] = np.radians([-165.0, -136.0])  # as a start once left a simulated thumb's
-    args = (data, st, result.lines, result.u)
-    stuck = solve_frames(*args, q)
+    stuck = solve_frames(data, st, replace(result.point, q=q))
     assert stuck.cost[i] > 1.0  # mm^2: a minimum of its own, not the motion's
     assert abs(stuck.q[0, i] - result.q[0, i]) > 1.0  # rad
-    q2, _, moved = from_neighbours(*args, stuck.q, stuck.hand)
+    back, moved = from_neighbours(data, st, replace(result.point, q=stuck.q, hand=stuck.hand))
     assert moved == 1
-    np.testing.assert_allclose(q2[:, i], result.q[:, i], atol=1e-6)
+    np.testing.assert_allclose(back.q[:, i], result.q[:, i], atol=1e-6)
 
 
 def test_a_thumb_cmc_with_one_marker_is_refused_in_one_line(exact_thumb):
@@ -365,11 +364,11 @@ def test_blocks_and_threads_change_nothing(monkeypatch):
     st = Structure(np.array([1, 2, 3]))
     start = staged_start(data, chain_layout("index", False))
     free = np.ones(4 * st.levels + 3 * len(data.labels), dtype=bool)
-    args = (data, st, start.lines, start.u, start.q + 0.05, start.hand, free)
+    at = replace(start.point, q=start.q + 0.05)
     steps = {}
     for frames in (10**9, 97):  # one block; blocks of 97 frames, the last one shorter
         monkeypatch.setattr(chain, "BLOCK_FRAMES", frames)
-        nq, scores = normal_equations(*args)
+        nq, scores = normal_equations(data, st, at, free)
         steps[frames] = (nq, scores, *schur_step(nq, 1e-3))
     assert len(chain.frame_blocks(data.frames)) > 10
     (one, s1, dq1, dg1), (many, s2, dq2, dg2) = steps[10**9], steps[97]

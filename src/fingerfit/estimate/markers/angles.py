@@ -20,7 +20,7 @@ from ...io.rigid import ClusterFit, fit_cluster
 from ...model import HandModel
 from ...session import Recording, Session
 from ...transforms import FloatArray, rotate_about_line
-from .chain import Lines, Structure, predict
+from .chain import HandFrames, Lines, Point, Structure, predict
 from .frames import FrameSolution, solve_frames
 from .observe import DigitMarkers, carry_back, digit_markers
 from .start import turn_about
@@ -111,7 +111,8 @@ def marker_angles(model: HandModel, recording: Recording) -> dict[str, DigitAngl
         u = np.array([model.markers[k][1] for k in data.labels])
         slide = np.array([model.markers[k][2] for k in data.labels])
         q = _start(data, structure, lines, u, first)
-        result = solve_frames(data, structure, lines, u, q, slide)
+        start = Point(lines, u, q, HandFrames.identity(data.frames), slide)
+        result = solve_frames(data, structure, start)
         seen = hand_ok & data.present.any(axis=0)
         angles = np.where(seen[None], result.q, np.nan).T
         tip = _tip(model, d, structure, lines, result, data, hand, seen)

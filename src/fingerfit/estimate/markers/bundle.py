@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ...transforms import FloatArray, unit
-from .chain import HandFrames, Lines, Structure, total_cost
+from .chain import HandFrames, Lines, Point, Structure, total_cost
 from .mixing import Mixer, information_weights
 from .normal import (
     LAM_START,
@@ -68,6 +68,11 @@ class BundleResult:
     converged: bool
     normal: Normal
     free: np.ndarray
+
+    @property
+    def point(self) -> Point:
+        """The unknowns at the solution."""
+        return Point(self.lines, self.u, self.q, self.hand, self.slide)
 
 
 #: :func:`adjust`'s ``near`` in the fits: converged within ``sqrt(1e-3)``, about 0.03,
@@ -136,9 +141,9 @@ def adjust(
     free = np.ones(G, dtype=bool) if free is None else free
     lines_free = bool(free[: 4 * L].any())
     hand = HandFrames.identity(data.frames) if hand is None else hand
-    lines, u, q = lines.copy(), u.copy(), q.copy()
+    at = Point(lines.copy(), u.copy(), q.copy(), hand, slide)
     with ThreadPoolExecutor(threads) if threads > 1 else contextlib.nullcontext() as pool:
-        nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide, pool)
+        nq, _ = normal_equations(data, structure, at, free, pool)
         diagonal = np.zeros(G)
         diagonal[free] = np.diag(nq.gg)
         sizes = [(2, 3)] * 2 * L + [(1, 1)] * (G - 4 * L)
@@ -151,28 +156,27 @@ def adjust(
                 dq, dg = schur_step(nq, lam, pool)
                 step = np.zeros(G)
                 step[free] = dg
-                trial = (
-                    lines.moved(step[: 4 * L]) if lines_free else lines,
-                    u + step[4 * L : 4 * L + 3 * M].reshape(M, 3),
-                    q + dq[:, :L].T,
-                    hand.moved(dq[:, L : L + 3], dq[:, L + 3 :]),
-                    None if slide is None else slide + step[4 * L + 3 * M :].reshape(M, 3),
+                trial = Point(
+                    at.lines.moved(step[: 4 * L]) if lines_free else at.lines,
+                    at.u + step[4 * L : 4 * L + 3 * M].reshape(M, 3),
+                    at.q + dq[:, :L].T,
+                    at.hand.moved(dq[:, L : L + 3], dq[:, L + 3 :]),
+                    None if at.slide is None else at.slide + step[4 * L + 3 * M :].reshape(M, 3),
                 )
-                cost = total_cost(data, structure, *trial, pool)
+                cost = total_cost(data, structure, trial, pool)
                 if cost <= nq.cost:
                     ratio = (nq.cost - cost) / max(promised(nq, dq, dg), 1e-300)
                     if mixer is not None:
-                        here = _pack(lines, u, q, hand, slide)
-                        there = _pack(*trial)
+                        here, there = _pack(at), _pack(trial)
                         mixed = mixer.propose(here, (there[0] - here[0], there[1] - here[1]))
                         if mixed is not None:
-                            candidate = _unpack(*mixed, L, M, slide is not None)
-                            c = total_cost(data, structure, *candidate, pool)
+                            candidate = _unpack(*mixed, L, M, at.slide is not None)
+                            c = total_cost(data, structure, candidate, pool)
                             if c < cost:
                                 trial, cost = candidate, c
                     gain = nq.cost - cost
-                    lines, u, q, hand, slide = trial
-                    nq, _ = normal_equations(data, structure, lines, u, q, hand, free, slide, pool)
+                    at = trial
+                    nq, _ = normal_equations(data, structure, at, free, pool)
                     lam = float(damping(lam, True, ratio))
                     done = gain <= tol * max(cost, 1e-300) or (
                         near is not None and _near_minimum(nq, gain, near, pool)
@@ -186,7 +190,7 @@ def adjust(
             if done:
                 break
     rms = float(np.sqrt(nq.cost / max(nq.count, 1)))
-    return BundleResult(lines, u, q, hand, slide, nq.cost, rms, it, done, nq, free)
+    return BundleResult(at.lines, at.u, at.q, at.hand, at.slide, nq.cost, rms, it, done, nq, free)
 
 
 def _near_minimum(nq: Normal, gain: float, near: float, pool: Executor | None) -> bool:
@@ -199,28 +203,25 @@ def _near_minimum(nq: Normal, gain: float, near: float, pool: Executor | None) -
     return float(np.vdot(nq.bq, dq) + nq.bg @ dg) <= limit
 
 
-def _pack(
-    lines: Lines, u: FloatArray, q: FloatArray, hand: HandFrames, slide: FloatArray | None
-) -> tuple[FloatArray, FloatArray]:
+def _pack(point: Point) -> tuple[FloatArray, FloatArray]:
     """A point's coordinates for :class:`.mixing.Mixer`: the global ones ``(6 L + 3 M,)``
-    (each line's direction and point, the places, with ``slide`` the slides; mm, mm/rad)
+    (each line's direction and point, the places, with slides the slides; mm, mm/rad)
     and each frame's ``(n, L + 6)`` (angles, the hand correction's rotation vector, rad,
     and offset, mm)."""
-    parts = [np.concatenate([lines.axis, lines.centre], axis=1).ravel(), u.ravel()]
-    if slide is not None:
-        parts.append(slide.ravel())
+    lines, hand = point.lines, point.hand
+    parts = [np.concatenate([lines.axis, lines.centre], axis=1).ravel(), point.u.ravel()]
+    if point.slide is not None:
+        parts.append(point.slide.ravel())
     rotvec = Rotation.from_matrix(hand.rotation).as_rotvec()
-    return np.concatenate(parts), np.concatenate([q.T, rotvec, hand.offset], axis=1)
+    return np.concatenate(parts), np.concatenate([point.q.T, rotvec, hand.offset], axis=1)
 
 
-def _unpack(
-    g: FloatArray, f: FloatArray, L: int, M: int, sliding: bool
-) -> tuple[Lines, FloatArray, FloatArray, HandFrames, FloatArray | None]:
+def _unpack(g: FloatArray, f: FloatArray, L: int, M: int, sliding: bool) -> Point:
     """The point of :func:`_pack`'s coordinates (each direction scaled to unit length)."""
     lines = g[: 6 * L].reshape(L, 6)
     places = g[6 * L :].reshape(-1, M, 3)
     hand = HandFrames(Rotation.from_rotvec(f[:, L : L + 3]).as_matrix(), f[:, L + 3 :].copy())
-    return (
+    return Point(
         Lines(unit(lines[:, :3]), lines[:, 3:].copy()),
         places[0].copy(),
         f[:, :L].T.copy(),

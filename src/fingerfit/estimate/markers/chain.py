@@ -234,6 +234,35 @@ class HandFrames:
         return HandFrames(back @ self.rotation, np.einsum("nij,nj->ni", back, self.offset) + tau)
 
 
+@dataclass
+class Point:
+    """A point of the adjustment's unknowns (tracker coordinates at the reference
+    posture).
+
+    Attributes
+    ----------
+    lines : Lines
+    u : ndarray, shape (M, 3)
+        The markers' places (mm).
+    q : ndarray, shape (L, n)
+        Every frame's angles (rad).
+    hand : HandFrames
+        Every frame's correction of the hand's frame.
+    slide : ndarray, shape (M, 3) or None
+        The markers' slides (mm/rad, :func:`places`), when estimated.
+    """
+
+    lines: Lines
+    u: FloatArray
+    q: FloatArray
+    hand: HandFrames
+    slide: FloatArray | None = None
+
+    def take(self, frames: slice | np.ndarray) -> Point:
+        """The same point over ``frames`` only (their angles and hand corrections)."""
+        return Point(self.lines, self.u, self.q[:, frames], self.hand.take(frames), self.slide)
+
+
 def observed(data: DigitMarkers, hand: HandFrames) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The digit's and the hand's markers with the hand frames' correction, and the
     pivot ``(3,)``."""
@@ -242,25 +271,18 @@ def observed(data: DigitMarkers, hand: HandFrames) -> tuple[FloatArray, FloatArr
 
 
 def total_cost(
-    data: DigitMarkers,
-    structure: Structure,
-    lines: Lines,
-    u: FloatArray,
-    q: FloatArray,
-    hand: HandFrames,
-    slide: FloatArray | None = None,
-    pool: Executor | None = None,
+    data: DigitMarkers, structure: Structure, point: Point, pool: Executor | None = None
 ) -> float:
-    """The cost (mm^2): the digit's markers, the hand's markers about their shape, the
-    reference term and (with ``slide``) the slide's prior; the frames by blocks
+    """The cost (mm^2) at ``point``: the digit's markers, the hand's markers about their
+    shape, the reference term and (with slides) the slide's prior; the frames by blocks
     (:func:`over_blocks`, with ``pool`` side by side)."""
 
     def block(frames: slice) -> float:
-        d, qb, hb = data.take(frames), q[:, frames], hand.take(frames)
-        res = marker_residuals(d, structure, lines, u, qb, hb, slide)
+        res = marker_residuals(data.take(frames), structure, point.take(frames))
         return float((res.r * res.r).sum() + (res.rh * res.rh).sum())
 
-    ref = reference_residual(data, u)
+    ref = reference_residual(data, point.u)
+    slide = point.slide
     prior = 0.0 if slide is None else float((slide * slide).sum()) / SLIDE_PRIOR**2
     return sum(over_blocks(block, data.frames, pool)) + float((ref * ref).sum()) + prior
 
@@ -290,22 +312,13 @@ class MarkerResiduals:
 
 
 def marker_residuals(
-    data: DigitMarkers,
-    structure: Structure,
-    lines: Lines,
-    u: FloatArray,
-    q: FloatArray,
-    hand: HandFrames,
-    slide: FloatArray | None = None,
-    *,
-    levels: bool = False,
+    data: DigitMarkers, structure: Structure, point: Point, *, levels: bool = False
 ) -> MarkerResiduals:
     """The markers observed, where the chain puts them (:func:`predict`, with
-    ``levels``) and their residuals, at angles ``q (L, n)`` (rad), ``hand``, the lines,
-    places ``u (M, 3)`` (mm) and slides ``slide (M, 3)`` (mm/rad)."""
-    y, yh, pivot = observed(data, hand)
-    ut = places(structure, data, u, q, slide)
-    posed = predict(structure, lines, data.segment, ut, q, levels=levels)
+    ``levels``) and their residuals, at ``point``."""
+    y, yh, pivot = observed(data, point.hand)
+    ut = places(structure, data, point.u, point.q, point.slide)
+    posed = predict(structure, point.lines, data.segment, ut, point.q, levels=levels)
     r = (y - posed[0]) * data.present[:, None]
     rh = (yh - data.hand_shape[..., None]) * data.hand_present[:, None]
     return MarkerResiduals(y, yh, pivot, r, rh, posed)

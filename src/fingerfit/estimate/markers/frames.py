@@ -12,12 +12,12 @@ frames or in the whole recording (to rounding).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ...transforms import FloatArray
-from .chain import HandFrames, Lines, Structure
+from .chain import HandFrames, Point, Structure
 from .normal import LAM_START, RIDGE, damping, frame_terms
 from .observe import DigitMarkers
 
@@ -61,40 +61,30 @@ class FrameSolution:
     converged: np.ndarray
 
 
-def solve_frames(
-    data: DigitMarkers,
-    structure: Structure,
-    lines: Lines,
-    u: FloatArray,
-    q: FloatArray,
-    slide: FloatArray | None = None,
-) -> FrameSolution:
+def solve_frames(data: DigitMarkers, structure: Structure, start: Point) -> FrameSolution:
     """Every frame's angles and hand frame, the model held.
 
     Parameters
     ----------
     data : DigitMarkers
     structure : Structure
-    lines : Lines
-        The model's lines (tracker coordinates at the reference posture, mm).
-    u : ndarray, shape (M, 3)
-        The markers' places (mm).
-    q : ndarray, shape (L, n)
-        Start angles (rad).
-    slide : ndarray, shape (M, 3), optional
-        The markers' slides (mm/rad, :func:`.chain.places`).
+    start : Point
+        The model (its lines, places and slides: tracker coordinates at the reference
+        posture, mm, mm/rad) and every frame's start (angles, rad; hand correction).
 
     Returns
     -------
     FrameSolution
     """
     n, L = data.frames, structure.levels
-    q, hand = q.copy(), HandFrames.identity(n)
+    lines, u, slide = start.lines, start.u, start.slide
+    q = start.q.copy()
+    hand = HandFrames(start.hand.rotation.copy(), start.hand.offset.copy())
     lam = np.full(n, LAM_START)
     steps = np.zeros(n, dtype=int)
     converged = np.ones(n, dtype=bool)
     idx = np.arange(n)  # the frames still iterating
-    f = frame_terms(data, structure, lines, u, q, hand, slide)
+    f = frame_terms(data, structure, Point(lines, u, q, hand, slide))
     qq, bq, cost = f.qq, f.bq, f.cost
     while idx.size:
         a = qq.copy()
@@ -108,7 +98,7 @@ def solve_frames(
         q_try = q[:, idx] + d[:, :L].T
         now = hand.take(idx)
         h_try = now.moved(d[:, L : L + 3], d[:, L + 3 :])
-        nt = frame_terms(data.take(idx), structure, lines, u, q_try, h_try, slide)
+        nt = frame_terms(data.take(idx), structure, Point(lines, u, q_try, h_try, slide))
         # Below the cost's rounding (FLOOR of it) a step is judged by the model alone.
         floor = FLOOR * cost[idx]
         ok = nt.cost <= cost[idx] + floor
@@ -133,15 +123,7 @@ def solve_frames(
     return FrameSolution(q, hand, cost, steps, converged)
 
 
-def from_neighbours(
-    data: DigitMarkers,
-    structure: Structure,
-    lines: Lines,
-    u: FloatArray,
-    q: FloatArray,
-    hand: HandFrames,
-    slide: FloatArray | None = None,
-) -> tuple[FloatArray, HandFrames, int]:
+def from_neighbours(data: DigitMarkers, structure: Structure, point: Point) -> tuple[Point, int]:
     """Each frame solved again from the angles of the frame before it and of the frame
     after it, kept where that reaches a lower minimum than its own angles do.
 
@@ -155,28 +137,27 @@ def from_neighbours(
 
     Parameters
     ----------
-    data, structure, lines, u, slide
+    data, structure
         As :func:`solve_frames`.
-    q : ndarray, shape (L, n)
-        Every frame's angles (rad).
-    hand : HandFrames
-        Every frame's hand correction.
+    point : Point
+        The model and every frame's angles (rad) and hand correction.
 
     Returns
     -------
-    q : ndarray, shape (L, n)
-        The angles, changed where a neighbour's start reached a lower minimum.
-    hand : HandFrames
-        The corrections, the same.
+    point : Point
+        The same, every frame's angles and hand correction changed where a neighbour's
+        start reached a lower minimum.
     moved : int
         The frames changed.
     """
-    own = solve_frames(data, structure, lines, u, q, slide)
-    q, hand = q.copy(), HandFrames(hand.rotation.copy(), hand.offset.copy())
+    own = solve_frames(data, structure, point)
+    q = point.q.copy()
+    hand = HandFrames(point.hand.rotation.copy(), point.hand.offset.copy())
     cost = own.cost.copy()
     moved = np.zeros(data.frames, dtype=bool)
     for shift in (1, -1):  # the frame before, the frame after (wrapping at the ends)
-        other = solve_frames(data, structure, lines, u, np.roll(q, shift, axis=1), slide)
+        start = replace(point, q=np.roll(q, shift, axis=1))
+        other = solve_frames(data, structure, start)
         better = other.cost < cost * (1.0 - FLOOR) - FLOOR
         q[:, better] = other.q[:, better]
         hand.rotation[better], hand.offset[better] = (
@@ -185,4 +166,4 @@ def from_neighbours(
         )
         cost[better] = other.cost[better]
         moved |= better
-    return q, hand, int(moved.sum())
+    return replace(point, q=q, hand=hand), int(moved.sum())

@@ -20,8 +20,8 @@ from ...track.chains import matvec_rows
 from ...transforms import FloatArray, orthonormal_basis
 from .chain import (
     SLIDE_PRIOR,
-    HandFrames,
     Lines,
+    Point,
     Structure,
     marker_residuals,
     over_blocks,
@@ -177,25 +177,21 @@ def frame_columns(points: FloatArray, pivot: FloatArray) -> FloatArray:
 def normal_equations(
     data: DigitMarkers,
     structure: Structure,
-    lines: Lines,
-    u: FloatArray,
-    q: FloatArray,
-    hand: HandFrames,
+    point: Point,
     free: np.ndarray,
-    slide: FloatArray | None = None,
     pool: Executor | None = None,
 ) -> tuple[Normal, FloatArray]:
-    """The normal equations of every frame and of the global unknowns, the frames by
-    blocks (:func:`.chain.over_blocks`, with ``pool`` side by side).
+    """The normal equations of every frame and of the global unknowns at ``point``, the
+    frames by blocks (:func:`.chain.over_blocks`, with ``pool`` side by side).
 
     Parameters
     ----------
-    free : ndarray of bool, shape (4 L + 3 M,) or, with ``slide``, (4 L + 6 M,)
+    point : Point
+        With slides (mm/rad, :func:`.chain.places`), those are unknowns too, with the
+        prior of :data:`.chain.SLIDE_PRIOR`.
+    free : ndarray of bool, shape (4 L + 3 M,) or, with slides, (4 L + 6 M,)
         Global unknowns that move (lines first, then the markers' places, then their
         slides).
-    slide : ndarray, shape (M, 3), optional
-        Each marker's slide (mm/rad, :func:`.chain.places`): then unknowns too, with the
-        prior of :data:`.chain.SLIDE_PRIOR`.
     pool : concurrent.futures.Executor, optional
         A thread pool that works through the frames' blocks side by side (the result is
         the same without it).
@@ -215,6 +211,7 @@ def normal_equations(
     marker, never as a dense ``(3 M, 3 M)`` block.
     """
     M, L, n = len(data.labels), structure.levels, data.frames
+    slide = point.slide
     K, G = L + 6, 4 * L + 3 * M * (1 if slide is None else 2)
     g = int(free.sum())
     qq, bq, frame_cost = np.empty((n, K, K)), np.empty((n, K)), np.empty(n)
@@ -222,12 +219,14 @@ def normal_equations(
 
     def block(frames: slice) -> FloatArray:
         d = data.take(frames)
-        f = frame_terms(d, structure, lines, u, q[:, frames], hand.take(frames), slide)
+        f = frame_terms(d, structure, point.take(frames))
         qq[frames], bq[frames], frame_cost[frames] = f.qq, f.bq, f.cost
         if not g:  # the model held (the angles of a recording): no global column to build
             return np.zeros((0, 0))
         masked = f.rot * d.present[:, None, None]
-        qgb, ggb, sgb = _global_products(structure, lines, d, f.posed, masked, f.jf, f.rr, slide)
+        qgb, ggb, sgb = _global_products(
+            structure, point.lines, d, f.posed, masked, f.jf, f.rr, slide
+        )
         if g < G:
             qgb, ggb, sgb = qgb[..., free], ggb[np.ix_(free, free)], sgb[:, free]
         qg[frames], sg[frames] = qgb, sgb
@@ -235,7 +234,7 @@ def normal_equations(
 
     gg = sum(over_blocks(block, n, pool), start=np.zeros((g, g)))
     bg = sg.sum(axis=0)
-    ref = reference_residual(data, u)
+    ref = reference_residual(data, point.u)
     uw = np.zeros(G)
     uw[4 * L : 4 * L + 3 * M] = np.repeat(data.reference_count, 3)
     ref_b = np.zeros(G)
@@ -284,20 +283,11 @@ class FrameTerms:
     posed: tuple[FloatArray, ...]
 
 
-def frame_terms(
-    data: DigitMarkers,
-    structure: Structure,
-    lines: Lines,
-    u: FloatArray,
-    q: FloatArray,
-    hand: HandFrames,
-    slide: FloatArray | None = None,
-) -> FrameTerms:
-    """Each frame's part of the normal equations at ``q (L, n)`` (rad), ``hand``, the
-    lines, places ``u (M, 3)`` (mm) and slides ``slide (M, 3)`` (mm/rad) as given."""
+def frame_terms(data: DigitMarkers, structure: Structure, point: Point) -> FrameTerms:
+    """Each frame's part of the normal equations at ``point``."""
     M, L, n = len(data.labels), structure.levels, data.frames
-    H = data.hand.shape[0]
-    res = marker_residuals(data, structure, lines, u, q, hand, slide, levels=True)
+    H, slide = data.hand.shape[0], point.slide
+    res = marker_residuals(data, structure, point, levels=True)
     y, yh, pivot, r, rh = res.y, res.yh, res.pivot, res.r, res.rh
     p, rot, axes, centres, prox = res.posed
     # d p_i / d q_k = a_k x (p_i - c_k) where axis k moves marker i's segment.
@@ -321,7 +311,7 @@ def frame_terms(
     bq = (jft @ rr[..., None])[..., 0]
     bq[:, L:] += (jht @ rrh[..., None])[..., 0]
     cost = (rr * rr).sum(axis=1) + (rrh * rrh).sum(axis=1)
-    return FrameTerms(qq, bq, cost, jf, rr, rot, (p, q, prox, axes, centres))
+    return FrameTerms(qq, bq, cost, jf, rr, rot, (p, point.q, prox, axes, centres))
 
 
 def _global_products(

@@ -245,11 +245,9 @@ def staged_start(data: DigitMarkers, layout: ChainLayout, threads: int = 1) -> B
             Lines(axis[:levels], centre[:levels]), u[: len(part.labels)], q[:levels], hand=hand
         )
         if j in second:  # frames its start left on the angles' other branch
-            q2, hand2, moved = from_neighbours(
-                part, sub, result.lines, result.u, result.q, result.hand
-            )
+            again, moved = from_neighbours(part, sub, result.point)
             if moved:
-                result = stage(result.lines, result.u, q2, hand=hand2)
+                result = stage(again.lines, again.u, again.q, hand=again.hand)
         axis[:levels], centre[:levels] = result.lines.axis, result.lines.centre
         u[: len(part.labels)], q[:levels], hand = result.u, result.q, result.hand
     assert result is not None

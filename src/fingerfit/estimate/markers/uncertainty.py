@@ -37,7 +37,7 @@ angle's square) is measured, not modelled (``docs/markers.md``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.special import ndtr
@@ -127,9 +127,8 @@ def slide_uncertainty(
     L = structure.levels
     G = result.free.size  # 4 L + 3 M
     free = np.concatenate([result.free, np.ones(3 * M, dtype=bool)])
-    normal, _ = normal_equations(
-        data, structure, result.lines, result.u, result.q, result.hand, free, np.zeros((M, 3))
-    )
+    sliding = replace(result.point, slide=np.zeros((M, 3)))
+    normal, _ = normal_equations(data, structure, sliding, free)
     ng = int(result.free.sum())
     normal.gg[np.arange(ng, ng + 3 * M), np.arange(ng, ng + 3 * M)] -= 1.0 / SLIDE_PRIOR**2
     theta = result.q[structure.flexion[0]]  # the hand's markers slide with the first joint
