@@ -4,10 +4,11 @@ Each digit's chain (:func:`.chain.chain_layout`) is started and adjusted by :mod
 and :mod:`.bundle` on the reference and calibration (grasp) recordings. The thumb's CMC
 always has two axes; a finger's MP and the thumb's MCP get a second (ab/adduction) axis
 when the markers call for it (``mp_axes="auto"``, :func:`fit_digit`; else a hinge, said
-in one line), proximal or distal to the flexion axis as the lower cost decides. A line whose direction or point the markers leave
-undetermined (the noise's standard deviation above :data:`UNDETERMINED_SD_DEG` /
-:data:`UNDETERMINED_SD_MM`, or no information at all) is held at its start and said in
-one line naming the joint; the lines' uncertainty holds the skin's slide
+in one line), proximal or distal to the flexion axis as the lower cost decides. A line
+whose direction or point the markers leave undetermined (the noise's standard deviation
+above :data:`UNDETERMINED_SD_DEG` / :data:`UNDETERMINED_SD_MM`, or no information at
+all) is held at its start and said in one line naming the joint; the lines' uncertainty
+holds the skin's slide
 (:mod:`.uncertainty`). The result is the usual :class:`~fingerfit.model.HandModel`
 (``method`` ``markers``) plus each marker's place (:attr:`HandModel.markers`).
 """
@@ -33,8 +34,9 @@ from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import flexion_sign, staged_start
 from .uncertainty import slide_uncertainty
 
-#: A finger's MP keeps its second axis when it lowers the cost by more than this many
-#: standard deviations of what its unknowns absorb of the noise (:func:`fit_digit`).
+#: A finger's MP (the thumb's MCP) keeps its second axis when it lowers the cost by more
+#: than this many standard deviations of what its unknowns absorb of the noise
+#: (:func:`fit_digit`).
 SECOND_AXIS_Z = 5.0
 #: A line's direction with a larger SD (deg), or its point with a larger SD (mm), is not
 #: determined by the markers.
@@ -584,4 +586,4 @@ def _quality(fit: DigitFit, level: int) -> JointQuality:
     )
 
 
-__all__ = ["DigitFit", "MarkerFit", "chain_layout", "fit_marker_session"]
+__all__ = ["DigitFit", "MarkerFit", "fit_digit", "fit_marker_session"]
