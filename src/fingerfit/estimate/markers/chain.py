@@ -217,6 +217,9 @@ class HandFrames:
     def identity(cls, n: int) -> HandFrames:
         return cls(np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3)))
 
+    def copy(self) -> HandFrames:
+        return HandFrames(self.rotation.copy(), self.offset.copy())
+
     def take(self, frames: slice | np.ndarray) -> HandFrames:
         """The corrections of ``frames`` only (a slice: views; indices: copies)."""
         return HandFrames(self.rotation[frames], self.offset[frames])

@@ -510,8 +510,8 @@ def _model(
             # Positive ab/adduction (docs/conventions.md): the axis on the side of
             # bone x flexion axis for a right hand (a finger's radial deviation, the
             # thumb's palmar abduction), the other for a left one.
-            a2 = r.lines.axis[k] * _sign(
-                side * (r.lines.axis[k] @ np.cross(bone, joints[joint][3]))
+            a2 = r.lines.axis[k] * math.copysign(
+                1.0, side * (r.lines.axis[k] @ np.cross(bone, joints[joint][3]))
             )
             seconds[joint] = JointModel(
                 second_axis(joint), *sensors[joint], c2, a2, a2, _quality(fit, k)
@@ -558,11 +558,6 @@ def _model(
         warnings=tuple(notes),
         markers=markers,
     )
-
-
-def _sign(x: float) -> float:
-    """``-1.0`` for a negative ``x``, else ``1.0``."""
-    return -1.0 if x < 0 else 1.0
 
 
 def _quality(fit: DigitFit, level: int) -> JointQuality:

@@ -78,8 +78,7 @@ def solve_frames(data: DigitMarkers, structure: Structure, start: Point) -> Fram
     """
     n, L = data.frames, structure.levels
     lines, u, slide = start.lines, start.u, start.slide
-    q = start.q.copy()
-    hand = HandFrames(start.hand.rotation.copy(), start.hand.offset.copy())
+    q, hand = start.q.copy(), start.hand.copy()
     lam = np.full(n, LAM_START)
     steps = np.zeros(n, dtype=int)
     converged = np.ones(n, dtype=bool)
@@ -151,8 +150,7 @@ def from_neighbours(data: DigitMarkers, structure: Structure, point: Point) -> t
         The frames changed.
     """
     own = solve_frames(data, structure, point)
-    q = point.q.copy()
-    hand = HandFrames(point.hand.rotation.copy(), point.hand.offset.copy())
+    q, hand = point.q.copy(), point.hand.copy()
     cost = own.cost.copy()
     moved = np.zeros(data.frames, dtype=bool)
     for shift in (1, -1):  # the frame before, the frame after (wrapping at the ends)

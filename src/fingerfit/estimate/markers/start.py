@@ -31,7 +31,6 @@ from functools import partial
 
 import numpy as np
 
-from ...angles import two_axis_angles
 from ...digits import FLEXION_FIRST
 from ...errors import FingerfitError
 from ...io.rigid import fit_cluster
@@ -141,8 +140,7 @@ def saddle_start(
     axis = np.stack([fit.flexion_axis, fit.abduction_axis])
     centre = np.stack([fit.flexion_point, fit.abduction_point])
     q = np.zeros((2, n))
-    beta, theta = two_axis_angles(pose.rotation[ok], fit.abduction_axis, fit.flexion_axis)
-    q[0, ok], q[1, ok] = beta, theta
+    q[0, ok], q[1, ok] = fit.flexion_angle, fit.abduction_angle
     return axis, centre, q
 
 
@@ -221,8 +219,6 @@ def staged_start(data: DigitMarkers, layout: ChainLayout, threads: int = 1) -> B
         if j in second:
             k = second[j]
             ax2, c2, q2 = saddle_start(tracks, u[child], f"{data.digit} {layout.names[level]}")
-            if flexion_sign(q2[0]) < 0:
-                ax2[0], q2[0] = -ax2[0], -q2[0]
             axis[[level, k]], centre[[level, k]], q[[level, k]] = ax2, c2, q2
         else:
             usable = [t[np.isfinite(t).all(axis=1)] for t in tracks]
@@ -230,9 +226,9 @@ def staged_start(data: DigitMarkers, layout: ChainLayout, threads: int = 1) -> B
             ang = np.stack([turn_about(t, u[i], a, c) for t, i in zip(tracks, child, strict=True)])
             seen = np.isfinite(ang)
             theta = np.where(seen, ang, 0.0).sum(axis=0) / np.maximum(seen.sum(axis=0), 1)
-            if flexion_sign(theta) < 0:
-                a, theta = -a, -theta
             axis[level], centre[level], q[level] = a, c, theta
+        if flexion_sign(q[level]) < 0:
+            axis[level], q[level] = -axis[level], -q[level]
         sub = Structure(structure.depth[: j + 1])
         part = subset(data, j)
         last = j == len(first_levels) - 1
