@@ -8,8 +8,15 @@ import numpy as np
 import pytest
 
 from fingerfit.estimate.markers.bundle import line_covariance
-from fingerfit.estimate.markers.chain import Lines, Structure, chain_layout, predict
-from fingerfit.estimate.markers.normal import line_columns
+from fingerfit.estimate.markers.chain import (
+    Lines,
+    Structure,
+    chain_layout,
+    marker_residuals,
+    predict,
+)
+from fingerfit.estimate.markers.frames import frames_step
+from fingerfit.estimate.markers.normal import LAM_START, line_columns
 from fingerfit.estimate.markers.observe import (
     carry_back,
     digit_markers,
@@ -70,7 +77,10 @@ def test_gaps_are_handled(exact):
     data = replace(data, present=present, hand_present=hand_present)
     result = staged_start(data, chain_layout("index", False))
     for j, (angle, dist) in _errors(result, exact.sim).items():
-        assert angle < 1e-2, j  # deg: 6e-3 measured (the ridge of frames without the distal marker)
+        # deg: 4.7e-3 measured. A frame without its middle markers has two solutions
+        # (its PIP and DIP reach the nail marker two ways); a few stay on the other one
+        # where neither neighbour's start is on the motion's (these poses jump).
+        assert angle < 1e-2, j
         assert dist < 1e-2, j  # mm
 
 
@@ -427,3 +437,26 @@ def test_near_the_minimum_stops_sooner_within_its_distance():
     sd = np.sqrt(np.einsum("kii->ki", line_covariance(full))[:, :2])  # rad
     cos = np.abs(np.einsum("ki,ki->k", near.lines.axis, full.lines.axis))
     assert (np.arccos(np.minimum(cos, 1.0)) < np.sqrt(NEAR) * sd.max(axis=1)).all()
+
+
+def test_a_frames_step_brings_each_frame_back_and_holds_the_model(exact):
+    """The adjustment's step of each frame on its own (``frames.frames_step``): with the
+    model at the truth, angles put 3 deg off come back most of the way in one step, no
+    frame's cost rises, the model is held."""
+    data = _index(exact)
+    st = chain_layout("index", False).structure
+    truth = staged_start(data, chain_layout("index", False)).point  # the truth (above)
+    rng = np.random.default_rng(5)
+    off = replace(truth, q=truth.q + np.radians(3.0) * rng.standard_normal(truth.q.shape))
+
+    def cost(point):
+        res = marker_residuals(data, st, point)
+        return np.einsum("mcn,mcn->n", res.r, res.r) + np.einsum("hcn,hcn->n", res.rh, res.rh)
+
+    moved = frames_step(data, st, off, LAM_START)
+    before, after = cost(off), cost(moved)
+    assert np.all(after <= before)
+    assert np.median(after / before) < 1e-2  # 6e-4 measured
+    error = np.abs(np.degrees(moved.q - truth.q)).max(axis=0)  # each frame's largest, deg
+    assert np.median(error) < 0.5  # 0.24 measured, from 3.8
+    assert moved.lines is off.lines and moved.u is off.u

@@ -1,6 +1,7 @@
 """Bundle adjustment of one digit from its skin markers: Levenberg-Marquardt over the
 lines, the markers' places, every frame's angles and hand frame (the unknowns and the
-cost of :mod:`.chain`), on the block structure of :mod:`.normal`, its steps mixed
+cost of :mod:`.chain`), on the block structure of :mod:`.normal`, each trial point's
+frames moved by a step of their own (:func:`.frames.frames_step`), its steps mixed
 (:mod:`.mixing`); and the covariance of the lines at the solution.
 """
 
@@ -15,6 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from ...transforms import FloatArray, unit
 from .chain import HandFrames, Lines, Point, Structure, total_cost
+from .frames import frames_step
 from .mixing import Mixer, information_weights
 from .normal import (
     LAM_START,
@@ -99,6 +101,14 @@ def adjust(
     """Levenberg-Marquardt over the lines, the markers' places, every frame's angles and
     every frame's hand frame.
 
+    Each trial point is the damped step of the whole problem (the frames eliminated by
+    the Schur complement), then each frame's own damped Gauss-Newton step at the new
+    model (:func:`.frames.frames_step`, the same damping), kept in the frames whose
+    cost it lowers: the frames' part of the whole step is the linear model's, and
+    where the model's step bends the frames' minima (two axes sharing the flexion), the
+    frames' own step follows them, so the trial is judged nearer the cost the model
+    would have with its frames solved.
+
     Parameters
     ----------
     data : DigitMarkers
@@ -163,6 +173,9 @@ def adjust(
                     at.hand.moved(dq[:, L : L + 3], dq[:, L + 3 :]),
                     None if at.slide is None else at.slide + step[4 * L + 3 * M :].reshape(M, 3),
                 )
+                # The frames' part of the step is the linear model's; each frame's own
+                # Gauss-Newton step at the new model follows the cost's curvature.
+                trial = frames_step(data, structure, trial, lam, pool)
                 cost = total_cost(data, structure, trial, pool)
                 if cost <= nq.cost:
                     ratio = (nq.cost - cost) / max(promised(nq, dq, dg), 1e-300)

@@ -7,17 +7,19 @@ side: every frame has its own damping, its own acceptance of a step and its own 
 rule, and leaves the iteration when it has converged. The frames still iterating are
 computed together (batched ``K x K`` solves; the loop is over iterations, never over
 frames), so a frame's answer is the same whether it was solved alone, in a block of
-frames or in the whole recording (to rounding).
+frames or in the whole recording (to rounding). :func:`frames_step` is one damped step of
+every frame, the adjustment's (:func:`.bundle.adjust`) correction of its trial points.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ...transforms import FloatArray
-from .chain import HandFrames, Point, Structure
+from .chain import HandFrames, Point, Structure, marker_residuals, over_blocks
 from .normal import LAM_START, RIDGE, damping, frame_terms
 from .observe import DigitMarkers
 
@@ -86,14 +88,10 @@ def solve_frames(data: DigitMarkers, structure: Structure, start: Point) -> Fram
     f = frame_terms(data, structure, Point(lines, u, q, hand, slide))
     qq, bq, cost = f.qq, f.bq, f.cost
     while idx.size:
-        a = qq.copy()
-        diag = np.einsum("nkk->nk", a)
-        diag += RIDGE
         # Converged: the undamped (Gauss-Newton) step from here is below STEP.
-        far = np.abs(np.linalg.solve(a, bq[..., None])[..., 0]).max(axis=1) > STEP
-        idx, a, diag, qq, bq = idx[far], a[far], diag[far], qq[far], bq[far]
-        diag *= 1.0 + lam[idx, None]
-        d = np.linalg.solve(a, bq[..., None])[..., 0]  # (m, K)
+        far = np.abs(damped_step(qq, bq, np.zeros(len(idx)))).max(axis=1) > STEP
+        idx, qq, bq = idx[far], qq[far], bq[far]
+        d = damped_step(qq, bq, lam[idx])  # (m, K)
         q_try = q[:, idx] + d[:, :L].T
         now = hand.take(idx)
         h_try = now.moved(d[:, L : L + 3], d[:, L + 3 :])
@@ -120,6 +118,73 @@ def solve_frames(data: DigitMarkers, structure: Structure, start: Point) -> Fram
         go = ~(stuck | out)
         idx, qq, bq = idx[go], qq[go], bq[go]
     return FrameSolution(q, hand, cost, steps, converged)
+
+
+def damped_step(qq: FloatArray, bq: FloatArray, lam: FloatArray) -> FloatArray:
+    """Each frame's damped Gauss-Newton step ``(m, K)`` from its normal equations ``qq
+    (m, K, K)``, ``bq (m, K)``: the diagonal plus :data:`.normal.RIDGE`, times ``1 +
+    lam`` (one damping per frame, ``(m,)``)."""
+    a = qq.copy()
+    diag = np.einsum("nkk->nk", a)
+    diag += RIDGE
+    diag *= 1.0 + lam[:, None]
+    return np.linalg.solve(a, bq[..., None])[..., 0]
+
+
+def frames_step(
+    data: DigitMarkers,
+    structure: Structure,
+    point: Point,
+    lam: float,
+    pool: Executor | None = None,
+) -> Point:
+    """Every frame's angles and hand correction after one step of their own, the model
+    held: a Gauss-Newton step damped by ``lam`` (:func:`damped_step`), kept in each
+    frame whose cost it lowers.
+
+    The adjustment's trial points (:func:`.bundle.adjust`) move the frames by the
+    linear model of the whole problem; at the new model this step follows the cost's
+    curvature in each frame's own unknowns (the embedded step of bundle adjustment).
+
+    Parameters
+    ----------
+    data, structure
+        As :func:`solve_frames`.
+    point : Point
+        The model and every frame's angles (rad) and hand correction.
+    lam : float
+        The damping (Marquardt's: the diagonal times ``1 + lam``).
+    pool : concurrent.futures.Executor, optional
+        Threads for the frames' blocks (:func:`.chain.over_blocks`).
+
+    Returns
+    -------
+    Point
+        ``point`` with its frames moved (its lines, places and slides the same objects).
+    """
+    L = structure.levels
+
+    def block(frames: slice) -> tuple[FloatArray, FloatArray, FloatArray]:
+        part, here = data.take(frames), point.take(frames)
+        terms = frame_terms(part, structure, here)
+        d = damped_step(terms.qq, terms.bq, np.full(len(terms.bq), lam))
+        q = here.q + d[:, :L].T
+        hand = here.hand.moved(d[:, L : L + 3], d[:, L + 3 :])
+        res = marker_residuals(part, structure, replace(here, q=q, hand=hand))
+        cost = np.einsum("mcn,mcn->n", res.r, res.r) + np.einsum("hcn,hcn->n", res.rh, res.rh)
+        better = cost < terms.cost
+        return (
+            np.where(better, q, here.q),
+            np.where(better[:, None, None], hand.rotation, here.hand.rotation),
+            np.where(better[:, None], hand.offset, here.hand.offset),
+        )
+
+    q, rotation, offset = zip(*over_blocks(block, data.frames, pool), strict=True)
+    return replace(
+        point,
+        q=np.concatenate(q, axis=1),
+        hand=HandFrames(np.concatenate(rotation), np.concatenate(offset)),
+    )
 
 
 def from_neighbours(data: DigitMarkers, structure: Structure, point: Point) -> tuple[Point, int]:

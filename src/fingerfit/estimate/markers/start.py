@@ -180,7 +180,11 @@ def subset(data: DigitMarkers, last: int) -> DigitMarkers:
 def staged_start(data: DigitMarkers, layout: ChainLayout, threads: int = 1) -> BundleResult:
     """The staged solve of a digit's chain: each joint started from its child markers'
     arcs about it (a joint with two axes, the thumb's CMC: :func:`saddle_start`), then
-    adjusted with every joint proximal to it.
+    adjusted with every joint proximal to it. After a two-axis joint's stage and after
+    the last, the frames are solved again from their neighbours' angles
+    (:func:`.frames.from_neighbours`), and the stage adjusted again when one moved: a
+    frame can be left on another branch of its angles (a two-axis joint's; a frame
+    whose middle phalanx's markers are unseen reaches its nail marker two ways).
 
     Parameters
     ----------
@@ -240,7 +244,7 @@ def staged_start(data: DigitMarkers, layout: ChainLayout, threads: int = 1) -> B
         result = stage(
             Lines(axis[:levels], centre[:levels]), u[: len(part.labels)], q[:levels], hand=hand
         )
-        if j in second:  # frames its start left on the angles' other branch
+        if j in second or last:  # frames left on the angles' other branch
             again, moved = from_neighbours(part, sub, result.point)
             if moved:
                 result = stage(again.lines, again.u, again.q, hand=again.hand)
