@@ -488,3 +488,23 @@ def test_two_axes_near_parallel_are_not_a_joint():
     assert "deg apart" in _not_a_joint(fit(179.0))  # the same line, pointing the other way
     q[second] = np.linspace(-2.0, 2.0, 100)  # 207 deg (5th to 95th percentile)
     assert "turns an axis through" in _not_a_joint(fit(80.0))
+
+
+def test_what_a_digits_motion_cannot_give_names_the_session(tmp_path, monkeypatch):
+    """An error raised inside a digit's fit (a thumb CMC turned about one axis only,
+    from :func:`.start.saddle_start`) names the session folder, in one line."""
+    from fingerfit.errors import FingerfitError
+    from fingerfit.estimate.markers import fit as marker_fit
+    from fingerfit.io import load_session
+    from fingerfit.simulate.markers import write_marker_subject
+
+    sim = simulate_subject(SimConfig(fingers=["index"], cycles=2, targets=False), 3)
+    d = write_marker_subject(simulate_markers(sim, "todorov", seed=3), tmp_path / "S01")
+
+    def refuse(data, digit, *args):
+        raise FingerfitError(f"{digit} mp: the motion turned the joint about one axis only")
+
+    monkeypatch.setattr(marker_fit, "fit_digit", refuse)
+    with pytest.raises(FingerfitError) as err:
+        marker_fit.fit_marker_session(load_session(d))
+    assert str(err.value) == f"{d}: index mp: the motion turned the joint about one axis only"

@@ -465,14 +465,19 @@ def fit_marker_session(
     if lost or lost_ref:
         notes.append(f"{lost + lost_ref} frames without 3 hand markers left out")
     datas = {d: digit_markers(session, d, moving, reference) for d in session.fingers}
-    if executor is None:
-        fits = {d: fit_digit(data, d, mp_axes, slide, threads) for d, data in datas.items()}
-    else:
-        futures = {
-            d: executor.submit(fit_digit, data, d, mp_axes, slide, threads)
-            for d, data in datas.items()
-        }
-        fits = {d: f.result() for d, f in futures.items()}
+    try:
+        if executor is None:
+            fits = {d: fit_digit(data, d, mp_axes, slide, threads) for d, data in datas.items()}
+        else:
+            futures = {
+                d: executor.submit(fit_digit, data, d, mp_axes, slide, threads)
+                for d, data in datas.items()
+            }
+            fits = {d: f.result() for d, f in futures.items()}
+    except FingerfitError as exc:  # what a digit's motion cannot give: name the session
+        if exc.path is not None or session.path is None:
+            raise
+        raise FingerfitError(exc.reason, path=session.path, field=exc.field) from None
     for d in session.fingers:
         sd = fits[d].slide_sd
         if sd is not None:

@@ -148,10 +148,8 @@ def frames_step(
 
     Parameters
     ----------
-    data, structure
-        As :func:`solve_frames`.
-    point : Point
-        The model and every frame's angles (rad) and hand correction.
+    data, structure, point
+        As :func:`solve_frames` (``point`` its ``start``).
     lam : float
         The damping (Marquardt's: the diagonal times ``1 + lam``).
     pool : concurrent.futures.Executor, optional
