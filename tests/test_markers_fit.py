@@ -460,36 +460,6 @@ def test_a_frames_step_brings_each_frame_back_and_holds_the_model(exact):
     error = np.abs(np.degrees(moved.q - truth.q)).max(axis=0)  # each frame's largest, deg
     assert np.median(error) < 0.5  # 0.24 measured, from 3.8
     assert moved.lines is off.lines and moved.u is off.u
-
-
-def test_two_axes_near_parallel_are_not_a_joint():
-    """A two-axis minimum whose axes lie within 45 deg of parallel shares one motion
-    between two lines (they turn against each other): left out, the reason said; axes
-    80 deg apart with a joint's ranges are kept."""
-    from types import SimpleNamespace
-
-    from fingerfit.estimate.markers.fit import _not_a_joint
-
-    layout = chain_layout("index", True)
-    flex, second = layout.first[layout.choice], layout.second[layout.choice]
-    q = np.zeros((layout.structure.levels, 100))
-    q[flex] = np.linspace(0.0, 1.1, 100)  # 63 deg of flexion
-    q[second] = np.linspace(-0.1, 0.1, 100)
-
-    def fit(apart_deg):
-        axis = np.tile([1.0, 0.0, 0.0], (layout.structure.levels, 1))
-        t = np.radians(apart_deg)
-        axis[second] = [np.cos(t), 0.0, np.sin(t)]
-        lines = Lines(axis, np.zeros_like(axis))
-        return SimpleNamespace(layout=layout, result=SimpleNamespace(lines=lines, q=q))
-
-    assert _not_a_joint(fit(80.0)) is None
-    assert "2 deg apart" in _not_a_joint(fit(2.0))
-    assert "deg apart" in _not_a_joint(fit(179.0))  # the same line, pointing the other way
-    q[second] = np.linspace(-2.0, 2.0, 100)  # 207 deg (5th to 95th percentile)
-    assert "turns an axis through" in _not_a_joint(fit(80.0))
-
-
 def test_what_a_digits_motion_cannot_give_names_the_session(tmp_path, monkeypatch):
     """An error raised inside a digit's fit (a thumb CMC turned about one axis only,
     from :func:`.start.saddle_start`) names the session folder, in one line."""

@@ -52,12 +52,6 @@ TOL = 1e-10
 #: span more (5th to 95th percentile, deg) has two nearly parallel axes turning against
 #: each other to soak up the skin's slide, and is left out (:func:`fit_digit`).
 HALF_TURN_DEG = 180.0
-#: Nor are a joint's two axes nearer parallel than perpendicular: a second axis within
-#: this angle (deg) of the flexion axis turns the segment more about the flexion than
-#: across it. Such a minimum shares one motion between two lines (they turn against each
-#: other, their centres slide the segment, soaking up the skin's slide) and is left out
-#: (:func:`fit_digit`).
-PARALLEL_DEG = 45.0
 #: Chi-square 95 % quantile with two degrees of freedom: an axis direction's (or a
 #: line point's) 95 % region is ``x^T C^-1 x <= CHI2_95``.
 CHI2_95 = 5.991
@@ -182,20 +176,12 @@ def fit_chain(
     return _finish(data, digit, layout, result, threads)
 
 
-def _not_a_joint(fit: DigitFit) -> str | None:
-    """Why the choice joint's two axes in ``fit`` are not a joint's motion (an axis turns
-    through more than :data:`HALF_TURN_DEG`, or the axes lie within :data:`PARALLEL_DEG`
-    of parallel), or None."""
+def _largest_range_deg(fit: DigitFit) -> float:
+    """The larger range of motion of the choice joint's two axes (deg)."""
     c = fit.layout.choice
-    levels = (fit.layout.first[c], fit.layout.second[c])
-    turn = max(motion_range_deg(fit.result.q[k]) for k in levels)
-    if turn > HALF_TURN_DEG:
-        return f"turns an axis through {turn:.3g} deg"
-    a, b = fit.result.lines.axis[list(levels)]
-    apart = math.degrees(math.acos(min(abs(float(a @ b)), 1.0)))
-    if apart < PARALLEL_DEG:
-        return f"has its two axes {apart:.2g} deg apart (one motion shared by two lines)"
-    return None
+    return max(
+        motion_range_deg(fit.result.q[k]) for k in (fit.layout.first[c], fit.layout.second[c])
+    )
 
 
 def motion_range_deg(q: FloatArray) -> float:
@@ -313,9 +299,8 @@ def fit_digit(
     The two-axis fits start from the hinge's, the second axis inserted proximal to the
     flexion axis and distal to it: one chain of two lines from two starts; the lower
     cost wins, and the axis with the larger range of motion is named flexion
-    (:func:`_labelled`), which gives the order. A minimum that is not a joint's motion
-    (an axis turned through more than :data:`HALF_TURN_DEG`, or the two axes within
-    :data:`PARALLEL_DEG` of parallel: :func:`_not_a_joint`) is left out. The second axis's ``n + 4`` more
+    (:func:`_labelled`), which gives the order. A minimum that turns an axis through
+    more than :data:`HALF_TURN_DEG` is left out. The second axis's ``n + 4`` more
     unknowns (an angle per frame, the line) lower the cost by about ``(n + 4) sigma^2``
     on noise alone (a chi-square with that many degrees of freedom); ``auto`` keeps the
     second axis when the drop exceeds that by more than :data:`SECOND_AXIS_Z` of its
@@ -331,13 +316,13 @@ def fit_digit(
         fit_chain(data, digit, True, start=hinge.result, slide=slide, order=o, threads=threads)
         for o in (ABDUCTION_FIRST, FLEXION_FIRST)
     ]
-    why = [_not_a_joint(f) for f in orders]
-    turning = [f for f, w in zip(orders, why, strict=True) if w]
-    plausible = [f for f, w in zip(orders, why, strict=True) if not w] or orders
+    turns = [_largest_range_deg(f) > HALF_TURN_DEG for f in orders]
+    turning = [f for f, t in zip(orders, turns, strict=True) if t]
+    plausible = [f for f, t in zip(orders, turns, strict=True) if not t] or orders
     if mp_axes == "auto" and len(turning) == len(orders):
         hinge.notes.append(
-            f"{joint}: a hinge (neither two-axis minimum is a joint's motion: one "
-            f"{why[0]}, the other {why[1]})"
+            f"{joint}: a hinge (both two-axis minima turn an axis through "
+            f"{min(_largest_range_deg(f) for f in turning):.3g} deg or more: not a joint's motion)"
         )
         return _chosen(hinge)
     two, *rest = sorted(plausible, key=lambda f: f.result.cost)
@@ -353,7 +338,10 @@ def fit_digit(
         )
         if any(other is f for f in turning):
             lower = f" ({-gap:.3g} sigma^2 lower)" if gap < 0 else ""
-            beyond = f"the other start's minimum{lower} {_not_a_joint(other)}: not a joint's motion"
+            beyond = (
+                f"the other start's minimum{lower} turns an axis through "
+                f"{_largest_range_deg(other):.3g} deg: not a joint's motion"
+            )
         else:
             beyond = f"the other start's minimum {gap:.3g} sigma^2 higher"
         if not other.result.converged:
@@ -365,8 +353,8 @@ def fit_digit(
         )
         if any(two is f for f in turning):
             two.notes.append(
-                f"{joint}: warning: neither two-axis minimum is a joint's motion (the lower "
-                f"{_not_a_joint(two)}); mp_axes='two' kept it"
+                f"{joint}: warning: both two-axis minima turn an axis through more than "
+                f"{HALF_TURN_DEG:g} deg (not a joint's motion); mp_axes='two' kept the lower"
             )
         return _chosen(two)
     hinge.notes.append(
