@@ -460,6 +460,8 @@ def test_a_frames_step_brings_each_frame_back_and_holds_the_model(exact):
     error = np.abs(np.degrees(moved.q - truth.q)).max(axis=0)  # each frame's largest, deg
     assert np.median(error) < 0.5  # 0.24 measured, from 3.8
     assert moved.lines is off.lines and moved.u is off.u
+
+
 def test_what_a_digits_motion_cannot_give_names_the_session(tmp_path, monkeypatch):
     """An error raised inside a digit's fit (a thumb CMC turned about one axis only,
     from :func:`.start.saddle_start`) names the session folder, in one line."""
@@ -478,3 +480,26 @@ def test_what_a_digits_motion_cannot_give_names_the_session(tmp_path, monkeypatc
     with pytest.raises(FingerfitError) as err:
         marker_fit.fit_marker_session(load_session(d))
     assert str(err.value) == f"{d}: index mp: the motion turned the joint about one axis only"
+
+
+def test_two_axes_turning_against_each_other_are_not_a_joint():
+    """A two-axis minimum whose axes both turn further than the joint flexes as a hinge
+    (two nearly parallel axes turning against each other, as a realistic subject's MP
+    did: 107 and 92 deg against the hinge's 61) is left out, the reason said; a joint's
+    ranges are kept."""
+    from types import SimpleNamespace
+
+    from fingerfit.estimate.markers.fit import _not_a_joint
+
+    layout = chain_layout("index", True)
+    flex, second = layout.first[layout.choice], layout.second[layout.choice]
+
+    def fit(flexion_deg, abduction_deg):
+        q = np.zeros((layout.structure.levels, 101))
+        q[flex] = np.linspace(0.0, np.radians(flexion_deg) / 0.9, 101)  # 5th-95th: 0.9
+        q[second] = np.linspace(0.0, np.radians(abduction_deg) / 0.9, 101)
+        return SimpleNamespace(layout=layout, result=SimpleNamespace(q=q))
+
+    assert _not_a_joint(fit(63.0, 11.0), 61.0) is None
+    assert "turn against each other" in _not_a_joint(fit(107.0, 92.0), 61.0)
+    assert "turns an axis through 207 deg" in _not_a_joint(fit(207.0, 10.0), 61.0)

@@ -176,12 +176,25 @@ def fit_chain(
     return _finish(data, digit, layout, result, threads)
 
 
-def _largest_range_deg(fit: DigitFit) -> float:
-    """The larger range of motion of the choice joint's two axes (deg)."""
+def _not_a_joint(fit: DigitFit, flexion_deg: float) -> str | None:
+    """Why the choice joint's two axes in ``fit`` are not a joint's motion, or None: an
+    axis turns through more than :data:`HALF_TURN_DEG`, or the axis with the smaller
+    range (the ab/adduction's) turns further than the joint flexes as a hinge
+    (``flexion_deg``, its hinge fit's range): then the two axes turn against each other
+    (nearly parallel, the segment slid by their centres' offset) to soak up the skin's
+    slide."""
     c = fit.layout.choice
-    return max(
+    small, large = sorted(
         motion_range_deg(fit.result.q[k]) for k in (fit.layout.first[c], fit.layout.second[c])
     )
+    if large > HALF_TURN_DEG:
+        return f"turns an axis through {large:.3g} deg"
+    if small > flexion_deg:
+        return (
+            f"turns both axes further than the joint flexes as a hinge ({small:.3g} and "
+            f"{large:.3g} deg against {flexion_deg:.3g}: they turn against each other)"
+        )
+    return None
 
 
 def motion_range_deg(q: FloatArray) -> float:
@@ -299,8 +312,9 @@ def fit_digit(
     The two-axis fits start from the hinge's, the second axis inserted proximal to the
     flexion axis and distal to it: one chain of two lines from two starts; the lower
     cost wins, and the axis with the larger range of motion is named flexion
-    (:func:`_labelled`), which gives the order. A minimum that turns an axis through
-    more than :data:`HALF_TURN_DEG` is left out. The second axis's ``n + 4`` more
+    (:func:`_labelled`), which gives the order. A minimum that is not a joint's motion
+    (an axis turned through more than :data:`HALF_TURN_DEG`, or both further than the
+    hinge flexes: :func:`_not_a_joint`) is left out. The second axis's ``n + 4`` more
     unknowns (an angle per frame, the line) lower the cost by about ``(n + 4) sigma^2``
     on noise alone (a chi-square with that many degrees of freedom); ``auto`` keeps the
     second axis when the drop exceeds that by more than :data:`SECOND_AXIS_Z` of its
@@ -316,13 +330,14 @@ def fit_digit(
         fit_chain(data, digit, True, start=hinge.result, slide=slide, order=o, threads=threads)
         for o in (ABDUCTION_FIRST, FLEXION_FIRST)
     ]
-    turns = [_largest_range_deg(f) > HALF_TURN_DEG for f in orders]
-    turning = [f for f, t in zip(orders, turns, strict=True) if t]
-    plausible = [f for f, t in zip(orders, turns, strict=True) if not t] or orders
+    flexion = motion_range_deg(hinge.result.q[hinge.layout.first[c]])
+    why = [_not_a_joint(f, flexion) for f in orders]
+    turning = [f for f, w in zip(orders, why, strict=True) if w]
+    plausible = [f for f, w in zip(orders, why, strict=True) if not w] or orders
     if mp_axes == "auto" and len(turning) == len(orders):
         hinge.notes.append(
-            f"{joint}: a hinge (both two-axis minima turn an axis through "
-            f"{min(_largest_range_deg(f) for f in turning):.3g} deg or more: not a joint's motion)"
+            f"{joint}: a hinge (neither two-axis minimum is a joint's motion: one "
+            f"{why[0]}, the other {why[1]})"
         )
         return _chosen(hinge)
     two, *rest = sorted(plausible, key=lambda f: f.result.cost)
@@ -339,8 +354,8 @@ def fit_digit(
         if any(other is f for f in turning):
             lower = f" ({-gap:.3g} sigma^2 lower)" if gap < 0 else ""
             beyond = (
-                f"the other start's minimum{lower} turns an axis through "
-                f"{_largest_range_deg(other):.3g} deg: not a joint's motion"
+                f"the other start's minimum{lower} {_not_a_joint(other, flexion)}: "
+                "not a joint's motion"
             )
         else:
             beyond = f"the other start's minimum {gap:.3g} sigma^2 higher"
@@ -353,8 +368,8 @@ def fit_digit(
         )
         if any(two is f for f in turning):
             two.notes.append(
-                f"{joint}: warning: both two-axis minima turn an axis through more than "
-                f"{HALF_TURN_DEG:g} deg (not a joint's motion); mp_axes='two' kept the lower"
+                f"{joint}: warning: neither two-axis minimum is a joint's motion (the lower "
+                f"{_not_a_joint(two, flexion)}); mp_axes='two' kept it"
             )
         return _chosen(two)
     hinge.notes.append(
