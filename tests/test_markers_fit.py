@@ -503,3 +503,55 @@ def test_two_axes_turning_against_each_other_are_not_a_joint():
     assert _not_a_joint(fit(63.0, 11.0), 61.0) is None
     assert "turn against each other" in _not_a_joint(fit(107.0, 92.0), 61.0)
     assert "turns an axis through 207 deg" in _not_a_joint(fit(207.0, 10.0), 61.0)
+
+
+def test_a_held_out_marker_is_predicted_from_the_others(exact):
+    """Noise-free, the true model puts every held-out marker where it is (its frame
+    solved again without it); a marker alone on its segment is not held out; a model
+    whose PIP axis is 2 deg off predicts the held-out markers worse, and the comparison
+    says so beyond its interval."""
+    from fingerfit.estimate.markers.heldout import (
+        HELD_OUT_FRAMES,
+        compare_held_out,
+        held_out_errors,
+        holdable,
+    )
+    from fingerfit.transforms import orthonormal_basis
+
+    data = _index(exact)
+    layout = chain_layout("index", False)
+    st = layout.structure
+    truth = staged_start(data, layout).point  # the truth (above)
+    assert holdable(data).tolist() == [True, True, True, True, False]  # the nail's alone
+    frames = np.arange(0, data.frames, 7)
+    err = held_out_errors(data, st, truth, frames)
+    assert err.shape == (4, len(frames))
+    assert np.nanmax(err) < 1e-12  # mm^2
+    axis = truth.lines.axis.copy()
+    tilt = np.radians(2.0)
+    axis[1] = np.cos(tilt) * axis[1] + np.sin(tilt) * orthonormal_basis(axis[1])[0]
+    off = replace(truth, lines=Lines(axis, truth.lines.centre))
+    worse = compare_held_out(data, (st, truth), (st, off))
+    better = compare_held_out(data, (st, off), (st, truth))
+    assert worse.worse and worse.gain_mm2 < -0.01 and worse.t < -3  # -0.026, -4.1 measured
+    assert not better.worse and better.gain_mm2 == pytest.approx(-worse.gain_mm2)
+    predicted = np.arange(0, data.frames, int(np.ceil(data.frames / HELD_OUT_FRAMES)))
+    assert worse.predictions == data.present[:4][:, predicted].sum()
+
+
+def test_a_second_axis_that_predicts_held_out_markers_worse_is_left_out(monkeypatch):
+    """An MP without ab/adduction, its markers sliding over the bone: a second axis
+    fitted to it predicts the held-out markers worse than the hinge (its angles
+    follow the seen markers' noise and slide). With the noise's test set aside
+    (``SECOND_AXIS_Z`` made -inf), that evidence alone keeps the hinge, said in its
+    note."""
+    from fingerfit.estimate.markers import fit as marker_fit
+
+    cfg = SimConfig(targets=False, test=False, cycles=2, abduction=False)
+    sim = simulate_subject(replace(cfg, fingers=("index",)), 7)
+    data = _index(simulate_markers(sim, "todorov", seed=1))
+    monkeypatch.setattr(marker_fit, "SECOND_AXIS_Z", -np.inf)
+    fit = marker_fit.fit_digit(data, "index", "auto")
+    assert fit.layout.choice not in fit.layout.second, fit.notes
+    note = [n for n in fit.notes if "held-out" in n]
+    assert note and "predicts held-out markers worse" in note[0], fit.notes

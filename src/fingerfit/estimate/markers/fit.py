@@ -30,6 +30,7 @@ from ...track.solver import wrap
 from ...transforms import FloatArray, unit
 from .bundle import NEAR, BundleResult, adjust, line_covariance
 from .chain import ChainLayout, Lines, chain_layout
+from .heldout import HeldOutComparison, compare_held_out
 from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import flexion_sign, staged_start
 from .uncertainty import slide_uncertainty
@@ -345,6 +346,19 @@ def fit_digit(
     extra = data.frames + 4
     sigma2 = two.result.normal.sigma2
     z = ((hinge.result.cost - two.result.cost) / sigma2 - extra) / math.sqrt(2 * extra)
+    held = None
+    if mp_axes == "auto" and z > SECOND_AXIS_Z:
+        held = compare_held_out(
+            data,
+            (hinge.layout.structure, hinge.result.point),
+            (two.layout.structure, two.result.point),
+        )
+        if held.worse:
+            hinge.notes.append(
+                f"{joint}: a hinge (a second axis lowers the cost by {z:.3g} SD, but "
+                f"predicts held-out markers worse: {_held_out(held)})"
+            )
+            return _chosen(hinge)
     if mp_axes == "two" or z > SECOND_AXIS_Z:
         proximal = "ab/adduction" if two.layout.order == ABDUCTION_FIRST else "flexion"
         gap = (other.result.cost - two.result.cost) / sigma2
@@ -361,8 +375,9 @@ def fit_digit(
             beyond = f"the other start's minimum {gap:.3g} sigma^2 higher"
         if not other.result.converged:
             beyond += f" where it stopped at the {MAX_ITER}-iteration cap"
+        predicts = "" if held is None else f"; held-out markers: {_held_out(held)}"
         two.notes.append(
-            f"{joint}: two axes (the second lowers the cost by {z:.3g} SD), the "
+            f"{joint}: two axes (the second lowers the cost by {z:.3g} SD{predicts}), the "
             f"{proximal} axis proximal (ranges of motion: flexion {flex:.3g} deg, "
             f"ab/adduction {ab:.3g} deg; {beyond})"
         )
@@ -377,6 +392,17 @@ def fit_digit(
         f"not above {SECOND_AXIS_Z:g})"
     )
     return _chosen(hinge)
+
+
+def _held_out(held: HeldOutComparison) -> str:
+    """A held-out comparison of the hinge and the two axes in words."""
+    if not held.predictions:
+        return "none can be held out"
+    way = "better" if held.gain_mm2 >= 0 else "worse"
+    return (
+        f"predicted {abs(held.gain_mm2):.2g} mm^2 {way} with two axes, "
+        f"{abs(held.t):.2g} SE, {held.predictions} predictions"
+    )
 
 
 @dataclass
