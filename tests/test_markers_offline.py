@@ -294,3 +294,32 @@ def test_fit_jobs_fits_the_digits_in_worker_processes(tmp_path):
     res = runner.invoke(app, ["fit", str(s6), "--jobs", "2", "-q"])
     assert res.exit_code != 0
     assert "only a marker session's digits" in res.output
+
+
+def test_fit_chooses_a_marker_sessions_mp_axes_and_slide_on_the_command_line(tmp_path):
+    """``fingerfit fit --mp-axes hinge --slide`` of a marker session: a hinge MP and every
+    marker's slide estimated (a marker alone on its segment held at 0), in the model
+    file; a bad choice and a 6-DOF session are refused in one line."""
+    runner = CliRunner()
+    sim = ["simulate", str(tmp_path / "m"), "--subjects", "1", "--fingers", "index"]
+    res = runner.invoke(app, [*sim, "--cycles", "2", "--markers", "todorov", "-q"])
+    assert res.exit_code == 0, res.output
+    (session,) = (tmp_path / "m").iterdir()
+    out = tmp_path / "hinge.json"
+    cmd = ["fit", str(session), "--mp-axes", "hinge", "--slide", "-q", "-o", str(out)]
+    res = runner.invoke(app, cmd)
+    assert res.exit_code == 0, res.output
+    model = load_model(out)
+    assert [a.name for a in model.fingers["index"].axes("mp")] == ["mp"]
+    slides = {k: np.linalg.norm(v[2]) for k, v in model.markers.items() if k.startswith("IND")}
+    assert all(s > 0 for k, s in slides.items() if not k.startswith("IND3")), slides
+    assert slides["IND3_1"] == 0.0  # alone on the distal phalanx
+    res = runner.invoke(app, ["fit", str(session), "--mp-axes", "three", "-q"])
+    assert res.exit_code != 0 and "--mp-axes" in res.output and "auto, hinge or two" in res.output
+    six = tmp_path / "six"
+    res = runner.invoke(app, ["simulate", str(six), "--subjects", "1", "--fingers", "index", "-q"])
+    assert res.exit_code == 0, res.output
+    (s6,) = six.iterdir()
+    for option in (["--mp-axes", "two"], ["--slide"]):
+        res = runner.invoke(app, ["fit", str(s6), *option, "-q"])
+        assert res.exit_code != 0 and "only for a marker session" in res.output, res.output

@@ -259,6 +259,22 @@ def fit(
             "side, and a digit's frames in threads when the digits are fewer.",
         ),
     ] = 1,
+    mp_axes: Annotated[
+        str,
+        typer.Option(
+            "--mp-axes",
+            help="A marker session's finger MP and thumb MCP: auto (a second axis when the "
+            "markers call for it), hinge or two (docs/markers.md).",
+        ),
+    ] = "auto",
+    slide: Annotated[
+        bool,
+        typer.Option(
+            "--slide",
+            help="A marker session: estimate each marker's skin slide with the joint below "
+            "it (slower; docs/markers.md measures what it gains and costs).",
+        ),
+    ] = False,
     quiet: QuietTable = False,
 ) -> None:
     """Fit the individual finger model of a session: joint centres, axes, lengths, frames."""
@@ -271,6 +287,8 @@ def fit(
 
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
+    if mp_axes not in ("auto", "hinge", "two"):
+        raise typer.BadParameter("must be auto, hinge or two", param_hint="--mp-axes")
     names = parse_list(fingers, FINGERS, "--fingers")
     with progress(quiet) as bar:
         task = bar.add_task(f"reading {session}", total=2)
@@ -282,7 +300,7 @@ def fit(
             notice("note", note)
         n_fingers = len(names or s.fingers)
         if s.marker_map:
-            model = _fit_markers(s, names, bar, task, jobs)
+            model = _fit_markers(s, names, bar, task, jobs, mp_axes, slide)
             path = save_model(model, target)
             if not quiet:
                 out.print(quality_table(model))
@@ -293,6 +311,12 @@ def fit(
                 "only a marker session's digits are fitted in worker processes",
                 param_hint="--jobs",
             )
+        for given, hint in ((mp_axes != "auto", "--mp-axes"), (slide, "--slide")):
+            if given:
+                raise typer.BadParameter(
+                    "only for a marker session (a 6-DOF session's MP axes: --method)",
+                    param_hint=hint,
+                )
         bar.update(task, advance=1, description=f"fitting {n_fingers} digit(s) ({method})")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -310,7 +334,15 @@ def fit(
     say("model written to [bold]{}[/]", path)
 
 
-def _fit_markers(session, names: list[str] | None, bar, task, jobs: int = 1):
+def _fit_markers(
+    session,
+    names: list[str] | None,
+    bar,
+    task,
+    jobs: int = 1,
+    mp_axes: str = "auto",
+    slide: bool = False,
+):
     """The marker fit of a marker session (:mod:`fingerfit.estimate.markers`) on ``jobs``
     cores (its digits in up to ``jobs`` worker processes, the cores left over threads of
     each digit's adjustment), its notes shown one per line."""
@@ -324,7 +356,13 @@ def _fit_markers(session, names: list[str] | None, bar, task, jobs: int = 1):
     bar.update(task, advance=1, description=f"fitting {len(session.fingers)} digit(s) (markers)")
     workers = max(1, min(jobs, len(session.fingers)))
     with study_executor(workers) as pool:
-        result = fit_marker_session(session, executor=pool, threads=max(1, jobs // workers))
+        result = fit_marker_session(
+            session,
+            mp_axes=mp_axes,
+            slide=slide,
+            executor=pool,
+            threads=max(1, jobs // workers),
+        )
     bar.advance(task)
     for note in result.notes:
         notice("note", note)

@@ -1,4 +1,4 @@
-"""Each marker predicted from the others: out-of-sample evidence for a model's choice.
+"""Each marker predicted from the others: out-of-sample evidence on a model's choice.
 
 A model with more per-frame unknowns (a second axis's angle in every frame) fits the
 markers it was fitted to better whatever the truth: its angles take some of their noise
@@ -7,7 +7,9 @@ rests on a noise model cannot tell that from a joint's motion. Held out, a marke
 predicted from the other markers of its frame (the frame's angles and hand correction
 solved again without it, the model held: :func:`.frames.solve_frames`); a per-frame
 unknown that followed the noise of the markers it saw moves the prediction away from the
-marker it did not see, and one that follows a joint's motion brings it closer.
+marker it did not see, and one that follows a joint's motion brings it closer. The
+marker fit reports this for a second MP axis (:func:`.fit.fit_digit`); it does not
+decide by it (``docs/markers.md``: the measured trade).
 
 A marker is held out only where another marker on its segment still shows the segment's
 pose (:func:`holdable`), so that the frame's solve without it is nearly the fit's. The model's lines and
