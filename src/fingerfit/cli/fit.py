@@ -311,12 +311,16 @@ def fit(
                 "only a marker session's digits are fitted in worker processes",
                 param_hint="--jobs",
             )
-        for given, hint in ((mp_axes != "auto", "--mp-axes"), (slide, "--slide")):
-            if given:
-                raise typer.BadParameter(
-                    "only for a marker session (a 6-DOF session's MP axes: --method)",
-                    param_hint=hint,
-                )
+        if mp_axes != "auto":
+            raise typer.BadParameter(
+                "only for a marker session (a 6-DOF session's MP axes: --method)",
+                param_hint="--mp-axes",
+            )
+        if slide:
+            raise typer.BadParameter(
+                "only for a marker session (a 6-DOF session's sensors are fitted as rigid)",
+                param_hint="--slide",
+            )
         bar.update(task, advance=1, description=f"fitting {n_fingers} digit(s) ({method})")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
