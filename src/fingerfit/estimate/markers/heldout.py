@@ -11,10 +11,11 @@ marker it did not see, and one that follows a joint's motion brings it closer. T
 marker fit reports this for a second MP axis (:func:`.fit.fit_digit`); it does not
 decide by it (``docs/markers.md``: the measured trade).
 
-A marker is held out only where another marker on its segment still shows the segment's
-pose (:func:`holdable`), so that the frame's solve without it is nearly the fit's. The model's lines and
-places are the fit's, from every frame: a few dozen global unknowns against thousands of
-frames, which the held-out marker's own frames barely move.
+A marker is held out only where another marker on its segment still shows the
+segment's pose (:func:`holdable`), so that the frame's solve without it is nearly the
+fit's. The model's lines and places are the fit's, from every frame: a few dozen global
+unknowns against thousands of frames, which the held-out marker's own frames barely
+move.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ from .chain import Point, Structure, marker_residuals
 from .frames import solve_frames
 from .observe import DigitMarkers
 
-#: About this many frames of the fit (every ``k``-th) are predicted: thousands of
-#: predictions per marker, a fraction of a second of frame solves.
+#: About this many frames of the fit (every ``k``-th) are predicted: about as many
+#: predictions per held-out marker, a fraction of a second of frame solves.
 HELD_OUT_FRAMES = 1000
 #: The predicted frames' differences are averaged over this many runs of consecutive
 #: frames (batch means): the skin's slide makes neighbouring frames' errors alike, and
@@ -44,7 +45,8 @@ def holdable(data: DigitMarkers) -> np.ndarray:
     marker, which still shows the segment's pose. A marker alone on its segment held out
     leaves its joint's angles seen only through the joints beyond (or, on the last
     segment, not at all): the prediction then measures how well a weaker problem than
-    the fit's is solved, which favours the model with fewer angles whatever the truth."""
+    the fit's is solved, which can favour the model with fewer angles where the truth
+    has more (``docs/markers.md``, measured)."""
     return np.bincount(data.segment)[data.segment] >= 2
 
 
