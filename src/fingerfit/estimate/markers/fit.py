@@ -3,9 +3,9 @@
 Each digit's chain (:func:`.chain.chain_layout`) is started and adjusted by :mod:`.start`
 and :mod:`.bundle` on the reference and calibration (grasp) recordings. The thumb's CMC
 always has two axes; a finger's MP and the thumb's MCP get a second (ab/adduction) axis
-when the markers call for it, how it predicts held-out markers said
-(``mp_axes="auto"``, :func:`fit_digit`; else a hinge, said in one line), proximal or
-distal to the flexion axis as the lower cost decides. A line whose direction or point
+when the markers call for it (``mp_axes="auto"``, :func:`fit_digit`; else a hinge, said
+in one line; the note of a second axis also says how it predicts held-out markers),
+proximal or distal to the flexion axis as the lower cost decides. A line whose direction or point
 the markers leave undetermined (the noise's standard deviation above
 :data:`UNDETERMINED_SD_DEG` / :data:`UNDETERMINED_SD_MM`, or no information at all) is
 held at its start and said in one line naming the joint; the lines' uncertainty holds
@@ -374,8 +374,8 @@ def fit_digit(
             beyond += f" where it stopped at the {MAX_ITER}-iteration cap"
         two.notes.append(
             f"{joint}: two axes (the second lowers the cost by {z:.3g} SD; held-out "
-            f"markers {_held_out(held)}), the {proximal} axis proximal (ranges of motion: flexion {flex:.3g} deg, "
-            f"ab/adduction {ab:.3g} deg; {beyond})"
+            f"markers {_held_out(held)}), the {proximal} axis proximal (ranges of "
+            f"motion: flexion {flex:.3g} deg, ab/adduction {ab:.3g} deg; {beyond})"
         )
         if held.worse:
             two.notes.append(
