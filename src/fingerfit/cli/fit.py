@@ -281,13 +281,14 @@ def fit(
     from ..digits import DIGIT_NAMES as FINGERS
     from ..estimate import FitOptions, fit_session
     from ..estimate.fit import METHODS
+    from ..estimate.markers.fit import MP_AXES
     from ..io import load_session
     from ..io.atomic import check_target, refuse_writing_inputs
     from ..model import save_model
 
     if method not in METHODS:
         raise typer.BadParameter(f"must be one of {', '.join(METHODS)}", param_hint="--method")
-    if mp_axes not in ("auto", "hinge", "two"):
+    if mp_axes not in MP_AXES:
         raise typer.BadParameter("must be auto, hinge or two", param_hint="--mp-axes")
     names = parse_list(fingers, FINGERS, "--fingers")
     with progress(quiet) as bar:

@@ -36,6 +36,8 @@ from .observe import DigitMarkers, carry_back, digit_markers, hand_shape
 from .start import flexion_sign, staged_start
 from .uncertainty import slide_uncertainty
 
+#: The choices of a finger's MP (the thumb's MCP) axes (:func:`fit_marker_session`).
+MP_AXES = ("auto", "hinge", "two")
 #: A finger's MP (the thumb's MCP) keeps its second axis when it lowers the cost by more
 #: than this many standard deviations of what its unknowns absorb of the noise
 #: (:func:`fit_digit`).
@@ -467,7 +469,7 @@ def fit_marker_session(
     """
     if not session.marker_map:
         raise FingerfitError("not a marker session (no marker map)", path=session.path)
-    if mp_axes not in ("auto", "hinge", "two"):
+    if mp_axes not in MP_AXES:
         raise FingerfitError(f"must be auto, hinge or two, not {mp_axes!r}", field="--mp-axes")
     for d in session.fingers:
         for joint in DIGITS[d].required_second:
@@ -629,4 +631,4 @@ def _quality(fit: DigitFit, level: int) -> JointQuality:
     )
 
 
-__all__ = ["DigitFit", "MarkerFit", "fit_digit", "fit_marker_session"]
+__all__ = ["MP_AXES", "DigitFit", "MarkerFit", "fit_digit", "fit_marker_session"]
